@@ -1,0 +1,1 @@
+"""Ground truth (heyoka), HDF5 data sets, classical Lie-Poisson splitting, diagnostics."""

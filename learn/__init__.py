@@ -1,0 +1,1 @@
+"""LPNets, G-LPNets and unstructured baselines (JAX)."""

@@ -1,0 +1,32 @@
+"""liepoisson: Lie algebras, Lie-Poisson brackets, Casimirs, exact coadjoint flows and the
+physical systems of the LPNets paper."""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from ._algebra import LieAlgebra as LieAlgebra
+from ._catalogue import (
+    direct_sum as direct_sum,
+    heisenberg as heisenberg,
+    levi_civita as levi_civita,
+    se2 as se2,
+    se3 as se3,
+    sl2 as sl2,
+    so3 as so3,
+)
+from ._coadjoint import (
+    AbstractCoadjointFlow as AbstractCoadjointFlow,
+    MatrixExponentialFlow as MatrixExponentialFlow,
+    RodriguesFlow as RodriguesFlow,
+    SE3Flow as SE3Flow,
+    rotate as rotate,
+    rotation_coefficients as rotation_coefficients,
+)
+from ._casimirs import polynomial_casimirs as polynomial_casimirs
+from ._namespace import HEYOKA as HEYOKA, JAX as JAX, NUMPY as NUMPY
+from ._polynomial import Polynomial as Polynomial
+
+from . import systems as systems  # noqa: E402  (systems build on the algebra)
+
+__version__ = "0.1.0"

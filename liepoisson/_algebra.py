@@ -1,0 +1,223 @@
+r"""Real Lie algebras from structure constants and their Lie-Poisson structure on g*.
+
+Conventions (DESIGN.md section 2): $[e_a, e_b] = C_{abd}\,e_d$;
+$\mathbb{B}(\mu)_{ab} = \mathrm{sign}\cdot C_{abd}\,\mu_d$ (body convention `sign = -1`);
+$\dot\mu = \mathbb{B}(\mu)\,\partial H/\partial\mu$.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._casimirs import polynomial_casimirs
+from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
+from ._polynomial import Polynomial
+from ._validation import as_scalar_time, as_state
+
+# Structure constants given as floats (e.g. computed ones) may carry round-off: accept
+# violations of antisymmetry and Jacobi up to 1e-10 relative to the size of the constants.
+_STRUCTURE_RTOL = 1e-10
+
+
+def _check_structure_constants(C: Any) -> np.ndarray:
+    try:
+        C = np.asarray(C, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(
+            f"structure_constants must be a real array of shape (n, n, n); got {C!r}"
+        ) from err
+    if C.ndim != 3 or not (C.shape[0] == C.shape[1] == C.shape[2]) or C.shape[0] == 0:
+        raise ValueError(f"structure_constants must have shape (n, n, n) with n >= 1; got {C.shape}")
+    if not np.all(np.isfinite(C)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(C))[0])
+        raise ValueError(f"structure_constants must be finite; found {C[bad]} at (a, b, d) = {bad}")
+    scale = max(1.0, float(np.max(np.abs(C))))
+    sym = C + C.transpose(1, 0, 2)
+    if np.max(np.abs(sym)) > _STRUCTURE_RTOL * scale:
+        idx = tuple(int(i) for i in np.unravel_index(np.argmax(np.abs(sym)), sym.shape))
+        raise ValueError(
+            "structure_constants must be antisymmetric, C[a, b, d] = -C[b, a, d]; the largest "
+            f"violation is {np.abs(sym)[idx]:.3g} at (a, b, d) = {idx}"
+        )
+    # Jacobi: [[e_a, e_b], e_c] + cyclic = 0, i.e. sum_d C_abd C_dce + cyclic(a, b, c) = 0.
+    J = (
+        np.einsum("abd,dce->abce", C, C)
+        + np.einsum("bcd,dae->abce", C, C)
+        + np.einsum("cad,dbe->abce", C, C)
+    )
+    if np.max(np.abs(J)) > _STRUCTURE_RTOL * scale * scale:
+        idx = tuple(int(i) for i in np.unravel_index(np.argmax(np.abs(J)), J.shape))
+        raise ValueError(
+            "structure_constants must satisfy the Jacobi identity; the largest violation is "
+            f"{np.abs(J)[idx]:.3g} at (a, b, c) = {idx[:3]} (component {idx[3]})"
+        )
+    C = C.copy()
+    C.setflags(write=False)
+    return C
+
+
+class LieAlgebra:
+    r"""A real Lie algebra $\mathfrak g$ given by structure constants, with the Lie-Poisson
+    structure on $\mathfrak g^*$.
+
+    **Arguments:**
+
+    - `structure_constants`: array `(n, n, n)`, $[e_a, e_b] = C_{abd} e_d$; validated for
+      antisymmetry and the Jacobi identity.
+    - `name`, `basis_names`: labels for messages, files and plots.
+    - `casimirs`: polynomial Casimirs (closed forms); `None` computes a functionally
+      independent polynomial basis automatically (up to `max_casimir_degree`).
+    - `coadjoint_flow`: the evaluator of $\exp(t\mathbb M(\alpha))\mu$; default the matrix
+      exponential, closed forms for so(3) and se(3) (`RodriguesFlow`, `SE3Flow`).
+    - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
+    """
+
+    def __init__(
+        self,
+        structure_constants: Any,
+        name: str | None = None,
+        basis_names: Sequence[str] | None = None,
+        *,
+        casimirs: Sequence[Polynomial] | None = None,
+        coadjoint_flow: AbstractCoadjointFlow | None = None,
+        sign: int = -1,
+        max_casimir_degree: int = 4,
+    ):
+        C = _check_structure_constants(structure_constants)
+        n = C.shape[0]
+        if sign not in (-1, 1):
+            raise ValueError(f"sign must be -1 (body) or +1 (spatial); got {sign!r}")
+        if basis_names is None:
+            basis_names = tuple(f"e{i + 1}" for i in range(n))
+        basis_names = tuple(str(b) for b in basis_names)
+        if len(basis_names) != n:
+            raise ValueError(f"basis_names must have {n} entries; got {len(basis_names)}")
+        if casimirs is None:
+            casimirs = polynomial_casimirs(C, max_degree=max_casimir_degree)
+        else:
+            casimirs = tuple(casimirs)
+            for i, p in enumerate(casimirs):
+                if not isinstance(p, Polynomial) or p.dim != n:
+                    raise TypeError(f"casimirs[{i}] must be a Polynomial in {n} variables; got {p!r}")
+        if coadjoint_flow is None:
+            coadjoint_flow = MatrixExponentialFlow()
+        if not isinstance(coadjoint_flow, AbstractCoadjointFlow):
+            raise TypeError(
+                f"coadjoint_flow must be an AbstractCoadjointFlow; got {type(coadjoint_flow).__name__}"
+            )
+        self._C = C
+        self.name = "lie_algebra" if name is None else str(name)
+        self.basis_names = basis_names
+        self.sign = int(sign)
+        self.casimir_polynomials: tuple[Polynomial, ...] = tuple(casimirs)
+        self.exact_flow = coadjoint_flow
+        self._casimir_gradient_polys = tuple(p.gradient() for p in self.casimir_polynomials)
+
+    # -- basic data ----------------------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return self._C.shape[0]
+
+    @property
+    def structure_constants(self) -> np.ndarray:
+        """$C_{abd}$ with $[e_a, e_b] = C_{abd} e_d$ (read-only)."""
+        return self._C
+
+    @property
+    def n_casimirs(self) -> int:
+        return len(self.casimir_polynomials)
+
+    def __repr__(self) -> str:
+        return f"LieAlgebra(name={self.name!r}, dim={self.dim}, n_casimirs={self.n_casimirs})"
+
+    # -- Lie algebra operations ----------------------------------------------------------
+    def bracket(self, xi: Any, eta: Any) -> jax.Array:
+        r"""$[\xi, \eta]_d = C_{abd}\,\xi_a\,\eta_b$, batched over leading axes."""
+        xi = as_state(xi, "xi", self.dim)
+        eta = as_state(eta, "eta", self.dim)
+        return jnp.einsum("abd,...a,...b->...d", self._C, xi, eta)
+
+    def ad(self, xi: Any) -> jax.Array:
+        r"""Matrix of $\mathrm{ad}_\xi = [\xi, \cdot]$: $(\mathrm{ad}_\xi)_{db} = C_{abd}\,\xi_a$."""
+        xi = as_state(xi, "xi", self.dim)
+        return jnp.einsum("abd,...a->...db", self._C, xi)
+
+    def ad_star(self, xi: Any, mu: Any) -> jax.Array:
+        r"""$(\mathrm{ad}^*_\xi\mu)_b = \langle \mu, [\xi, e_b]\rangle = C_{abd}\,\xi_a\,\mu_d$."""
+        xi = as_state(xi, "xi", self.dim)
+        mu = as_state(mu, "mu", self.dim)
+        return jnp.einsum("abd,...a,...d->...b", self._C, xi, mu)
+
+    # -- Lie-Poisson structure -----------------------------------------------------------
+    def poisson_tensor(self, mu: Any) -> jax.Array:
+        r"""$\mathbb{B}(\mu)_{ab} = \mathrm{sign}\cdot C_{abd}\,\mu_d$, shape `(..., n, n)`."""
+        mu = as_state(mu, "mu", self.dim)
+        return self.sign * jnp.einsum("abd,...d->...ab", self._C, mu)
+
+    def poisson_tensor_components(self, mu: Sequence[Any]) -> list[list[Any]]:
+        """$\\mathbb{B}$ as nested lists of expressions in the components (any backend)."""
+        n = self.dim
+        out: list[list[Any]] = [[0.0] * n for _ in range(n)]
+        for a in range(n):
+            for b in range(n):
+                entry: Any = 0.0
+                for d in range(n):
+                    c = self.sign * self._C[a, b, d]
+                    if c != 0.0:
+                        entry = entry + float(c) * mu[d]
+                out[a][b] = entry
+        return out
+
+    def coadjoint_generator(self, alpha: Any) -> jax.Array:
+        r"""$\mathbb{M}(\alpha)_{ad} = \mathrm{sign}\cdot C_{abd}\,\alpha_b$: $\dot\mu = \mathbb{M}(\alpha)\mu$
+        is the flow of $H = \langle\alpha, \mu\rangle$."""
+        alpha = as_state(alpha, "alpha", self.dim)
+        return self.sign * jnp.einsum("abd,...b->...ad", self._C, alpha)
+
+    def coadjoint_flow(self, alpha: Any, t: Any, mu: Any) -> jax.Array:
+        r"""$\exp(t\,\mathbb{M}(\alpha))\,\mu$: exact flow of $H = \langle \alpha, \mu\rangle$.
+
+        `alpha` and `mu` of shape `(..., n)` and `t` a scalar or array, broadcast against each
+        other. Usable inside `jax.jit`, `jax.vmap` and `jax.grad`. This is the coadjoint action
+        of $\exp(t\alpha)$; it is a Poisson map and conserves every Casimir.
+        """
+        alpha = as_state(alpha, "alpha", self.dim)
+        mu = as_state(mu, "mu", self.dim)
+        t = as_scalar_time(t)
+        batch = jnp.broadcast_shapes(alpha.shape[:-1], mu.shape[:-1], t.shape)
+        alpha = jnp.broadcast_to(alpha, batch + (self.dim,))
+        mu = jnp.broadcast_to(mu, batch + (self.dim,))
+        # The fast paths are written for sign = -1; sign = +1 reverses time.
+        t = jnp.broadcast_to(-self.sign * t, batch)
+        return self.exact_flow(self._C, alpha, t, mu)
+
+    # -- Casimirs --------------------------------------------------------------------------
+    def casimirs(self, mu: Any) -> jax.Array:
+        """Values of the independent Casimirs, shape `(..., k)`."""
+        mu = as_state(mu, "mu", self.dim)
+        comps = [mu[..., i] for i in range(self.dim)]
+        vals = [jnp.broadcast_to(p.evaluate(comps), mu.shape[:-1]) for p in self.casimir_polynomials]
+        return jnp.stack(vals, axis=-1) if vals else jnp.zeros(mu.shape[:-1] + (0,))
+
+    def casimir_gradients(self, mu: Any) -> jax.Array:
+        """Gradients $\\partial C_j/\\partial\\mu$, shape `(..., k, n)`."""
+        mu = as_state(mu, "mu", self.dim)
+        comps = [mu[..., i] for i in range(self.dim)]
+        rows = [
+            jnp.stack([jnp.broadcast_to(g.evaluate(comps), mu.shape[:-1]) for g in grads], axis=-1)
+            for grads in self._casimir_gradient_polys
+        ]
+        return jnp.stack(rows, axis=-2) if rows else jnp.zeros(mu.shape[:-1] + (0, self.dim))
+
+    def orbit_dimension(self, mu: Any, rtol: float = 1e-10) -> int | np.ndarray:
+        r"""Dimension of the coadjoint orbit through $\mu$: $\operatorname{rank}\mathbb{B}(\mu)$."""
+        B = np.asarray(self.poisson_tensor(mu))
+        s = np.linalg.svd(B, compute_uv=False)
+        scale = max(1.0, float(np.max(np.abs(np.asarray(mu)))))
+        rank = np.sum(s > rtol * scale * max(1.0, float(np.max(np.abs(self._C)))), axis=-1)
+        return int(rank) if np.ndim(rank) == 0 else rank

@@ -1,0 +1,104 @@
+"""Input checks shared by every public function: shapes, dtypes, finiteness."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def is_traced(x: Any) -> bool:
+    """True if `x` is a JAX tracer (inside `jit`, `vmap` or `grad`): values unknown."""
+    return isinstance(x, jax.core.Tracer)
+
+
+def as_state(x: Any, name: str, dim: int, *, min_ndim: int = 1) -> jax.Array:
+    """Return `x` as a float64 array of shape `(..., dim)`.
+
+    Raises `TypeError` for non-numeric input and `ValueError` for a wrong last axis or
+    non-finite values (the finiteness check is skipped for traced values, whose content is
+    unknown at trace time).
+    """
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name} must be an array of shape (..., {dim}); got {type(x).__name__}")
+    if not is_traced(x):
+        try:
+            arr = np.asarray(x)
+        except Exception as err:  # ragged lists and the like
+            raise TypeError(f"{name} must be an array of shape (..., {dim}); got {x!r}") from err
+        if arr.dtype == object or not (
+            np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
+        ):
+            raise TypeError(f"{name} must be a real numeric array; got dtype {arr.dtype}")
+        if np.iscomplexobj(arr):
+            raise TypeError(f"{name} must be real; got dtype {arr.dtype}")
+        if arr.ndim < min_ndim or arr.shape[-1] != dim:
+            raise ValueError(
+                f"{name} must have shape (..., {dim}) (last axis = dimension {dim}); "
+                f"got shape {arr.shape}"
+            )
+        if not np.all(np.isfinite(arr)):
+            bad = np.argwhere(~np.isfinite(arr))[0]
+            raise ValueError(
+                f"{name} must be finite; found {arr[tuple(bad)]} at index {tuple(int(i) for i in bad)}"
+            )
+        return jnp.asarray(arr, dtype=jnp.float64)
+    if x.ndim < min_ndim or x.shape[-1] != dim:
+        raise ValueError(f"{name} must have shape (..., {dim}); got shape {x.shape}")
+    return jnp.asarray(x, dtype=jnp.float64)
+
+
+def as_scalar_time(t: Any, name: str = "t") -> jax.Array:
+    """Return a time (scalar or array broadcastable against the batch) as float64."""
+    if isinstance(t, (str, bytes)) or t is None:
+        raise TypeError(f"{name} must be a real number or array; got {type(t).__name__}")
+    if not is_traced(t):
+        arr = np.asarray(t)
+        if not (np.issubdtype(arr.dtype, np.number)) or np.iscomplexobj(arr):
+            raise TypeError(f"{name} must be real; got dtype {arr.dtype}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite; got {t!r}")
+        return jnp.asarray(arr, dtype=jnp.float64)
+    return jnp.asarray(t, dtype=jnp.float64)
+
+
+def positive_float(x: Any, name: str) -> float:
+    """A finite, strictly positive Python float (step sizes, masses, tolerances)."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        if not (isinstance(x, np.ndarray) and x.ndim == 0):
+            raise TypeError(f"{name} must be a positive real number; got {type(x).__name__} {x!r}")
+    value = float(x)
+    if not np.isfinite(value) or value <= 0.0:
+        raise ValueError(f"{name} must be finite and > 0; got {value!r}")
+    return value
+
+
+def positive_vector(x: Any, name: str, dim: int) -> np.ndarray:
+    """A finite vector with strictly positive entries (principal moments of inertia, masses)."""
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be {dim} positive numbers; got {x!r}") from err
+    if arr.shape == ():
+        arr = np.full(dim, float(arr))
+    if arr.shape != (dim,):
+        raise ValueError(f"{name} must have shape ({dim},); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+        raise ValueError(f"{name} must be finite and > 0 componentwise; got {arr.tolist()}")
+    return arr
+
+
+def finite_vector(x: Any, name: str, dim: int) -> np.ndarray:
+    """A finite real vector of a given length (fixed parameters of a system)."""
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be {dim} real numbers; got {x!r}") from err
+    if arr.shape != (dim,):
+        raise ValueError(f"{name} must have shape ({dim},); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got {arr.tolist()}")
+    return arr

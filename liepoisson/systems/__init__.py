@@ -1,0 +1,17 @@
+"""Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle."""
+
+from ._base import (
+    AbstractLiePoissonSystem as AbstractLiePoissonSystem,
+    AbstractPoissonSystem as AbstractPoissonSystem,
+    CollectiveTerm as CollectiveTerm,
+)
+from ._charged_particle import (
+    ChargedParticle as ChargedParticle,
+    segment_field_integral as segment_field_integral,
+)
+from ._heavy_top import HeavyTop as HeavyTop
+from ._kirchhoff import Kirchhoff as Kirchhoff
+from ._lie_poisson import LiePoissonSystem as LiePoissonSystem
+from ._pendulum import ExtendedPendulum as ExtendedPendulum
+from ._registry import SYSTEMS as SYSTEMS, from_name as from_name
+from ._rigid_body import RigidBody as RigidBody

@@ -1,0 +1,238 @@
+r"""Abstract Poisson systems: a state space with a Poisson tensor, a Hamiltonian, Casimirs and
+the exact flows of linear test Hamiltonians $H = \langle\alpha, y\rangle$."""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._namespace import HEYOKA, JAX
+from .._polynomial import Polynomial
+from .._validation import as_scalar_time, as_state
+
+
+class AbstractPoissonSystem(abc.ABC):
+    r"""A Poisson system $\dot y = \mathbb{B}(y)\,\nabla H(y)$ whose linear test Hamiltonians
+    $H_\alpha = \langle\alpha, y\rangle$ have exact, explicitly computable flows.
+
+    Subclasses define, once, the Hamiltonian and the Poisson tensor on the components of the
+    state against a math namespace `xp` (numpy, JAX or heyoka), the Casimir polynomials, and
+    `test_flow`. Everything else (vectorisation, gradients, the heyoka right-hand side) is
+    derived here.
+    """
+
+    name: str
+    dim: int
+
+    # -- what a system defines ----------------------------------------------------------
+    @property
+    @abc.abstractmethod
+    def params(self) -> dict[str, Any]:
+        """Parameters as JSON-serialisable values (stored in data files)."""
+
+    @abc.abstractmethod
+    def hamiltonian_components(self, y: Sequence[Any], xp: Any) -> Any:
+        """$H$ as an expression in the components `y[0], ..., y[dim-1]`."""
+
+    @abc.abstractmethod
+    def poisson_tensor_components(self, y: Sequence[Any]) -> list[list[Any]]:
+        """$\\mathbb{B}(y)$ as nested lists of expressions in the components."""
+
+    @property
+    @abc.abstractmethod
+    def casimir_polynomials(self) -> tuple[Polynomial, ...]:
+        """A functionally independent set of (polynomial) Casimirs; may be empty."""
+
+    @abc.abstractmethod
+    def _test_flow(self, alpha: jax.Array, t: jax.Array, y: jax.Array) -> jax.Array:
+        """Exact flow of $\\langle\\alpha, y\\rangle$; inputs validated and broadcast."""
+
+    @abc.abstractmethod
+    def hamiltonian_splitting(self) -> tuple[CollectiveTerm, ...]:
+        """$H = \\sum_k H_k$ with exactly solvable pieces (used by classical splitting)."""
+
+    # -- derived ------------------------------------------------------------------------
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"y{i + 1}" for i in range(self.dim))
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
+        return f"{type(self).__name__}({args})"
+
+    def _components(self, y: jax.Array) -> list[jax.Array]:
+        return [y[..., i] for i in range(self.dim)]
+
+    def hamiltonian(self, y: Any) -> jax.Array:
+        """$H(y)$, shape `(...)` for `y` of shape `(..., dim)`."""
+        y = as_state(y, "y", self.dim)
+        return jnp.broadcast_to(self.hamiltonian_components(self._components(y), JAX), y.shape[:-1])
+
+    def hamiltonian_gradient(self, y: Any) -> jax.Array:
+        """$\\nabla H(y)$, shape `(..., dim)` (JAX autodiff of the one formula)."""
+        y = as_state(y, "y", self.dim)
+        return jax.grad(lambda z: jnp.sum(self.hamiltonian(z)))(y)
+
+    def poisson_tensor(self, y: Any) -> jax.Array:
+        """$\\mathbb{B}(y)$, shape `(..., dim, dim)`."""
+        y = as_state(y, "y", self.dim)
+        rows = self.poisson_tensor_components(self._components(y))
+        batch = y.shape[:-1]
+        return jnp.stack(
+            [jnp.stack([jnp.broadcast_to(jnp.asarray(e, jnp.float64), batch) for e in r], -1) for r in rows],
+            -2,
+        )
+
+    def vector_field(self, y: Any) -> jax.Array:
+        """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
+        y = as_state(y, "y", self.dim)
+        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.hamiltonian_gradient(y))
+
+    def casimirs(self, y: Any) -> jax.Array:
+        """Values of the Casimirs, shape `(..., k)` (`k` may be 0)."""
+        y = as_state(y, "y", self.dim)
+        comps = self._components(y)
+        vals = [jnp.broadcast_to(p.evaluate(comps), y.shape[:-1]) for p in self.casimir_polynomials]
+        return jnp.stack(vals, -1) if vals else jnp.zeros(y.shape[:-1] + (0,))
+
+    def casimir_gradients(self, y: Any) -> jax.Array:
+        """Gradients of the Casimirs, shape `(..., k, dim)`."""
+        y = as_state(y, "y", self.dim)
+        comps = self._components(y)
+        rows = [
+            jnp.stack([jnp.broadcast_to(g.evaluate(comps), y.shape[:-1]) for g in p.gradient()], -1)
+            for p in self.casimir_polynomials
+        ]
+        return jnp.stack(rows, -2) if rows else jnp.zeros(y.shape[:-1] + (0, self.dim))
+
+    @property
+    def n_casimirs(self) -> int:
+        return len(self.casimir_polynomials)
+
+    def test_flow(self, alpha: Any, t: Any, y: Any) -> jax.Array:
+        r"""Exact flow of the test Hamiltonian $H = \langle\alpha, y\rangle$ for time `t`.
+
+        Batched over leading axes (broadcast), usable under `jit`, `vmap` and `grad`. For a
+        fixed `alpha` this is a Poisson map and conserves every Casimir.
+        """
+        alpha = as_state(alpha, "alpha", self.dim)
+        y = as_state(y, "y", self.dim)
+        t = as_scalar_time(t)
+        batch = jnp.broadcast_shapes(alpha.shape[:-1], y.shape[:-1], t.shape)
+        return self._test_flow(
+            jnp.broadcast_to(alpha, batch + (self.dim,)),
+            jnp.broadcast_to(t, batch),
+            jnp.broadcast_to(y, batch + (self.dim,)),
+        )
+
+    # -- heyoka ---------------------------------------------------------------------------
+    def heyoka_system(self) -> list[tuple[Any, Any]]:
+        """The ODE as heyoka `(variable, right-hand side)` pairs, $\\mathbb{B}(y)\\nabla H$,
+        built symbolically from the same Hamiltonian and Poisson tensor."""
+        import heyoka as hy
+
+        names = [f"y{i}" for i in range(self.dim)]
+        ys = list(hy.make_vars(*names)) if self.dim > 1 else [hy.make_vars(*names)]
+        H = self.hamiltonian_components(ys, HEYOKA)
+        grad = [hy.diff(H, v) for v in ys]
+        B = self.poisson_tensor_components(ys)
+        rhs = []
+        for a in range(self.dim):
+            expr = 0.0
+            for b in range(self.dim):
+                if isinstance(B[a][b], (int, float)) and B[a][b] == 0:
+                    continue
+                expr = expr + B[a][b] * grad[b]
+            rhs.append(hy.expression(0.0) if isinstance(expr, float) else expr)
+        return list(zip(ys, rhs))
+
+
+class CollectiveTerm:
+    r"""A piece $H_k(y) = \varphi(L y, C(y))$ of a Hamiltonian, with linear forms $L$ (rows)
+    that Poisson-commute, $L_i^\top \mathbb{B}(y) L_j = 0$, and optionally the Casimirs $C$.
+
+    Every $L_i y$ and every Casimir is conserved by the flow of $H_k$, so the flow is the test
+    flow with the frozen parameter $\alpha = L^\top\partial_s\varphi(L y, C(y))$ (the Casimir
+    gradients are in the kernel of $\mathbb{B}$): exact, Poisson, Casimir-preserving. This is
+    also the structure of a G-LPNet module (a function of $\langle\alpha, y\rangle$).
+
+    **Arguments:** `forms` `(m, dim)`; `function(s)` or, with `uses_casimirs=True`,
+    `function(s, c)`, written on the lists of components `s[0..m-1]` and `c[0..k-1]`.
+    """
+
+    def __init__(
+        self,
+        forms: Any,
+        function: Callable[..., Any],
+        name: str = "",
+        *,
+        uses_casimirs: bool = False,
+    ):
+        forms = np.atleast_2d(np.asarray(forms, dtype=np.float64))
+        if forms.ndim != 2:
+            raise ValueError(f"forms must be a matrix (m, dim); got shape {forms.shape}")
+        self.forms = forms
+        self.function = function
+        self.name = name
+        self.uses_casimirs = bool(uses_casimirs)
+
+    def __repr__(self) -> str:
+        return f"CollectiveTerm({self.name or self.forms.tolist()})"
+
+    def _call(self, s: jax.Array, c: jax.Array | None) -> jax.Array:
+        sl = [s[..., i] for i in range(s.shape[-1])]
+        if self.uses_casimirs:
+            return self.function(sl, [c[..., j] for j in range(c.shape[-1])])
+        return self.function(sl)
+
+    def _arguments(self, system: AbstractPoissonSystem, y: jax.Array):
+        s = jnp.einsum("md,...d->...m", jnp.asarray(self.forms), y)
+        c = system.casimirs(y) if self.uses_casimirs else None
+        return s, c
+
+    def value(self, system: AbstractPoissonSystem, y: Any) -> jax.Array:
+        """$H_k(y)$."""
+        y = as_state(y, "y", system.dim)
+        s, c = self._arguments(system, y)
+        return jnp.broadcast_to(self._call(s, c), y.shape[:-1])
+
+    def frozen_alpha(self, system: AbstractPoissonSystem, y: jax.Array) -> jax.Array:
+        """$\alpha = L^\top\partial_s\varphi$, constant along the flow of this term."""
+        s, c = self._arguments(system, y)
+        g = jax.grad(lambda z: jnp.sum(self._call(z, c)))(s)
+        return jnp.einsum("md,...m->...d", jnp.asarray(self.forms), g)
+
+    def flow(self, system: AbstractPoissonSystem, t: Any, y: Any) -> jax.Array:
+        """Exact flow of this term for time `t`."""
+        y = as_state(y, "y", system.dim)
+        return system.test_flow(self.frozen_alpha(system, y), t, y)
+
+
+class AbstractLiePoissonSystem(AbstractPoissonSystem):
+    """A system on the dual of a Lie algebra: the bracket, Casimirs and test flows come from
+    the algebra (coadjoint flows)."""
+
+    algebra: Any
+
+    @property
+    def dim(self) -> int:  # type: ignore[override]
+        return self.algebra.dim
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.algebra.basis_names
+
+    def poisson_tensor_components(self, y):
+        return self.algebra.poisson_tensor_components(y)
+
+    @property
+    def casimir_polynomials(self):
+        return self.algebra.casimir_polynomials
+
+    def _test_flow(self, alpha, t, y):
+        return self.algebra.coadjoint_flow(alpha, t, y)

@@ -1,0 +1,131 @@
+"""A charged particle in the plane, in a magnetic field B = B3(x) e3 and a central potential."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._validation import as_state, positive_float
+from ._base import AbstractPoissonSystem, CollectiveTerm
+
+# Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0).
+_TINY = 1e-150
+
+
+def segment_field_integral(x0: jnp.ndarray, a: jnp.ndarray, t: jnp.ndarray) -> jnp.ndarray:
+    r"""$\Phi(t) = \int_0^t |x_0 + a s|\,ds$ for planar $x_0, a$ (paper eq. integrated_Phi).
+
+    With $A = |a|$, $c = x_0\cdot a/A$, $d = |x_0\times a|/A$ and
+    $G(z) = \tfrac12\left(z\sqrt{z^2+d^2} + d^2\operatorname{asinh}(z/d)\right)$:
+    $\Phi = (G(c + At) - G(c))/A$. The asinh difference is evaluated as a log of a ratio in a
+    cancellation-free form, and $A\to 0$, $d\to 0$ (a segment through the origin) are safe.
+    """
+    A2 = a[..., 0] ** 2 + a[..., 1] ** 2
+    moving = A2 > _TINY**2
+    A = jnp.sqrt(jnp.where(moving, A2, 1.0))
+    c = (x0[..., 0] * a[..., 0] + x0[..., 1] * a[..., 1]) / A
+    cross = (x0[..., 0] * a[..., 1] - x0[..., 1] * a[..., 0]) / A
+    d2 = cross * cross
+    z0, z1 = c, c + A * t
+    r0 = jnp.sqrt(z0 * z0 + d2)
+    r1 = jnp.sqrt(z1 * z1 + d2)
+    has_d = d2 > 0.0
+    d2s = jnp.where(has_d, d2, 1.0)
+
+    def w(z, r):  # z + sqrt(z^2 + d^2), without cancellation for z < 0
+        rs = jnp.sqrt(z * z + d2s)
+        return jnp.where(z >= 0, z + rs, d2s / (rs - z))
+
+    log_ratio = jnp.where(has_d, jnp.log(w(z1, r1)) - jnp.log(w(z0, r0)), 0.0)
+    phi_moving = 0.5 * (z1 * r1 - z0 * r0 + d2 * log_ratio) / A
+    r_start = jnp.sqrt(x0[..., 0] ** 2 + x0[..., 1] ** 2)
+    return jnp.where(moving, phi_moving, r_start * t)
+
+
+class ChargedParticle(AbstractPoissonSystem):
+    r"""Planar charged particle, $y = (p_1, p_2, x_1, x_2)$:
+    $\dot p = q\,v\times B - q\nabla\varphi$, $\dot x = v = p/m$, with
+    $B = b_0\,r\,e_3$ and $\varphi = k/r$, $r = |x|$ (paper defaults $q = m = b_0 = 1$,
+    $k = 1/100$). $H = |p|^2/(2m) + q\varphi$,
+    $\mathbb{B} = \begin{pmatrix}-q\hat B & -I\\ I & 0\end{pmatrix}$, no Casimirs; the second
+    integral is $I = x_1p_2 - x_2p_1 + q b_0 r^3/3$ (paper eq. Cons_law_momentum).
+
+    The paper writes $-\tfrac{q}{m}\hat B$ in the tensor; with $\partial H/\partial p = p/m$
+    the Lorentz force needs $-q\hat B$. Both agree for the paper's $q = m = 1$.
+    """
+
+    name = "ChargedParticle"
+    dim = 4
+
+    def __init__(self, charge=1.0, mass=1.0, field_strength=1.0, potential_strength=0.01):
+        self.charge = float(charge)
+        if not np.isfinite(self.charge) or self.charge == 0:
+            raise ValueError(f"charge must be finite and non-zero; got {charge!r}")
+        self.mass = positive_float(mass, "mass")
+        self.field_strength = float(field_strength)
+        self.potential_strength = float(potential_strength)
+        if not (np.isfinite(self.field_strength) and np.isfinite(self.potential_strength)):
+            raise ValueError("field_strength and potential_strength must be finite")
+
+    @property
+    def params(self):
+        return {
+            "charge": self.charge,
+            "mass": self.mass,
+            "field_strength": self.field_strength,
+            "potential_strength": self.potential_strength,
+        }
+
+    @property
+    def state_names(self):
+        return ("p1", "p2", "x1", "x2")
+
+    def hamiltonian_components(self, y, xp):
+        p1, p2, x1, x2 = y
+        r = xp.sqrt(x1**2 + x2**2)
+        return (p1**2 + p2**2) / (2.0 * self.mass) + self.charge * self.potential_strength / r
+
+    def poisson_tensor_components(self, y):
+        _, _, x1, x2 = y
+        qB = self.charge * self.field_strength * (x1**2 + x2**2) ** 0.5
+        return [
+            [0.0, qB, -1.0, 0.0],
+            [-1.0 * qB, 0.0, 0.0, -1.0],
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+        ]
+
+    @property
+    def casimir_polynomials(self):
+        return ()
+
+    def angular_integral(self, y) -> jnp.ndarray:
+        r"""$I = x_1p_2 - x_2p_1 + q b_0 r^3/3$, conserved by the true flow."""
+        y = as_state(y, "y", 4)
+        p1, p2, x1, x2 = (y[..., i] for i in range(4))
+        r = jnp.sqrt(x1**2 + x2**2)
+        return x1 * p2 - x2 * p1 + self.charge * self.field_strength * r**3 / 3.0
+
+    def _test_flow(self, alpha, t, y):
+        r"""$H = a\cdot p + \beta\cdot x$: $x(t) = x_0 + a t$,
+        $p(t) = p_0 + q b_0\,\Phi(t)\,(a_2, -a_1) - \beta t$ with $\Phi = \int_0^t |x(s)|\,ds$.
+        (The paper's $\mathbb{T}_1$ is $\beta = 0$, $\mathbb{T}_2$ is $a = 0$; its
+        $x_2(t) = \alpha_2 t + x_1(0)$ is a typo.)"""
+        a, beta = alpha[..., :2], alpha[..., 2:]
+        x0 = y[..., 2:]
+        qphi = self.charge * self.field_strength * segment_field_integral(x0, a, t)
+        p1 = y[..., 0] + qphi * a[..., 1] - beta[..., 0] * t
+        p2 = y[..., 1] - qphi * a[..., 0] - beta[..., 1] * t
+        x = x0 + a * t[..., None]
+        return jnp.concatenate([jnp.stack([p1, p2], -1), x], axis=-1)
+
+    def hamiltonian_splitting(self):
+        r"""$p_1^2/(2m)$, $p_2^2/(2m)$ (each exact: the other momentum's shear by the field)
+        and $q\varphi(x)$ (a kick; $x_1, x_2$ commute)."""
+        m, qk = self.mass, self.charge * self.potential_strength
+        eye = np.eye(4)
+        return (
+            CollectiveTerm(eye[0], lambda s: s[0] ** 2 / (2.0 * m), "P1"),
+            CollectiveTerm(eye[1], lambda s: s[0] ** 2 / (2.0 * m), "P2"),
+            CollectiveTerm(eye[2:], lambda s: qk / jnp.sqrt(s[0] ** 2 + s[1] ** 2), "V"),
+        )

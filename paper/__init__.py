@@ -1,0 +1,1 @@
+"""Reproductions of the experiments of "Lie-Poisson Neural Networks (LPNets)"."""
