@@ -25,6 +25,11 @@ _STRUCTURE_RTOL = 1e-10
 
 
 def _check_structure_constants(C: Any) -> np.ndarray:
+    if isinstance(C, (str, bytes)) or np.iscomplexobj(C):
+        raise TypeError(
+            f"structure_constants must be a real array of shape (n, n, n); got {type(C).__name__}"
+            + (f" of dtype {np.asarray(C).dtype}" if np.iscomplexobj(C) else "")
+        )
     try:
         C = np.asarray(C, dtype=np.float64)
     except (TypeError, ValueError) as err:
@@ -90,7 +95,7 @@ class LieAlgebra:
     ):
         C = _check_structure_constants(structure_constants)
         n = C.shape[0]
-        if sign not in (-1, 1):
+        if isinstance(sign, bool) or sign not in (-1, 1):
             raise ValueError(f"sign must be -1 (body) or +1 (spatial); got {sign!r}")
         if basis_names is None:
             basis_names = tuple(f"e{i + 1}" for i in range(n))

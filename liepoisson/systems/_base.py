@@ -202,7 +202,7 @@ class CollectiveTerm:
         return jnp.broadcast_to(self._call(s, c), y.shape[:-1])
 
     def frozen_alpha(self, system: AbstractPoissonSystem, y: jax.Array) -> jax.Array:
-        """$\alpha = L^\top\partial_s\varphi$, constant along the flow of this term."""
+        r"""$\alpha = L^\top\partial_s\varphi$, constant along the flow of this term."""
         s, c = self._arguments(system, y)
         g = jax.grad(lambda z: jnp.sum(self._call(z, c)))(s)
         return jnp.einsum("md,...m->...d", jnp.asarray(self.forms), g)

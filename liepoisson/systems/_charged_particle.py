@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numbers
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -10,6 +12,19 @@ from ._base import AbstractPoissonSystem, CollectiveTerm
 
 # Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0).
 _TINY = 1e-150
+
+
+def _finite_float(x, name: str) -> float:
+    if isinstance(x, (bool, str, bytes)) or not (
+        isinstance(x, numbers.Real) or (isinstance(x, np.ndarray) and x.ndim == 0)
+    ):
+        raise TypeError(f"{name} must be a finite real number; got {type(x).__name__} {x!r}")
+    if np.iscomplexobj(x):
+        raise TypeError(f"{name} must be a finite real number; got {x!r}")
+    value = float(x)
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite; got {value!r}")
+    return value
 
 
 def segment_field_integral(x0: jnp.ndarray, a: jnp.ndarray, t: jnp.ndarray) -> jnp.ndarray:
@@ -58,14 +73,12 @@ class ChargedParticle(AbstractPoissonSystem):
     dim = 4
 
     def __init__(self, charge=1.0, mass=1.0, field_strength=1.0, potential_strength=0.01):
-        self.charge = float(charge)
-        if not np.isfinite(self.charge) or self.charge == 0:
+        self.charge = _finite_float(charge, "charge")
+        if self.charge == 0:
             raise ValueError(f"charge must be finite and non-zero; got {charge!r}")
         self.mass = positive_float(mass, "mass")
-        self.field_strength = float(field_strength)
-        self.potential_strength = float(potential_strength)
-        if not (np.isfinite(self.field_strength) and np.isfinite(self.potential_strength)):
-            raise ValueError("field_strength and potential_strength must be finite")
+        self.field_strength = _finite_float(field_strength, "field_strength")
+        self.potential_strength = _finite_float(potential_strength, "potential_strength")
 
     @property
     def params(self):
