@@ -1,1 +1,6 @@
 """Ground truth (heyoka), HDF5 data sets, classical Lie-Poisson splitting, diagnostics."""
+
+import liepoisson as _liepoisson  # noqa: F401  (first: switches JAX to float64)
+
+from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
+from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

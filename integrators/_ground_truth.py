@@ -1,0 +1,138 @@
+r"""Ground truth: Taylor's method (heyoka) on $\dot y = \mathbb{B}(y)\nabla H(y)$, the ODE built
+symbolically from the system's own Hamiltonian and Poisson tensor (`system.heyoka_system()`)."""
+
+from __future__ import annotations
+
+import json
+import numbers
+import weakref
+from typing import Any
+
+import numpy as np
+
+from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
+from liepoisson._validation import as_state, positive_float
+
+from ._trajectories import Trajectories
+
+#: Default tolerance of the Taylor integrator: double-precision machine epsilon.
+EPS = float(np.finfo(np.float64).eps)
+
+# Compiling a taylor_adaptive (LLVM JIT) costs ~0.1-1 s, far more than integrating one
+# trajectory, so integrators are reused across calls. Catalogue systems are fully described by
+# (class, params); any other system (a user Hamiltonian) is cached on the object itself.
+_CACHE_BY_PARAMS: dict[tuple[Any, ...], Any] = {}
+_CACHE_BY_OBJECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def check_n_steps(n_steps: Any, name: str = "n_steps") -> int:
+    """An integer >= 1."""
+    if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Integral):
+        raise TypeError(f"{name} must be an integer >= 1; got {type(n_steps).__name__} {n_steps!r}")
+    if int(n_steps) < 1:
+        raise ValueError(f"{name} must be an integer >= 1; got {n_steps!r}")
+    return int(n_steps)
+
+
+def taylor_integrator(system: AbstractPoissonSystem, tol: float | None = None):
+    """The (cached) `heyoka.taylor_adaptive` of `system` at tolerance `tol` (default eps).
+
+    Shared between calls: set `ta.time` and `ta.state` before every use.
+    """
+    import heyoka as hy
+
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+    tol = EPS if tol is None else positive_float(tol, "tol")
+    if SYSTEMS.get(system.name) is type(system):
+        key = (type(system), json.dumps(system.params, sort_keys=True), tol)
+        cache = _CACHE_BY_PARAMS
+    else:
+        key = tol
+        cache = _CACHE_BY_OBJECT.setdefault(system, {})
+    if key not in cache:
+        cache[key] = hy.taylor_adaptive(system.heyoka_system(), [0.0] * system.dim, tol=tol)
+    return cache[key]
+
+
+def _initial_conditions(system: AbstractPoissonSystem, y0: Any) -> np.ndarray:
+    y0 = np.asarray(as_state(y0, "y0", system.dim))
+    if y0.ndim == 1:
+        y0 = y0[None]
+    if y0.ndim != 2:
+        raise ValueError(
+            f"y0 must have shape ({system.dim},) or (n_traj, {system.dim}); got shape {y0.shape}"
+        )
+    return y0
+
+
+def _progress_bar(total: int, progress: bool | None):
+    from tqdm.auto import tqdm
+
+    if progress is None:
+        # Auto: only a run that is still going after a few seconds earns a bar.
+        return tqdm(total=total, desc="ground truth", unit="traj", delay=3.0, leave=False)
+    return tqdm(total=total, desc="ground truth", unit="traj", disable=not progress)
+
+
+def ground_truth(
+    system: AbstractPoissonSystem,
+    y0: Any,
+    h: float,
+    n_steps: int,
+    tol: float | None = None,
+    *,
+    progress: bool | None = None,
+    max_steps: int = 0,
+) -> Trajectories:
+    r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ with heyoka's adaptive Taylor method and
+    sample it at $t_n = n h$, $n = 0..n_\text{steps}$.
+
+    The Taylor order and step follow from `tol` (default machine epsilon), so the local error
+    is at round-off level: Casimirs and energy drift like a random walk of rounding errors.
+    One compiled integrator serves every initial condition (re-set `time` and `state`, then
+    `propagate_grid`): for these small systems a loop over one integrator beats heyoka's
+    ensemble mode by a wide margin (see BENCHMARKS.md).
+
+    **Arguments:**
+
+    - `system`: an `AbstractPoissonSystem`.
+    - `y0`: `(dim,)` or `(n_traj, dim)`, finite.
+    - `h`: sampling step (> 0); `n_steps`: number of steps (integer >= 1).
+    - `tol`: heyoka tolerance (> 0), default machine epsilon.
+    - `progress`: `True`/`False` to force the tqdm bar; `None` shows it only for a run still
+      going after 3 s.
+    - `max_steps`: heyoka's cap on steps per trajectory (0: none).
+
+    **Returns:** `Trajectories` with `states` of shape `(n_traj, n_steps + 1, dim)`.
+
+    Raises `RuntimeError` naming the trajectory if heyoka stops early (non-finite state, step
+    cap).
+    """
+    import heyoka as hy
+
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+    h = positive_float(h, "h")
+    n_steps = check_n_steps(n_steps)
+    tol_used = EPS if tol is None else positive_float(tol, "tol")
+    y0 = _initial_conditions(system, y0)
+    if progress is not None and not isinstance(progress, bool):
+        raise TypeError(f"progress must be True, False or None; got {progress!r}")
+
+    ta = taylor_integrator(system, tol_used)
+    grid = h * np.arange(n_steps + 1, dtype=np.float64)
+    out = np.empty((y0.shape[0], n_steps + 1, system.dim))
+    with _progress_bar(y0.shape[0], progress) as bar:
+        for i, y in enumerate(y0):
+            ta.time = 0.0
+            ta.state[:] = y
+            outcome, *_, states = ta.propagate_grid(grid, max_steps=max_steps)
+            if outcome != hy.taylor_outcome.time_limit:
+                raise RuntimeError(
+                    f"heyoka stopped trajectory {i} (y0={y.tolist()}) at t={ta.time} with "
+                    f"outcome {outcome}"
+                )
+            out[i] = states
+            bar.update(1)
+    return Trajectories(out, h, system, times=grid, integrator="heyoka-taylor", tolerance=tol_used)

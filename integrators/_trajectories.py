@@ -1,0 +1,330 @@
+r"""`Trajectories`: sampled solutions $y(t_n)$, $t_n = n h$, with their provenance, and the
+HDF5 format of DESIGN.md section 4."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import numbers
+import os
+import tempfile
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+import liepoisson
+from liepoisson.systems import AbstractPoissonSystem, from_name
+from liepoisson._validation import positive_float
+
+#: Version of the on-disk layout; `Trajectories.load` refuses any other.
+FORMAT_VERSION = 1
+
+# HDF5 attributes cannot hold None: these sentinels stand for "not recorded".
+_NO_TOLERANCE = float("nan")
+_NO_SEED = -1
+
+_REQUIRED_ATTRS = (
+    "system",
+    "system_params",
+    "h",
+    "integrator",
+    "tolerance",
+    "seed",
+    "created",
+    "liepoisson_version",
+    "format_version",
+)
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+
+
+def _check_seed(seed: Any) -> int | None:
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or int(seed) < 0:
+        raise TypeError(f"seed must be a non-negative integer or None; got {seed!r}")
+    return int(seed)
+
+
+class Trajectories:
+    r"""A data set of `n_traj` trajectories sampled at `n_steps + 1` equally spaced times.
+
+    `states[i, n]` is $y_i(t_n)$ with $t_n = n h$ (`times[n]`). The learning code uses exactly
+    `h`, `system`, `states`, `times`, `pairs()` and `split(...)`.
+
+    **Arguments:**
+
+    - `states`: `(n_traj, n_steps + 1, dim)` (a single `(n_steps + 1, dim)` trajectory is
+      promoted to `n_traj = 1`), finite, stored as float64.
+    - `h`: the sampling step, > 0.
+    - `system`: the `AbstractPoissonSystem` that generated them (`dim` must match).
+    - `times`: `(n_steps + 1,)`; default `h * arange(n_steps + 1)`.
+    - `integrator`, `tolerance`, `seed`: provenance, written to the file.
+    """
+
+    def __init__(
+        self,
+        states: Any,
+        h: float,
+        system: AbstractPoissonSystem,
+        *,
+        times: Any = None,
+        integrator: str = "heyoka-taylor",
+        tolerance: float | None = None,
+        seed: int | None = None,
+        created: str | None = None,
+        liepoisson_version: str | None = None,
+    ):
+        if not isinstance(system, AbstractPoissonSystem):
+            raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+        self.h = positive_float(h, "h")
+        try:
+            arr = np.array(states, dtype=np.float64)  # a copy: the data set owns its arrays
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"states must be a real array (n_traj, n_steps+1, dim); got {type(states).__name__}") from err
+        if arr.ndim == 2:
+            arr = arr[None]
+        if arr.ndim != 3 or arr.shape[-1] != system.dim or arr.shape[1] < 1:
+            raise ValueError(
+                f"states must have shape (n_traj, n_steps+1, {system.dim}) for {system!r}; "
+                f"got shape {np.shape(states)}"
+            )
+        if not np.all(np.isfinite(arr)):
+            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+            raise ValueError(f"states must be finite; found {arr[bad]} at index {bad}")
+        if times is None:
+            t = self.h * np.arange(arr.shape[1], dtype=np.float64)
+        else:
+            t = np.array(times, dtype=np.float64)
+            if t.shape != (arr.shape[1],):
+                raise ValueError(f"times must have shape ({arr.shape[1]},); got shape {t.shape}")
+            if not np.all(np.isfinite(t)):
+                raise ValueError("times must be finite")
+        if not isinstance(integrator, str):
+            raise TypeError(f"integrator must be a string; got {integrator!r}")
+        if tolerance is not None:
+            tolerance = float(tolerance)
+            if not np.isfinite(tolerance):  # NaN is how a file says "none"
+                tolerance = None
+        self.states = arr
+        self.times = t
+        self.system = system
+        self.integrator = integrator
+        self.tolerance = tolerance
+        self.seed = _check_seed(seed)
+        self.created = created or _now()
+        self.liepoisson_version = liepoisson_version or liepoisson.__version__
+
+    # -- shape ----------------------------------------------------------------------------
+    @property
+    def n_traj(self) -> int:
+        return self.states.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.states.shape[1] - 1
+
+    @property
+    def dim(self) -> int:
+        return self.states.shape[2]
+
+    def __len__(self) -> int:
+        return self.n_traj
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """Everything but the arrays (as written to the file)."""
+        return {
+            "system": self.system.name,
+            "system_params": dict(self.system.params),
+            "h": self.h,
+            "integrator": self.integrator,
+            "tolerance": self.tolerance,
+            "seed": self.seed,
+            "created": self.created,
+            "liepoisson_version": self.liepoisson_version,
+            "format_version": FORMAT_VERSION,
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"Trajectories({self.system!r}, n_traj={self.n_traj}, n_steps={self.n_steps}, "
+            f"h={self.h}, integrator={self.integrator!r})"
+        )
+
+    def _like(self, states: np.ndarray, times: np.ndarray | None = None) -> Trajectories:
+        return Trajectories(
+            states,
+            self.h,
+            self.system,
+            times=self.times if times is None else times,
+            integrator=self.integrator,
+            tolerance=self.tolerance,
+            seed=self.seed,
+            created=self.created,
+            liepoisson_version=self.liepoisson_version,
+        )
+
+    # -- learning views -------------------------------------------------------------------
+    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        r"""All one-step pairs $(y_n, y_{n+1})$, each `(n_traj * n_steps, dim)`, trajectory-major."""
+        return (
+            self.states[:, :-1].reshape(-1, self.dim).copy(),
+            self.states[:, 1:].reshape(-1, self.dim).copy(),
+        )
+
+    def split(
+        self, validation_fraction: float = 0.2, seed: int = 0
+    ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """Seeded random split of `pairs()`: `((y0_train, y1_train), (y0_val, y1_val))`.
+
+        `round(validation_fraction * n_pairs)` pairs, drawn without replacement by
+        `numpy.random.default_rng(seed)`, go to validation; both parts keep their time order.
+        """
+        if isinstance(validation_fraction, bool) or not isinstance(validation_fraction, numbers.Real):
+            raise TypeError(f"validation_fraction must be a real number in [0, 1); got {validation_fraction!r}")
+        if not 0.0 <= float(validation_fraction) < 1.0:
+            raise ValueError(f"validation_fraction must be in [0, 1); got {validation_fraction!r}")
+        seed = _check_seed(seed)
+        y0, y1 = self.pairs()
+        n = y0.shape[0]
+        n_val = int(round(float(validation_fraction) * n))
+        if n - n_val < 1:
+            raise ValueError(
+                f"validation_fraction={validation_fraction} leaves no training pair out of {n}"
+            )
+        perm = np.random.default_rng(seed).permutation(n)
+        val, train = np.sort(perm[:n_val]), np.sort(perm[n_val:])
+        return (y0[train], y1[train]), (y0[val], y1[val])
+
+    # -- subsets ----------------------------------------------------------------------------
+    def select(self, indices: Any) -> Trajectories:
+        """The trajectories `indices` (int, slice, sequence or boolean mask); always 3-D."""
+        if isinstance(indices, numbers.Integral) and not isinstance(indices, bool):
+            i = int(indices)
+            if not -self.n_traj <= i < self.n_traj:
+                raise IndexError(f"trajectory index {i} out of range for n_traj={self.n_traj}")
+            indices = [i]
+        states = self.states[indices]
+        if states.ndim != 3 or states.shape[0] == 0:
+            raise IndexError(f"indices must select at least one trajectory; got {indices!r}")
+        return self._like(states)
+
+    __getitem__ = select
+
+    @staticmethod
+    def concatenate(datasets: Sequence[Trajectories]) -> Trajectories:
+        """Stack data sets of the same system, `h`, times and provenance along `n_traj`."""
+        datasets = list(datasets)
+        if not datasets or not all(isinstance(d, Trajectories) for d in datasets):
+            raise TypeError("datasets must be a non-empty sequence of Trajectories")
+        first = datasets[0]
+        for k, d in enumerate(datasets[1:], 1):
+            if (d.system.name, d.system.params) != (first.system.name, first.system.params):
+                raise ValueError(f"datasets[{k}] is of {d.system!r}, datasets[0] of {first.system!r}")
+            if d.h != first.h or not np.array_equal(d.times, first.times):
+                raise ValueError(f"datasets[{k}] has other times (h={d.h}) than datasets[0] (h={first.h})")
+            if (d.integrator, d.tolerance) != (first.integrator, first.tolerance):
+                raise ValueError(
+                    f"datasets[{k}] comes from {d.integrator} (tol {d.tolerance}), datasets[0] "
+                    f"from {first.integrator} (tol {first.tolerance})"
+                )
+        return first._like(np.concatenate([d.states for d in datasets], axis=0))
+
+    # -- HDF5 -------------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> None:
+        """Write to HDF5 (DESIGN.md section 4), atomically: a temporary file in the same
+        directory is renamed over `path` only once complete, so a failure never leaves a half
+        file nor clobbers an existing one."""
+        import h5py
+
+        path = os.fspath(path)
+        directory = os.path.dirname(os.path.abspath(path))
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
+        os.close(fd)
+        try:
+            with h5py.File(tmp, "w") as f:
+                f.create_dataset("trajectories", data=self.states)
+                f.create_dataset("times", data=self.times)
+                f.attrs["system"] = self.system.name
+                f.attrs["system_params"] = json.dumps(self.system.params, sort_keys=True)
+                f.attrs["h"] = self.h
+                f.attrs["integrator"] = self.integrator
+                f.attrs["tolerance"] = _NO_TOLERANCE if self.tolerance is None else self.tolerance
+                f.attrs["seed"] = np.int64(_NO_SEED if self.seed is None else self.seed)
+                f.attrs["created"] = self.created
+                f.attrs["liepoisson_version"] = self.liepoisson_version
+                f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+            with open(tmp, "rb+") as fh:  # data on disk before the rename makes it visible
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Trajectories:
+        """Read a file written by `save`; the system is rebuilt by
+        `liepoisson.systems.from_name(name, params)`. Raises `ValueError` naming the file for a
+        file that is not HDF5, is truncated, lacks the datasets or attributes, or has another
+        `format_version`."""
+        import h5py
+
+        path = os.fspath(path)
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"no such data file: {path!r}")
+        try:
+            f = h5py.File(path, "r")
+        except OSError as err:
+            raise ValueError(
+                f"{path!r} is not a readable HDF5 file (corrupt, truncated or another format): {err}"
+            ) from err
+        try:
+            with f:
+                missing = [k for k in ("trajectories", "times") if k not in f]
+                missing += [f"attribute {a!r}" for a in _REQUIRED_ATTRS if a not in f.attrs]
+                if missing:
+                    raise ValueError(
+                        f"{path!r} is not a liepoisson trajectory file: missing {', '.join(missing)}"
+                    )
+                version = int(f.attrs["format_version"])
+                if version != FORMAT_VERSION:
+                    raise ValueError(
+                        f"{path!r} has format_version {version}; this liepoisson reads "
+                        f"format_version {FORMAT_VERSION}"
+                    )
+                attrs = {a: f.attrs[a] for a in _REQUIRED_ATTRS}
+                states = f["trajectories"][...]
+                times = f["times"][...]
+        except ValueError:
+            raise
+        except (OSError, KeyError, TypeError) as err:
+            raise ValueError(f"{path!r} is damaged (truncated or corrupt HDF5 data): {err}") from err
+
+        def text(v: Any) -> str:
+            return v.decode() if isinstance(v, bytes) else str(v)
+
+        try:
+            params = json.loads(text(attrs["system_params"]))
+            system = from_name(text(attrs["system"]), params)
+        except (ValueError, TypeError) as err:
+            raise ValueError(f"{path!r}: cannot rebuild the system: {err}") from err
+        seed = int(attrs["seed"])
+        try:
+            return cls(
+                states,
+                float(attrs["h"]),
+                system,
+                times=times,
+                integrator=text(attrs["integrator"]),
+                tolerance=float(attrs["tolerance"]),
+                seed=None if seed == _NO_SEED else seed,
+                created=text(attrs["created"]),
+                liepoisson_version=text(attrs["liepoisson_version"]),
+            )
+        except (ValueError, TypeError) as err:
+            raise ValueError(f"{path!r} holds inconsistent data: {err}") from err
