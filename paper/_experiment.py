@@ -1,0 +1,147 @@
+"""What every experiment of the paper shares: profiles, result files, the paper-vs-ours table."""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import json
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+
+# The keys every experiment's metrics.json carries (issue 4), for ours and for the baseline.
+METRIC_KEYS = (
+    "train_loss",
+    "val_loss",
+    "energy_rel_err_max",
+    "energy_rel_err_mean",
+    "casimir_rel_drift_max",
+    "traj_err_final",
+    "poisson_defect_max",
+    "wall_time_s",
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperValue:
+    """A number the paper reports, with how it compares (`<=`: the paper's value is a bound)."""
+
+    metric: str
+    value: float
+    text: str
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write via a temporary file renamed into place: an interruption never leaves half a file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
+        x = x.item()
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
+
+
+def fmt(x: Any) -> str:
+    if x is None:
+        return "—"
+    if isinstance(x, str):
+        return x
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(fmt(v) for v in x) + "]"
+    x = float(x)
+    if x == 0:
+        return "0"
+    if 1e-3 <= abs(x) < 1e4:
+        return f"{x:.4g}"
+    return f"{x:.2e}"
+
+
+class AbstractExperiment(abc.ABC):
+    """One experiment of the paper: `run(profile)` returns its metrics (ours and baseline)."""
+
+    id: str
+    title: str
+    paper_values: tuple[PaperValue, ...]
+    # Rows of the summary table: (metric key in metrics.json, label).
+    table_rows: tuple[tuple[str, str], ...] = (
+        ("train_loss", "training loss (MSE)"),
+        ("val_loss", "validation loss (MSE)"),
+        ("energy_rel_err_max", "max |rel. energy error|"),
+        ("energy_rel_err_mean", "mean |rel. energy error|"),
+        ("casimir_rel_drift_max", "max |rel. Casimir drift|"),
+        ("traj_err_final", "trajectory error at the end"),
+        ("poisson_defect_max", "max Poisson defect"),
+        ("wall_time_s", "training wall time [s]"),
+    )
+
+    @abc.abstractmethod
+    def run(self, profile: str, out_dir: Path, progress: bool) -> dict[str, Any]:
+        """Run at `profile` ("quick" or "full"), write figures into `out_dir`, return metrics."""
+
+    def execute(self, profile: str = "quick", progress: bool = True, out_dir: Path | None = None):
+        out_dir = RESULTS_DIR / self.id if out_dir is None else Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        metrics = self.run(profile, out_dir, progress)
+        metrics["experiment"] = self.id
+        metrics["profile"] = profile
+        metrics["total_time_s"] = time.perf_counter() - t0
+        metrics = _jsonable(metrics)
+        atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2) + "\n")
+        atomic_write_text(out_dir / "table.md", self.markdown_table(metrics))
+        return metrics
+
+    def paper_value(self, key: str) -> PaperValue | None:
+        for pv in self.paper_values:
+            if pv.metric == key:
+                return pv
+        return None
+
+    def rows(self, metrics: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+        base = metrics.get("baseline", {}) or {}
+        out = []
+        for key, label in self.table_rows:
+            if key not in metrics:
+                continue
+            pv = self.paper_value(key)
+            out.append((label, pv.text if pv else "—", fmt(metrics[key]), fmt(base.get(key))))
+        return out
+
+    def markdown_table(self, metrics: dict[str, Any]) -> str:
+        lines = [
+            f"# {self.id}: {self.title}",
+            "",
+            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run {self.id}"
+            + (" --full`" if metrics.get("profile") == "full" else "`"),
+            "",
+            f"| metric | paper | ours ({metrics.get('model', 'LPNet')}) | baseline ({metrics.get('baseline_model', 'MLP')}) |",
+            "|---|---|---|---|",
+        ]
+        lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in self.rows(metrics)]
+        notes = metrics.get("notes")
+        if notes:
+            lines += ["", *[f"- {n}" for n in notes]]
+        return "\n".join(lines) + "\n"

@@ -1,0 +1,77 @@
+"""E2: LPNet for the rigid body learned from 20 nearby trajectories, predicting an unseen one.
+
+Data: 20 heyoka trajectories from Pi0 + U[-0.1, 0.1]^3 (Pi0 = (1/sqrt2, -1/sqrt2, 1)), 200 pairs
+each, h = 0.1. Model: MLP 3x32 sigmoid (2339 parameters), Adam 1e-3 decaying to 1e-4, loss on
+the state. Prediction: 10,000 steps from Pi0 itself (not in the data).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+import integrators as it
+import learn
+import liepoisson as lp
+
+from ._evaluate import compare
+from ._experiment import AbstractExperiment, PaperValue
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    epochs: int
+    prediction_steps: int
+
+
+PROFILES = {
+    # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
+    "smoke": Profile(epochs=300, prediction_steps=300),
+    "quick": Profile(epochs=30_000, prediction_steps=10_000),
+    "full": Profile(epochs=100_000, prediction_steps=10_000),
+}
+DATA_SEED = 2
+
+
+class E2(AbstractExperiment):
+    id = "E2"
+    title = "rigid body, LPNet from 20 nearby trajectories"
+    paper_values = (
+        PaperValue("train_loss", 1e-6, "< 1e-6"),
+        PaperValue("val_loss", 1e-5, "< 1e-5"),
+        PaperValue("energy_rel_err_max", 2.5e-3, "0.25%"),
+        PaperValue("casimir_rel_drift_max", 1e-11, "1e-11 (absolute)"),
+    )
+
+    def run(self, profile: str, out_dir: Path, progress: bool):
+        P = PROFILES[profile]
+        system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+        h = 0.1
+        pi0 = np.array([1 / np.sqrt(2), -1 / np.sqrt(2), 1.0])
+        rng = np.random.default_rng(DATA_SEED)
+        y0s = pi0 + rng.uniform(-0.1, 0.1, size=(20, 3))
+        data = it.ground_truth(system, y0s, h=h, n_steps=200, seed=DATA_SEED)
+        data.save(out_dir / "data.h5")
+        reference = it.ground_truth(system, pi0, h=h, n_steps=P.prediction_steps)
+
+        fit = dict(
+            epochs=P.epochs,
+            learning_rate=1e-3,
+            final_learning_rate=1e-4,
+            validation_fraction=0.2,
+            seed=0,
+            progress=progress,
+        )
+        net = learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
+        net.save(out_dir / "lpnet.h5")
+        base = learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
+        metrics = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics["n_parameters"] = net.n_parameters
+        metrics["model"] = "LPNet 3x32"
+        metrics["baseline_model"] = "residual MLP 3x32"
+        return metrics
+
+
+EXPERIMENT = E2()
