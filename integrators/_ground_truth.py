@@ -34,9 +34,13 @@ def check_n_steps(n_steps: Any, name: str = "n_steps") -> int:
     return int(n_steps)
 
 
-def taylor_integrator(system: AbstractPoissonSystem, tol: float | None = None):
+def taylor_integrator(
+    system: AbstractPoissonSystem, tol: float | None = None, *, variational: bool = False
+):
     """The (cached) `heyoka.taylor_adaptive` of `system` at tolerance `tol` (default eps).
 
+    With `variational=True` the state is augmented by the first-order variational equations
+    (`heyoka.var_ode_sys`): `state[dim:].reshape(dim, dim)[i, j]` is $\\partial y_i/\\partial y_j(0)$.
     Shared between calls: set `ta.time` and `ta.state` before every use.
     """
     import heyoka as hy
@@ -45,13 +49,16 @@ def taylor_integrator(system: AbstractPoissonSystem, tol: float | None = None):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     tol = EPS if tol is None else positive_float(tol, "tol")
     if SYSTEMS.get(system.name) is type(system):
-        key = (type(system), json.dumps(system.params, sort_keys=True), tol)
+        key = (type(system), json.dumps(system.params, sort_keys=True), tol, variational)
         cache = _CACHE_BY_PARAMS
     else:
-        key = tol
+        key = (tol, variational)
         cache = _CACHE_BY_OBJECT.setdefault(system, {})
     if key not in cache:
-        cache[key] = hy.taylor_adaptive(system.heyoka_system(), [0.0] * system.dim, tol=tol)
+        ode = system.heyoka_system()
+        if variational:
+            ode = hy.var_ode_sys(ode, hy.var_args.vars, order=1)
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * system.dim, tol=tol)
     return cache[key]
 
 

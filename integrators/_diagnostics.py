@@ -1,0 +1,192 @@
+r"""Diagnostics of a computed trajectory: Casimir drift, relative energy error, error against a
+reference, and a plot of them."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+import numpy as np
+
+from liepoisson.systems import AbstractPoissonSystem
+
+from ._trajectories import Trajectories
+
+# |<C>| below this is "zero" (e.g. Pi.p = 0 for Kirchhoff): the relative drift then divides by 1,
+# i.e. falls back to the absolute drift, rather than blowing up.
+_TINY = 1e-12
+
+
+def _safe_denominator(mean: np.ndarray) -> np.ndarray:
+    return np.where(np.abs(mean) > _TINY, mean, 1.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class DiagnosticsReport:
+    r"""Time series and summaries of a trajectory's conservation and accuracy.
+
+    Arrays have the trajectory's leading shape: `(T,)` for one trajectory, `(n_traj, T)` for
+    many (a trailing `k` axis for Casimirs).
+
+    - `casimirs`: $C(t)$; `casimir_drift`: $C(t) - C(0)$;
+      `casimir_drift_relative`: $(C(t) - C(0))/\langle C\rangle$, $\langle\cdot\rangle$ the time
+      mean (paper's figure captions), divided by 1 where $|\langle C\rangle| < 10^{-12}$.
+    - `energy`: $E(t) = H(y(t))$; `energy_error_relative`: $(E(t) - E(0))/\langle E\rangle$
+      (the paper's relative energy error), with the same safe denominator.
+    - `trajectory_error`: $\|y(t) - y_\text{ref}(t)\|_2$ per time, or `None` without reference.
+    """
+
+    times: np.ndarray
+    casimirs: np.ndarray
+    casimir_drift: np.ndarray
+    casimir_drift_relative: np.ndarray
+    energy: np.ndarray
+    energy_error_relative: np.ndarray
+    trajectory_error: np.ndarray | None
+
+    @property
+    def max_casimir_drift(self) -> float:
+        """$\\max_t |C(t) - C(0)|$ over all Casimirs and trajectories (0 if there are none)."""
+        return float(np.max(np.abs(self.casimir_drift), initial=0.0))
+
+    @property
+    def mean_casimir_drift(self) -> float:
+        return float(np.mean(np.abs(self.casimir_drift))) if self.casimir_drift.size else 0.0
+
+    @property
+    def max_casimir_drift_relative(self) -> float:
+        return float(np.max(np.abs(self.casimir_drift_relative), initial=0.0))
+
+    @property
+    def mean_casimir_drift_relative(self) -> float:
+        a = self.casimir_drift_relative
+        return float(np.mean(np.abs(a))) if a.size else 0.0
+
+    @property
+    def max_energy_error(self) -> float:
+        """$\\max_t |E(t) - E(0)|/|\\langle E\\rangle|$."""
+        return float(np.max(np.abs(self.energy_error_relative)))
+
+    @property
+    def mean_energy_error(self) -> float:
+        return float(np.mean(np.abs(self.energy_error_relative)))
+
+    @property
+    def max_trajectory_error(self) -> float | None:
+        return None if self.trajectory_error is None else float(np.max(self.trajectory_error))
+
+    @property
+    def mean_trajectory_error(self) -> float | None:
+        return None if self.trajectory_error is None else float(np.mean(self.trajectory_error))
+
+    def summary(self) -> dict[str, float | None]:
+        """The scalar figures, for tables and logs."""
+        return {
+            "max_casimir_drift": self.max_casimir_drift,
+            "mean_casimir_drift": self.mean_casimir_drift,
+            "max_casimir_drift_relative": self.max_casimir_drift_relative,
+            "mean_casimir_drift_relative": self.mean_casimir_drift_relative,
+            "max_energy_error": self.max_energy_error,
+            "mean_energy_error": self.mean_energy_error,
+            "max_trajectory_error": self.max_trajectory_error,
+            "mean_trajectory_error": self.mean_trajectory_error,
+        }
+
+    def __getitem__(self, key: str) -> Any:  # dict-like access to fields and summaries
+        if key in self.summary():
+            return self.summary()[key]
+        if key in {f.name for f in dataclasses.fields(self)}:
+            return getattr(self, key)
+        raise KeyError(key)
+
+
+def _as_path(trajectory: Any, name: str, dim: int) -> tuple[np.ndarray, np.ndarray | None]:
+    if isinstance(trajectory, Trajectories):
+        return trajectory.states, trajectory.times
+    try:
+        arr = np.asarray(trajectory, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be an array (T, {dim}) or (n_traj, T, {dim}); got {type(trajectory).__name__}") from err
+    if arr.ndim not in (2, 3) or arr.shape[-1] != dim:
+        raise ValueError(f"{name} must have shape (T, {dim}) or (n_traj, T, {dim}); got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise ValueError(f"{name} must be finite; found {arr[bad]} at index {bad}")
+    return arr, None
+
+
+def diagnostics(
+    trajectory: Any,
+    system: AbstractPoissonSystem,
+    reference: Any = None,
+    times: Any = None,
+) -> DiagnosticsReport:
+    r"""Casimir drift, relative energy error and (with `reference`) the error over time.
+
+    **Arguments:**
+
+    - `trajectory`: `(T, dim)`, `(n_traj, T, dim)` or a `Trajectories`.
+    - `system`: the `AbstractPoissonSystem` (its `hamiltonian` and `casimirs`).
+    - `reference`: same shape (or a `Trajectories`), e.g. the ground truth, or `None`.
+    - `times`: `(T,)`; default the `Trajectories`' times or the step index `0..T-1`.
+
+    **Returns:** a `DiagnosticsReport` (see there for the definitions).
+    """
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+    y, t_data = _as_path(trajectory, "trajectory", system.dim)
+    T = y.shape[-2]
+    if times is None:
+        times = t_data if t_data is not None else np.arange(T, dtype=np.float64)
+    times = np.asarray(times, dtype=np.float64)
+    if times.shape != (T,):
+        raise ValueError(f"times must have shape ({T},) to match trajectory; got {times.shape}")
+
+    C = np.asarray(system.casimirs(y))  # (..., T, k)
+    dC = C - C[..., :1, :]
+    dC_rel = dC / _safe_denominator(np.mean(C, axis=-2, keepdims=True))
+    E = np.asarray(system.hamiltonian(y))  # (..., T)
+    dE_rel = (E - E[..., :1]) / _safe_denominator(np.mean(E, axis=-1, keepdims=True))
+
+    error = None
+    if reference is not None:
+        ref, _ = _as_path(reference, "reference", system.dim)
+        if ref.shape != y.shape:
+            raise ValueError(f"reference must have the trajectory's shape {y.shape}; got {ref.shape}")
+        error = np.linalg.norm(y - ref, axis=-1)
+    return DiagnosticsReport(times, C, dC, dC_rel, E, dE_rel, error)
+
+
+def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, title: str = "") -> None:
+    """Plot $|E(t)-E(0)|/|\\langle E\\rangle|$, $|C(t)-C(0)|/|\\langle C\\rangle|$ and the
+    trajectory error (log scale, one line per trajectory) to `path` (any matplotlib format)."""
+    if not isinstance(report, DiagnosticsReport):
+        raise TypeError(f"report must be a DiagnosticsReport; got {type(report).__name__}")
+    try:
+        from matplotlib.figure import Figure  # no pyplot: no GUI backend, no global state
+    except ImportError as err:
+        raise ImportError(
+            "plot_diagnostics needs matplotlib: pip install 'liepoisson[paper]'"
+        ) from err
+
+    def lines(a: np.ndarray) -> np.ndarray:  # (T, n_lines) for ax.semilogy
+        a = np.abs(a)
+        a = a.reshape(-1, a.shape[-1]) if a.ndim > 1 else a[None]
+        return np.where(a.T > 0, a.T, np.nan)  # exact zeros (t = 0) have no place on a log axis
+
+    panels = [("relative energy error", report.energy_error_relative)]
+    if report.casimirs.shape[-1]:
+        drift = np.moveaxis(report.casimir_drift_relative, -1, 0)  # one panel line per Casimir
+        panels.append(("relative Casimir drift", drift.reshape(-1, drift.shape[-1])))
+    if report.trajectory_error is not None:
+        panels.append(("trajectory error", report.trajectory_error))
+    fig = Figure(figsize=(5.0, 2.2 * len(panels)), layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, data) in zip(axes, panels):
+        ax.semilogy(report.times, lines(data), lw=0.8)
+        ax.set_ylabel(label)
+    axes[-1].set_xlabel("t")
+    if title:
+        axes[0].set_title(title)
+    fig.savefig(os.fspath(path))

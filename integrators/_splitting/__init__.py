@@ -1,0 +1,1 @@
+"""Classical splitting methods built on the exact sub-flows of `system.hamiltonian_splitting()`."""

@@ -1,0 +1,29 @@
+r"""Strang splitting (order 2, symmetric): the basic step of every composition method."""
+
+from __future__ import annotations
+
+from ._base import AbstractSplittingMethod
+
+
+def strang_step(method: AbstractSplittingMethod, y, h):
+    r"""$\varphi^{[1]}_{h/2}\circ\cdots\circ\varphi^{[N-1]}_{h/2}\circ\varphi^{[N]}_h\circ
+    \varphi^{[N-1]}_{h/2}\circ\cdots\circ\varphi^{[1]}_{h/2}$ (applied right to left)."""
+    n = len(method.terms)
+    for k in range(n - 1):
+        y = method.flow(k, 0.5 * h, y)
+    y = method.flow(n - 1, h, y)
+    for k in reversed(range(n - 1)):
+        y = method.flow(k, 0.5 * h, y)
+    return y
+
+
+class Strang(AbstractSplittingMethod):
+    r"""Strang (1968) splitting
+    $\Phi_h = \varphi^{[1]}_{h/2}\cdots\varphi^{[N-1]}_{h/2}\,\varphi^{[N]}_h\,
+    \varphi^{[N-1]}_{h/2}\cdots\varphi^{[1]}_{h/2}$: symmetric, $\Phi_{-h} = \Phi_h^{-1}$, order 2.
+    """
+
+    order = 2
+
+    def _step(self, y, h):
+        return strang_step(self, y, h)
