@@ -1,0 +1,98 @@
+"""HDF5 model files and training checkpoints: attributes for hyperparameters, datasets for
+weights (never pickle); written to a temporary file renamed into place."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from typing import Any
+
+import equinox as eqx
+import h5py
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+FORMAT = "learn-model"
+FORMAT_VERSION = 1
+
+
+def array_leaves(tree: Any) -> list[np.ndarray]:
+    """The array leaves of a pytree (equinox model or optimiser state), in a fixed order."""
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(eqx.filter(tree, eqx.is_array))]
+
+
+def replace_array_leaves(tree: Any, leaves: list[np.ndarray], what: str) -> Any:
+    """`tree` with its array leaves replaced by `leaves` (checked for count, shape, dtype)."""
+    dynamic, static = eqx.partition(tree, eqx.is_array)
+    old, treedef = jax.tree_util.tree_flatten(dynamic)
+    if len(old) != len(leaves):
+        raise ValueError(f"{what}: the file holds {len(leaves)} arrays; the model expects {len(old)}")
+    new = []
+    for i, (o, n) in enumerate(zip(old, leaves)):
+        if tuple(o.shape) != tuple(n.shape):
+            raise ValueError(f"{what}: array {i} has shape {n.shape} in the file, {o.shape} expected")
+        new.append(jnp.asarray(n, dtype=o.dtype))
+    return eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static)
+
+
+def write(path: Any, attrs: dict[str, Any], groups: dict[str, Any]) -> None:
+    """Write `attrs` (JSON-encoded when not scalar/str) and `groups` = {name: list of arrays or
+    dict of arrays} atomically to `path`."""
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=directory)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = FORMAT
+            f.attrs["format_version"] = FORMAT_VERSION
+            for key, value in attrs.items():
+                if isinstance(value, (str, int, float, bool, np.integer, np.floating)):
+                    f.attrs[key] = value
+                else:
+                    f.attrs[key + "_json"] = json.dumps(value)
+            for name, content in groups.items():
+                g = f.create_group(name)
+                if isinstance(content, dict):
+                    g.attrs["kind"] = "dict"
+                    for k, v in content.items():
+                        g.create_dataset(k, data=np.asarray(v))
+                else:
+                    g.attrs["kind"] = "list"
+                    g.attrs["count"] = len(content)
+                    for i, v in enumerate(content):
+                        g.create_dataset(f"{i:04d}", data=np.asarray(v))
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def read(path: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """`(attrs, groups)` as written by `write` (JSON attributes decoded)."""
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"path {path!r} does not exist")
+    with h5py.File(path, "r") as f:
+        if f.attrs.get("format") != FORMAT:
+            raise ValueError(f"path {path!r} is not a learn model/checkpoint file")
+        attrs: dict[str, Any] = {}
+        for key, value in f.attrs.items():
+            if isinstance(value, bytes):
+                value = value.decode()
+            if isinstance(value, np.generic):
+                value = value.item()
+            if key.endswith("_json"):
+                key, value = key[: -len("_json")], json.loads(value)
+            attrs[key] = value
+        groups: dict[str, Any] = {}
+        for name, g in f.items():
+            if g.attrs["kind"] == "dict":
+                groups[name] = {k: np.asarray(v) for k, v in g.items()}
+            else:
+                groups[name] = [np.asarray(g[f"{i:04d}"]) for i in range(int(g.attrs["count"]))]
+    return attrs, groups

@@ -1,0 +1,85 @@
+"""Training data: `(y0, y1)` pairs from an `integrators.Trajectories` or from arrays."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ._validation import fraction, pairs, positive_float, positive_int
+
+
+class PairData:
+    """Training and validation pairs with their time step (host-side, numpy)."""
+
+    def __init__(self, train, val, h):
+        self.y0, self.y1 = train
+        self.y0_val, self.y1_val = val
+        self.h = h
+
+    @property
+    def has_validation(self) -> bool:
+        return self.y0_val.shape[0] > 0
+
+
+def _split(y0, y1, validation_fraction, seed):
+    n = y0.shape[0]
+    n_val = int(round(validation_fraction * n))
+    if validation_fraction > 0 and n_val == 0:
+        n_val = 1
+    if n - n_val < 1:
+        raise ValueError(
+            f"validation_fraction={validation_fraction} leaves no training pairs out of {n}"
+        )
+    perm = np.random.default_rng(seed).permutation(n)
+    tr, va = np.sort(perm[n_val:]), np.sort(perm[:n_val])
+    return (y0[tr], y1[tr]), (y0[va], y1[va])
+
+
+def prepare(data: Any, system, h: Any, validation_fraction: Any, seed: Any) -> PairData:
+    """Turn `data` into training/validation pairs for `system`.
+
+    `data` is an `integrators.Trajectories` (duck-typed: `.h`, `.pairs()`, `.split(f, seed)`,
+    `.system`) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h` given.
+    """
+    validation_fraction = fraction(validation_fraction, "validation_fraction")
+    seed = positive_int(seed, "seed", minimum=0)
+    if isinstance(data, (tuple, list)):
+        if len(data) != 2:
+            raise ValueError(f"data given as a tuple must be (y0, y1); got {len(data)} entries")
+        if h is None:
+            raise ValueError("h (the time step between y0 and y1) is required when data is (y0, y1)")
+        h = positive_float(h, "h")
+        y0, y1 = pairs(data[0], data[1], system.dim)
+        y0, y1 = y0.reshape(-1, system.dim), y1.reshape(-1, system.dim)
+        if y0.shape[0] == 0:
+            raise ValueError("data must contain at least one pair; got 0")
+        train, val = _split(y0, y1, validation_fraction, seed)
+        return PairData(train, val, h)
+    pairs_method = getattr(data, "pairs", None)
+    data_h = getattr(data, "h", None)
+    if not callable(pairs_method) or data_h is None:
+        raise TypeError(
+            "data must be an integrators.Trajectories (with .h, .pairs(), .split()) or a tuple "
+            f"(y0, y1) of arrays with h=...; got {type(data).__name__}"
+        )
+    data_h = positive_float(data_h, "data.h")
+    if h is not None and abs(positive_float(h, "h") - data_h) > 1e-12 * data_h:
+        raise ValueError(f"h={h} disagrees with the data's time step data.h={data_h}")
+    data_system = getattr(data, "system", None)
+    if data_system is not None and getattr(data_system, "dim", system.dim) != system.dim:
+        raise ValueError(
+            f"data is for {data_system!r} (dim {data_system.dim}); the model is for {system!r} "
+            f"(dim {system.dim})"
+        )
+    split_method = getattr(data, "split", None)
+    if validation_fraction > 0 and callable(split_method):
+        (y0, y1), (v0, v1) = split_method(validation_fraction, seed)
+        y0, y1 = pairs(y0, y1, system.dim)
+        v0, v1 = pairs(v0, v1, system.dim)
+        return PairData((y0.reshape(-1, system.dim), y1.reshape(-1, system.dim)),
+                        (v0.reshape(-1, system.dim), v1.reshape(-1, system.dim)), data_h)
+    y0, y1 = pairs(*pairs_method(), system.dim)
+    train, val = _split(y0.reshape(-1, system.dim), y1.reshape(-1, system.dim),
+                        validation_fraction, seed)
+    return PairData(train, val, data_h)
