@@ -1,0 +1,128 @@
+"""Classical splitting: observed order against heyoka, Casimirs to round-off, shapes, validation."""
+
+import numpy as np
+import pytest
+
+import integrators as it
+import liepoisson as lp
+from integrators import splitting
+
+EPS = np.finfo(np.float64).eps
+BODY = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+PI0 = np.array([1 / np.sqrt(2), -1 / np.sqrt(2), 1.0])
+PENDULUM = lp.systems.ExtendedPendulum()
+
+# Step counts over t in [0, 1] in the asymptotic regime, errors well above round-off
+# (Yoshida6 is accurate to ~1e-14 already at h = 1/32, so it gets larger steps).
+STEPS = {1: (16, 32, 64, 128), 2: (8, 16, 32, 64), 4: (4, 8, 16, 32), 6: (2, 3, 4, 6)}
+CASES = [(m, BODY, PI0) for m in splitting.METHODS if m is not splitting.BlanesMoan4] + [
+    (m, PENDULUM, np.array([0.0, 1.0, 1.0])) for m in (splitting.Strang, splitting.BlanesMoan4)
+]
+
+
+def _flows_per_step(method) -> int:
+    n = len(method.system.hamiltonian_splitting())
+    if isinstance(method, splitting.LieTrotter):
+        return n
+    if isinstance(method, splitting.BlanesMoan4):
+        return len(method.a) + len(method.b)
+    strang = 2 * n - 1
+    return strang * len(getattr(method, "coefficients", [1.0]))
+
+
+@pytest.mark.parametrize("cls, system, y0", CASES, ids=lambda v: getattr(v, "__name__", type(v).__name__))
+def test_observed_order(cls, system, y0):
+    method = cls(system)
+    steps = STEPS[cls.order]
+    ref = it.ground_truth(system, y0, h=1.0, n_steps=1).states[0, -1]
+    errors = []
+    for n in steps:  # `step` compiles once for all h (rollout would recompile per n_steps)
+        y = y0
+        for _ in range(n):
+            y = method.step(y, 1.0 / n)
+        errors.append(np.linalg.norm(np.asarray(y) - ref))
+    slope = np.polyfit(np.log(steps), -np.log(errors), 1)[0]
+    assert abs(slope - cls.order) < 0.1, (errors, slope)
+
+
+@pytest.mark.parametrize("cls", [m for m in splitting.METHODS if m is not splitting.BlanesMoan4])
+def test_casimir_round_off_over_1e4_steps(cls):
+    method = cls(BODY)
+    n_steps = 10_000
+    ys = np.asarray(method.rollout(PI0, 0.1, n_steps))
+    C = np.asarray(BODY.casimirs(ys))[:, 0]
+    drift = np.max(np.abs(C - C[0])) / C[0]
+    # Each exact sub-flow is a rotation that changes |Pi|^2 by a few eps (relative); those
+    # errors add like a random walk, sqrt(n_flows); its maximum over time stays within a few
+    # standard deviations: 10 sqrt(n_flows) eps.
+    n_flows = n_steps * _flows_per_step(method)
+    assert drift < 10 * np.sqrt(n_flows) * EPS, drift
+
+
+def test_blanes_moan_casimir_round_off():
+    ys = np.asarray(splitting.BlanesMoan4(PENDULUM).rollout([0.0, 1.5, 2.35], 0.1, 10_000))
+    C = np.asarray(PENDULUM.casimirs(ys))[:, 0]
+    scale = np.max(np.abs(ys[:, 2]))  # C = r - u^2 - v^2 cancels terms of size |r|
+    assert np.max(np.abs(C - C[0])) < 10 * np.sqrt(13e4) * EPS * scale
+
+
+@pytest.mark.parametrize(
+    "system",
+    [lp.systems.HeavyTop(), lp.systems.Kirchhoff(), lp.systems.ChargedParticle()],
+    ids=lambda s: s.name,
+)
+def test_other_systems_strang_close_to_ground_truth(system):
+    y0 = {"HeavyTop": [0.3, -0.2, 0.5, 0.1, 0.6, 0.79], "Kirchhoff": [1, 1, 1, -1, 1, 2], "ChargedParticle": [1, 0.5, 0.5, 1]}[system.name]
+    ref = it.ground_truth(system, y0, 0.01, 100).states[0]
+    ys = np.asarray(splitting.Strang(system).rollout(y0, 0.01, 100))
+    np.testing.assert_allclose(ys, ref, atol=1e-4)  # Strang: O(h^2) over t = 1
+
+
+def test_shapes_and_batching():
+    method = splitting.Strang(BODY)
+    y0s = PI0 + np.random.default_rng(0).uniform(-0.1, 0.1, (5, 3))
+    many = method.rollout(y0s, 0.1, 7)
+    assert many.shape == (5, 8, 3) and many.dtype == np.float64
+    one = method.rollout(y0s[2], 0.1, 7)
+    assert one.shape == (8, 3)
+    np.testing.assert_allclose(many[2], one, rtol=0, atol=4 * EPS)
+    np.testing.assert_array_equal(many[:, 0], y0s)
+    np.testing.assert_allclose(method.step(y0s, 0.1), many[:, 1], rtol=0, atol=4 * EPS)
+    assert method.step(PI0, 0.1).shape == (3,)
+
+
+def test_strang_is_symmetric():
+    method = splitting.Strang(BODY)
+    # Phi_{-h} o Phi_h = id: step backwards by flowing the pieces for negative time
+    y1 = np.asarray(method.step(PI0, 0.3))
+    back = method._step(y1, -0.3)
+    np.testing.assert_allclose(back, PI0, rtol=0, atol=8 * EPS)
+
+
+def test_blanes_moan_needs_two_terms():
+    with pytest.raises(ValueError, match=r"RigidBody.*3 pieces"):
+        splitting.BlanesMoan4(BODY)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"h": 0.0}, ValueError, ["h", "> 0", "0.0"]),
+        ({"h": -1.0}, ValueError, ["h", "-1.0"]),
+        ({"n_steps": 0}, ValueError, ["n_steps", "0"]),
+        ({"n_steps": 1.5}, TypeError, ["n_steps", "1.5"]),
+        ({"y0": [np.nan, 0, 1]}, ValueError, ["y0", "finite"]),
+        ({"y0": [1.0, 2.0]}, ValueError, ["y0", "(2,)"]),
+    ],
+)
+def test_validation(kwargs, error, words):
+    args = {"y0": PI0, "h": 0.1, "n_steps": 3} | kwargs
+    with pytest.raises(error) as info:
+        splitting.Strang(BODY).rollout(**args)
+    for w in words:
+        assert w in str(info.value)
+
+
+def test_system_type_checked():
+    with pytest.raises(TypeError, match="system"):
+        splitting.Strang("RigidBody")
