@@ -129,16 +129,19 @@ def diagnostics(
     - `trajectory`: `(T, dim)`, `(n_traj, T, dim)` or a `Trajectories`.
     - `system`: the `AbstractPoissonSystem` (its `hamiltonian` and `casimirs`).
     - `reference`: same shape (or a `Trajectories`), e.g. the ground truth, or `None`.
-    - `times`: `(T,)`; default the `Trajectories`' times or the step index `0..T-1`.
+    - `times`: `(T,)`; default the times of `trajectory` or `reference` if either is a
+      `Trajectories`, else the step index `0..T-1`.
 
     **Returns:** a `DiagnosticsReport` (see there for the definitions).
     """
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     y, t_data = _as_path(trajectory, "trajectory", system.dim)
+    ref, t_ref = (None, None) if reference is None else _as_path(reference, "reference", system.dim)
     T = y.shape[-2]
     if times is None:
-        times = t_data if t_data is not None else np.arange(T, dtype=np.float64)
+        t_known = t_data if t_data is not None else t_ref
+        times = t_known if t_known is not None else np.arange(T, dtype=np.float64)
     times = np.asarray(times, dtype=np.float64)
     if times.shape != (T,):
         raise ValueError(f"times must have shape ({T},) to match trajectory; got {times.shape}")
@@ -150,8 +153,7 @@ def diagnostics(
     dE_rel = (E - E[..., :1]) / _safe_denominator(np.mean(E, axis=-1, keepdims=True))
 
     error = None
-    if reference is not None:
-        ref, _ = _as_path(reference, "reference", system.dim)
+    if ref is not None:
         if ref.shape != y.shape:
             raise ValueError(f"reference must have the trajectory's shape {y.shape}; got {ref.shape}")
         error = np.linalg.norm(y - ref, axis=-1)
