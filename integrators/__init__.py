@@ -1,14 +1,13 @@
 """Ground truth (heyoka), HDF5 data sets, classical Lie-Poisson splitting, diagnostics."""
 
-import liepoisson as _liepoisson  # noqa: F401  (first: switches JAX to float64)
+import liepoisson as _liepoisson  # noqa: F401  (first: it switches JAX to float64)
 
-from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
-from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories
-
-from . import splitting as splitting  # noqa: E402
-from ._diagnostics import (  # noqa: E402
+from . import splitting as splitting
+from ._diagnostics import (
     DiagnosticsReport as DiagnosticsReport,
     diagnostics as diagnostics,
     plot_diagnostics as plot_diagnostics,
 )
-from ._lyapunov import lyapunov_exponent as lyapunov_exponent  # noqa: E402
+from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
+from ._lyapunov import lyapunov_exponent as lyapunov_exponent
+from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

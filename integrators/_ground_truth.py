@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
 from liepoisson._validation import as_state, positive_float
+from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
 
 from ._trajectories import Trajectories
 

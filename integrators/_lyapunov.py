@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from liepoisson.systems import AbstractPoissonSystem
 from liepoisson._validation import as_state, positive_float
+from liepoisson.systems import AbstractPoissonSystem
 
 from ._ground_truth import EPS, taylor_integrator
 

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 
 import liepoisson
-from liepoisson.systems import AbstractPoissonSystem, from_name
 from liepoisson._validation import positive_float
+from liepoisson.systems import AbstractPoissonSystem, from_name
 
 #: Version of the on-disk layout; `Trajectories.load` refuses any other.
 FORMAT_VERSION = 1

@@ -5,9 +5,17 @@ from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
 from ._splitting._composition import (
     AbstractCompositionMethod as AbstractCompositionMethod,
+)
+from ._splitting._composition import (
     McLachlan4 as McLachlan4,
+)
+from ._splitting._composition import (
     Suzuki as Suzuki,
+)
+from ._splitting._composition import (
     TripleJump as TripleJump,
+)
+from ._splitting._composition import (
     Yoshida6 as Yoshida6,
 )
 from ._splitting._lie_trotter import LieTrotter as LieTrotter

@@ -27,7 +27,7 @@ def test_against_dop853(system, y0):
     h, n = 0.1, 50
     gt = it.ground_truth(system, y0, h=h, n_steps=n)
     jitted = jax.jit(system.vector_field)
-    field = lambda t, y: np.asarray(jitted(y))  # noqa: E731
+    field = lambda t, y: np.asarray(jitted(y))
     ref = solve_ivp(field, (0, h * n), y0, method="DOP853", t_eval=gt.times, rtol=1e-13, atol=1e-13)
     assert ref.success
     # DOP853 at rtol 1e-13 accumulates ~1e-12 over 50 steps; heyoka is far tighter.

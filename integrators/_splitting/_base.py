@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson.systems import AbstractPoissonSystem, CollectiveTerm
 from liepoisson._validation import as_state, positive_float
+from liepoisson.systems import AbstractPoissonSystem, CollectiveTerm
 
 from .._ground_truth import check_n_steps
 
