@@ -15,3 +15,5 @@ from ._parametrisation import (
     SO3Rotation as SO3Rotation,
     default_parametrisation as default_parametrisation,
 )
+from ._glpnet import GLPNet as GLPNet
+from ._baseline import MLPBaseline as MLPBaseline

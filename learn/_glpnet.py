@@ -1,0 +1,287 @@
+r"""G-LPNets (paper section "G-LPNets: Derivation and test cases"): compositions of modules
+$\widetilde{\mathbb T}_s y = \exp\!\big(\tfrac hM\,q_s(y)\,\mathbb M(\alpha_s)\big)y$,
+$q_s = a_s\,\sigma(\langle\alpha_s, y\rangle) + b_s$ (eq. G_LPNets_moduli).
+
+Each module is the exact flow of $\varphi_s(\langle\alpha_s, y\rangle)$ with
+$\varphi_s' = a_s\sigma + b_s$, because $\langle\alpha_s, y\rangle$ is conserved along the flow
+of a linear test Hamiltonian $\langle\alpha_s, y\rangle$: every module, hence the network, is an
+exact Poisson map.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import scipy.optimize
+from jax.flatten_util import ravel_pytree
+from tqdm.auto import tqdm
+
+from liepoisson.systems import AbstractPoissonSystem
+
+from ._base import AbstractLearnedMap, TrainingRecord, check_system, replace
+from ._data import prepare
+from ._mlp import ACTIVATIONS, as_key, check_activation
+from ._validation import positive_float, positive_int
+
+METHODS = ("bfgs", "lbfgs")
+
+
+def _check_order(order: Any, n_modules: int, dim: int) -> tuple[int, ...]:
+    if order is None:
+        return tuple(s % dim for s in range(n_modules))
+    try:
+        order = tuple(order)
+    except TypeError as err:
+        raise TypeError(f"order must be a sequence of basis indices; got {order!r}") from err
+    if len(order) != n_modules:
+        raise ValueError(f"order must have n_modules = {n_modules} entries; got {len(order)}")
+    for s, k in enumerate(order):
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < dim:
+            raise ValueError(f"order[{s}] must be a basis index in [0, {dim}); got {k!r}")
+    return tuple(int(k) for k in order)
+
+
+class GLPNet(AbstractLearnedMap):
+    r"""Global Lie-Poisson network: $M$ modules $\widetilde{\mathbb T}_s$, each a rescaled exact
+    test flow over $h/M$ (paper eqs. G_LPNets_moduli, Loss_function_G_LPNets).
+
+    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis ($e_1, e_2, e_3, e_1,
+    \ldots$, paper eq. Rot_sequence): three scalars $(a_s, c_s, b_s)$ per module, 18 parameters
+    for 6 modules. `full_vectors=True` learns $\alpha_s\in\mathbb R^n$. Exactly Poisson and
+    Casimir-conserving for any parameters.
+
+    **Arguments:** `system`; `n_modules` $M$; `order` of the basis vectors (default cycling);
+    `key`; `full_vectors`; `activation` $\sigma$ (paper: sigmoid); `h` (set by `fit`).
+    """
+
+    a: jax.Array
+    c: jax.Array
+    b: jax.Array
+    system: AbstractPoissonSystem = eqx.field(static=True)
+    order: tuple[int, ...] = eqx.field(static=True)
+    full_vectors: bool = eqx.field(static=True)
+    activation: str = eqx.field(static=True)
+    h: float | None = eqx.field(static=True)
+    record: TrainingRecord | None = eqx.field(static=True)
+
+    def __init__(
+        self,
+        system: Any,
+        n_modules: int = 6,
+        order: Any = None,
+        key: Any = 0,
+        *,
+        full_vectors: bool = False,
+        activation: str = "sigmoid",
+        h: float | None = None,
+    ):
+        self.system = check_system(system)
+        n_modules = positive_int(n_modules, "n_modules")
+        self.order = _check_order(order, n_modules, system.dim)
+        self.full_vectors = bool(full_vectors)
+        self.activation = check_activation(activation)
+        self.h = None if h is None else positive_float(h, "h")
+        self.a, self.c, self.b = self._initial(as_key(key), n_modules)
+        self.record = None
+
+    def _initial(self, key, n_modules):
+        ka, kc, kb = jax.random.split(key, 3)
+        shape = (n_modules, self.system.dim) if self.full_vectors else (n_modules,)
+        a = jax.random.normal(ka, (n_modules,), jnp.float64)
+        c = jax.random.normal(kc, shape, jnp.float64)
+        b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64)
+        return a, c, b
+
+    @property
+    def n_modules(self) -> int:
+        return len(self.order)
+
+    def module_vectors(self) -> jax.Array:
+        r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
+        if self.full_vectors:
+            return self.c
+        return self.c[:, None] * jnp.eye(self.system.dim)[jnp.asarray(self.order)]
+
+    def _step(self, y):
+        act = ACTIVATIONS[self.activation]
+        vectors = self.module_vectors()
+        dt = self.h / self.n_modules
+        for s in range(self.n_modules):
+            alpha = vectors[s]
+            q = self.a[s] * act(jnp.dot(alpha, y)) + self.b[s]
+            y = self.system.test_flow(q * alpha, dt, y)
+        return y
+
+    def hyperparameters(self):
+        return {
+            "n_modules": self.n_modules,
+            "order": list(self.order),
+            "full_vectors": self.full_vectors,
+            "activation": self.activation,
+        }
+
+    @classmethod
+    def _skeleton(cls, system, hp):
+        return cls(system, hp["n_modules"], hp["order"], 0, full_vectors=hp["full_vectors"],
+                   activation=hp["activation"])
+
+    def fit(
+        self,
+        data: Any,
+        method: str = "bfgs",
+        max_iter: int = 3500,
+        restarts: int = 4,
+        seed: int = 0,
+        h: float | None = None,
+        progress: bool = True,
+        validation_fraction: float = 0.0,
+    ) -> GLPNet:
+        r"""Minimise the state MSE (paper eq. Loss_function_G_LPNets) with a quasi-Newton method
+        and JAX gradients; returns the fitted network (a new object).
+
+        **Arguments:**
+
+        - `data`: an `integrators.Trajectories`, or `(y0, y1)` arrays with `h`.
+        - `method`: `"bfgs"` (SciPy BFGS, `jac=True`, the paper's choice) or `"lbfgs"`
+          (optax L-BFGS with zoom line search, compiled in chunks).
+        - `max_iter` iterations per start; `restarts` starts in total: the first from the
+          current parameters, the others from random ones seeded by `seed`; the best kept
+          (lowest validation loss if `validation_fraction > 0`, else training loss).
+        - `validation_fraction`: held-out pairs (default 0: the paper trains on all pairs).
+        """
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {list(METHODS)}; got {method!r}")
+        max_iter = positive_int(max_iter, "max_iter")
+        restarts = positive_int(restarts, "restarts")
+        seed = positive_int(seed, "seed", minimum=0)
+        pairs = prepare(data, self.system, h, validation_fraction, seed)
+        net = replace(self, h=pairs.h)
+        X, Y = jnp.asarray(pairs.y0), jnp.asarray(pairs.y1)
+        Xv, Yv = jnp.asarray(pairs.y0_val), jnp.asarray(pairs.y1_val)
+        params, static = eqx.partition(net, eqx.is_inexact_array)
+        flat0, unravel = ravel_pytree(params)
+
+        def loss(x, X, Y):
+            model = eqx.combine(unravel(x), static)
+            return jnp.mean((jax.vmap(model._step)(X) - Y) ** 2)
+
+        value_and_grad = jax.jit(jax.value_and_grad(loss))
+        evaluate = jax.jit(loss)
+        start = time.perf_counter()
+        results = []
+        base = jax.random.PRNGKey(seed)
+        for r in range(restarts):
+            if r == 0:
+                x0 = flat0
+            else:
+                a, c, b = net._initial(jax.random.fold_in(base, r), net.n_modules)
+                x0 = ravel_pytree(eqx.filter(replace(net, a=a, c=c, b=b), eqx.is_inexact_array))[0]
+            desc = f"GLPNet {method} start {r + 1}/{restarts}"
+            if method == "bfgs":
+                x, hist = _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc)
+            else:
+                x, hist = _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc)
+            train = float(evaluate(x, X, Y))
+            val = float(evaluate(x, Xv, Yv)) if pairs.has_validation else float("nan")
+            crit = val if pairs.has_validation else train
+            results.append((crit if np.isfinite(crit) else np.inf, r, x, hist, train, val))
+        wall = time.perf_counter() - start
+        crit, best_r, x, hist, train, val = min(results, key=lambda t: (t[0], t[1]))
+        if not np.isfinite(crit):
+            raise FloatingPointError("GLPNet.fit: every start diverged (non-finite loss)")
+        fitted = eqx.combine(unravel(jnp.asarray(x)), static)
+        info = {
+            "method": method,
+            "max_iter": max_iter,
+            "restarts": restarts,
+            "seed": seed,
+            "h": pairs.h,
+            "best_restart": best_r,
+            "restart_train_losses": [t[4] for t in sorted(results, key=lambda t: t[1])],
+            "iterations": int(hist["epoch"][-1]) if len(hist["epoch"]) else 0,
+            "n_train": int(X.shape[0]),
+            "n_val": int(Xv.shape[0]),
+        }
+        history = dict(hist)
+        history["val_loss"] = np.full_like(history["train_loss"], np.nan)
+        if pairs.has_validation and len(history["val_loss"]):
+            history["val_loss"][-1] = val
+        return replace(fitted, record=TrainingRecord(history, train, val, wall, info))
+
+
+def _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc):
+    def fun(x):
+        v, g = value_and_grad(jnp.asarray(x), X, Y)
+        return float(v), np.asarray(g, dtype=np.float64)
+
+    losses: list[float] = []
+    bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
+
+    def callback(intermediate_result):
+        losses.append(float(intermediate_result.fun))
+        bar.update(1)
+        if len(losses) % 50 == 0:
+            bar.set_postfix(loss=f"{losses[-1]:.3g}")
+
+    try:
+        res = scipy.optimize.minimize(
+            fun, np.asarray(x0, dtype=np.float64), jac=True, method="BFGS", callback=callback,
+            options={"maxiter": max_iter, "gtol": 0.0},
+        )
+    finally:
+        bar.close()
+    hist = {"epoch": np.arange(1, len(losses) + 1), "train_loss": np.asarray(losses)}
+    return jnp.asarray(res.x), hist
+
+
+_LBFGS_CHUNK = 100
+
+
+def _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc):
+    opt = optax.lbfgs()
+
+    def value_fn(x):
+        return loss(x, X, Y)
+
+    vg = optax.value_and_grad_from_state(value_fn)
+
+    @jax.jit
+    def run(x, state):
+        def body(carry, _):
+            x, state = carry
+            value, grad = vg(x, state=state)
+            updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=value_fn)
+            return (optax.apply_updates(x, updates), state), value
+
+        return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
+
+    x, state = x0, opt.init(x0)
+    losses: list[np.ndarray] = []
+    bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
+    done = 0
+    best_x, best = x0, np.inf
+    try:
+        while done < max_iter:
+            (x_new, state), values = run(x, state)
+            values = np.asarray(values)[: max_iter - done]
+            losses.append(values)
+            done += len(values)
+            bar.update(len(values))
+            bar.set_postfix(loss=f"{values[-1]:.3g}")
+            if not np.all(np.isfinite(values)):
+                break
+            x = x_new
+            current = float(value_fn(x))
+            if current < best:
+                best_x, best = x, current
+    finally:
+        bar.close()
+    train = np.concatenate(losses) if losses else np.zeros(0)
+    hist = {"epoch": np.arange(1, len(train) + 1), "train_loss": train}
+    return best_x, hist

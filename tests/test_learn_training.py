@@ -1,0 +1,170 @@
+"""learn training: Adam fits (LPNet, MLPBaseline), BFGS fits (GLPNet), best-validation weights,
+HDF5 save/load and checkpoint resume."""
+
+import jax
+import numpy as np
+import pytest
+import scipy.integrate
+
+import learn
+import liepoisson as lp
+
+H = 0.1
+
+
+def _rigid_body_pairs(y0, n_steps, inertia=(1.0, 2.0, 3.0)):
+    """Reference trajectory (numpy Euler equations, DOP853 at tight tolerance): no shared code."""
+    inertia = np.asarray(inertia)
+    t = np.arange(n_steps + 1) * H
+    sol = scipy.integrate.solve_ivp(
+        lambda _, y: np.cross(y, y / inertia), (0, t[-1]), y0, method="DOP853",
+        rtol=1e-13, atol=1e-14, t_eval=t,
+    )
+    Y = sol.y.T
+    return Y[:-1], Y[1:]
+
+
+@pytest.fixture(scope="module")
+def rb():
+    return lp.systems.RigidBody()
+
+
+@pytest.fixture(scope="module")
+def pairs():
+    return _rigid_body_pairs(np.array([1 / np.sqrt(2), -1 / np.sqrt(2), 1.0]), 120)
+
+
+@pytest.fixture(scope="module")
+def many_pairs():
+    rng = np.random.default_rng(0)
+    y0s, y1s = zip(*(_rigid_body_pairs(y, 10) for y in rng.uniform(-2, 2, size=(8, 3))))
+    return np.concatenate(y0s), np.concatenate(y1s)
+
+
+def _leaves(model):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(model)]
+
+
+@pytest.fixture(scope="module")
+def fitted(rb, pairs):
+    net = learn.LPNet(rb, hidden=(8, 8), key=0)
+    return net.fit(pairs, h=H, epochs=300, learning_rate=2e-2, progress=False, log_every=1)
+
+
+def test_lpnet_fit_decreases_loss_and_keeps_best(fitted):
+    hist = fitted.history
+    assert len(hist["epoch"]) == 300
+    assert hist["train_loss"][-1] < 0.1 * hist["train_loss"][0]
+    assert fitted.h == H and fitted.wall_time_s > 0
+    # the kept weights are the best-validation ones (not the last)
+    assert fitted.val_loss <= np.min(hist["val_loss"]) * (1 + 1e-12)
+    assert np.isfinite(fitted.train_loss)
+    # and the fitted map still conserves the Casimir
+    y = np.asarray(fitted.rollout(np.array([0.43, 1.33, -0.21]), 1000))
+    C = np.sum(y**2, -1)
+    assert np.max(np.abs(C - C[0])) < 1e-12
+
+
+def test_lpnet_alpha_loss_and_minibatches(rb, pairs):
+    net = learn.LPNet(rb, hidden=(8,), key=1)
+    f = net.fit(pairs, h=H, epochs=50, loss="alpha", batch_size=32, learning_rate=1e-2,
+                final_learning_rate=1e-3, progress=False, log_every=1)
+    assert f.history["train_loss"][-1] < f.history["train_loss"][0]
+    assert np.isfinite(f.val_loss)
+
+
+def test_save_load_round_trip_is_bit_identical(tmp_path, rb, fitted):
+    path = tmp_path / "net.h5"
+    fitted.save(path)
+    loaded = learn.LPNet.load(path, rb)
+    for a, b in zip(_leaves(fitted), _leaves(loaded)):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert loaded.h == fitted.h and loaded.hyperparameters() == fitted.hyperparameters()
+    assert loaded.val_loss == fitted.val_loss
+    np.testing.assert_array_equal(loaded.history["val_loss"], fitted.history["val_loss"])
+    y0 = np.array([0.43, 1.33, -0.21])
+    np.testing.assert_array_equal(np.asarray(loaded.rollout(y0, 50)), np.asarray(fitted.rollout(y0, 50)))
+    with pytest.raises(ValueError, match="GLPNet"):
+        learn.GLPNet.load(path, rb)
+    with pytest.raises(ValueError, match="system"):
+        learn.LPNet.load(path, lp.systems.RigidBody(inertia=(1.0, 2.0, 4.0)))
+
+
+def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch):
+    import learn._checkpoint as ckpt
+    import learn._training as training
+
+    monkeypatch.setattr(training, "CHUNK", 50)
+    kwargs = dict(h=H, epochs=150, learning_rate=1e-2, progress=False, checkpoint_every=50)
+    net = learn.LPNet(rb, hidden=(4,), key=2)
+    straight = net.fit(pairs, checkpoint=tmp_path / "a.h5", **kwargs)
+
+    path = tmp_path / "b.h5"
+    write = ckpt.write
+    calls = []
+
+    def interrupted(*args, **kw):
+        write(*args, **kw)
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ckpt, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        net.fit(pairs, checkpoint=path, **kwargs)
+    monkeypatch.setattr(ckpt, "write", write)
+    assert learn.LPNet.load(path, rb).h == H  # a valid file after the interruption
+    resumed = net.fit(pairs, checkpoint=path, resume=True, **kwargs)
+    for a, b in zip(_leaves(straight), _leaves(resumed)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(straight.history["train_loss"], resumed.history["train_loss"])
+    with pytest.raises(ValueError, match="learning_rate"):
+        net.fit(pairs, checkpoint=path, resume=True, **{**kwargs, "learning_rate": 5e-3})
+
+
+def test_fit_bad_inputs_name_the_argument(rb, pairs):
+    net = learn.LPNet(rb, hidden=(4,))
+    with pytest.raises(ValueError, match="epochs"):
+        net.fit(pairs, h=H, epochs=0)
+    with pytest.raises(ValueError, match="h"):
+        net.fit(pairs)
+    with pytest.raises(ValueError, match="h"):
+        net.fit(pairs, h=0.0)
+    with pytest.raises(ValueError, match="validation_fraction"):
+        net.fit(pairs, h=H, validation_fraction=1.5)
+    with pytest.raises(ValueError, match="loss"):
+        net.fit(pairs, h=H, loss="energy")
+    with pytest.raises(ValueError, match="y0"):
+        net.fit((pairs[0][:, :2], pairs[1]), h=H)
+    with pytest.raises(ValueError, match="y1"):
+        net.fit((pairs[0], np.full_like(pairs[1], np.inf)), h=H)
+    with pytest.raises(ValueError, match="resume"):
+        net.fit(pairs, h=H, resume=True)
+    with pytest.raises(ValueError, match="method"):
+        learn.GLPNet(rb).fit(pairs, h=H, method="adam")
+
+
+@pytest.mark.parametrize("method", ["bfgs", "lbfgs"])
+def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, method):
+    g = learn.GLPNet(rb, n_modules=6, key=0)
+    f = g.fit(many_pairs, h=H, method=method, max_iter=100, restarts=2, progress=False)
+    hist = f.history["train_loss"]
+    assert hist[-1] < 0.1 * hist[0]
+    assert f.train_loss <= min(f.record.info["restart_train_losses"]) + 0.0
+    y = np.random.default_rng(5).uniform(-1, 1, (5, 3))
+    assert np.max(np.asarray(f.poisson_defect(y))) < 1e-12
+    f.save(tmp_path / "g.h5")
+    loaded = learn.GLPNet.load(tmp_path / "g.h5", rb)
+    for a, b in zip(_leaves(f), _leaves(loaded)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_baseline_fit_and_casimir_drift(tmp_path, rb, pairs):
+    base = learn.MLPBaseline(rb, hidden=(8, 8), key=0)
+    f = base.fit(pairs, h=H, epochs=200, learning_rate=1e-2, progress=False)
+    assert f.history["train_loss"][-1] < 0.1 * f.history["train_loss"][0]
+    y = np.asarray(f.rollout(pairs[0][0], 500))
+    C = np.sum(y**2, -1)
+    assert np.max(np.abs(C - C[0])) > 1e-8  # no structure: the Casimir drifts
+    f.save(tmp_path / "b.h5")
+    loaded = learn.MLPBaseline.load(tmp_path / "b.h5", rb)
+    np.testing.assert_array_equal(np.asarray(loaded.step(y[:3])), np.asarray(f.step(y[:3])))
