@@ -1,0 +1,266 @@
+"""Exact coadjoint flows: Poisson maps, Casimirs to round-off, closed forms == expm, gradients."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import (
+    ALGEBRAS,
+    EPS,
+    algebra,
+    algebra_names,
+    poisson_defect,
+    reference_coadjoint_flow,
+    states,
+    times,
+    vectors,
+)
+from hypothesis import given
+from hypothesis import strategies as st
+
+import liepoisson as lp
+
+
+def _generic(g: lp.LieAlgebra) -> lp.LieAlgebra:
+    """The same algebra without closed forms: matrix exponential of its constants."""
+    return lp.LieAlgebra(
+        g.structure_constants, casimirs=g.casimir_polynomials, sign=g.sign,
+        coadjoint_flow=lp.MatrixExponentialFlow(),
+    )
+
+
+# -- Poisson maps -----------------------------------------------------------------------------
+@algebra_names
+@given(data=st.data())
+def test_coadjoint_flow_is_poisson(name, data):
+    g = algebra(name)
+    alpha = data.draw(vectors(g.dim), label="alpha")
+    mu = data.draw(states(name, g.dim), label="mu")
+    t = data.draw(times, label="t")
+    # Entries of B are O(|mu|) <= ~10 here; the map's Jacobian is O(exp(|t||alpha|)) for
+    # non-compact algebras; 1e-10 leaves room for that growth times round-off.
+    defect, size = poisson_defect(("algebra", name), g.coadjoint_flow, g.poisson_tensor, alpha, t, mu)
+    assert defect <= 1e-10 * max(1.0, size)
+
+
+@algebra_names
+@given(data=st.data())
+def test_coadjoint_flow_matches_reference_expm(name, data):
+    """Every algebra's flow (fast path or not) == scipy expm of t M(alpha) built by loops."""
+    g = algebra(name)
+    alpha = data.draw(vectors(g.dim), label="alpha")
+    mu = data.draw(vectors(g.dim), label="mu")
+    t = data.draw(times, label="t")
+    ref = reference_coadjoint_flow(g.structure_constants, alpha, t, mu, g.sign)
+    got = np.asarray(g.coadjoint_flow(alpha, t, mu))
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(ref))))
+
+
+@algebra_names
+def test_flow_generates_the_lie_poisson_vector_field(name):
+    """d/dt at t=0 of the flow is B(mu) alpha (central differences, error O(h^2))."""
+    g = algebra(name)
+    rng = np.random.default_rng(1)
+    alpha, mu = rng.standard_normal((2, g.dim))
+    h = 1e-5
+    fd = (np.asarray(g.coadjoint_flow(alpha, h, mu)) - np.asarray(g.coadjoint_flow(alpha, -h, mu))) / (2 * h)
+    np.testing.assert_allclose(fd, np.asarray(g.poisson_tensor(mu)) @ alpha, atol=1e-8)
+
+
+# -- Casimirs over 10^4 composed flows --------------------------------------------------------
+N_COMPOSED = 10_000
+
+
+def _compose(flow, alphas, t, y0):
+    def step(y, a):
+        y = flow(a, t, y)
+        return y, y
+
+    _, ys = jax.lax.scan(step, jnp.asarray(y0), jnp.asarray(alphas))
+    return np.asarray(ys)
+
+
+# Casimir conservation by 10^4 random flows composed. Each step commits O(eps) relative
+# round-off in mu and hence ~ deg * eps * |mu|^deg in a Casimir of degree deg; the errors
+# add like a random walk (~ sqrt(N)) but we bound the worst case, linear in N: tolerance
+# 4 * N * eps * max_t |mu_t|^deg. A flow that is not exactly isospectral (e.g. a Taylor
+# series of too low order, or a sign error in one block) fails by orders of magnitude.
+@pytest.mark.parametrize("name", ALGEBRAS)
+def test_composed_flows_conserve_casimirs(name):
+    g = algebra(name)
+    rng = np.random.default_rng(2)
+    alphas = rng.uniform(-1, 1, (N_COMPOSED, g.dim))
+    mu0 = rng.uniform(-1, 1, g.dim)
+    t = 0.05  # keeps sl(2)'s hyperbolic growth moderate over 10^4 steps
+    ys = _compose(jax.jit(g.coadjoint_flow), alphas, t, mu0)
+    assert np.all(np.isfinite(ys))
+    c0 = np.asarray(g.casimirs(mu0))
+    cs = np.asarray(g.casimirs(ys))
+    assert cs.shape == (N_COMPOSED, g.n_casimirs) and g.n_casimirs >= 1
+    degrees = np.array([p.degree for p in g.casimir_polynomials])
+    size = np.max(np.abs(ys), axis=-1).max()
+    tol = 4 * N_COMPOSED * EPS * np.maximum(size, 1.0) ** degrees
+    drift = np.max(np.abs(cs - c0), axis=0)
+    assert np.all(drift <= tol), (drift, tol)
+    # and the flows did move mu around (not a trivial pass)
+    assert np.max(np.abs(ys[-1] - mu0)) > 0.1
+
+
+# -- closed forms == generic matrix exponential -----------------------------------------------
+ANGLES = [0.0, 1e-12, 1e-9, 1e-6, 1e-4, 9.99e-4, 1e-3, 1.001e-3, 0.1, 1.0, np.pi, 3.0, 10.0, 31.0]
+
+
+@pytest.mark.parametrize("fast", ["so3", "so3_spatial", "se3", "so3+heisenberg"])
+@pytest.mark.parametrize("angle", ANGLES)
+def test_closed_form_equals_expm(fast, angle):
+    """Rodrigues / se(3) formulas against expm on the same constants, to 1e-13 relative,
+    across the switch to the Taylor series at angle 1e-3, tiny, zero and large angles."""
+    g = algebra(fast)
+    gen = _generic(g)
+    rng = np.random.default_rng(int(angle * 1e6) % 2**32)
+    for _ in range(4):
+        alpha = rng.standard_normal(g.dim)
+        axis = alpha[:3] / np.linalg.norm(alpha[:3])
+        alpha[:3] = angle * axis  # rotation angle |alpha_rot t| with t = 1
+        mu = rng.standard_normal(g.dim)
+        got = np.asarray(g.coadjoint_flow(alpha, 1.0, mu))
+        generic = np.asarray(gen.coadjoint_flow(alpha, 1.0, mu))
+        ref = reference_coadjoint_flow(g.structure_constants, alpha, 1.0, mu, g.sign)
+        scale = np.max(np.abs(ref))
+        # 1e-13: both are backward stable to O(10 eps |angle|); expm of a norm-31 matrix
+        # loses about log2(31) squarings' worth of eps.
+        np.testing.assert_allclose(got, generic, rtol=0, atol=1e-13 * scale)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-13 * scale)
+
+
+def test_zero_rotation_and_zero_time_are_identity():
+    for name in ALGEBRAS:
+        g = algebra(name)
+        mu = np.linspace(-1, 2, g.dim)
+        np.testing.assert_array_equal(np.asarray(g.coadjoint_flow(np.zeros(g.dim), 2.0, mu)), mu)
+        np.testing.assert_array_equal(np.asarray(g.coadjoint_flow(np.ones(g.dim), 0.0, mu)), mu)
+
+
+def test_so3_rotation_is_the_literature_rodrigues():
+    """so(3) body flow dPi/dt = -alpha x Pi: rotation by angle -|alpha| t about alpha, written
+    out with the textbook Rodrigues formula; Pi parallel to alpha is fixed."""
+    g = algebra("so3")
+    alpha, t = np.array([0.3, -1.2, 0.5]), 0.7
+    theta = np.linalg.norm(alpha) * t
+    n = alpha / np.linalg.norm(alpha)
+    K = np.array([[0, -n[2], n[1]], [n[2], 0, -n[0]], [-n[1], n[0], 0]])
+    R = np.eye(3) - np.sin(theta) * K + (1 - np.cos(theta)) * K @ K
+    mu = np.array([1.0, 2.0, -0.5])
+    np.testing.assert_allclose(np.asarray(g.coadjoint_flow(alpha, t, mu)), R @ mu, atol=10 * EPS * 3)
+    np.testing.assert_allclose(
+        np.asarray(g.coadjoint_flow(alpha, t, 2.5 * alpha)), 2.5 * alpha, rtol=4 * EPS
+    )
+    # spatial convention reverses time
+    np.testing.assert_allclose(
+        np.asarray(algebra("so3_spatial").coadjoint_flow(alpha, t, mu)), R.T @ mu, atol=10 * EPS * 3
+    )
+
+
+def test_se3_special_cases():
+    """H = b.p: dPi/dt = p x b, dp/dt = 0 (DESIGN.md); H = A.Pi rotates Pi and p together."""
+    g = algebra("se3")
+    Pi, p = np.array([0.4, -1.0, 2.0]), np.array([1.5, 0.2, -0.7])
+    b, t = np.array([0.3, 0.9, -0.4]), 1.7
+    out = np.asarray(g.coadjoint_flow(np.concatenate([np.zeros(3), b]), t, np.concatenate([Pi, p])))
+    np.testing.assert_allclose(out, np.concatenate([Pi + t * np.cross(p, b), p]), atol=20 * EPS)
+    A = np.array([0.2, -0.5, 0.8])
+    out = np.asarray(g.coadjoint_flow(np.concatenate([A, np.zeros(3)]), t, np.concatenate([Pi, p])))
+    rot = np.asarray(algebra("so3").coadjoint_flow(A, t, np.stack([Pi, p])))
+    np.testing.assert_allclose(out, rot.reshape(-1), atol=20 * EPS)
+
+
+# -- gradients ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["so3", "se3", "so3_spatial", "sl2", "so3+heisenberg", "generic_so3"])
+def test_jacobian_in_alpha_at_zero_is_t_times_B(name):
+    """d/d alpha exp(t M(alpha)) mu at alpha = 0 is t dM/dalpha mu = t B(mu) exactly."""
+    g = algebra(name)
+    mu = np.linspace(-1.0, 1.5, g.dim)
+    t = 0.8
+    zero = jnp.zeros(g.dim)
+    J = np.asarray(jax.jit(jax.jacfwd(lambda a: g.coadjoint_flow(a, t, mu)))(zero))
+    Jr = np.asarray(jax.jit(jax.jacrev(lambda a: g.coadjoint_flow(a, t, mu)))(zero))
+    B = np.asarray(g.poisson_tensor(mu))
+    np.testing.assert_allclose(J, t * B, atol=8 * EPS)
+    np.testing.assert_allclose(Jr, t * B, atol=8 * EPS)
+    # second derivative at 0: d^2/dalpha^2 <w, exp(tM)mu> = t^2/2 (M_a M_b + M_b M_a) terms;
+    # only finiteness is the point here (the Taylor branch must be differentiable twice)
+    if name in ("so3", "se3", "generic_so3"):
+        H = np.asarray(jax.jit(jax.hessian(lambda a: jnp.sum(g.coadjoint_flow(a, t, mu) ** 2)))(zero))
+        assert np.all(np.isfinite(H))
+        if name != "se3":  # rotations preserve |mu|^2: its Hessian in alpha vanishes
+            np.testing.assert_allclose(H, 0.0, atol=16 * EPS)
+
+
+@pytest.mark.parametrize("name", ["so3", "se3"])
+@pytest.mark.parametrize("angle", [0.0, 1e-9, 1e-4, 9.99e-4, 1.001e-3, 0.5, 3.0])
+def test_gradient_matches_finite_differences(name, angle):
+    g = algebra(name)
+    rng = np.random.default_rng(3)
+    alpha = rng.standard_normal(g.dim)
+    alpha[:3] *= angle / np.linalg.norm(alpha[:3])
+    mu, w = rng.standard_normal((2, g.dim))
+    t = 1.0
+
+    @jax.jit
+    def f(a):
+        return jnp.dot(w, g.coadjoint_flow(a, t, mu))
+
+    grad = np.asarray(jax.jit(jax.grad(f))(jnp.asarray(alpha)))
+    assert np.all(np.isfinite(grad))
+    h = 1e-6  # central differences: error h^2 |f'''| + eps |f| / h ~ 1e-10
+    fd = np.array([
+        (float(f(alpha + h * e)) - float(f(alpha - h * e))) / (2 * h) for e in np.eye(g.dim)
+    ])
+    np.testing.assert_allclose(grad, fd, atol=1e-8)
+    # gradient in t and mu too
+    gt = float(jax.grad(lambda s: jnp.dot(w, g.coadjoint_flow(alpha, s, mu)))(1.0))
+    fdt = (float(jnp.dot(w, g.coadjoint_flow(alpha, 1 + h, mu))) - float(jnp.dot(w, g.coadjoint_flow(alpha, 1 - h, mu)))) / (2 * h)
+    assert abs(gt - fdt) < 1e-8
+
+
+def test_rotation_coefficients_against_closed_forms():
+    th = np.array([0.0, 1e-8, 1e-5, 9.9e-4, 1.01e-3, 0.3, 2.0, 10.0])
+    sinc, c1, c2 = (np.asarray(c) for c in lp.rotation_coefficients(jnp.asarray(th**2)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ref_sinc = np.where(th > 0, np.sin(th) / np.where(th > 0, th, 1), 1.0)
+        # series to high order where the closed form cancels
+        ref_c1 = np.where(th > 1e-2, (1 - np.cos(th)) / np.where(th > 0, th, 1) ** 2,
+                          0.5 - th**2 / 24 + th**4 / 720 - th**6 / 40320)
+        ref_c2 = np.where(th > 1e-1, (th - np.sin(th)) / np.where(th > 0, th, 1) ** 3,
+                          1 / 6 - th**2 / 120 + th**4 / 5040 - th**6 / 362880 + th**8 / 39916800)
+    np.testing.assert_allclose(sinc, ref_sinc, rtol=4 * EPS)
+    np.testing.assert_allclose(c1, ref_c1, rtol=8 * EPS)
+    # (th - sin th)/th^3 cancels to a relative error ~6 eps/th^2 just above the switch at 1e-3;
+    # it only enters multiplied by th^2 (the k x (k x b) term of V), where that is O(eps).
+    np.testing.assert_allclose(c2 * th**2, ref_c2 * th**2, rtol=0, atol=8 * EPS)
+    rel = np.abs(c2 - ref_c2) / ref_c2
+    assert np.all(rel <= 8 * EPS / np.clip(th, 1e-3, 1.0) ** 2), rel
+    g = jax.grad(lambda s: sum(lp.rotation_coefficients(s)))(0.0)
+    assert np.isfinite(g) and abs(g - (-1 / 6 - 1 / 24 - 1 / 120)) < 1e-15
+
+
+# -- batching and transformations ------------------------------------------------------------
+@algebra_names
+def test_batching_jit_vmap(name):
+    g = algebra(name)
+    rng = np.random.default_rng(4)
+    alpha = rng.standard_normal((4, 5, g.dim))
+    mu = rng.standard_normal((4, 5, g.dim))
+    t = rng.uniform(-1, 1, (4, 5))
+    out = np.asarray(g.coadjoint_flow(alpha, t, mu))
+    assert out.shape == (4, 5, g.dim)
+    loop = np.array([[np.asarray(g.coadjoint_flow(alpha[i, j], t[i, j], mu[i, j])) for j in range(5)] for i in range(4)])
+    np.testing.assert_allclose(out, loop, atol=10 * EPS * np.max(np.abs(loop)))
+    # broadcasting a single alpha and scalar t against a batch of mu
+    out_b = np.asarray(g.coadjoint_flow(alpha[0, 0], 0.3, mu))
+    loop_b = np.array([[np.asarray(g.coadjoint_flow(alpha[0, 0], 0.3, mu[i, j])) for j in range(5)] for i in range(4)])
+    np.testing.assert_allclose(out_b, loop_b, atol=10 * EPS * np.max(np.abs(loop_b)))
+    jitted = np.asarray(jax.jit(g.coadjoint_flow)(alpha, t, mu))
+    np.testing.assert_allclose(jitted, out, atol=10 * EPS * np.max(np.abs(out)))
+    vm = np.asarray(jax.vmap(jax.vmap(g.coadjoint_flow))(alpha, t, mu))
+    np.testing.assert_allclose(vm, out, atol=10 * EPS * np.max(np.abs(out)))
