@@ -96,6 +96,7 @@ class MLPBaseline(AbstractLearnedMap):
         progress: bool = True,
         log_every: int | None = None,
         checkpoint_every: int = 10_000,
+        normalise: bool = True,
     ) -> MLPBaseline:
         """Train on the state MSE; same arguments and results as `LPNet.fit` (only
         `loss="state"`)."""
@@ -104,12 +105,12 @@ class MLPBaseline(AbstractLearnedMap):
             final_learning_rate=final_learning_rate, batch_size=batch_size,
             validation_fraction=validation_fraction, seed=seed, loss=loss, h=h,
             checkpoint=checkpoint, resume=resume, progress=progress, log_every=log_every,
-            checkpoint_every=checkpoint_every, losses=("state",), build=_build,
+            checkpoint_every=checkpoint_every, normalise=normalise, losses=("state",), build=_build,
         )
 
 
-def _build(net: MLPBaseline, pairs, loss: str):
-    if net.record is None:
+def _build(net: MLPBaseline, pairs, loss: str, normalise: bool):
+    if net.record is None and normalise:
         in_shift, in_scale = affine(pairs.y0, net.system.dim)
         out_shift, out_scale = affine(pairs.y1 - pairs.y0, net.system.dim)
         net = replace(net, input_shift=in_shift, input_scale=in_scale, output_shift=out_shift,

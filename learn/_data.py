@@ -24,9 +24,7 @@ class PairData:
 
 def _split(y0, y1, validation_fraction, seed):
     n = y0.shape[0]
-    n_val = int(round(validation_fraction * n))
-    if validation_fraction > 0 and n_val == 0:
-        n_val = 1
+    n_val = round(validation_fraction * n)  # as integrators.Trajectories.split
     if n - n_val < 1:
         raise ValueError(
             f"validation_fraction={validation_fraction} leaves no training pairs out of {n}"

@@ -27,6 +27,7 @@ def fit_gradient(
     progress,
     log_every,
     checkpoint_every,
+    normalise=True,
     losses: tuple[str, ...],
     build: Any,
 ):
@@ -51,7 +52,7 @@ def fit_gradient(
     if resume and checkpoint is None:
         raise ValueError("resume=True needs checkpoint='path.h5'")
     pairs = prepare(data, model.system, h, validation_fraction, seed)
-    model, train, val, loss_fn = build(model, pairs, loss)
+    model, train, val, loss_fn = build(model, pairs, loss, bool(normalise))
     settings = {
         "epochs": epochs,
         "learning_rate": learning_rate,
@@ -60,6 +61,7 @@ def fit_gradient(
         "validation_fraction": float(validation_fraction),
         "seed": int(seed),
         "loss": loss,
+        "normalise": bool(normalise),
         "h": pairs.h,
         "n_train": int(train[0].shape[0]),
         "n_val": int(val[0].shape[0]),

@@ -142,6 +142,7 @@ class LPNet(AbstractLearnedMap):
         progress: bool = True,
         log_every: int | None = None,
         checkpoint_every: int = 10_000,
+        normalise: bool = True,
     ) -> LPNet:
         r"""Train on data pairs; returns the fitted network (a new object) with the weights of
         the best validation loss, `.history`, `.train_loss`, `.val_loss`, `.h`, `.wall_time_s`.
@@ -161,17 +162,19 @@ class LPNet(AbstractLearnedMap):
           `resume=True` continues from it (epoch, optimiser state, best weights).
         - `progress`: tqdm bar with the losses; `log_every`: history resolution in epochs
           (default epochs // 1000).
+        - `normalise`: on the first fit, set the fixed input/output scalings from the
+          training data (True, default) or keep the identity (False, a plain MLP).
         """
         return fit_gradient(
             self, data, epochs=epochs, learning_rate=learning_rate,
             final_learning_rate=final_learning_rate, batch_size=batch_size,
             validation_fraction=validation_fraction, seed=seed, loss=loss, h=h,
             checkpoint=checkpoint, resume=resume, progress=progress, log_every=log_every,
-            checkpoint_every=checkpoint_every, losses=("state", "alpha"), build=_build,
+            checkpoint_every=checkpoint_every, normalise=normalise, losses=("state", "alpha"), build=_build,
         )
 
 
-def _build(net: LPNet, pairs, loss: str):
+def _build(net: LPNet, pairs, loss: str, normalise: bool):
     p = net.parametrisation
     h = pairs.h
     if loss == "alpha":
@@ -180,7 +183,7 @@ def _build(net: LPNet, pairs, loss: str):
             p.params_from_pair(pairs.y0_val, pairs.y1_val, h) if pairs.has_validation
             else np.zeros((0, p.n_params))
         )
-    if net.record is None:  # first fit: scalings from the training data
+    if net.record is None and normalise:  # first fit: scalings from the training data
         in_shift, in_scale = affine(pairs.y0, net.system.dim)
         estimate = targets if loss == "alpha" else p.params_estimate(pairs.y0, pairs.y1, h)
         out_shift, out_scale = affine(estimate, p.n_params)

@@ -95,7 +95,7 @@ def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch):
     import learn._training as training
 
     monkeypatch.setattr(training, "CHUNK", 50)
-    kwargs = dict(h=H, epochs=150, learning_rate=1e-2, progress=False, checkpoint_every=50)
+    kwargs = {"h": H, "epochs": 150, "learning_rate": 1e-2, "progress": False, "checkpoint_every": 50}
     net = learn.LPNet(rb, hidden=(4,), key=2)
     straight = net.fit(pairs, checkpoint=tmp_path / "a.h5", **kwargs)
 
@@ -121,6 +121,21 @@ def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch):
         net.fit(pairs, checkpoint=path, resume=True, **{**kwargs, "learning_rate": 5e-3})
 
 
+def test_fit_accepts_trajectories(rb, pairs):
+    integrators = pytest.importorskip("integrators")
+    states = np.concatenate([pairs[0], pairs[1][-1:]])
+    data = integrators.Trajectories(states, H, rb)
+    kwargs = {"epochs": 20, "learning_rate": 1e-2, "progress": False}
+    net = learn.LPNet(rb, hidden=(4,), key=3)
+    a = net.fit(data, **kwargs)
+    b = net.fit(pairs, h=H, **kwargs)  # same seeded split of the same pairs
+    assert a.h == H
+    for x, y in zip(_leaves(a), _leaves(b)):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ValueError, match="h="):
+        net.fit(data, h=0.2, **kwargs)
+
+
 def test_fit_bad_inputs_name_the_argument(rb, pairs):
     net = learn.LPNet(rb, hidden=(4,))
     with pytest.raises(ValueError, match="epochs"):
@@ -143,7 +158,7 @@ def test_fit_bad_inputs_name_the_argument(rb, pairs):
         learn.GLPNet(rb).fit(pairs, h=H, method="adam")
 
 
-@pytest.mark.parametrize("method", ["bfgs", "lbfgs"])
+@pytest.mark.parametrize("method", ["bfgs", pytest.param("lbfgs", marks=pytest.mark.slow)])
 def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, method):
     g = learn.GLPNet(rb, n_modules=6, key=0)
     f = g.fit(many_pairs, h=H, method=method, max_iter=100, restarts=2, progress=False)
