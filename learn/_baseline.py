@@ -96,7 +96,7 @@ class MLPBaseline(AbstractLearnedMap):
         progress: bool = True,
         log_every: int | None = None,
         checkpoint_every: int = 10_000,
-        normalise: bool = True,
+        normalise: bool = False,
     ) -> MLPBaseline:
         """Train on the state MSE; same arguments and results as `LPNet.fit` (only
         `loss="state"`)."""

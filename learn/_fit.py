@@ -27,7 +27,7 @@ def fit_gradient(
     progress,
     log_every,
     checkpoint_every,
-    normalise=True,
+    normalise=False,
     losses: tuple[str, ...],
     build: Any,
 ):

@@ -68,7 +68,7 @@ def test_lpnet_fit_decreases_loss_and_keeps_best(fitted):
 def test_lpnet_alpha_loss_and_minibatches(rb, pairs):
     net = learn.LPNet(rb, hidden=(8,), key=1)
     f = net.fit(pairs, h=H, epochs=50, loss="alpha", batch_size=32, learning_rate=1e-2,
-                final_learning_rate=1e-3, progress=False, log_every=1)
+                final_learning_rate=1e-3, progress=False, log_every=1, normalise=True)
     assert f.history["train_loss"][-1] < f.history["train_loss"][0]
     assert np.isfinite(f.val_loss)
 
