@@ -91,6 +91,7 @@ def ground_truth(
     *,
     progress: bool | None = None,
     max_steps: int = 0,
+    seed: int | None = None,
 ) -> Trajectories:
     r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ with heyoka's adaptive Taylor method and
     sample it at $t_n = n h$, $n = 0..n_\text{steps}$.
@@ -110,6 +111,7 @@ def ground_truth(
     - `progress`: `True`/`False` to force the tqdm bar; `None` shows it only for a run still
       going after 3 s.
     - `max_steps`: heyoka's cap on steps per trajectory (0: none).
+    - `seed`: the seed that drew `y0`, if any; recorded in the data set's metadata.
 
     **Returns:** `Trajectories` with `states` of shape `(n_traj, n_steps + 1, dim)`.
 
@@ -142,4 +144,6 @@ def ground_truth(
                 )
             out[i] = states
             bar.update(1)
-    return Trajectories(out, h, system, times=grid, integrator="heyoka-taylor", tolerance=tol_used)
+    return Trajectories(
+        out, h, system, times=grid, integrator="heyoka-taylor", tolerance=tol_used, seed=seed
+    )

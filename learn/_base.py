@@ -126,6 +126,12 @@ class AbstractLearnedMap(eqx.Module):
         return poisson_defect(self, flat).reshape(y.shape[:-1])
 
     @property
+    def n_parameters(self) -> int:
+        """Number of trainable parameters (the floating-point array leaves)."""
+        leaves = jax.tree_util.tree_leaves(eqx.filter(self, eqx.is_inexact_array))
+        return int(sum(leaf.size for leaf in leaves))
+
+    @property
     def history(self) -> dict[str, np.ndarray]:
         """Loss history of the last fit (`epoch`/`iteration`, `train_loss`, `val_loss`)."""
         return {} if self.record is None else self.record.history

@@ -76,7 +76,7 @@ def plot_experiment(
         plt.close(fig)
         files.append("phase_portrait.png")
 
-    n_cas = np.asarray(report_ours.casimir_rel_drift).shape[-1] if system.n_casimirs else 0
+    n_cas = np.asarray(report_ours.casimir_drift_relative).shape[-1] if system.n_casimirs else 0
     fig, axes = plt.subplots(1 + n_cas, 1, figsize=(8, 2.4 * (1 + n_cas)), sharex=True)
     axes = np.atleast_1d(axes)
     for rep, style, lab in (
@@ -86,9 +86,9 @@ def plot_experiment(
     ):
         if rep is None:
             continue
-        axes[0].plot(times, np.asarray(rep.energy_rel_err), style, lw=0.8, label=lab)
+        axes[0].plot(times, np.asarray(rep.energy_error_relative), style, lw=0.8, label=lab)
         for j in range(n_cas):
-            axes[1 + j].plot(times, np.asarray(rep.casimir_rel_drift)[:, j], style, lw=0.8, label=lab)
+            axes[1 + j].plot(times, np.asarray(rep.casimir_drift_relative)[:, j], style, lw=0.8, label=lab)
     axes[0].set_ylabel("(E(t)-E(0))/<E>")
     for j in range(n_cas):
         axes[1 + j].set_ylabel(f"(C{j + 1}(t)-C{j + 1}(0))/<C{j + 1}>")
