@@ -10,8 +10,9 @@ import numpy as np
 from .._validation import as_state, positive_float
 from ._base import AbstractPoissonSystem, CollectiveTerm
 
-# Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0).
-_TINY = 1e-150
+# Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0;
+# the neglected term is O(|a| t^2) < 1e-100).
+_TINY = 1e-100
 
 
 def _finite_float(x, name: str) -> float:
@@ -30,31 +31,52 @@ def _finite_float(x, name: str) -> float:
 def segment_field_integral(x0: jnp.ndarray, a: jnp.ndarray, t: jnp.ndarray) -> jnp.ndarray:
     r"""$\Phi(t) = \int_0^t |x_0 + a s|\,ds$ for planar $x_0, a$ (paper eq. integrated_Phi).
 
-    With $A = |a|$, $c = x_0\cdot a/A$, $d = |x_0\times a|/A$ and
-    $G(z) = \tfrac12\left(z\sqrt{z^2+d^2} + d^2\operatorname{asinh}(z/d)\right)$:
-    $\Phi = (G(c + At) - G(c))/A$. The asinh difference is evaluated as a log of a ratio in a
-    cancellation-free form, and $A\to 0$, $d\to 0$ (a segment through the origin) are safe.
+    With $A = |a|$, $z = x\cdot a/A$, $d = |x_0\times a|/A$, $r = |x|$ and
+    $G(z) = \tfrac12\left(z\sqrt{z^2+d^2} + d^2\operatorname{asinh}(z/d)\right)$,
+    $\Phi = (G(z_1) - G(z_0))/A$. That difference quotient cancels catastrophically for small
+    $At$ (its derivative in $a$ errs by $\epsilon|x_0|^2/A^2$), so it is evaluated as
+    $\Phi = \tfrac t2\left(r_0 + r_1 - q\,(1 - \operatorname{asinh}(D)/D)\right)$ with
+    $q = r_0 - z_0(z_0+z_1)/(r_0+r_1) \ge 0$ and $D = A t q/d^2$ (from
+    $\operatorname{asinh}u - \operatorname{asinh}v = \operatorname{asinh}(u\sqrt{1+v^2} - v\sqrt{1+u^2})$),
+    which has no division by $A$ beyond the direction of $a$. $A\to 0$, $d \to 0$ (a segment
+    through the origin) and $t < 0$ are safe.
     """
     A2 = a[..., 0] ** 2 + a[..., 1] ** 2
     moving = A2 > _TINY**2
+    # Unselected branches of `where` must stay finite in value and derivative (else their
+    # zero cotangent times an infinite partial gives NaN gradients): a stand-in direction
+    # when a ~ 0, and d^2 below 1e-100 r^2 treated as 0 (a segment through the origin), where
+    # the neglected part of q (1 - asinh(D)/D) is below 1e-98 |x|.
+    a_s = jnp.where(moving[..., None], a, jnp.array([1.0, 0.0]))
     A = jnp.sqrt(jnp.where(moving, A2, 1.0))
-    c = (x0[..., 0] * a[..., 0] + x0[..., 1] * a[..., 1]) / A
-    cross = (x0[..., 0] * a[..., 1] - x0[..., 1] * a[..., 0]) / A
-    d2 = cross * cross
-    z0, z1 = c, c + A * t
-    r0 = jnp.sqrt(z0 * z0 + d2)
-    r1 = jnp.sqrt(z1 * z1 + d2)
-    has_d = d2 > 0.0
-    d2s = jnp.where(has_d, d2, 1.0)
-
-    def w(z, r):  # z + sqrt(z^2 + d^2), without cancellation for z < 0
-        rs = jnp.sqrt(z * z + d2s)
-        return jnp.where(z >= 0, z + rs, d2s / (rs - z))
-
-    log_ratio = jnp.where(has_d, jnp.log(w(z1, r1)) - jnp.log(w(z0, r0)), 0.0)
-    phi_moving = 0.5 * (z1 * r1 - z0 * r0 + d2 * log_ratio) / A
-    r_start = jnp.sqrt(x0[..., 0] ** 2 + x0[..., 1] ** 2)
-    return jnp.where(moving, phi_moving, r_start * t)
+    # The unit direction of a: products of powers of A (A^4 ~ 1e-400 underflows, autodiff
+    # of x / A^2 forms 1/A^4) would make the derivatives inf * 0 = NaN.
+    e = a_s / A[..., None]
+    x1 = x0 + a_s * t[..., None]
+    r0 = jnp.sqrt(x0[..., 0] ** 2 + x0[..., 1] ** 2)
+    r1 = jnp.sqrt(x1[..., 0] ** 2 + x1[..., 1] ** 2)
+    z0 = x0[..., 0] * e[..., 0] + x0[..., 1] * e[..., 1]
+    z1 = z0 + A * t
+    rsum = r0 + r1
+    rsum_s = jnp.where(rsum > 0, rsum, 1.0)
+    q = jnp.where(rsum > 0, r0 - z0 * (z0 + z1) / rsum_s, 0.0)
+    d2 = (x0[..., 0] * e[..., 1] - x0[..., 1] * e[..., 0]) ** 2
+    has_d = d2 > 1e-100 * (r0 * r0 + r1 * r1)
+    D = A * t * q / jnp.where(has_d, d2, 1.0)
+    small = has_d & (jnp.abs(D) < 1e-3)
+    huge = ~has_d | ~(jnp.abs(D) < 1e150)
+    Ds = jnp.where(small | huge, 1.0, D)
+    Dm = jnp.where(small, D, 0.0)
+    # 1 - asinh(D)/D: series below 1e-3 (next term 5 D^6/112 < 1e-19), 1 for D -> infinity
+    one_minus_s = jnp.where(
+        small, Dm * Dm / 6.0 - 3.0 * Dm**4 / 40.0, jnp.where(huge, 1.0, 1.0 - jnp.arcsinh(Ds) / Ds)
+    )
+    phi_moving = 0.5 * t * (r0 + r1 - q * one_minus_s)
+    # a -> 0: Phi = |x0| t + (x0 . a) t^2 / (2 |x0|) + O(|a|^2 t^3 / |x0|), exact to 1e-200
+    r0s = jnp.where(r0 > 0, r0, 1.0)
+    xa = x0[..., 0] * a[..., 0] + x0[..., 1] * a[..., 1]
+    phi_still = r0 * t + jnp.where(r0 > 0, xa * t * t / (2.0 * r0s), 0.0)
+    return jnp.where(moving, phi_moving, phi_still)
 
 
 class ChargedParticle(AbstractPoissonSystem):
