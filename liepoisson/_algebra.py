@@ -25,17 +25,16 @@ _STRUCTURE_RTOL = 1e-10
 
 
 def _check_structure_constants(C: Any) -> np.ndarray:
-    if isinstance(C, (str, bytes)) or np.iscomplexobj(C):
-        raise TypeError(
-            f"structure_constants must be a real array of shape (n, n, n); got {type(C).__name__}"
-            + (f" of dtype {np.asarray(C).dtype}" if np.iscomplexobj(C) else "")
-        )
+    what = f"{type(C).__name__} {C!r}"
     try:
+        if isinstance(C, (str, bytes)) or C is None:
+            raise TypeError
+        if np.iscomplexobj(C):
+            what = f"complex {type(C).__name__} of dtype {np.asarray(C).dtype}"
+            raise TypeError
         C = np.asarray(C, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise TypeError(
-            f"structure_constants must be a real array of shape (n, n, n); got {C!r}"
-        ) from err
+        raise TypeError(f"structure_constants must be a real array of shape (n, n, n); got {what}") from err
     if C.ndim != 3 or not (C.shape[0] == C.shape[1] == C.shape[2]) or C.shape[0] == 0:
         raise ValueError(f"structure_constants must have shape (n, n, n) with n >= 1; got {C.shape}")
     if not np.all(np.isfinite(C)):
