@@ -19,6 +19,8 @@ ACTIVATIONS = {
     "gelu": jax.nn.gelu,
     "silu": jax.nn.silu,
     "elu": jax.nn.elu,
+    # G-LPNet modules with the identity are flows of quadratics phi(s) = a s^2/2 + b s.
+    "identity": lambda x: x,
 }
 
 
