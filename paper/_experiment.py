@@ -72,6 +72,8 @@ def fmt(x: Any) -> str:
     if isinstance(x, (list, tuple)):
         return "[" + ", ".join(fmt(v) for v in x) + "]"
     x = float(x)
+    if math.isnan(x):
+        return "—"
     if x == 0:
         return "0"
     if 1e-3 <= abs(x) < 1e4:
