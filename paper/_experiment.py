@@ -123,13 +123,23 @@ class AbstractExperiment(abc.ABC):
         return None
 
     def rows(self, metrics: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+        """(label, paper, ours, baseline); a dotted key `glpnet.x` reads a nested block."""
+
+        def get(d: dict[str, Any], key: str) -> Any:
+            for part in key.split("."):
+                if not isinstance(d, dict) or part not in d:
+                    return None
+                d = d[part]
+            return d
+
         base = metrics.get("baseline", {}) or {}
         out = []
         for key, label in self.table_rows:
-            if key not in metrics:
+            ours = get(metrics, key)
+            if ours is None:
                 continue
             pv = self.paper_value(key)
-            out.append((label, pv.text if pv else "—", fmt(metrics[key]), fmt(base.get(key))))
+            out.append((label, pv.text if pv else "—", fmt(ours), fmt(get(base, key))))
         return out
 
     def markdown_table(self, metrics: dict[str, Any]) -> str:

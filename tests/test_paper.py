@@ -32,6 +32,10 @@ def test_experiment_smoke(exp_id, tmp_path):
     if exp_id == "E6":
         # G-LPNet steps are exact Poisson maps: defect at round-off (entries of B are O(|Pi|)).
         assert on_disk["poisson_defect_max"] < 1e3 * EPS
+    if exp_id == "E1":
+        assert on_disk["glpnet"]["poisson_defect_max"] < 1e3 * EPS
+        assert on_disk["glpnet"]["casimir_rel_drift_max"] < 1e-12
+        assert len(on_disk["energy_rel_err_max_seeds"]) == 2
 
 
 def test_cli_list(capsys):
