@@ -58,7 +58,9 @@ def _jsonable(x: Any) -> Any:
     if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
         x = x.item()
     if hasattr(x, "tolist"):
-        return x.tolist()
+        return _jsonable(x.tolist())
+    if isinstance(x, float) and math.isnan(x):
+        return None  # JSON null: "not measured" (e.g. no validation set)
     if isinstance(x, float) and not math.isfinite(x):
         return str(x)
     return x
