@@ -37,3 +37,9 @@ def poisson_defect(model, y: jax.Array) -> jax.Array:
         return jnp.max(jnp.abs(J @ B0 @ J.T - B1))
 
     return jax.vmap(one)(y)
+
+
+def state_mse(model, y0: jax.Array, y1: jax.Array) -> jax.Array:
+    """Mean squared error of one learned step over pairs `(N, dim)`: the state loss of every
+    learned map (paper eqs. Loss_function, Loss_function_G_LPNets). Traceable, not jitted."""
+    return jnp.mean((jax.vmap(model._step)(y0) - y1) ** 2)
