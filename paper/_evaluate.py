@@ -18,7 +18,7 @@ def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 2
     trajectories and times, means over both. Returns the metrics, the rollout and the reports.
     """
     reference = np.asarray(reference)
-    n_traj, n_points, _ = reference.shape
+    n_points = reference.shape[1]
     t0 = time.perf_counter()
     y = np.asarray(model.rollout(reference[:, 0], n_points - 1))
     rollout_time = time.perf_counter() - t0
@@ -76,3 +76,15 @@ def compare(system, ours, baseline, reference, out_dir, data_states=None, label=
         metrics["ground_truth_casimir_rel_drift_max"] = gt.max_casimir_drift_relative
     metrics["ground_truth_energy_rel_err_max"] = gt.max_energy_error
     return metrics
+
+
+def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress):
+    """A G-LPNet (6 modules, exactly Poisson) trained on the same pairs and rolled out from
+    the same initial conditions: what an exact Poisson map makes of the same data."""
+    import learn
+
+    gnet = learn.GLPNet(system, n_modules=6, key=0).fit(
+        data, max_iter=iterations, restarts=restarts, seed=0, progress=progress
+    )
+    gnet.save(out_dir / "glpnet.h5")
+    return rollout_metrics(gnet, system, reference.states)["metrics"]

@@ -27,6 +27,15 @@ METRIC_KEYS = (
 )
 
 
+# Rows for the G-LPNet trained on an LPNet experiment's data (`metrics["glpnet"]`).
+GLPNET_ROWS = (
+    ("glpnet.train_loss", "G-LPNet on the same data: training loss"),
+    ("glpnet.energy_rel_err_max", "G-LPNet on the same data: max |rel. energy error|"),
+    ("glpnet.traj_err_final", "G-LPNet on the same data: trajectory error at the end"),
+    ("glpnet.poisson_defect_max", "G-LPNet on the same data: max Poisson defect"),
+)
+
+
 @dataclasses.dataclass(frozen=True)
 class PaperValue:
     """A number the paper reports, with how it compares (`<=`: the paper's value is a bound)."""
