@@ -17,7 +17,7 @@ from liepoisson.systems import AbstractPoissonSystem
 
 from . import _checkpoint
 from ._rollout import batched_step, poisson_defect, rollout
-from ._validation import positive_int, states
+from ._validation import check_system, positive_int, states
 
 
 class TrainingRecord:
@@ -48,14 +48,6 @@ def replace(module: eqx.Module, **changes: Any) -> eqx.Module:
     if changes:
         raise TypeError(f"{type(module).__name__} has no fields {sorted(changes)}")
     return new
-
-
-def check_system(system: Any) -> AbstractPoissonSystem:
-    if not isinstance(system, AbstractPoissonSystem):
-        raise TypeError(
-            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
-        )
-    return system
 
 
 class AbstractLearnedMap(eqx.Module):
@@ -185,7 +177,7 @@ class AbstractLearnedMap(eqx.Module):
         attrs, groups = _checkpoint.read(path)
         if attrs.get("class") != cls.__name__:
             raise ValueError(f"path {path!r} holds a {attrs.get('class')}, not a {cls.__name__}")
-        if attrs["system"] != system.name or attrs["system_params"] != _jsonable(system.params):
+        if attrs["system"] != system.name or attrs["system_params"] != _checkpoint.jsonable(system.params):
             raise ValueError(
                 f"system {system!r} does not match the file's {attrs['system']}"
                 f"({attrs['system_params']})"
@@ -202,8 +194,3 @@ class AbstractLearnedMap(eqx.Module):
             )
         return replace(model, h=None if np.isnan(h) else float(h), record=record)
 
-
-def _jsonable(value: Any) -> Any:
-    import json
-
-    return json.loads(json.dumps(value))

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from ._base import check_system
 from ._mlp_map import AbstractMLPMap
 from ._rollout import state_mse
+from ._validation import check_system
 
 
 class MLPBaseline(AbstractMLPMap):

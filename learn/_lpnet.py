@@ -11,7 +11,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._base import check_system
 from ._mlp_map import AbstractMLPMap
 from ._parametrisation import (
     AbstractStepParametrisation,
@@ -20,6 +19,7 @@ from ._parametrisation import (
     default_parametrisation,
 )
 from ._rollout import state_mse
+from ._validation import check_system
 
 _PARAMETRISATIONS = {"SO3Rotation": SO3Rotation, "LieAlgebraParametrisation": LieAlgebraParametrisation}
 

@@ -18,18 +18,10 @@ import numpy as np
 import liepoisson as lp
 from liepoisson.systems import AbstractLiePoissonSystem, AbstractPoissonSystem
 
-from ._validation import pairs, positive_float, positive_int
+from ._validation import check_system, pairs, positive_float, positive_int
 
 # Below this ratio |y0 x y1| / (y0 . y1) the angle/sine ratio uses its series (error O(r^6)).
 _SMALL_RATIO = 1e-4
-
-
-def _check_system(system: Any) -> AbstractPoissonSystem:
-    if not isinstance(system, AbstractPoissonSystem):
-        raise TypeError(
-            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
-        )
-    return system
 
 
 def _check_rtol(rtol: Any) -> float:
@@ -79,6 +71,14 @@ class AbstractStepParametrisation(abc.ABC):
         return f"{type(self).__name__}({self.system!r})"
 
 
+def _flat_pairs(y0: Any, y1: Any, h: Any, dim: int):
+    """`params_from_pair`'s input checks: `(y0, y1)` flattened to `(N, dim)`, `h`, and the
+    leading shape to restore."""
+    y0, y1 = pairs(y0, y1, dim)
+    h = positive_float(h, "h")
+    return y0.reshape(-1, dim), y1.reshape(-1, dim), h, y0.shape[:-1]
+
+
 def _is_so3(system: AbstractPoissonSystem) -> bool:
     if not isinstance(system, AbstractLiePoissonSystem) or system.dim != 3:
         return False
@@ -102,7 +102,7 @@ class SO3Rotation(AbstractStepParametrisation):
     """
 
     def __init__(self, system: Any, rtol: float = 1e-10):
-        system = _check_system(system)
+        system = check_system(system)
         if not _is_so3(system):
             raise ValueError(
                 "SO3Rotation needs a Lie-Poisson system on so(3)* (structure constants = "
@@ -133,10 +133,7 @@ class SO3Rotation(AbstractStepParametrisation):
         return self.system.test_flow(params, h, y)
 
     def params_from_pair(self, y0, y1, h):
-        y0, y1 = pairs(y0, y1, 3)
-        h = positive_float(h, "h")
-        shape = y0.shape
-        a, b = y0.reshape(-1, 3), y1.reshape(-1, 3)
+        a, b, h, batch = _flat_pairs(y0, y1, h, 3)
         n0, n1 = np.linalg.norm(a, axis=-1), np.linalg.norm(b, axis=-1)
         scale = np.maximum(n0, n1)
         bad = np.abs(n0 - n1) > self.rtol * scale
@@ -165,7 +162,7 @@ class SO3Rotation(AbstractStepParametrisation):
         factor = np.where(small, (1.0 - r * r / 3.0 + r**4 / 5.0) / c_safe, np.arctan2(s, c) / s_safe)
         factor = np.where(scale == 0.0, 0.0, factor)
         A = -self.orientation * factor[:, None] * cross / h
-        return A.reshape(shape)
+        return A.reshape(batch + (3,))
 
 
 class LieAlgebraParametrisation(AbstractStepParametrisation):
@@ -183,7 +180,7 @@ class LieAlgebraParametrisation(AbstractStepParametrisation):
     """
 
     def __init__(self, system: Any, rtol: float = 1e-10, max_iter: int = 30):
-        self.system = _check_system(system)
+        self.system = check_system(system)
         self.rtol = _check_rtol(rtol)
         self.max_iter = positive_int(max_iter, "max_iter")
         self._solve = jax.jit(jax.vmap(self._solve_one, in_axes=(0, 0, None)))
@@ -222,10 +219,7 @@ class LieAlgebraParametrisation(AbstractStepParametrisation):
         return P @ z, jnp.max(jnp.abs(residual(z)))
 
     def params_from_pair(self, y0, y1, h):
-        y0, y1 = pairs(y0, y1, self.system.dim)
-        h = positive_float(h, "h")
-        shape = y0.shape
-        a, b = y0.reshape(-1, self.system.dim), y1.reshape(-1, self.system.dim)
+        a, b, h, batch = _flat_pairs(y0, y1, h, self.system.dim)
         scale = np.maximum(np.max(np.abs(a), axis=-1), np.max(np.abs(b), axis=-1))
         scale = np.maximum(scale, np.finfo(float).tiny)
         if self.system.n_casimirs:
@@ -252,13 +246,13 @@ class LieAlgebraParametrisation(AbstractStepParametrisation):
                 f"(residual {res[i]:.3g} after {self.max_iter} iterations); the step may be too "
                 "large for the exponential map or the pair inconsistent"
             )
-        return alpha.reshape(shape[:-1] + (self.system.dim,))
+        return alpha.reshape(batch + (self.system.dim,))
 
 
 def default_parametrisation(system: Any) -> AbstractStepParametrisation:
     """`SO3Rotation` for so(3)* systems, `LieAlgebraParametrisation` for any other
     Lie-Poisson system; other systems must name their parametrisation explicitly."""
-    system = _check_system(system)
+    system = check_system(system)
     if _is_so3(system):
         return SO3Rotation(system)
     if isinstance(system, AbstractLiePoissonSystem):

@@ -81,12 +81,12 @@ def train_adam(
         attrs, groups = _checkpoint.read(checkpoint)
         if attrs.get("class") != type(model).__name__:
             raise ValueError(f"checkpoint {checkpoint!r} holds a {attrs.get('class')}, not a {type(model).__name__}")
-        if attrs["hyperparameters"] != _json(model.hyperparameters()):
+        if attrs["hyperparameters"] != _checkpoint.jsonable(model.hyperparameters()):
             raise ValueError(
                 f"checkpoint {checkpoint!r} was written for a model with hyperparameters "
                 f"{attrs['hyperparameters']}; this model has {model.hyperparameters()}"
             )
-        for key, value in _json(settings).items():
+        for key, value in _checkpoint.jsonable(settings).items():
             if attrs["fit_settings"].get(key) != value:
                 raise ValueError(
                     f"checkpoint {checkpoint!r} was written with {key}={attrs['fit_settings'].get(key)!r}; "
@@ -215,8 +215,3 @@ def train_adam(
     }
     return best_model, info
 
-
-def _json(value):
-    import json
-
-    return json.loads(json.dumps(value))

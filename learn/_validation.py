@@ -7,6 +7,17 @@ from typing import Any
 
 import numpy as np
 
+from liepoisson.systems import AbstractPoissonSystem
+
+
+def check_system(system: Any) -> AbstractPoissonSystem:
+    """A `liepoisson.systems.AbstractPoissonSystem`."""
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(
+            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
+        )
+    return system
+
 
 def positive_float(x: Any, name: str) -> float:
     """A finite, strictly positive Python float."""
