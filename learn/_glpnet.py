@@ -24,10 +24,11 @@ from tqdm.auto import tqdm
 
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._base import AbstractLearnedMap, TrainingRecord, check_system, replace
+from ._base import AbstractLearnedMap, TrainingRecord, replace
 from ._data import prepare
 from ._mlp import ACTIVATIONS, as_key, check_activation
-from ._validation import positive_float, positive_int
+from ._rollout import state_mse
+from ._validation import check_system, positive_float, positive_int
 
 METHODS = ("bfgs", "lbfgs")
 
@@ -175,8 +176,7 @@ class GLPNet(AbstractLearnedMap):
         flat0, unravel = ravel_pytree(params)
 
         def loss(x, X, Y):
-            model = eqx.combine(unravel(x), static)
-            return jnp.mean((jax.vmap(model._step)(X) - Y) ** 2)
+            return state_mse(eqx.combine(unravel(x), static), X, Y)
 
         value_and_grad = jax.jit(jax.value_and_grad(loss))
         evaluate = jax.jit(loss)
@@ -267,8 +267,7 @@ def _warm_start(net, unravel, static, x0, X, Y, method, max_iter, progress, desc
             model_static = static
 
         def loss(x, X, Y, model_static=model_static, unrav=unrav):
-            model = eqx.combine(unrav(x), model_static)
-            return jnp.mean((jax.vmap(model._step)(X) - Y) ** 2)
+            return state_mse(eqx.combine(unrav(x), model_static), X, Y)
 
         stage_desc = f"{desc} ({tag})"
         if method == "bfgs":
@@ -319,6 +318,7 @@ def _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc):
         return loss(x, X, Y)
 
     vg = optax.value_and_grad_from_state(value_fn)
+    evaluate = jax.jit(value_fn)  # once per chunk; eagerly it would dispatch op by op
 
     @jax.jit
     def run(x, state):
@@ -346,7 +346,7 @@ def _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc):
             if not np.all(np.isfinite(values)):
                 break
             x = x_new
-            current = float(value_fn(x))
+            current = float(evaluate(x))
             if current < best:
                 best_x, best = x, current
     finally:

@@ -30,10 +30,14 @@ def rollout(model, y0: jax.Array, n_steps: int) -> jax.Array:
 def poisson_defect(model, y: jax.Array) -> jax.Array:
     """`y` `(N, dim)` -> `(N,)`: max |J B(y) J^T - B(T y)|."""
 
+    def step_and_image(x):
+        y = model._step(x)
+        return y, y
+
     def one(x):
-        J = jax.jacfwd(model._step)(x)
+        J, y = jax.jacfwd(step_and_image, has_aux=True)(x)  # the step once, not twice
         B0 = model.system.poisson_tensor(x)
-        B1 = model.system.poisson_tensor(model._step(x))
+        B1 = model.system.poisson_tensor(y)
         return jnp.max(jnp.abs(J @ B0 @ J.T - B1))
 
     return jax.vmap(one)(y)
