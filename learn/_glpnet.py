@@ -178,8 +178,18 @@ class GLPNet(AbstractLearnedMap):
         def loss(x, X, Y):
             return state_mse(eqx.combine(unravel(x), static), X, Y)
 
-        value_and_grad = jax.jit(jax.value_and_grad(loss))
         evaluate = jax.jit(loss)
+        # Compiled once per fit and reused by every start (and stage).
+        minimise = _minimiser(method, loss, X, Y)
+        use_warm_start = warm_start and self.activation != "identity"
+        if use_warm_start:
+            lin_params, lin_static = eqx.partition(replace(net, activation="identity"), eqx.is_inexact_array)
+            lin_unravel = ravel_pytree(lin_params)[1]  # same flat layout, other static metadata
+
+            def linear_loss(x, X, Y):
+                return state_mse(eqx.combine(lin_unravel(x), lin_static), X, Y)
+
+            minimise_linear = _minimiser(method, linear_loss, X, Y)
         start = time.perf_counter()
         results = []
         base = jax.random.PRNGKey(seed)
@@ -190,12 +200,13 @@ class GLPNet(AbstractLearnedMap):
                 a, c, b = net._initial(jax.random.fold_in(base, r), net.n_modules)
                 x0 = ravel_pytree(eqx.filter(replace(net, a=a, c=c, b=b), eqx.is_inexact_array))[0]
             desc = f"GLPNet {method} start {r + 1}/{restarts}"
-            if warm_start and self.activation != "identity":
-                x, hist = _warm_start(net, unravel, static, x0, X, Y, method, max_iter, progress, desc)
-            elif method == "bfgs":
-                x, hist = _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc)
+            if use_warm_start:
+                x, hist = _warm_start(
+                    net, unravel, static, lin_unravel, lin_static, x0, X, minimise_linear, minimise,
+                    max_iter, progress, desc,
+                )
             else:
-                x, hist = _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc)
+                x, hist = minimise(x0, max_iter, progress, desc)
             train = float(evaluate(x, X, Y))
             val = float(evaluate(x, Xv, Yv)) if pairs.has_validation else float("nan")
             crit = val if pairs.has_validation else train
@@ -249,38 +260,37 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     return replace(net, a=a, c=c, b=b)
 
 
-def _warm_start(net, unravel, static, x0, X, Y, method, max_iter, progress, desc):
-    """Identity-activation fit, mapped onto sigma's linear regime, then refined with sigma."""
-    start = eqx.combine(unravel(x0), static)
-    lin = replace(start, activation="identity")
-    lin_params, lin_static = eqx.partition(lin, eqx.is_inexact_array)
-    lin_x0, lin_unravel = ravel_pytree(lin_params)
-    stages = []
-    for model_static, unrav, x_init, iters, tag in (
-        (lin_static, lin_unravel, lin_x0, max(1, max_iter // 2), "identity"),
-        (None, unravel, None, max(1, max_iter - max_iter // 2), net.activation),
-    ):
-        if model_static is None:  # second stage: start from the mapped linear solution
-            lin_fit = eqx.combine(lin_unravel(stages[0][0]), lin_static)
-            mapped = linear_to_activation(start, lin_fit, X)
-            x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
-            model_static = static
+def _warm_start(net, unravel, static, lin_unravel, lin_static, x0, X, minimise_linear, minimise,
+                max_iter, progress, desc):
+    """Identity-activation fit, mapped onto sigma's linear regime, then refined with sigma.
 
-        def loss(x, X, Y, model_static=model_static, unrav=unrav):
-            return state_mse(eqx.combine(unrav(x), model_static), X, Y)
-
-        stage_desc = f"{desc} ({tag})"
-        if method == "bfgs":
-            x, hist = _scipy_bfgs(jax.jit(jax.value_and_grad(loss)), x_init, X, Y, iters, progress, stage_desc)
-        else:
-            x, hist = _optax_lbfgs(loss, x_init, X, Y, iters, progress, stage_desc)
-        stages.append((x, hist))
-    h1, h2 = stages[0][1], stages[1][1]
+    The identity and sigma networks share their flat parameter layout (`a`, `c`, `b`); only the
+    static activation (part of the pytree metadata) differs."""
+    first = max(1, max_iter // 2)
+    x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (identity)")
+    mapped = linear_to_activation(
+        eqx.combine(unravel(x0), static), eqx.combine(lin_unravel(x_lin), lin_static), X
+    )
+    x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
+    x, h2 = minimise(x_init, max(1, max_iter - first), progress, f"{desc} ({net.activation})")
     hist = {
         "epoch": np.concatenate([h1["epoch"], h2["epoch"] + (h1["epoch"][-1] if len(h1["epoch"]) else 0)]),
         "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]]),
     }
-    return stages[1][0], hist
+    return x, hist
+
+
+def _minimiser(method, loss, X, Y):
+    """`minimise(x0, max_iter, progress, desc) -> (x, history)` for `loss(x, X, Y)`, with its
+    compiled pieces built once so that every start reuses them."""
+    if method == "bfgs":
+        value_and_grad = jax.jit(jax.value_and_grad(loss))
+
+        def minimise(x0, max_iter, progress, desc):
+            return _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc)
+
+        return minimise
+    return _optax_lbfgs(loss, X, Y)
 
 
 def _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc):
@@ -311,7 +321,8 @@ def _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc):
 _LBFGS_CHUNK = 100
 
 
-def _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc):
+def _optax_lbfgs(loss, X, Y):
+    """optax L-BFGS (zoom line search) compiled in chunks of iterations; returns a minimiser."""
     opt = optax.lbfgs()
 
     def value_fn(x):
@@ -330,27 +341,30 @@ def _optax_lbfgs(loss, x0, X, Y, max_iter, progress, desc):
 
         return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
 
-    x, state = x0, opt.init(x0)
-    losses: list[np.ndarray] = []
-    bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
-    done = 0
-    best_x, best = x0, np.inf
-    try:
-        while done < max_iter:
-            (x_new, state), values = run(x, state)
-            values = np.asarray(values)[: max_iter - done]
-            losses.append(values)
-            done += len(values)
-            bar.update(len(values))
-            bar.set_postfix(loss=f"{values[-1]:.3g}")
-            if not np.all(np.isfinite(values)):
-                break
-            x = x_new
-            current = float(evaluate(x))
-            if current < best:
-                best_x, best = x, current
-    finally:
-        bar.close()
-    train = np.concatenate(losses) if losses else np.zeros(0)
-    hist = {"epoch": np.arange(1, len(train) + 1), "train_loss": train}
-    return best_x, hist
+    def minimise(x0, max_iter, progress, desc):
+        x, state = x0, opt.init(x0)
+        losses: list[np.ndarray] = []
+        bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
+        done = 0
+        best_x, best = x0, np.inf
+        try:
+            while done < max_iter:
+                (x_new, state), values = run(x, state)
+                values = np.asarray(values)[: max_iter - done]
+                losses.append(values)
+                done += len(values)
+                bar.update(len(values))
+                bar.set_postfix(loss=f"{values[-1]:.3g}")
+                if not np.all(np.isfinite(values)):
+                    break
+                x = x_new
+                current = float(evaluate(x))
+                if current < best:
+                    best_x, best = x, current
+        finally:
+            bar.close()
+        train = np.concatenate(losses) if losses else np.zeros(0)
+        hist = {"epoch": np.arange(1, len(train) + 1), "train_loss": train}
+        return best_x, hist
+
+    return minimise
