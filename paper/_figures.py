@@ -86,13 +86,16 @@ def plot_experiment(
     ):
         if rep is None:
             continue
-        axes[0].plot(times, np.asarray(rep.energy_error_relative), style, lw=0.8, label=lab)
+        # Absolute values on a log axis (floored at 1e-17 for exact zeros): the errors span
+        # from round-off (Casimirs of the learned maps) to O(1) (the unstructured baseline).
+        energy = np.maximum(np.abs(np.asarray(rep.energy_error_relative)), 1e-17)
+        axes[0].semilogy(times, energy, style, lw=0.8, label=lab)
         for j in range(n_cas):
-            axes[1 + j].plot(times, np.asarray(rep.casimir_drift_relative)[:, j], style, lw=0.8, label=lab)
-    axes[0].set_ylabel("(E(t)-E(0))/<E>")
+            cas = np.maximum(np.abs(np.asarray(rep.casimir_drift_relative)[:, j]), 1e-17)
+            axes[1 + j].semilogy(times, cas, style, lw=0.8, label=lab)
+    axes[0].set_ylabel("|E(t)-E(0)|/<E>")
     for j in range(n_cas):
-        axes[1 + j].set_ylabel(f"(C{j + 1}(t)-C{j + 1}(0))/<C{j + 1}>")
-        axes[1 + j].set_yscale("symlog", linthresh=1e-16)
+        axes[1 + j].set_ylabel(f"|C{j + 1}(t)-C{j + 1}(0)|/<C{j + 1}>")
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel("t")
     fig.tight_layout()
