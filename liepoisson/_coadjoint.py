@@ -33,7 +33,7 @@ def rotation_coefficients(theta2: jax.Array) -> tuple[jax.Array, jax.Array, jax.
     small = theta2 < _SMALL_ANGLE**2
     t2 = jnp.where(small, 1.0, theta2)
     theta = jnp.sqrt(t2)
-    s, c = jnp.sin(theta), jnp.cos(theta)
+    s = jnp.sin(theta)
     half = jnp.sin(0.5 * theta)
     sinc = jnp.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, s / theta)
     c1 = jnp.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, 2.0 * half * half / t2)
