@@ -19,6 +19,9 @@ from ._parametrisation import (
     LieAlgebraParametrisation as LieAlgebraParametrisation,
 )
 from ._parametrisation import (
+    SE3RotationShear as SE3RotationShear,
+)
+from ._parametrisation import (
     SO3Rotation as SO3Rotation,
 )
 from ._parametrisation import (

@@ -112,15 +112,7 @@ class SO3Rotation(AbstractStepParametrisation):
         self.rtol = _check_rtol(rtol)
         # Orientation of the test flow relative to rotate(hA, y) = exp(-h hat A) y, checked
         # numerically so that either sign convention of the algebra is handled.
-        A = np.array([0.3, -0.2, 0.5])
-        y = np.array([0.7, 0.1, -0.4])
-        flow = np.asarray(system.test_flow(A, 1.0, y))
-        if np.allclose(flow, np.asarray(lp.rotate(A, y)), atol=1e-13):
-            self.orientation = 1.0
-        elif np.allclose(flow, np.asarray(lp.rotate(-A, y)), atol=1e-13):
-            self.orientation = -1.0
-        else:  # pragma: no cover - would be a bug in liepoisson
-            raise ValueError(f"the test flow of {system!r} is not a rotation about alpha")
+        self.orientation = _rotation_orientation(lambda A, y: system.test_flow(A, 1.0, y))
 
     @property
     def n_params(self) -> int:
@@ -134,35 +126,157 @@ class SO3Rotation(AbstractStepParametrisation):
 
     def params_from_pair(self, y0, y1, h):
         a, b, h, batch = _flat_pairs(y0, y1, h, 3)
-        n0, n1 = np.linalg.norm(a, axis=-1), np.linalg.norm(b, axis=-1)
-        scale = np.maximum(n0, n1)
-        bad = np.abs(n0 - n1) > self.rtol * scale
+        A = -self.orientation * _shortest_rotation(a, b, self.rtol, "y") / h
+        return A.reshape(batch + (3,))
+
+
+def _rotation_orientation(rotation: Any) -> float:
+    """+1 if `rotation(A, y)` = exp(-hat A) y (`lp.rotate`), -1 if exp(+hat A) y."""
+    A = np.array([0.3, -0.2, 0.5])
+    y = np.array([0.7, 0.1, -0.4])
+    out = np.asarray(rotation(A, y))
+    if np.allclose(out, np.asarray(lp.rotate(A, y)), atol=1e-13):
+        return 1.0
+    if np.allclose(out, np.asarray(lp.rotate(-A, y)), atol=1e-13):
+        return -1.0
+    raise ValueError("the test flow is not a rotation about alpha")  # pragma: no cover
+
+
+def _shortest_rotation(a: np.ndarray, b: np.ndarray, rtol: float, name: str) -> np.ndarray:
+    r"""$\theta\,(a\times b)/|a\times b|$ with $\theta = \operatorname{atan2}(|a\times b|, a\cdot b)$:
+    the rotation vector of the shortest rotation carrying `a` to `b` (rows of `(N, 3)`);
+    zero for parallel rows. Raises `ValueError` if $|a| \neq |b|$ or they are antiparallel."""
+    n0, n1 = np.linalg.norm(a, axis=-1), np.linalg.norm(b, axis=-1)
+    scale = np.maximum(n0, n1)
+    bad = np.abs(n0 - n1) > rtol * scale
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"pair {i}: |{name}0| = {n0[i]:.17g} and |{name}1| = {n1[i]:.17g} differ by "
+            f"{abs(n0[i] - n1[i]) / scale[i]:.3g} (relative) > rtol = {rtol:g}; they lie "
+            "on different Casimir spheres and no rotation (Poisson map) connects them"
+        )
+    cross = np.cross(a, b)
+    s = np.linalg.norm(cross, axis=-1)
+    c = np.einsum("ia,ia->i", a, b)
+    anti = (s <= 1e-8 * n0 * n1) & (c < 0)
+    if np.any(anti):
+        i = int(np.argmax(anti))
+        raise ValueError(
+            f"pair {i}: {name}0 = {a[i].tolist()} and {name}1 = {b[i].tolist()} are antiparallel; the "
+            "rotation axis carrying one to the other is not unique"
+        )
+    c_safe = np.where(c == 0.0, 1.0, np.abs(c))
+    r = s / c_safe
+    s_safe = np.where(s == 0.0, 1.0, s)
+    small = (r < _SMALL_RATIO) & (c > 0)
+    # theta / |a x b|, with theta = atan2(s, c); series for small angles: no 0/0.
+    factor = np.where(small, (1.0 - r * r / 3.0 + r**4 / 5.0) / c_safe, np.arctan2(s, c) / s_safe)
+    factor = np.where(scale == 0.0, 0.0, factor)
+    return factor[:, None] * cross
+
+
+def _is_se3(system: AbstractPoissonSystem) -> bool:
+    return (
+        isinstance(system, AbstractLiePoissonSystem)
+        and system.dim == 6
+        and np.allclose(
+            np.asarray(system.algebra.structure_constants),
+            np.asarray(lp.se3().structure_constants),
+            atol=1e-12,
+        )
+    )
+
+
+class SE3RotationShear(AbstractStepParametrisation):
+    r"""se(3)* (Kirchhoff): one step is a rotation followed by a shear, the paper's data
+    preparation for Kirchhoff's equations re-derived,
+    $(\Pi, p) \mapsto \mathbb T_{(0,b)}\,\mathbb T_{(A,0)}(\Pi, p)$, parameters
+    $\alpha = (A, b)\in\mathbb R^6$, where $\mathbb T_\alpha$ = `system.test_flow(alpha, h, .)`:
+    $\mathbb T_{(A,0)}$ rotates $\Pi$ and $p$ by the same rotation $R$ (angle $h|A|$ about
+    $A$), $\mathbb T_{(0,b)}$ is the shear $\Pi \mapsto \Pi + \sigma h\,b\times p$, $p$ fixed
+    ($\sigma = \pm1$ from the algebra's sign convention). Both are exact Poisson maps, so their
+    composition conserves $|p|^2$ and $\Pi\cdot p$ exactly.
+
+    `params_from_pair` (closed form): $A$ is the shortest rotation carrying $p^0$ to $p^f$
+    (axis $p^0\times p^f$, angle $\operatorname{atan2}(|p^0\times p^f|, p^0\cdot p^f)$, as in
+    `SO3Rotation`), so $A\perp p^0$; then with $d = R\Pi^0 - \Pi^f$, which is orthogonal to
+    $p^f$ exactly when $\Pi\cdot p$ agrees ($R\Pi^0\cdot p^f = \Pi^0\cdot p^0$), the
+    minimum-norm solution of $\sigma h\,b\times p^f = -d$ is
+    $b = -\sigma\,p^f\times d/(h|p^f|^2)$, $b\perp p^f$. Four effective parameters of six, like
+    the Casimir-projected coadjoint flow; the step is not a single $\exp(h\mathbb M(\alpha))$.
+
+    **Arguments:** `system` (a Lie-Poisson system on se(3)*), `rtol`: relative tolerance for
+    the Casimir mismatch of a pair.
+    """
+
+    def __init__(self, system: Any, rtol: float = 1e-10):
+        system = check_system(system)
+        if not _is_se3(system):
+            raise ValueError(
+                "SE3RotationShear needs a Lie-Poisson system on se(3)* (e.g. "
+                f"liepoisson.systems.Kirchhoff); got {system!r}"
+            )
+        self.system = system
+        self.rtol = _check_rtol(rtol)
+        zero = np.zeros(3)
+        y = np.array([0.2, -0.5, 0.9, 0.7, 0.1, -0.4])
+        self.orientation = _rotation_orientation(
+            lambda A, v: np.asarray(
+                system.test_flow(np.concatenate([A, zero]), 1.0, np.concatenate([zero, v]))
+            )[3:]
+        )
+        b = np.array([0.3, -0.2, 0.5])
+        shear = np.asarray(system.test_flow(np.concatenate([zero, b]), 1.0, y))
+        if np.allclose(shear, np.concatenate([y[:3] + np.cross(b, y[3:]), y[3:]]), atol=1e-13):
+            self.shear_sign = 1.0
+        elif np.allclose(shear, np.concatenate([y[:3] - np.cross(b, y[3:]), y[3:]]), atol=1e-13):
+            self.shear_sign = -1.0
+        else:  # pragma: no cover - would be a bug in liepoisson
+            raise ValueError(f"the test flow of {system!r} along p is not a shear of Pi")
+        self._step_batch = jax.jit(jax.vmap(self.step, in_axes=(0, 0, None)))
+
+    @property
+    def n_params(self) -> int:
+        return 6
+
+    def hyperparameters(self):
+        return {"rtol": self.rtol}
+
+    def step(self, params, y, h):
+        zero = jnp.zeros_like(params[:3])
+        rotated = self.system.test_flow(jnp.concatenate([params[:3], zero]), h, y)
+        return self.system.test_flow(jnp.concatenate([zero, params[3:]]), h, rotated)
+
+    def params_from_pair(self, y0, y1, h):
+        a, b, h, batch = _flat_pairs(y0, y1, h, 6)
+        p0, pf, Pif = a[:, 3:], b[:, 3:], b[:, :3]
+        npf = np.linalg.norm(pf, axis=-1)
+        zero_p = npf == 0.0
+        if np.any(zero_p):
+            i = int(np.argmax(zero_p))
+            raise ValueError(
+                f"pair {i}: p = 0; the rotation is not determined by p (a rigid-body pair: use "
+                "LieAlgebraParametrisation)"
+            )
+        A = -self.orientation * _shortest_rotation(p0, pf, self.rtol, "p") / h
+        zeros = np.zeros_like(A)
+        rotated = np.asarray(
+            self._step_batch(jnp.asarray(np.concatenate([A, zeros], -1)), jnp.asarray(a), h)
+        )
+        d = rotated[:, :3] - Pif
+        # The component of d along p^f is the change of the Casimir Pi . p.
+        along = np.einsum("ia,ia->i", d, pf) / npf
+        cscale = np.linalg.norm(a[:, :3], axis=-1) + np.linalg.norm(Pif, axis=-1)
+        bad = np.abs(along) > self.rtol * np.maximum(cscale, np.finfo(float).tiny)
         if np.any(bad):
             i = int(np.argmax(bad))
             raise ValueError(
-                f"pair {i}: |y0| = {n0[i]:.17g} and |y1| = {n1[i]:.17g} differ by "
-                f"{abs(n0[i] - n1[i]) / scale[i]:.3g} (relative) > rtol = {self.rtol:g}; they lie "
-                "on different Casimir spheres and no rotation (Poisson map) connects them"
+                f"pair {i}: the Casimir Pi . p differs between y0 and y1 ({a[i, :3] @ p0[i]:.17g} vs "
+                f"{Pif[i] @ pf[i]:.17g}); no Poisson map connects them"
             )
-        cross = np.cross(a, b)
-        s = np.linalg.norm(cross, axis=-1)
-        c = np.einsum("ia,ia->i", a, b)
-        anti = (s <= 1e-8 * n0 * n1) & (c < 0)
-        if np.any(anti):
-            i = int(np.argmax(anti))
-            raise ValueError(
-                f"pair {i}: y0 = {a[i].tolist()} and y1 = {b[i].tolist()} are antiparallel; the "
-                "rotation axis carrying one to the other is not unique"
-            )
-        c_safe = np.where(c == 0.0, 1.0, np.abs(c))
-        r = s / c_safe
-        s_safe = np.where(s == 0.0, 1.0, s)
-        small = (r < _SMALL_RATIO) & (c > 0)
-        # theta / |y0 x y1|, with theta = atan2(s, c); series for small angles: no 0/0.
-        factor = np.where(small, (1.0 - r * r / 3.0 + r**4 / 5.0) / c_safe, np.arctan2(s, c) / s_safe)
-        factor = np.where(scale == 0.0, 0.0, factor)
-        A = -self.orientation * factor[:, None] * cross / h
-        return A.reshape(batch + (3,))
+        bvec = -self.shear_sign * np.cross(pf, d) / (h * npf[:, None] ** 2)
+        return np.concatenate([A, bvec], -1).reshape(batch + (6,))
 
 
 class LieAlgebraParametrisation(AbstractStepParametrisation):
