@@ -2,7 +2,9 @@
 
 from .e1_rigid_body import EXPERIMENT as _E1
 from .e2_rigid_body_many import EXPERIMENT as _E2
+from .e3_extended_pendulum import EXPERIMENT as _E3
+from .e4_charged_particle import EXPERIMENT as _E4
 from .e5_kirchhoff import EXPERIMENT as _E5
 from .e6_glpnet_rigid_body import EXPERIMENT as _E6
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E5, _E6)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6)}
