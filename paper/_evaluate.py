@@ -50,7 +50,10 @@ def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 2
 
 def compare(system, ours, baseline, reference, out_dir, data_states=None, label="LPNet", show=0):
     """Metrics of `ours` with the baseline's beside them, and the paper's figures for
-    trajectory `show` of `reference` (a `Trajectories`)."""
+    trajectory `show` of `reference` (a `Trajectories`).
+
+    Returns `(metrics, rollouts)`, `rollouts = {"ours": ..., "baseline": ...}` of shape
+    `(n_traj, n_steps+1, dim)`, so that experiments measure more without rolling out again."""
     from ._figures import plot_experiment
 
     res = rollout_metrics(ours, system, reference.states)
@@ -75,7 +78,7 @@ def compare(system, ours, baseline, reference, out_dir, data_states=None, label=
     if system.n_casimirs:
         metrics["ground_truth_casimir_rel_drift_max"] = gt.max_casimir_drift_relative
     metrics["ground_truth_energy_rel_err_max"] = gt.max_energy_error
-    return metrics
+    return metrics, {"ours": res["rollout"], "baseline": bres["rollout"]}
 
 
 def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress):

@@ -106,7 +106,7 @@ class E1(AbstractExperiment):
             seed=0,
             progress=progress,
         )
-        metrics.update(compare(system, net, base, reference, out_dir, data_states=data.states))
+        metrics.update(compare(system, net, base, reference, out_dir, data_states=data.states)[0])
         # What does reach the paper's energy figure: an exactly Poisson map on the same data.
         metrics["glpnet"] = glpnet_on_same_data(
             system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress

@@ -70,7 +70,7 @@ class E2(AbstractExperiment):
         net = learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
         net.save(out_dir / "lpnet.h5")
         base = learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
-        metrics = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics, _ = compare(system, net, base, reference, out_dir, data_states=data.states)
         metrics["n_parameters"] = net.n_parameters
         metrics["model"] = "LPNet 3x32"
         metrics["baseline_model"] = "residual MLP 3x32"

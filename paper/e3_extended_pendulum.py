@@ -99,12 +99,14 @@ class E3(AbstractExperiment):
         base = learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0).fit(
             data, **fit
         )
-        metrics = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics, rollouts = compare(system, net, base, reference, out_dir, data_states=data.states)
         # The second trajectory's energy is near zero (K = -0.07), which inflates its relative
         # error: report each trajectory's maximum as well.
-        n = reference.states.shape[1] - 1
-        for key, model in (("energy_rel_err_max_per_trajectory", net), ("baseline", base)):
-            report = it.diagnostics(model.rollout(starts, n), system, reference=reference.states)
+        for key, y in (
+            ("energy_rel_err_max_per_trajectory", rollouts["ours"]),
+            ("baseline", rollouts["baseline"]),
+        ):
+            report = it.diagnostics(y, system, reference=reference.states)
             per_trajectory = np.max(np.abs(report.energy_error_relative), axis=1)
             if key == "baseline":
                 metrics["baseline"]["energy_rel_err_max_per_trajectory"] = per_trajectory

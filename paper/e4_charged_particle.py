@@ -116,12 +116,12 @@ class E4(AbstractExperiment):
         base = learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0).fit(
             data, **fit
         )
-        metrics = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics, rollouts = compare(system, net, base, reference, out_dir, data_states=data.states)
         y0s = reference.states[:, 0]
         n = reference.states.shape[1] - 1
-        metrics["integral_rel_err_max"] = integral_rel_err_max(system, net.rollout(y0s, n))
+        metrics["integral_rel_err_max"] = integral_rel_err_max(system, rollouts["ours"])
         metrics["baseline"]["integral_rel_err_max"] = integral_rel_err_max(
-            system, base.rollout(y0s, n)
+            system, rollouts["baseline"]
         )
         metrics["ground_truth_integral_rel_err_max"] = integral_rel_err_max(
             system, reference.states

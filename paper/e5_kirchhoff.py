@@ -108,11 +108,13 @@ class E5(AbstractExperiment):
         base = learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0).fit(
             data, **fit
         )
-        metrics = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics, rollouts = compare(system, net, base, reference, out_dir, data_states=data.states)
 
         times = np.asarray(reference.times)
-        for model, target in ((net, metrics), (base, metrics["baseline"])):
-            y = np.asarray(model.rollout(reference.states[:, 0], PREDICTION_STEPS))
+        for y, target in (
+            (rollouts["ours"], metrics),
+            (rollouts["baseline"], metrics["baseline"]),
+        ):
             err = it.diagnostics(y[0], system, reference=reference.states[0]).trajectory_error
             target["error_growth_rate"] = error_growth_rate(times, np.asarray(err).reshape(-1))
         metrics["lyapunov_exponent"] = {

@@ -74,7 +74,7 @@ class E6(AbstractExperiment):
             seed=0,
             progress=progress,
         )
-        metrics = compare(
+        metrics, _ = compare(
             system, gnet, base, reference, out_dir, data_states=data.states, label="G-LPNet"
         )
         metrics["n_parameters"] = gnet.n_parameters
