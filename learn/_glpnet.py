@@ -17,20 +17,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
-import scipy.optimize
 from jax.flatten_util import ravel_pytree
-from tqdm.auto import tqdm
 
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap, TrainingRecord, replace
 from ._data import prepare
 from ._mlp import ACTIVATIONS, as_key, check_activation
+from ._quasi_newton import check_method, minimiser
 from ._rollout import state_mse
 from ._validation import check_system, positive_float, positive_int
-
-METHODS = ("bfgs", "lbfgs")
 
 
 def _check_order(order: Any, n_modules: int, dim: int) -> tuple[int, ...]:
@@ -150,8 +146,8 @@ class GLPNet(AbstractLearnedMap):
         **Arguments:**
 
         - `data`: an `integrators.Trajectories`, or `(y0, y1)` arrays with `h`.
-        - `method`: `"bfgs"` (SciPy BFGS, `jac=True`, the paper's choice) or `"lbfgs"`
-          (optax L-BFGS with zoom line search, compiled in chunks).
+        - `method`: `"bfgs"` (SciPy BFGS, `jac=True`, the paper's choice), `"lbfgsb"` (SciPy
+          L-BFGS-B) or `"lbfgs"` (optax L-BFGS with zoom line search, compiled in chunks).
         - `max_iter` iterations per start; `restarts` starts in total: the first from the
           current parameters, the others from random ones seeded by `seed`; the best kept
           (lowest validation loss if `validation_fraction > 0`, else training loss).
@@ -163,8 +159,7 @@ class GLPNet(AbstractLearnedMap):
           the other half. From random sigmoid starts BFGS stalls in a first-order-splitting
           basin (MSE ~1e-6 on E6); the warm start reaches the paper's < 5e-10.
         """
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {list(METHODS)}; got {method!r}")
+        method = check_method(method)
         max_iter = positive_int(max_iter, "max_iter")
         restarts = positive_int(restarts, "restarts")
         seed = positive_int(seed, "seed", minimum=0)
@@ -180,7 +175,7 @@ class GLPNet(AbstractLearnedMap):
 
         evaluate = jax.jit(loss)
         # Compiled once per fit and reused by every start (and stage).
-        minimise = _minimiser(method, loss, X, Y)
+        minimise = minimiser(method, loss, X, Y)
         use_warm_start = warm_start and self.activation != "identity"
         if use_warm_start:
             lin_params, lin_static = eqx.partition(replace(net, activation="identity"), eqx.is_inexact_array)
@@ -189,7 +184,7 @@ class GLPNet(AbstractLearnedMap):
             def linear_loss(x, X, Y):
                 return state_mse(eqx.combine(lin_unravel(x), lin_static), X, Y)
 
-            minimise_linear = _minimiser(method, linear_loss, X, Y)
+            minimise_linear = minimiser(method, linear_loss, X, Y)
         start = time.perf_counter()
         results = []
         base = jax.random.PRNGKey(seed)
@@ -278,93 +273,3 @@ def _warm_start(net, unravel, static, lin_unravel, lin_static, x0, X, minimise_l
         "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]]),
     }
     return x, hist
-
-
-def _minimiser(method, loss, X, Y):
-    """`minimise(x0, max_iter, progress, desc) -> (x, history)` for `loss(x, X, Y)`, with its
-    compiled pieces built once so that every start reuses them."""
-    if method == "bfgs":
-        value_and_grad = jax.jit(jax.value_and_grad(loss))
-
-        def minimise(x0, max_iter, progress, desc):
-            return _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc)
-
-        return minimise
-    return _optax_lbfgs(loss, X, Y)
-
-
-def _scipy_bfgs(value_and_grad, x0, X, Y, max_iter, progress, desc):
-    def fun(x):
-        v, g = value_and_grad(jnp.asarray(x), X, Y)
-        return float(v), np.asarray(g, dtype=np.float64)
-
-    losses: list[float] = []
-    bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
-
-    def callback(intermediate_result):
-        losses.append(float(intermediate_result.fun))
-        bar.update(1)
-        if len(losses) % 50 == 0:
-            bar.set_postfix(loss=f"{losses[-1]:.3g}")
-
-    try:
-        res = scipy.optimize.minimize(
-            fun, np.asarray(x0, dtype=np.float64), jac=True, method="BFGS", callback=callback,
-            options={"maxiter": max_iter, "gtol": 0.0},
-        )
-    finally:
-        bar.close()
-    hist = {"epoch": np.arange(1, len(losses) + 1), "train_loss": np.asarray(losses)}
-    return jnp.asarray(res.x), hist
-
-
-_LBFGS_CHUNK = 100
-
-
-def _optax_lbfgs(loss, X, Y):
-    """optax L-BFGS (zoom line search) compiled in chunks of iterations; returns a minimiser."""
-    opt = optax.lbfgs()
-
-    def value_fn(x):
-        return loss(x, X, Y)
-
-    vg = optax.value_and_grad_from_state(value_fn)
-    evaluate = jax.jit(value_fn)  # once per chunk; eagerly it would dispatch op by op
-
-    @jax.jit
-    def run(x, state):
-        def body(carry, _):
-            x, state = carry
-            value, grad = vg(x, state=state)
-            updates, state = opt.update(grad, state, x, value=value, grad=grad, value_fn=value_fn)
-            return (optax.apply_updates(x, updates), state), value
-
-        return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
-
-    def minimise(x0, max_iter, progress, desc):
-        x, state = x0, opt.init(x0)
-        losses: list[np.ndarray] = []
-        bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
-        done = 0
-        best_x, best = x0, np.inf
-        try:
-            while done < max_iter:
-                (x_new, state), values = run(x, state)
-                values = np.asarray(values)[: max_iter - done]
-                losses.append(values)
-                done += len(values)
-                bar.update(len(values))
-                bar.set_postfix(loss=f"{values[-1]:.3g}")
-                if not np.all(np.isfinite(values)):
-                    break
-                x = x_new
-                current = float(evaluate(x))
-                if current < best:
-                    best_x, best = x, current
-        finally:
-            bar.close()
-        train = np.concatenate(losses) if losses else np.zeros(0)
-        hist = {"epoch": np.arange(1, len(train) + 1), "train_loss": train}
-        return best_x, hist
-
-    return minimise
