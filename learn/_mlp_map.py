@@ -124,7 +124,8 @@ class AbstractMLPMap(AbstractLearnedMap):
         **Arguments:**
 
         - `data`: an `integrators.Trajectories`, or `(y0, y1)` arrays `(N, dim)` with `h`.
-        - `epochs`; `learning_rate` and `final_learning_rate` (Adam with exponential decay
+        - `epochs` of Adam (0: none, only the quasi-Newton refinement from the current
+          weights); `learning_rate` and `final_learning_rate` (Adam with exponential decay
           from one to the other over all steps; constant if `final_learning_rate` is None).
         - `batch_size`: None for full batch, else seeded shuffled mini-batches (remainder dropped
           per epoch).
@@ -153,7 +154,7 @@ class AbstractMLPMap(AbstractLearnedMap):
           iterations after Adam take the loss from 3e-10 to 1e-12 and the 10,000-step energy
           drift from 7.8e-3 to XXX.
         """
-        epochs = positive_int(epochs, "epochs")
+        epochs = positive_int(epochs, "epochs", minimum=0)
         learning_rate = positive_float(learning_rate, "learning_rate")
         if final_learning_rate is not None:
             final_learning_rate = positive_float(final_learning_rate, "final_learning_rate")
@@ -167,6 +168,9 @@ class AbstractMLPMap(AbstractLearnedMap):
         checkpoint_every = positive_int(checkpoint_every, "checkpoint_every")
         refine_iterations = positive_int(refine_iterations, "refine_iterations", minimum=0)
         refine_method = check_method(refine_method)
+        if epochs == 0 and refine_iterations == 0:
+            raise ValueError("epochs=0 and refine_iterations=0 leave nothing to train; give epochs >= 1 "
+                             "(Adam) or refine_iterations >= 1 (quasi-Newton from the current weights)")
         if checkpoint is not None:
             checkpoint = os.fspath(checkpoint)
         if resume and checkpoint is None:
@@ -190,24 +194,27 @@ class AbstractMLPMap(AbstractLearnedMap):
             "n_train": int(train[0].shape[0]),
             "n_val": int(val[0].shape[0]),
         }
-        best, info = train_adam(
-            model,
-            train,
-            val,
-            loss_fn,
-            epochs=epochs,
-            learning_rate=learning_rate,
-            final_learning_rate=final_learning_rate,
-            batch_size=batch_size,
-            seed=seed,
-            progress=progress,
-            log_every=log_every,
-            checkpoint=checkpoint,
-            checkpoint_every=checkpoint_every,
-            resume=resume,
-            settings=settings,
-            desc=type(model).__name__,
-        )
+        if epochs == 0:
+            best, info = model, _no_adam(model, train, val, loss_fn)
+        else:
+            best, info = train_adam(
+                model,
+                train,
+                val,
+                loss_fn,
+                epochs=epochs,
+                learning_rate=learning_rate,
+                final_learning_rate=final_learning_rate,
+                batch_size=batch_size,
+                seed=seed,
+                progress=progress,
+                log_every=log_every,
+                checkpoint=checkpoint,
+                checkpoint_every=checkpoint_every,
+                resume=resume,
+                settings=settings,
+                desc=type(model).__name__,
+            )
         extra = {"best_epoch": info["best_epoch"], "epochs_run": info["epochs"], "stopped": info["stopped"]}
         history, wall = info["history"], info["wall_time_s"]
         train_loss, val_loss = info["train_loss"], info["val_loss"]
@@ -222,11 +229,26 @@ class AbstractMLPMap(AbstractLearnedMap):
             }
             wall += ref["wall_time_s"]
             extra.update(
-                refine_iterations_run=n, refine_kept=ref["kept"], adam_train_loss=train_loss, adam_val_loss=val_loss,
-                adam_wall_time_s=info["wall_time_s"],
+                refine_iterations_run=n, refine_kept=ref["kept"], train_loss_before_refine=train_loss, val_loss_before_refine=val_loss,
+                adam_wall_time_s=info["wall_time_s"], refine_wall_time_s=ref["wall_time_s"],
             )
             if ref["kept"]:
                 train_loss = float(loss_fn(best, jnp.asarray(train[0]), jnp.asarray(train[1])))
                 val_loss = ref["criterion_after"] if val[0].shape[0] else float("nan")
         record = TrainingRecord(history, train_loss, val_loss, wall, {**settings, **extra})
         return replace(best, record=record)
+
+
+def _no_adam(model, train, val, loss_fn) -> dict[str, Any]:
+    """`train_adam`'s info for zero epochs: the losses of `model` as it is."""
+    X, T = (jnp.asarray(a) for a in train)
+    has_val = val[0].shape[0] > 0
+    return {
+        "history": {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)},
+        "train_loss": float(loss_fn(model, X, T)),
+        "val_loss": float(loss_fn(model, jnp.asarray(val[0]), jnp.asarray(val[1]))) if has_val else float("nan"),
+        "wall_time_s": 0.0,
+        "best_epoch": -1,
+        "epochs": 0,
+        "stopped": "",
+    }

@@ -86,5 +86,5 @@ def test_lyapunov_validation():
 @pytest.mark.slow
 def test_lyapunov_kirchhoff_long_horizon():
     # Over t = 1000 the estimate is ~log(t)/t: perturbations grow linearly, not exponentially.
-    lam, times, est = it.lyapunov_exponent(KIRCHHOFF, [1, 1, 1, -1, 1, 2], 1000.0, return_history=True)
+    lam, _times, est = it.lyapunov_exponent(KIRCHHOFF, [1, 1, 1, -1, 1, 2], 1000.0, return_history=True)
     assert lam < 0.02 and est[9] > 0.2

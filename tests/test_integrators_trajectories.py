@@ -32,7 +32,7 @@ def test_pairs_and_split(data):
     assert y0.shape == y1.shape == (4 * 5, 6)
     np.testing.assert_array_equal(y0[5], data.states[1, 0])
     np.testing.assert_array_equal(y1[5], data.states[1, 1])
-    (a0, a1), (v0, v1) = data.split(0.2, seed=3)
+    (a0, _a1), (v0, v1) = data.split(0.2, seed=3)
     assert a0.shape == (16, 6) and v0.shape == (4, 6)
     both = np.concatenate([a0, v0])
     assert sorted(map(tuple, both)) == sorted(map(tuple, y0))  # a partition of the pairs

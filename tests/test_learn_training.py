@@ -193,8 +193,8 @@ def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     assert info["refine_kept"] and info["refine_iterations_run"] > 0
     # 150 L-BFGS-B iterations go well below what 200 Adam epochs reach (measured: by 1e5 for
     # the LPNet, by 20 for the baseline)
-    assert f.val_loss < 0.1 * info["adam_val_loss"]
-    assert f.train_loss < 0.1 * info["adam_train_loss"]
+    assert f.val_loss < 0.1 * info["val_loss_before_refine"]
+    assert f.train_loss < 0.1 * info["train_loss_before_refine"]
     hist = f.history
     n = info["refine_iterations_run"]
     assert len(hist["epoch"]) == 200 + n
@@ -234,3 +234,14 @@ def test_refinement_bad_arguments(rb, pairs):
         net.fit(pairs, h=H, epochs=2, refine_iterations=1.5)
     with pytest.raises(ValueError, match="method"):
         net.fit(pairs, h=H, epochs=2, refine_method="newton")
+
+
+def test_refine_only_continues_from_the_current_weights(rb, pairs, fitted):
+    again = fitted.fit(pairs, h=H, epochs=0, refine_iterations=50, progress=False)
+    info = again.record.info
+    # the starting point is the fitted network: its losses are fitted's
+    assert info["val_loss_before_refine"] == pytest.approx(fitted.val_loss, rel=1e-12)
+    assert info["epochs_run"] == 0 and len(again.history["epoch"]) == info["refine_iterations_run"]
+    assert again.val_loss < fitted.val_loss
+    with pytest.raises(ValueError, match="nothing to train"):
+        fitted.fit(pairs, h=H, epochs=0)
