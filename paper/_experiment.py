@@ -34,6 +34,12 @@ GLPNET_ROWS = (
     ("glpnet.traj_err_final", "G-LPNet on the same data: trajectory error at the end"),
     ("glpnet.poisson_defect_max", "G-LPNet on the same data: max Poisson defect"),
 )
+# The paper trains with Adam only; our LPNets are then refined by L-BFGS-B (see each experiment).
+ADAM_ROWS = (
+    ("adam_only.train_loss", "before L-BFGS-B (Adam only, the paper's optimiser): training loss"),
+    ("adam_only.energy_rel_err_max", "before L-BFGS-B (Adam only): max |rel. energy error|"),
+    ("adam_only.traj_err_final", "before L-BFGS-B (Adam only): trajectory error at the end"),
+)
 
 
 @dataclasses.dataclass(frozen=True)

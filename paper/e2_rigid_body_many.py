@@ -2,7 +2,13 @@
 
 Data: 20 heyoka trajectories from Pi0 + U[-0.1, 0.1]^3 (Pi0 = (1/sqrt2, -1/sqrt2, 1)), 200 pairs
 each, h = 0.1. Model: MLP 3x32 sigmoid (2339 parameters), Adam 1e-3 decaying to 1e-4, loss on
-the state. Prediction: 10,000 steps from Pi0 itself (not in the data).
+the state, then L-BFGS-B on the same loss (not in the paper). Prediction: 10,000 steps from Pi0
+itself (not in the data).
+
+Why the refinement: the LPNet is not exactly Poisson, and its energy error over 10,000 steps is
+a steady drift whose rate follows the one-step error. Adam alone stops at MSE ~3e-10 and
+drifts by 0.8% (seed 0); L-BFGS-B takes the MSE to ~1e-12 and the drift below the paper's
+0.25%. The baseline gets the same two-stage training.
 """
 
 from __future__ import annotations
@@ -16,23 +22,26 @@ import integrators as it
 import learn
 import liepoisson as lp
 
-from ._evaluate import compare, glpnet_on_same_data
-from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue
+from ._evaluate import compare, glpnet_on_same_data, lpnet_seeds
+from ._experiment import ADAM_ROWS, GLPNET_ROWS, AbstractExperiment, PaperValue
 
 
 @dataclasses.dataclass(frozen=True)
 class Profile:
     epochs: int
     prediction_steps: int
+    refine_iterations: int
+    seeds: int = 1
     glpnet_iterations: int = 3500
     glpnet_restarts: int = 2
 
 
 PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(epochs=300, prediction_steps=300, glpnet_iterations=20, glpnet_restarts=1),
-    "quick": Profile(epochs=30_000, prediction_steps=10_000),
-    "full": Profile(epochs=100_000, prediction_steps=10_000),
+    "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
+                     glpnet_restarts=1),
+    "quick": Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000),
+    "full": Profile(epochs=100_000, prediction_steps=10_000, refine_iterations=30_000, seeds=3),
 }
 DATA_SEED = 2
 
@@ -44,9 +53,14 @@ class E2(AbstractExperiment):
         PaperValue("train_loss", 1e-6, "< 1e-6"),
         PaperValue("val_loss", 1e-5, "< 1e-5"),
         PaperValue("energy_rel_err_max", 2.5e-3, "0.25%"),
+        PaperValue("energy_rel_err_max_median", 2.5e-3, "0.25%"),
         PaperValue("casimir_rel_drift_max", 1e-11, "1e-11 (absolute)"),
     )
-    table_rows = AbstractExperiment.table_rows + GLPNET_ROWS
+    table_rows = AbstractExperiment.table_rows[:3] + (
+        ("energy_rel_err_max_median", "max |rel. energy error|, median over seeds"),
+    ) + AbstractExperiment.table_rows[3:] + ADAM_ROWS + (
+        ("adam_only_energy_median", "before L-BFGS-B (Adam only): max |rel. energy error|, median over seeds"),
+    ) + GLPNET_ROWS
 
     def run(self, profile: str, out_dir: Path, progress: bool):
         P = PROFILES[profile]
@@ -59,18 +73,27 @@ class E2(AbstractExperiment):
         data.save(out_dir / "data.h5")
         reference = it.ground_truth(system, pi0, h=h, n_steps=P.prediction_steps)
 
-        fit = dict(
-            epochs=P.epochs,
-            learning_rate=1e-3,
-            final_learning_rate=1e-4,
-            validation_fraction=0.2,
-            seed=0,
-            progress=progress,
+        fit = {
+            "epochs": P.epochs,
+            "learning_rate": 1e-3,
+            "final_learning_rate": 1e-4,
+            "validation_fraction": 0.2,
+            "seed": 0,
+            "progress": progress,
+        }
+        # Network seeds vary; the split is the same (seed 0) for all.
+        nets, seed_metrics = lpnet_seeds(
+            lambda seed: learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=seed),
+            lambda seed: {k: v for k, v in fit.items() if k != "progress"},
+            data, P.refine_iterations, system, reference, range(P.seeds), progress, "E2",
         )
-        net = learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
+        net = nets[0]
         net.save(out_dir / "lpnet.h5")
-        base = learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(data, **fit)
+        base = learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(
+            data, **fit, refine_iterations=P.refine_iterations
+        )
         metrics, _ = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics.update(seed_metrics)
         metrics["n_parameters"] = net.n_parameters
         metrics["model"] = "LPNet 3x32"
         metrics["baseline_model"] = "residual MLP 3x32"
@@ -78,6 +101,12 @@ class E2(AbstractExperiment):
             system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress
         )
         metrics["notes"] = [
+            (
+                f"Training: Adam as in the paper ({P.epochs} epochs), then {P.refine_iterations} "
+                "L-BFGS-B iterations on the same loss and split (LPNet and baseline alike); "
+                "adam_only and *_adam_only hold the LPNets before the refinement; "
+                "energy_rel_err_max is seed 0's, *_seeds over network seeds."
+            ),
             (
                 "glpnet: a G-LPNet (6 modules, 18 parameters, exactly Poisson) trained on the "
                 "same 4000 pairs and rolled out from the same point."
