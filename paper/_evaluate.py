@@ -37,6 +37,7 @@ def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 2
         "val_loss": None if model.val_loss is None else float(model.val_loss),
         "energy_rel_err_max": float(np.max(energy)),
         "energy_rel_err_mean": float(np.mean(energy)),
+        "energy_rel_err_max_per_trajectory": np.max(energy, axis=1),
         "casimir_rel_drift_max": report.max_casimir_drift_relative if system.n_casimirs else None,
         "traj_err_final": float(np.max(report.trajectory_error[:, -1])),
         "poisson_defect_max": float(np.max(np.asarray(model.poisson_defect(pick)))),
@@ -105,8 +106,8 @@ def refine_after_adam(net, data, iterations, system, reference, progress):
         seed=info["seed"], loss=info["loss"], progress=progress,
     )
     adam = rollout_metrics(net, system, reference.states)["metrics"]
-    keys = ("train_loss", "val_loss", "energy_rel_err_max", "energy_rel_err_mean", "traj_err_final",
-            "poisson_defect_max", "wall_time_s")
+    keys = ("train_loss", "val_loss", "energy_rel_err_max", "energy_rel_err_mean",
+            "energy_rel_err_max_per_trajectory", "traj_err_final", "poisson_defect_max", "wall_time_s")
     return refined, {k: adam[k] for k in keys}
 
 
