@@ -12,7 +12,7 @@ def test_readme_examples_run(capsys):
     blocks = re.findall(r"```python\n(.*?)```", README.read_text(), re.DOTALL)
     assert blocks, "README has no Python example"
     code = "\n".join(blocks)
-    code = code.replace("epochs=30_000", "epochs=200")
+    code = code.replace("epochs=30_000", "epochs=200").replace("refine_iterations=5_000", "refine_iterations=20")
     code = code.replace(".fit(data)", ".fit(data, max_iter=10, restarts=1, progress=False)")
     namespace: dict = {}
     exec(compile(code, str(README), "exec"), namespace)
