@@ -82,12 +82,13 @@ def compare(system, ours, baseline, reference, out_dir, data_states=None, label=
     return metrics, {"ours": res["rollout"], "baseline": bres["rollout"]}
 
 
-def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress):
-    """A G-LPNet (6 modules, exactly Poisson) trained on the same pairs and rolled out from
-    the same initial conditions: what an exact Poisson map makes of the same data."""
+def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,
+                        full_vectors=False):
+    """A G-LPNet (`n_modules` modules, exactly Poisson) trained on the same pairs and rolled out
+    from the same initial conditions: what an exact Poisson map makes of the same data."""
     import learn
 
-    gnet = learn.GLPNet(system, n_modules=6, key=0).fit(
+    gnet = learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors).fit(
         data, max_iter=iterations, restarts=restarts, seed=0, progress=progress
     )
     gnet.save(out_dir / "glpnet.h5")
