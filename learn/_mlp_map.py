@@ -213,7 +213,8 @@ class AbstractMLPMap(AbstractLearnedMap):
                 checkpoint=checkpoint,
                 checkpoint_every=checkpoint_every,
                 resume=resume,
-                settings=settings,
+                # the refinement runs after Adam: a checkpoint resumes whatever refinement follows
+                settings={k: v for k, v in settings.items() if not k.startswith("refine")},
                 desc=type(model).__name__,
             )
         extra = {"best_epoch": info["best_epoch"], "epochs_run": info["epochs"], "stopped": info["stopped"]}

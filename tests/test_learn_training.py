@@ -119,6 +119,9 @@ def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch):
     np.testing.assert_array_equal(straight.history["train_loss"], resumed.history["train_loss"])
     with pytest.raises(ValueError, match="learning_rate"):
         net.fit(pairs, checkpoint=path, resume=True, **{**kwargs, "learning_rate": 5e-3})
+    # Adam's checkpoint does not depend on the refinement that follows it
+    refined = net.fit(pairs, checkpoint=path, resume=True, refine_iterations=5, **kwargs)
+    assert refined.record.info["val_loss_before_refine"] == resumed.val_loss
 
 
 def test_fit_accepts_trajectories(rb, pairs):
