@@ -45,8 +45,9 @@ PROFILES = {
     "quick": Profile(n_trajectories=500, epochs=50, batch_size=1000, glpnet_iterations=0),
     # The paper's 5e5 full-batch epochs on 40,000 pairs would take ~14 h on 2 cores. Measured
     # on the committed data: 32,000 mini-batch Adam steps (800 epochs of 40 batches of 1000,
-    # 300 s) reach MSE 7.2e-6 and a 0.83% energy error; 3000 full-batch L-BFGS-B iterations from
-    # the random start with normalised inputs/outputs (~10 min) reach 5.4e-6 and 0.31%.
+    # 300 s) reached MSE 7.2e-6 and a 0.83% energy error (commit d61c18e); 3000 full-batch
+    # L-BFGS-B iterations from the random start with normalised inputs/outputs (588 s) reach
+    # 5.0e-6 and 0.31% (paper/results/E5).
     "full": Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=1000,
                     refine_iterations=3000, normalise=True),
 }
