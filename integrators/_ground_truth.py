@@ -4,13 +4,12 @@ symbolically from the system's own Hamiltonian and Poisson tensor (`system.heyok
 from __future__ import annotations
 
 import json
-import numbers
 import weakref
 from typing import Any
 
 import numpy as np
 
-from liepoisson._validation import as_state, positive_float
+from liepoisson._validation import as_state, positive_float, positive_int
 from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
 
 from ._trajectories import Trajectories
@@ -23,15 +22,6 @@ EPS = float(np.finfo(np.float64).eps)
 # (class, params); any other system (a user Hamiltonian) is cached on the object itself.
 _CACHE_BY_PARAMS: dict[tuple[Any, ...], Any] = {}
 _CACHE_BY_OBJECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def check_n_steps(n_steps: Any, name: str = "n_steps") -> int:
-    """An integer >= 1."""
-    if isinstance(n_steps, bool) or not isinstance(n_steps, numbers.Integral):
-        raise TypeError(f"{name} must be an integer >= 1; got {type(n_steps).__name__} {n_steps!r}")
-    if int(n_steps) < 1:
-        raise ValueError(f"{name} must be an integer >= 1; got {n_steps!r}")
-    return int(n_steps)
 
 
 def taylor_integrator(
@@ -123,7 +113,7 @@ def ground_truth(
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     h = positive_float(h, "h")
-    n_steps = check_n_steps(n_steps)
+    n_steps = positive_int(n_steps, "n_steps")
     tol_used = EPS if tol is None else positive_float(tol, "tol")
     y0 = _initial_conditions(system, y0)
     if progress is not None and not isinstance(progress, bool):

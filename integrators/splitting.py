@@ -1,5 +1,5 @@
 """Classical splitting methods: exact sub-flows of `system.hamiltonian_splitting()` composed
-by coefficient tables (`Strang(system).rollout(y0, h, n_steps)`)."""
+by coefficient tables; each is a step map (`Strang(system, h=0.1).rollout(y0, n_steps)`)."""
 
 from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4

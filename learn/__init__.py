@@ -1,4 +1,5 @@
-"""LPNets, G-LPNets and unstructured baselines: data-driven Lie-Poisson maps (JAX).
+"""LPNets, G-LPNets and unstructured baselines: data-driven Lie-Poisson step maps (JAX), and
+training as a free function (`learn.fit`).
 
 Importing `learn` switches JAX to float64.
 """
@@ -8,22 +9,23 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._base import AbstractLearnedMap as AbstractLearnedMap
-from ._base import TrainingRecord as TrainingRecord
 from ._baseline import MLPBaseline as MLPBaseline
-from ._glpnet import GLPNet as GLPNet
+from ._fit import (
+    Adam as Adam,
+    Checkpoint as Checkpoint,
+    QuasiNewton as QuasiNewton,
+    alpha_mse as alpha_mse,
+    default_optimiser as default_optimiser,
+    fit as fit,
+    state_mse as state_mse,
+)
+from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._lpnet import LPNet as LPNet
 from ._parametrisation import (
     AbstractStepParametrisation as AbstractStepParametrisation,
-)
-from ._parametrisation import (
     LieAlgebraParametrisation as LieAlgebraParametrisation,
-)
-from ._parametrisation import (
     SE3RotationShear as SE3RotationShear,
-)
-from ._parametrisation import (
     SO3Rotation as SO3Rotation,
-)
-from ._parametrisation import (
     default_parametrisation as default_parametrisation,
 )
+from ._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord

@@ -3,44 +3,58 @@ an LPNet on the state, to show what the Lie-Poisson structure buys (it conserves
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from collections.abc import Sequence
+from typing import Any
 
-from ._mlp_map import AbstractMLPMap
-from ._rollout import state_mse
-from ._validation import check_system
+import equinox as eqx
+import jax
+
+from integrators._step_map import check_state
+from liepoisson._validation import check_system, positive_float
+from liepoisson.systems import AbstractPoissonSystem
+
+from ._base import AbstractLearnedMap
+from ._mlp import AffineMLP, Scaling, as_key, check_activation, check_hidden
 
 
-class MLPBaseline(AbstractMLPMap):
+class MLPBaseline(AbstractLearnedMap):
     r"""$y \mapsto y + s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$,
-    with fixed scalings set by the first `fit` (inputs $y_0$, outputs $y_1 - y_0$).
+    with fixed scalings (`learn.fit(normalise=True)` sets them from the data: inputs $y_0$,
+    outputs $y_1 - y_0$). Trained on the state MSE only.
 
-    **Arguments:** as `LPNet` (without a parametrisation). `fit` trains on the state MSE only
-    (`loss="state"`).
+    **Arguments:** as `LPNet`, without a parametrisation.
     """
 
-    _losses: ClassVar[tuple[str, ...]] = ("state",)
+    network: AffineMLP
+    system: AbstractPoissonSystem = eqx.field(static=True)
+    h: float | None
 
     def __init__(
         self,
-        system: Any,
-        hidden: Any = (16, 16, 16),
+        system: AbstractPoissonSystem,
+        hidden: Sequence[int] = (16, 16, 16),
         activation: str = "sigmoid",
-        key: Any = 0,
+        key: int | jax.Array = 0,
         h: float | None = None,
+        input_scaling: Scaling | None = None,
+        output_scaling: Scaling | None = None,
     ):
         self.system = check_system(system)
-        self._init_network(hidden, activation, key, h, system.dim)
+        self.network = AffineMLP(
+            system.dim, system.dim, check_hidden(hidden), check_activation(activation), as_key(key),
+            input_scaling, output_scaling,
+        )
+        self.h = None if h is None else positive_float(h, "h")
 
-    def _step(self, y):
-        return y + self._network(y)
+    def step(self, y: jax.Array) -> jax.Array:
+        y = check_state(y, self.system.dim)
+        return y + self.network(y)
 
-    def _own_hyperparameters(self):
-        return {}
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
 
-    @classmethod
-    def _skeleton(cls, system, hp):
-        return cls(system, tuple(hp["hidden"]), hp["activation"], 0)._restore_scalings(hp)
-
-    def _build(self, pairs, loss, set_scalings):
-        net = self._with_scalings(pairs.y0, pairs.y1 - pairs.y0) if set_scalings else self
-        return net, (pairs.y0, pairs.y1), (pairs.y0_val, pairs.y1_val), state_mse
+    def hyperparameters(self) -> dict[str, Any]:
+        return {
+            **self.network.hyperparameters(),
+        }

@@ -6,7 +6,9 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import fraction, pairs, positive_float, positive_int
+from integrators import Trajectories
+from liepoisson._validation import fraction, pairs, positive_float, positive_int
+from liepoisson.systems import AbstractPoissonSystem
 
 
 class PairData:
@@ -34,12 +36,10 @@ def _split(y0, y1, validation_fraction, seed):
     return (y0[tr], y1[tr]), (y0[va], y1[va])
 
 
-def prepare(data: Any, system, h: Any, validation_fraction: Any, seed: Any) -> PairData:
-    """Turn `data` into training/validation pairs for `system`.
-
-    `data` is an `integrators.Trajectories` (duck-typed: `.h`, `.pairs()`, `.split(f, seed)`,
-    `.system`) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h` given.
-    """
+def prepare(data: Trajectories | tuple[Any, Any], system: AbstractPoissonSystem, h: float | None,
+            validation_fraction: float, seed: int) -> PairData:
+    """Turn `data` into training/validation pairs for `system`: an `integrators.Trajectories`
+    (consecutive states; its own split) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h`."""
     validation_fraction = fraction(validation_fraction, "validation_fraction")
     seed = positive_int(seed, "seed", minimum=0)
     if isinstance(data, (tuple, list)):
@@ -54,30 +54,25 @@ def prepare(data: Any, system, h: Any, validation_fraction: Any, seed: Any) -> P
             raise ValueError("data must contain at least one pair; got 0")
         train, val = _split(y0, y1, validation_fraction, seed)
         return PairData(train, val, h)
-    pairs_method = getattr(data, "pairs", None)
-    data_h = getattr(data, "h", None)
-    if not callable(pairs_method) or data_h is None:
+    if not isinstance(data, Trajectories):
         raise TypeError(
-            "data must be an integrators.Trajectories (with .h, .pairs(), .split()) or a tuple "
-            f"(y0, y1) of arrays with h=...; got {type(data).__name__}"
+            "data must be an integrators.Trajectories or a tuple (y0, y1) of arrays with h=...; "
+            f"got {type(data).__name__}"
         )
-    data_h = positive_float(data_h, "data.h")
+    data_h = positive_float(data.h, "data.h")
     if h is not None and abs(positive_float(h, "h") - data_h) > 1e-12 * data_h:
         raise ValueError(f"h={h} disagrees with the data's time step data.h={data_h}")
-    data_system = getattr(data, "system", None)
-    if data_system is not None and getattr(data_system, "dim", system.dim) != system.dim:
+    if data.system.dim != system.dim:
         raise ValueError(
-            f"data is for {data_system!r} (dim {data_system.dim}); the model is for {system!r} "
+            f"data is for {data.system!r} (dim {data.system.dim}); the model is for {system!r} "
             f"(dim {system.dim})"
         )
-    split_method = getattr(data, "split", None)
-    if validation_fraction > 0 and callable(split_method):
-        (y0, y1), (v0, v1) = split_method(validation_fraction, seed)
+    if validation_fraction > 0:
+        (y0, y1), (v0, v1) = data.split(validation_fraction, seed)
         y0, y1 = pairs(y0, y1, system.dim)
         v0, v1 = pairs(v0, v1, system.dim)
         return PairData((y0.reshape(-1, system.dim), y1.reshape(-1, system.dim)),
                         (v0.reshape(-1, system.dim), v1.reshape(-1, system.dim)), data_h)
-    y0, y1 = pairs(*pairs_method(), system.dim)
-    train, val = _split(y0.reshape(-1, system.dim), y1.reshape(-1, system.dim),
-                        validation_fraction, seed)
+    y0, y1 = pairs(*data.pairs(), system.dim)
+    train, val = _split(y0.reshape(-1, system.dim), y1.reshape(-1, system.dim), validation_fraction, seed)
     return PairData(train, val, data_h)

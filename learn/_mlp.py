@@ -1,4 +1,5 @@
-"""A small multilayer perceptron with fixed (non-trainable) affine input/output scalings."""
+r"""A small multilayer perceptron, and the same with fixed (non-trainable) affine scalings
+$N(y) = s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from ._validation import positive_int
+from liepoisson._validation import positive_int
 
 ACTIVATIONS = {
     "sigmoid": jax.nn.sigmoid,
@@ -72,11 +74,9 @@ class MLP(eqx.Module):
         return self.layers[-1](x)
 
 
-def affine(values, dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def affine(values: np.ndarray, dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Per-component (mean, scale) of samples `(N, dim)`; tiny spreads are floored so that a
     (near-)constant component does not blow up the scaling."""
-    import numpy as np
-
     values = np.asarray(values, dtype=np.float64).reshape(-1, dim)
     mean = values.mean(axis=0)
     std = values.std(axis=0)
@@ -85,3 +85,80 @@ def affine(values, dim: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
     if not np.all(np.isfinite(mean)) or not np.all(np.isfinite(std)):
         raise ValueError("the training data give non-finite scalings")
     return tuple(float(v) for v in mean), tuple(float(v) for v in std)
+
+
+Scaling = tuple[tuple[float, ...], tuple[float, ...]]
+
+
+def _scaling(value: Scaling | None, size: int, name: str) -> Scaling:
+    """`(shift, scale)` of `size` finite floats each (scales > 0); `None` is the identity."""
+    if value is None:
+        return (0.0,) * size, (1.0,) * size
+    try:
+        shift, scale = (tuple(float(v) for v in part) for part in value)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be a pair (shift, scale) of {size} numbers each; got {value!r}") from err
+    if len(shift) != size or len(scale) != size:
+        raise ValueError(f"{name} must hold {size} shifts and {size} scales; got {len(shift)} and {len(scale)}")
+    if not all(np.isfinite(shift)) or not all(np.isfinite(scale)) or min(scale) <= 0.0:
+        raise ValueError(f"{name} must be finite with scales > 0; got {value!r}")
+    return shift, scale
+
+
+class AffineMLP(eqx.Module):
+    r"""$N(y) = s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$
+    for one sample. The scalings are Python floats, not arrays: never trained, compiled in as
+    constants. `input_scaling`/`output_scaling` are `(shift, scale)` pairs (`None`: identity).
+    """
+
+    mlp: MLP
+    input_shift: tuple[float, ...]
+    input_scale: tuple[float, ...]
+    output_shift: tuple[float, ...]
+    output_scale: tuple[float, ...]
+
+    def __init__(
+        self,
+        in_size: int,
+        out_size: int,
+        hidden: Sequence[int],
+        activation: str,
+        key: jax.Array,
+        input_scaling: Scaling | None = None,
+        output_scaling: Scaling | None = None,
+    ):
+        self.mlp = MLP(in_size, out_size, hidden, activation, key)
+        self.input_shift, self.input_scale = _scaling(input_scaling, in_size, "input_scaling")
+        self.output_shift, self.output_scale = _scaling(output_scaling, out_size, "output_scaling")
+
+    def __call__(self, y: jax.Array) -> jax.Array:
+        x = (y - jnp.asarray(self.input_shift)) / jnp.asarray(self.input_scale)
+        return jnp.asarray(self.output_shift) + jnp.asarray(self.output_scale) * self.mlp(x)
+
+    @property
+    def hidden(self) -> tuple[int, ...]:
+        return tuple(layer.out_features for layer in self.mlp.layers[:-1])
+
+    @property
+    def activation(self) -> str:
+        return self.mlp.activation
+
+    def hyperparameters(self) -> dict[str, Any]:
+        """`hidden`, `activation`, `input_scaling`, `output_scaling` as JSON values (the
+        constructor arguments of the maps built on this network)."""
+        return {
+            "hidden": list(self.hidden),
+            "activation": self.activation,
+            "input_scaling": [list(self.input_shift), list(self.input_scale)],
+            "output_scaling": [list(self.output_shift), list(self.output_scale)],
+        }
+
+    def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> AffineMLP:
+        """The same weights with scalings set to the mean/std of sample `inputs`/`outputs`."""
+        in_shift, in_scale = affine(inputs, len(self.input_shift))
+        out_shift, out_scale = affine(outputs, len(self.output_shift))
+        return eqx.tree_at(
+            lambda n: (n.input_shift, n.input_scale, n.output_shift, n.output_scale),
+            self,
+            (in_shift, in_scale, out_shift, out_scale),
+        )

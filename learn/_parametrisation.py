@@ -16,9 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import liepoisson as lp
+from liepoisson._validation import check_system, pairs, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem, AbstractPoissonSystem
-
-from ._validation import check_system, pairs, positive_float, positive_int
 
 # Below this ratio |y0 x y1| / (y0 . y1) the angle/sine ratio uses its series (error O(r^6)).
 _SMALL_RATIO = 1e-4
@@ -54,6 +53,11 @@ class AbstractStepParametrisation(abc.ABC):
         `y0`, `y1` of shape `(..., dim)`; returns `(..., n_params)`. Raises `ValueError`
         naming the pair when no step connects them (different Casimirs).
         """
+
+    @property
+    def exact_flows(self) -> int:
+        """Exact test flows evaluated by one `step`."""
+        return 1
 
     def params_estimate(self, y0: Any, y1: Any, h: Any) -> np.ndarray:
         r"""First-order estimate $\alpha \approx \mathbb B(y_0)^+ (y_1 - y_0)/h$ (minimum norm,
@@ -240,6 +244,10 @@ class SE3RotationShear(AbstractStepParametrisation):
     def n_params(self) -> int:
         return 6
 
+    @property
+    def exact_flows(self) -> int:
+        return 2
+
     def hyperparameters(self):
         return {"rtol": self.rtol}
 
@@ -377,3 +385,13 @@ def default_parametrisation(system: Any) -> AbstractStepParametrisation:
         "flow; works for any system with exact test flows) or your own "
         "learn.AbstractStepParametrisation"
     )
+
+
+PARAMETRISATIONS = {cls.__name__: cls for cls in (SO3Rotation, SE3RotationShear, LieAlgebraParametrisation)}
+
+
+def parametrisation_from_name(name: str, system: AbstractPoissonSystem) -> AbstractStepParametrisation:
+    """The parametrisation class `name` built for `system` (as stored in model files)."""
+    if name not in PARAMETRISATIONS:
+        raise ValueError(f"unknown parametrisation {name!r}; known: {sorted(PARAMETRISATIONS)}")
+    return PARAMETRISATIONS[name](system)

@@ -1,5 +1,4 @@
-"""Gradient training (optax Adam) of a learned map, compiled in chunks of epochs, and an
-optional quasi-Newton refinement of the result (`refine`).
+"""Gradient training (optax Adam) of a learned map, compiled in chunks of epochs.
 
 Each chunk of `CHUNK` epochs is one jitted `lax.scan`; the best-validation weights are
 tracked inside the scan, so no epoch is lost between host synchronisations.
@@ -17,11 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from jax.flatten_util import ravel_pytree
 from tqdm.auto import tqdm
 
 from . import _checkpoint
-from ._quasi_newton import minimiser
 
 CHUNK = 1000
 
@@ -164,7 +161,7 @@ def train_adam(
             },
         )
 
-    model_attrs = model.file_content()[0] if checkpoint is not None else {}
+    model_attrs = model.file_attributes() if checkpoint is not None else {}
     carry = (params, opt_state, best, best_loss, best_epoch)
     start = time.perf_counter()
     epoch = epoch0
@@ -217,52 +214,3 @@ def train_adam(
         "stopped": stopped,
     }
     return best_model, info
-
-
-
-def refine(
-    model: Any,
-    train: tuple[np.ndarray, np.ndarray],
-    val: tuple[np.ndarray, np.ndarray],
-    loss_fn: Callable[[Any, jax.Array, jax.Array], jax.Array],
-    *,
-    iterations: int,
-    method: str,
-    progress: bool,
-    desc: str,
-):
-    """Minimise the full-batch training loss further with a quasi-Newton method, from `model`.
-
-    Returns `(model, info)`: the refined weights if they have the lower validation loss
-    (training loss when there is no validation set), else `model` unchanged; `info` holds the
-    iteration history, the losses before and after, whether the refinement was kept and its
-    wall time.
-    """
-    X, T = (jnp.asarray(a) for a in train)
-    Xv, Tv = (jnp.asarray(a) for a in val)
-    has_val = Xv.shape[0] > 0
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    flat, unravel = ravel_pytree(params)
-
-    def loss(x, X, T):
-        return loss_fn(eqx.combine(unravel(x), static), X, T)
-
-    evaluate = jax.jit(loss)
-    start = time.perf_counter()
-    x, hist = minimiser(method, loss, X, T)(flat, iterations, progress, desc)
-    wall = time.perf_counter() - start
-
-    def criterion(x):
-        return float(evaluate(x, Xv, Tv) if has_val else evaluate(x, X, T))
-
-    before, after = criterion(flat), criterion(x)
-    kept = bool(np.isfinite(after) and after < before)
-    info = {
-        "history": hist,
-        "iterations": len(hist["train_loss"]),
-        "criterion_before": before,
-        "criterion_after": after,
-        "kept": kept,
-        "wall_time_s": wall,
-    }
-    return (eqx.combine(unravel(x), static) if kept else model), info

@@ -102,3 +102,53 @@ def finite_vector(x: Any, name: str, dim: int) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite; got {arr.tolist()}")
     return arr
+
+
+def positive_int(x: Any, name: str, minimum: int = 1) -> int:
+    """An integer >= `minimum` (an integral float such as `1e5` is accepted)."""
+    if isinstance(x, bool) or not isinstance(x, (numbers.Integral, np.integer)):
+        if isinstance(x, float) and x.is_integer():
+            x = int(x)
+        else:
+            raise TypeError(f"{name} must be an integer >= {minimum}; got {type(x).__name__} {x!r}")
+    if int(x) < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {int(x)}")
+    return int(x)
+
+
+def fraction(x: Any, name: str) -> float:
+    """A number in [0, 1)."""
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        raise TypeError(f"{name} must be a number in [0, 1); got {type(x).__name__} {x!r}")
+    value = float(x)
+    if not (0.0 <= value < 1.0):
+        raise ValueError(f"{name} must be in [0, 1); got {value!r}")
+    return value
+
+
+def states(x: Any, name: str, dim: int) -> np.ndarray:
+    """A finite float64 numpy array of shape `(..., dim)` (host-side preparation; `as_state`
+    is the JAX-side twin that also accepts traced values)."""
+    if is_traced(x):
+        raise TypeError(f"{name} must be a concrete array here, not a traced JAX value")
+    return np.asarray(as_state(x, name, dim))
+
+
+def pairs(y0: Any, y1: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two finite state arrays of the same shape `(..., dim)`."""
+    y0 = states(y0, "y0", dim)
+    y1 = states(y1, "y1", dim)
+    if y0.shape != y1.shape:
+        raise ValueError(f"y0 and y1 must have the same shape; got {y0.shape} and {y1.shape}")
+    return y0, y1
+
+
+def check_system(system: Any):
+    """A `liepoisson.systems.AbstractPoissonSystem` (TypeError otherwise)."""
+    from .systems import AbstractPoissonSystem  # systems import this module
+
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(
+            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
+        )
+    return system

@@ -6,6 +6,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 # S. Blanes, P. C. Moan, "Practical symplectic partitioned Runge-Kutta and Runge-Kutta-Nystrom
@@ -40,8 +41,13 @@ class BlanesMoan4(AbstractSplittingMethod):
                 f"into {n} pieces"
             )
 
-    def _step(self, y, h):
+    def step(self, y):
+        y, h = check_state(y, self.system.dim), self.h
         for k in range(len(self.b)):
             y = self.flow(0, float(self.a[k]) * h, y)
             y = self.flow(1, float(self.b[k]) * h, y)
         return self.flow(0, float(self.a[-1]) * h, y)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return len(self.a) + len(self.b)

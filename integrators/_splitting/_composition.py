@@ -9,8 +9,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from .._step_map import check_state
 from ._base import AbstractSplittingMethod, symmetric_coefficients
-from ._strang import strang_step
+from ._strang import strang_flows, strang_step
 
 
 class AbstractCompositionMethod(AbstractSplittingMethod):
@@ -19,10 +20,15 @@ class AbstractCompositionMethod(AbstractSplittingMethod):
 
     coefficients: ClassVar[np.ndarray]
 
-    def _step(self, y, h):
+    def step(self, y):
+        y = check_state(y, self.system.dim)
         for gamma in self.coefficients:
-            y = strang_step(self, y, float(gamma) * h)
+            y = strang_step(self, y, float(gamma) * self.h)
         return y
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return len(self.coefficients) * strang_flows(self)
 
 
 _CBRT2 = 2.0 ** (1.0 / 3.0)

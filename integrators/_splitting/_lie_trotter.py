@@ -2,6 +2,7 @@ r"""Lie-Trotter splitting (order 1)."""
 
 from __future__ import annotations
 
+from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 
@@ -11,7 +12,12 @@ class LieTrotter(AbstractSplittingMethod):
 
     order = 1
 
-    def _step(self, y, h):
+    def step(self, y):
+        y = check_state(y, self.system.dim)
         for k in range(len(self.terms)):
-            y = self.flow(k, h, y)
+            y = self.flow(k, self.h, y)
         return y
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return len(self.terms)

@@ -2,10 +2,13 @@ r"""Strang splitting (order 2, symmetric): the basic step of every composition m
 
 from __future__ import annotations
 
+import jax
+
+from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 
-def strang_step(method: AbstractSplittingMethod, y, h):
+def strang_step(method: AbstractSplittingMethod, y: jax.Array, h: float) -> jax.Array:
     r"""$\varphi^{[1]}_{h/2}\circ\cdots\circ\varphi^{[N-1]}_{h/2}\circ\varphi^{[N]}_h\circ
     \varphi^{[N-1]}_{h/2}\circ\cdots\circ\varphi^{[1]}_{h/2}$ (applied right to left)."""
     n = len(method.terms)
@@ -17,6 +20,11 @@ def strang_step(method: AbstractSplittingMethod, y, h):
     return y
 
 
+def strang_flows(method: AbstractSplittingMethod) -> int:
+    """Exact sub-flows of one Strang step: $2N - 1$."""
+    return 2 * len(method.terms) - 1
+
+
 class Strang(AbstractSplittingMethod):
     r"""Strang (1968) splitting
     $\Phi_h = \varphi^{[1]}_{h/2}\cdots\varphi^{[N-1]}_{h/2}\,\varphi^{[N]}_h\,
@@ -25,5 +33,9 @@ class Strang(AbstractSplittingMethod):
 
     order = 2
 
-    def _step(self, y, h):
-        return strang_step(self, y, h)
+    def step(self, y):
+        return strang_step(self, check_state(y, self.system.dim), self.h)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return strang_flows(self)

@@ -1,0 +1,159 @@
+r"""The step map: one interface for every integrator, classical or learned.
+
+A step map is a one-step map $y_{n+1} = \Phi_h(y_n)$ of a Poisson system with a fixed step
+size $h$: a classical splitting method bound to a system and $h$, an LPNet, a G-LPNet or an
+unstructured baseline. All of them share one validated, compiled `rollout`, one
+`poisson_defect` and one cost figure, so a learned map and a classical one are compared with
+the same calls.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liepoisson._validation import as_state, positive_int, states
+from liepoisson.systems import AbstractPoissonSystem
+
+
+@dataclasses.dataclass(frozen=True)
+class StepCost:
+    """What one step costs: `flops`, XLA's estimate of the floating-point operations of one
+    compiled step on one state (the same count for every kind of map), and `exact_flows`, the
+    number of exact sub-flows (test flows) it evaluates."""
+
+    flops: float
+    exact_flows: int
+
+
+class AbstractStepMap(eqx.Module):
+    r"""A one-step map $y \mapsto \Phi_h(y)$ of `system` with step size `h`.
+
+    Final subclasses define `step` on one state (traceable: `jit`, `vmap`, `grad`) and
+    `exact_flows_per_step`; everything else is shared: `rollout`, `poisson_defect`, `cost`.
+    `h` is `None` only for a learned map that has not been fitted yet (it takes the data's
+    step); such a map cannot be rolled out.
+    """
+
+    system: eqx.AbstractVar[AbstractPoissonSystem]
+    h: eqx.AbstractVar[float | None]
+
+    @abc.abstractmethod
+    def step(self, y: jax.Array) -> jax.Array:
+        """$\\Phi_h(y)$ for one state `y` of shape `(dim,)`."""
+
+    @property
+    @abc.abstractmethod
+    def exact_flows_per_step(self) -> int:
+        """How many exact sub-flows (test flows) one step evaluates."""
+
+    # -- shared ------------------------------------------------------------------------------
+    def _check_h(self) -> float:
+        if self.h is None:
+            raise ValueError(
+                f"{type(self).__name__} has no step size h yet: fit it to data "
+                "(learn.fit(model, data)) or construct it with h=..."
+            )
+        return self.h
+
+    def rollout(self, y0: Any, n_steps: int, *, save_every: int = 1) -> jax.Array:
+        r"""Iterate the step: $y_k = \Phi_h^k(y_0)$ for $k = 0, s, 2s, \dots, n$ ($s$ =
+        `save_every`, which must divide `n_steps`).
+
+        **Arguments:** `y0` of shape `(dim,)` or `(n_traj, dim)`, finite; `n_steps` >= 0;
+        `save_every` >= 1.
+
+        **Returns:** `(n_steps // save_every + 1, dim)`, or `(n_traj, n_steps // save_every + 1,
+        dim)` for many initial conditions; entry 0 is `y0`. Compiled once per map, shape and
+        `n_steps` (`jax.lax.scan`, vectorised over trajectories with `jax.vmap`).
+        """
+        self._check_h()
+        dim = self.system.dim
+        n_steps = positive_int(n_steps, "n_steps", minimum=0)
+        save_every = positive_int(save_every, "save_every")
+        if n_steps % save_every:
+            raise ValueError(
+                f"save_every must divide n_steps; got n_steps={n_steps}, save_every={save_every}"
+            )
+        y0 = states(y0, "y0", dim)
+        if y0.ndim > 2:
+            raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
+        out = _rollout_compiled(self, jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
+        return out[0] if y0.ndim == 1 else out
+
+    def poisson_defect(self, y: Any) -> jax.Array:
+        r"""$\max_{ab}|(J\,\mathbb B(y)\,J^\top - \mathbb B(\Phi_h(y)))_{ab}|$ per point, with
+        $J = \partial\Phi_h/\partial y$ (forward-mode autodiff): zero, up to round-off, exactly
+        when the step is a Poisson map. `y` of shape `(..., dim)`; returns `(...)`."""
+        self._check_h()
+        dim = self.system.dim
+        y = states(y, "y", dim)
+        return _defect_compiled(self, jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
+
+    def cost(self) -> StepCost:
+        """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
+        compiled step."""
+        self._check_h()
+        y = jnp.zeros(self.system.dim)
+        dynamic, static = eqx.partition(self, eqx.is_array)
+        compiled = jax.jit(lambda d, y: eqx.combine(d, static).step(y)).lower(dynamic, y).compile()
+        analysis = compiled.cost_analysis()
+        if isinstance(analysis, (list, tuple)):  # older jax: one entry per device
+            analysis = analysis[0] if analysis else {}
+        flops = float((analysis or {}).get("flops", np.nan))
+        return StepCost(flops=flops, exact_flows=self.exact_flows_per_step)
+
+
+def check_state(y: jax.Array, dim: int) -> jax.Array:
+    """`y` as a float64 state of shape `(dim,)` (shapes are static, so this also works on
+    traced values; `step` takes one state, `rollout` takes many)."""
+    y = as_state(y, "y", dim)
+    if y.shape != (dim,):
+        raise ValueError(
+            f"step takes one state of shape ({dim},); got shape {y.shape} (use rollout, or "
+            "jax.vmap(map.step), for many)"
+        )
+    return y
+
+
+@eqx.filter_jit
+def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, save_every: int) -> jax.Array:
+    """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`."""
+    step = jax.vmap(step_map.step)
+    if save_every == 1:
+
+        def body(y, _):
+            y = step(y)
+            return y, y
+
+    else:
+
+        def body(y, _):
+            y = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), y)
+            return y, y
+
+    _, ys = jax.lax.scan(body, y0, None, length=n_saved)
+    return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
+
+
+@eqx.filter_jit
+def _defect_compiled(step_map: AbstractStepMap, y: jax.Array) -> jax.Array:
+    """`y` `(N, dim)` -> `(N,)`."""
+
+    def step_and_image(x):
+        z = step_map.step(x)
+        return z, z
+
+    def one(x):
+        J, z = jax.jacfwd(step_and_image, has_aux=True)(x)  # the step once, not twice
+        B0 = step_map.system.poisson_tensor(x)
+        B1 = step_map.system.poisson_tensor(z)
+        return jnp.max(jnp.abs(J @ B0 @ J.T - B1))
+
+    return jax.vmap(one)(y)

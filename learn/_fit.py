@@ -1,0 +1,332 @@
+r"""Training as a free function: `learn.fit(model, data, optimiser=...)` returns a new model and
+its `TrainingRecord`. The optimisers are plain settings (`Adam`, `QuasiNewton`); a sequence of
+them runs as stages, each starting from the weights the previous one kept."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Sequence
+from typing import TypeVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from integrators import Trajectories
+from liepoisson._validation import positive_float, positive_int
+
+from ._base import AbstractLearnedMap
+from ._baseline import MLPBaseline
+from ._data import PairData, prepare
+from ._glpnet import GLPNet, linear_to_activation
+from ._lpnet import LPNet
+from ._quasi_newton import check_method, minimiser
+from ._record import StageRecord, TrainingRecord
+from ._training import train_adam
+
+_Map = TypeVar("_Map", bound=AbstractLearnedMap)
+LOSSES = ("state", "alpha")
+
+
+@dataclasses.dataclass(frozen=True)
+class Adam:
+    r"""Adam (optax) on the training loss, compiled in chunks of epochs; keeps the weights of
+    the lowest validation loss (training loss without a validation set).
+
+    `epochs`; `learning_rate`, and `final_learning_rate` for an exponential decay from one to
+    the other over all steps (constant if `None`); `batch_size` `None` for full batch, else
+    seeded shuffled mini-batches (remainder dropped per epoch); `log_every`: history resolution
+    in epochs (default `epochs // 1000`).
+    """
+
+    epochs: int = 100_000
+    learning_rate: float = 1e-3
+    final_learning_rate: float | None = None
+    batch_size: int | None = None
+    log_every: int | None = None
+
+    def __post_init__(self):
+        positive_int(self.epochs, "Adam.epochs")
+        positive_float(self.learning_rate, "Adam.learning_rate")
+        if self.final_learning_rate is not None:
+            positive_float(self.final_learning_rate, "Adam.final_learning_rate")
+        if self.batch_size is not None:
+            positive_int(self.batch_size, "Adam.batch_size")
+        if self.log_every is not None:
+            positive_int(self.log_every, "Adam.log_every")
+
+
+@dataclasses.dataclass(frozen=True)
+class QuasiNewton:
+    r"""Full-batch quasi-Newton minimisation with JAX gradients, for every learned map.
+
+    `iterations` per start; `method`: `"lbfgsb"` (SciPy L-BFGS-B, 50 correction pairs: thousands
+    of parameters, an MLP), `"bfgs"` (SciPy BFGS, dense: a few dozen parameters, the paper's
+    choice for G-LPNets) or `"lbfgs"` (optax, compiled in chunks); `restarts` starts in total,
+    the first from the current weights, the others from fresh random weights
+    (`model.reinitialised`, keys from the fit's `seed`); `warm_start` (G-LPNet only): each
+    start first fits the network with the identity activation (flows of quadratics, a smooth
+    problem) for half the iterations, maps it onto the linear regime of $\sigma$
+    (`linear_to_activation`) and finishes with $\sigma$ (on E6 from random sigmoid starts
+    BFGS stalls at MSE ~1e-6; the warm start reaches the paper's < 5e-10).
+
+    The best start by validation loss (training loss without a validation set) is kept, and
+    only if it beats the weights the stage started from.
+    """
+
+    iterations: int = 3500
+    method: str = "lbfgsb"
+    restarts: int = 1
+    warm_start: bool = False
+
+    def __post_init__(self):
+        positive_int(self.iterations, "QuasiNewton.iterations")
+        check_method(self.method)
+        positive_int(self.restarts, "QuasiNewton.restarts")
+
+
+Optimiser = Adam | QuasiNewton
+
+
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    """Write Adam's state to `path` (HDF5) every `every` epochs and at the end; with `resume`,
+    continue from the file if it exists (epoch, optimiser state, best weights: bit-identical to
+    an uninterrupted run). Checks that the file was written by the same model, data split and
+    Adam settings."""
+
+    path: str | os.PathLike
+    every: int = 10_000
+    resume: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.path, (str, os.PathLike)):
+            raise TypeError(f"Checkpoint.path must be a file path; got {type(self.path).__name__}")
+        positive_int(self.every, "Checkpoint.every")
+
+
+def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
+    """BFGS with the identity warm start (3500 iterations, 4 starts) for a G-LPNet, as the
+    paper; 100,000 epochs of Adam (learning rate 1e-3) for the MLP-based maps."""
+    if isinstance(model, GLPNet):
+        return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
+    return (Adam(),)
+
+
+def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Array:
+    """Mean squared error of one learned step over pairs `(N, dim)`: the state loss of every
+    learned map (paper eqs. Loss_function, Loss_function_G_LPNets)."""
+    return jnp.mean((jax.vmap(model.step)(y0) - y1) ** 2)
+
+
+def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:
+    """MSE of an LPNet's $\\alpha(y_0)$ against the pairs' parameters, in units of the output
+    scale."""
+    scale = jnp.asarray(model.network.output_scale)
+    return jnp.mean(((jax.vmap(model.alpha)(y0) - alpha) / scale) ** 2)
+
+
+def fit(
+    model: _Map,
+    data: Trajectories | tuple[np.ndarray, np.ndarray],
+    *,
+    optimiser: Optimiser | Sequence[Optimiser] | None = None,
+    h: float | None = None,
+    validation_fraction: float = 0.2,
+    seed: int = 0,
+    loss: str = "state",
+    normalise: bool = False,
+    checkpoint: Checkpoint | None = None,
+    progress: bool = True,
+) -> tuple[_Map, TrainingRecord]:
+    r"""Train a learned map on data pairs; returns `(fitted model, TrainingRecord)`.
+
+    **Arguments:**
+
+    - `model`: an `LPNet`, `GLPNet` or `MLPBaseline` (not modified).
+    - `data`: an `integrators.Trajectories` (consecutive states are the pairs, `h` its step),
+      or `(y0, y1)` arrays `(N, dim)` with `h=`.
+    - `optimiser`: an `Adam` or `QuasiNewton`, or a sequence of them run one after the other
+      (e.g. `(Adam(100_000), QuasiNewton(30_000))`, the paper's Adam refined by L-BFGS-B);
+      default `default_optimiser(model)`.
+    - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
+      mini-batches and restarts).
+    - `loss`: `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
+      LPNet through the exact flow) or, LPNet only, `"alpha"` (MSE between $\alpha(y_0)$ and
+      the pairs' parameters `parametrisation.params_from_pair(y0, y1, h)`).
+    - `normalise` (MLP-based maps): set the fixed input/output scalings from the training data
+      first (inputs: mean/std of $y_0$; outputs: of the pairs' parameters for an LPNet, of
+      $y_1 - y_0$ for the baseline). Default `False`: a plain MLP as in the paper. On E1
+      normalising reaches a lower loss (1.6e-11 vs 3-4e-11 after 1e5 epochs) but the
+      10,000-step rollout drifts more in energy (2e-3..0.6 vs 4e-4..7e-4).
+    - `checkpoint`: a `Checkpoint` for the Adam stage.
+    - `progress`: tqdm bars with the losses.
+    """
+    if not isinstance(model, AbstractLearnedMap):
+        raise TypeError(f"model must be a learn.LPNet, GLPNet or MLPBaseline; got {type(model).__name__}")
+    stages = default_optimiser(model) if optimiser is None else optimiser
+    if isinstance(stages, (Adam, QuasiNewton)):
+        stages = (stages,)
+    stages = tuple(stages)
+    if not stages or not all(isinstance(s, (Adam, QuasiNewton)) for s in stages):
+        raise TypeError(f"optimiser must be a learn.Adam or learn.QuasiNewton, or a sequence of them; got {optimiser!r}")
+    if loss not in LOSSES:
+        raise ValueError(f"loss must be one of {list(LOSSES)}; got {loss!r}")
+    if loss == "alpha" and not isinstance(model, LPNet):
+        raise ValueError(f"loss='alpha' trains an LPNet's parameters alpha; {type(model).__name__} has none")
+    if normalise and isinstance(model, GLPNet):
+        raise ValueError("normalise=True sets the scalings of an MLP; a GLPNet has none")
+    if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
+        raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
+    if checkpoint is not None and sum(isinstance(s, Adam) for s in stages) != 1:
+        raise ValueError("checkpoint needs exactly one Adam stage in optimiser")
+    if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not isinstance(model, GLPNet):
+        raise ValueError("QuasiNewton(warm_start=True) is the G-LPNet's identity warm start; "
+                         f"use warm_start=False for a {type(model).__name__}")
+    pairs = prepare(data, model.system, h, validation_fraction, seed)
+    if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
+        raise ValueError(
+            f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "
+            "with h=None (or the data's h), or data sampled at the model's step"
+        )
+    model = eqx.tree_at(lambda m: m.h, model, pairs.h, is_leaf=lambda x: x is None)
+    model, train, val, loss_fn = _objective(model, pairs, loss, normalise)
+    X, T = (jnp.asarray(a) for a in train)
+    Xv, Tv = (jnp.asarray(a) for a in val)
+    settings = {
+        "validation_fraction": float(validation_fraction), "seed": int(seed), "loss": loss,
+        "normalise": bool(normalise), "h": pairs.h, "n_train": int(X.shape[0]), "n_val": int(Xv.shape[0]),
+    }
+    history = {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)}
+    records = []
+    for stage in stages:
+        offset = int(history["epoch"][-1]) if len(history["epoch"]) else 0
+        if isinstance(stage, Adam):
+            model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress)
+            hist = dict(hist, epoch=hist["epoch"] + offset)
+        else:
+            model, rec, hist = _run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress)
+            hist = dict(hist, epoch=hist["epoch"] + offset)
+        history = {k: np.concatenate([history[k], hist[k]]) for k in history}
+        records.append(rec)
+    record = TrainingRecord(
+        model=type(model).__name__, h=pairs.h, seed=int(seed), validation_fraction=float(validation_fraction),
+        loss=loss, normalise=bool(normalise), n_train=settings["n_train"], n_val=settings["n_val"],
+        stages=tuple(records), history=history, train_loss=records[-1].train_loss,
+        val_loss=records[-1].val_loss, wall_time_s=float(sum(r.wall_time_s for r in records)),
+    )
+    return model, record
+
+
+def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise: bool):
+    """`(model, (inputs, targets), (inputs_val, targets_val), loss_fn)`; the model's scalings
+    set from the data when `normalise`."""
+    if loss == "alpha":
+        p = model.parametrisation
+        targets = p.params_from_pair(pairs.y0, pairs.y1, pairs.h)
+        targets_val = (p.params_from_pair(pairs.y0_val, pairs.y1_val, pairs.h) if pairs.has_validation
+                       else np.zeros((0, p.n_params)))
+        if normalise:
+            model = eqx.tree_at(lambda m: m.network, model, model.network.rescaled(pairs.y0, targets))
+        return model, (pairs.y0, targets), (pairs.y0_val, targets_val), alpha_mse
+    if normalise:
+        if isinstance(model, LPNet):
+            outputs = model.parametrisation.params_estimate(pairs.y0, pairs.y1, pairs.h)
+        elif isinstance(model, MLPBaseline):
+            outputs = pairs.y1 - pairs.y0
+        model = eqx.tree_at(lambda m: m.network, model, model.network.rescaled(pairs.y0, outputs))
+    return model, (pairs.y0, pairs.y1), (pairs.y0_val, pairs.y1_val), state_mse
+
+
+def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress):
+    log_every = stage.log_every if stage.log_every is not None else max(1, stage.epochs // 1000)
+    best, info = train_adam(
+        model, train, val, loss_fn,
+        epochs=stage.epochs, learning_rate=stage.learning_rate, final_learning_rate=stage.final_learning_rate,
+        batch_size=stage.batch_size, seed=settings["seed"], progress=progress, log_every=log_every,
+        checkpoint=None if checkpoint is None else os.fspath(checkpoint.path),
+        checkpoint_every=10_000 if checkpoint is None else checkpoint.every,
+        resume=checkpoint is not None and checkpoint.resume,
+        settings={**settings, **dataclasses.asdict(stage), "log_every": log_every}, desc=type(model).__name__,
+    )
+    rec = StageRecord(
+        optimiser="Adam", settings=dataclasses.asdict(stage), iterations=info["epochs"],
+        train_loss=info["train_loss"], val_loss=info["val_loss"], kept=True, wall_time_s=info["wall_time_s"],
+        details={"best_epoch": info["best_epoch"], "stopped": info["stopped"]},
+    )
+    return best, rec, info["history"]
+
+
+def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, progress: bool):
+    """Every start minimised, the best kept if it beats `model` (see `QuasiNewton`)."""
+    (X, T), (Xv, Tv) = train, val
+    has_val = Xv.shape[0] > 0
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    flat0, unravel = ravel_pytree(params)
+
+    def loss(x, X, T):
+        return loss_fn(eqx.combine(unravel(x), static), X, T)
+
+    evaluate = jax.jit(loss)
+    minimise = minimiser(stage.method, loss, X, T)  # compiled once, reused by every start
+    warm = stage.warm_start and model.activation != "identity"
+    if warm:
+        linear = eqx.tree_at(lambda m: m.activation, model, "identity")
+        lin_params, lin_static = eqx.partition(linear, eqx.is_inexact_array)
+        lin_unravel = ravel_pytree(lin_params)[1]  # same flat layout, other static activation
+
+        def linear_loss(x, X, T):
+            return loss_fn(eqx.combine(lin_unravel(x), lin_static), X, T)
+
+        minimise_linear = minimiser(stage.method, linear_loss, X, T)
+
+    def losses(x):
+        train_loss = float(evaluate(x, X, T))
+        val_loss = float(evaluate(x, Xv, Tv)) if has_val else float("nan")
+        crit = val_loss if has_val else train_loss
+        return (crit if np.isfinite(crit) else np.inf), train_loss, val_loss
+
+    name = f"{type(model).__name__} {stage.method}"
+    start = time.perf_counter()
+    results = []
+    base = jax.random.PRNGKey(seed)
+    for r in range(stage.restarts):
+        if r == 0:
+            x0 = flat0
+        else:
+            x0 = ravel_pytree(eqx.filter(model.reinitialised(jax.random.fold_in(base, r)), eqx.is_inexact_array))[0]
+        desc = f"{name} start {r + 1}/{stage.restarts}" if stage.restarts > 1 else name
+        if warm:
+            first = max(1, stage.iterations // 2)
+            x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (identity)")
+            mapped = linear_to_activation(eqx.combine(unravel(x0), static),
+                                          eqx.combine(lin_unravel(x_lin), lin_static), X)
+            x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
+            x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} ({model.activation})")
+            shift = h1["epoch"][-1] if len(h1["epoch"]) else 0
+            hist = {"epoch": np.concatenate([h1["epoch"], h2["epoch"] + shift]),
+                    "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]])}
+        else:
+            x, hist = minimise(x0, stage.iterations, progress, desc)
+        results.append((*losses(x), r, x, hist))
+    wall = time.perf_counter() - start
+    crit, train_loss, val_loss, best_r, x, hist = min(results, key=lambda t: (t[0], t[3]))
+    crit0, train0, val0 = losses(flat0)
+    kept = bool(np.isfinite(crit) and crit < crit0)
+    if not kept and not np.isfinite(crit0):
+        raise FloatingPointError(f"{name}: every start diverged (non-finite loss) and the initial weights are not finite")
+    history = {"epoch": np.asarray(hist["epoch"]), "train_loss": np.asarray(hist["train_loss"]),
+               "val_loss": np.full(len(hist["train_loss"]), np.nan)}
+    rec = StageRecord(
+        optimiser="QuasiNewton", settings=dataclasses.asdict(stage), iterations=len(hist["train_loss"]),
+        train_loss=train_loss if kept else train0, val_loss=val_loss if kept else val0, kept=kept,
+        wall_time_s=wall,
+        details={"best_start": best_r, "start_train_losses": [t[1] for t in sorted(results, key=lambda t: t[3])],
+                 "train_loss_before": train0, "val_loss_before": val0},
+    )
+    fitted = eqx.combine(unravel(jnp.asarray(x)), static) if kept else model
+    return fitted, rec, history
