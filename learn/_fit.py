@@ -135,6 +135,7 @@ def fit(
     data: Trajectories | tuple[np.ndarray, np.ndarray],
     *,
     optimiser: Optimiser | Sequence[Optimiser] | None = None,
+    epochs: int | None = None,
     h: float | None = None,
     validation_fraction: float = 0.2,
     seed: int = 0,
@@ -152,7 +153,7 @@ def fit(
       or `(y0, y1)` arrays `(N, dim)` with `h=`.
     - `optimiser`: an `Adam` or `QuasiNewton`, or a sequence of them run one after the other
       (e.g. `(Adam(100_000), QuasiNewton(30_000))`, the paper's Adam refined by L-BFGS-B);
-      default `default_optimiser(model)`.
+      default `default_optimiser(model)`. `epochs=N` is short for `optimiser=Adam(N)`.
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
       mini-batches and restarts).
     - `loss`: `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
@@ -168,6 +169,10 @@ def fit(
     """
     if not isinstance(model, AbstractLearnedMap):
         raise TypeError(f"model must be a learn.LPNet, GLPNet or MLPBaseline; got {type(model).__name__}")
+    if epochs is not None:
+        if optimiser is not None:
+            raise ValueError("give either epochs (short for optimiser=learn.Adam(epochs)) or optimiser, not both")
+        optimiser = Adam(positive_int(epochs, "epochs"))
     stages = default_optimiser(model) if optimiser is None else optimiser
     if isinstance(stages, (Adam, QuasiNewton)):
         stages = (stages,)

@@ -8,10 +8,14 @@ from typing import Any
 import numpy as np
 
 import integrators as it
+import learn
+from learn import AbstractLearnedMap, TrainingRecord
 
 
-def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 200) -> dict[str, Any]:
-    """Metrics of `model` rolled out from `reference[:, 0]` for as many steps as `reference` has.
+def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, reference: np.ndarray,
+                    defect_points: int = 200) -> dict[str, Any]:
+    """Metrics of `model` (trained as `record` says) rolled out from `reference[:, 0]` for as
+    many steps as `reference` has.
 
     `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`. Energy and Casimir errors are
     relative to the time mean as in the paper (`(E(t) - E(0)) / <E>`); maxima are over all
@@ -33,15 +37,15 @@ def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 2
     rng = np.random.default_rng(0)
     pick = pick_from[rng.choice(len(pick_from), size=min(defect_points, len(pick_from)), replace=False)]
     metrics = {
-        "train_loss": float(model.train_loss),
-        "val_loss": None if model.val_loss is None else float(model.val_loss),
+        "train_loss": record.train_loss,
+        "val_loss": record.val_loss,
         "energy_rel_err_max": float(np.max(energy)),
         "energy_rel_err_mean": float(np.mean(energy)),
         "energy_rel_err_max_per_trajectory": np.max(energy, axis=1),
         "casimir_rel_drift_max": report.max_casimir_drift_relative if system.n_casimirs else None,
         "traj_err_final": float(np.max(report.trajectory_error[:, -1])),
         "poisson_defect_max": float(np.max(np.asarray(model.poisson_defect(pick)))),
-        "wall_time_s": float(model.wall_time_s),
+        "wall_time_s": record.wall_time_s,
         "rollout_time_s": rollout_time,
     }
     if n_ok < n_points:
@@ -49,16 +53,19 @@ def rollout_metrics(model, system, reference: np.ndarray, defect_points: int = 2
     return {"metrics": metrics, "rollout": y, "report": report}
 
 
-def compare(system, ours, baseline, reference, out_dir, data_states=None, label="LPNet", show=0):
-    """Metrics of `ours` with the baseline's beside them, and the paper's figures for
-    trajectory `show` of `reference` (a `Trajectories`).
+Trained = tuple[AbstractLearnedMap, TrainingRecord]
+
+
+def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_states=None, label="LPNet", show=0):
+    """Metrics of `ours = (model, record)` with the baseline's beside them, and the paper's
+    figures for trajectory `show` of `reference` (a `Trajectories`).
 
     Returns `(metrics, rollouts)`, `rollouts = {"ours": ..., "baseline": ...}` of shape
     `(n_traj, n_steps+1, dim)`, so that experiments measure more without rolling out again."""
     from ._figures import plot_experiment
 
-    res = rollout_metrics(ours, system, reference.states)
-    bres = rollout_metrics(baseline, system, reference.states)
+    res = measure_rollout(*ours, system, reference.states)
+    bres = measure_rollout(*baseline, system, reference.states)
     metrics = dict(res["metrics"])
     metrics["baseline"] = bres["metrics"]
     metrics["figures"] = plot_experiment(
@@ -84,65 +91,66 @@ def compare(system, ours, baseline, reference, out_dir, data_states=None, label=
 
 def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,
                         full_vectors=False):
-    """A G-LPNet (`n_modules` modules, exactly Poisson) trained on the same pairs and rolled out
-    from the same initial conditions: what an exact Poisson map makes of the same data."""
-    import learn
-
-    gnet = learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors).fit(
-        data, max_iter=iterations, restarts=restarts, seed=0, progress=progress
+    """A G-LPNet (`n_modules` modules, exactly Poisson) trained on the same pairs (all of them,
+    as the paper trains G-LPNets) and rolled out from the same initial conditions: what an
+    exact Poisson map makes of the same data. Returns `(model, metrics)`."""
+    gnet, record = learn.fit(
+        learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors), data,
+        optimiser=learn.QuasiNewton(iterations, "bfgs", restarts=restarts, warm_start=True),
+        validation_fraction=0.0, seed=0, progress=progress,
     )
     gnet.save(out_dir / "glpnet.h5")
-    return rollout_metrics(gnet, system, reference.states)["metrics"]
+    return gnet, measure_rollout(gnet, record, system, reference.states)["metrics"]
 
 
-def refine_after_adam(net, data, iterations, system, reference, progress):
-    """`net`, fitted with Adam (the paper's optimiser), refined by `iterations` of L-BFGS-B on
-    the same training pairs (same split), and the Adam-only network's metrics.
+def refine_after_adam(adam: Trained, data, iterations, system, reference, progress):
+    """The Adam-fitted (the paper's optimiser) `adam = (net, record)` refined by `iterations`
+    of L-BFGS-B on the same training pairs (same split), and the Adam-only network's metrics.
 
-    Returns `(refined, adam_only)`; `adam_only["wall_time_s"]` is Adam's, and the refinement's
-    is `refined.wall_time_s`."""
-    info = net.record.info
-    refined = net.fit(
-        data, epochs=0, refine_iterations=iterations, validation_fraction=info["validation_fraction"],
-        seed=info["seed"], loss=info["loss"], progress=progress,
+    Returns `((refined, record), adam_only)`; `adam_only["wall_time_s"]` is Adam's, the
+    refinement's is in the refined record."""
+    net, rec = adam
+    refined = learn.fit(
+        net, data, optimiser=learn.QuasiNewton(iterations, "lbfgsb"),
+        validation_fraction=rec.validation_fraction, seed=rec.seed, loss=rec.loss, progress=progress,
     )
-    adam = rollout_metrics(net, system, reference.states)["metrics"]
+    metrics = measure_rollout(net, rec, system, reference.states)["metrics"]
     keys = ("train_loss", "val_loss", "energy_rel_err_max", "energy_rel_err_mean",
             "energy_rel_err_max_per_trajectory", "traj_err_final", "poisson_defect_max", "wall_time_s")
-    return refined, {k: adam[k] for k in keys}
+    return refined, {k: metrics[k] for k in keys}
 
 
 def lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, progress, label):
-    """Train `make(seed)` for each seed in `seeds` (Adam with `fit(seed)` keyword arguments,
-    then `refine_after_adam`) and roll each out against `reference`.
+    """Train `make(seed)` for each seed in `seeds` (`learn.fit` with the keyword arguments
+    `fit(seed)`, an Adam stage, then `refine_after_adam`) and roll each out against `reference`.
 
-    Returns `(nets, metrics)`: the refined networks (seed order) and the per-seed lists
-    `energy_rel_err_max_seeds`, `train_loss_seeds` and their `*_adam_only` twins, the medians
-    `energy_rel_err_max_median` and `adam_only_energy_median`, and `adam_only`, `wall_time_s`
-    of the first seed (Adam plus refinement)."""
-    nets, energies, adam_runs = [], [], []
+    Returns `(trained, metrics)`: the refined `(network, record)` pairs (seed order) and the
+    per-seed lists `energy_rel_err_max_seeds`, `train_loss_seeds` and their `*_adam_only` twins,
+    the medians `energy_rel_err_max_median` and `adam_only_energy_median`, and `adam_only`,
+    `wall_time_s` of the first seed (Adam plus refinement)."""
+    trained, energies, adam_runs = [], [], []
     for seed in seeds:
-        adam = make(seed).fit(data, **fit(seed), progress=progress)
-        net, adam_only = refine_after_adam(adam, data, refine_iterations, system, reference, progress)
-        energy = rollout_metrics(net, system, reference.states)["metrics"]["energy_rel_err_max"]
-        nets.append(net)
+        first = learn.fit(make(seed), data, **fit(seed), progress=progress)
+        (net, rec), adam_only = refine_after_adam(first, data, refine_iterations, system, reference, progress)
+        energy = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max"]
+        trained.append((net, rec))
         energies.append(energy)
         adam_runs.append(adam_only)
         print(
-            f"  {label} seed {seed}: train {net.train_loss:.2e} val {net.val_loss:.2e} energy max {energy:.2e} "
+            f"  {label} seed {seed}: train {rec.train_loss:.2e} val {rec.val_loss:.2e} energy max {energy:.2e} "
             f"(Adam only: train {adam_only['train_loss']:.2e}, energy max {adam_only['energy_rel_err_max']:.2e}; "
-            f"{adam.wall_time_s + net.wall_time_s:.1f} s)"
+            f"{first[1].wall_time_s + rec.wall_time_s:.1f} s)"
         )
     adam_energies = [a["energy_rel_err_max"] for a in adam_runs]
     metrics = {
         "energy_rel_err_max_seeds": energies,
         "energy_rel_err_max_median": float(np.median(energies)),
-        "train_loss_seeds": [n.train_loss for n in nets],
+        "train_loss_seeds": [r.train_loss for _, r in trained],
         "energy_rel_err_max_seeds_adam_only": adam_energies,
         "adam_only_energy_median": float(np.median(adam_energies)),
         "train_loss_seeds_adam_only": [a["train_loss"] for a in adam_runs],
         "adam_only": adam_runs[0],
-        "wall_time_s": adam_runs[0]["wall_time_s"] + nets[0].wall_time_s,
+        "wall_time_s": adam_runs[0]["wall_time_s"] + trained[0][1].wall_time_s,
         "refine_iterations": refine_iterations,
     }
-    return nets, metrics
+    return trained, metrics

@@ -73,33 +73,29 @@ class E2(AbstractExperiment):
         data.save(out_dir / "data.h5")
         reference = it.ground_truth(system, pi0, h=h, n_steps=P.prediction_steps)
 
-        fit = {
-            "epochs": P.epochs,
-            "learning_rate": 1e-3,
-            "final_learning_rate": 1e-4,
-            "validation_fraction": 0.2,
-            "seed": 0,
-            "progress": progress,
-        }
+        adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-4)
+        split = {"validation_fraction": 0.2, "seed": 0}
         # Network seeds vary; the split is the same (seed 0) for all.
-        nets, seed_metrics = lpnet_seeds(
+        trained, seed_metrics = lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=seed),
-            lambda seed: {k: v for k, v in fit.items() if k != "progress"},
+            lambda seed: {"optimiser": adam, **split},
             data, P.refine_iterations, system, reference, range(P.seeds), progress, "E2",
         )
-        net = nets[0]
+        net, record = trained[0]
         net.save(out_dir / "lpnet.h5")
-        base = learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0).fit(
-            data, **fit, refine_iterations=P.refine_iterations
+        record.save(out_dir / "lpnet-training.h5")
+        base = learn.fit(
+            learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0), data,
+            optimiser=(adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb")), **split, progress=progress,
         )
-        metrics, _ = compare(system, net, base, reference, out_dir, data_states=data.states)
+        metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
         metrics.update(seed_metrics)
         metrics["n_parameters"] = net.n_parameters
         metrics["model"] = "LPNet 3x32"
         metrics["baseline_model"] = "residual MLP 3x32"
         metrics["glpnet"] = glpnet_on_same_data(
             system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress
-        )
+        )[1]
         metrics["notes"] = [
             (
                 f"Training: Adam as in the paper ({P.epochs} epochs), then {P.refine_iterations} "

@@ -98,26 +98,20 @@ class E4(AbstractExperiment):
         reference = it.ground_truth(system, start, h=h, n_steps=P.prediction_steps)
 
         fit = {
-            "epochs": P.epochs,
-            "learning_rate": 1e-3,
-            "final_learning_rate": 1e-5,
-            "batch_size": P.batch_size,
+            "optimiser": learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=P.batch_size),
             "validation_fraction": 0.2,
             "seed": 0,
             "progress": progress,
         }
-        net = learn.LPNet(
-            system,
-            hidden=HIDDEN,
-            activation="sigmoid",
-            key=0,
-            parametrisation=learn.LieAlgebraParametrisation(system),
-        ).fit(data, **fit)
-        net.save(out_dir / "lpnet.h5")
-        base = learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0).fit(
-            data, **fit
+        net, record = learn.fit(
+            learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
+                        parametrisation=learn.LieAlgebraParametrisation(system)),
+            data, **fit,
         )
-        metrics, rollouts = compare(system, net, base, reference, out_dir, data_states=data.states)
+        net.save(out_dir / "lpnet.h5")
+        record.save(out_dir / "lpnet-training.h5")
+        base = learn.fit(learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data, **fit)
+        metrics, rollouts = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
         y0s = reference.states[:, 0]
         n = reference.states.shape[1] - 1
         metrics["integral_rel_err_max"] = integral_rel_err_max(system, rollouts["ours"])
@@ -128,11 +122,10 @@ class E4(AbstractExperiment):
             system, reference.states
         )
         if P.glpnet_iterations:
-            metrics["glpnet"] = glpnet_on_same_data(
+            gnet, metrics["glpnet"] = glpnet_on_same_data(
                 system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
                 n_modules=P.glpnet_modules, full_vectors=True,
             )
-            gnet = learn.GLPNet.load(out_dir / "glpnet.h5", system)
             metrics["glpnet"]["integral_rel_err_max"] = integral_rel_err_max(
                 system, gnet.rollout(y0s, n)
             )
@@ -140,7 +133,7 @@ class E4(AbstractExperiment):
         metrics["adam_steps"] = P.epochs * (n_train // P.batch_size if P.batch_size else 1)
         metrics["start_point"] = start
         metrics["n_parameters"] = net.n_parameters
-        metrics["baseline_n_parameters"] = base.n_parameters
+        metrics["baseline_n_parameters"] = base[0].n_parameters
         metrics["model"] = "LPNet 3x32"
         metrics["baseline_model"] = "residual MLP 3x32"
         metrics["notes"] = [

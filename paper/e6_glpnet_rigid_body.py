@@ -61,21 +61,20 @@ class E6(AbstractExperiment):
         test0 = np.random.default_rng(TEST_SEED).uniform(-1.25, 1.25, size=(10, 3))
         reference = it.ground_truth(system, test0, h=h, n_steps=P.prediction_steps, seed=TEST_SEED)
 
-        gnet = learn.GLPNet(system, n_modules=6, key=0).fit(
-            data, method="bfgs", max_iter=P.max_iter, restarts=P.restarts, seed=0, progress=progress
+        gnet, record = learn.fit(
+            learn.GLPNet(system, n_modules=6, key=0), data,
+            optimiser=learn.QuasiNewton(P.max_iter, "bfgs", restarts=P.restarts, warm_start=True),
+            validation_fraction=0.0, seed=0, progress=progress,
         )
         gnet.save(out_dir / "glpnet.h5")
-        base = learn.MLPBaseline(system, hidden=(16, 16, 16), activation="sigmoid", key=0).fit(
-            data,
-            epochs=P.baseline_epochs,
-            learning_rate=1e-3,
-            final_learning_rate=1e-5,
-            validation_fraction=0.2,
-            seed=0,
-            progress=progress,
+        record.save(out_dir / "glpnet-training.h5")
+        base = learn.fit(
+            learn.MLPBaseline(system, hidden=(16, 16, 16), activation="sigmoid", key=0), data,
+            optimiser=learn.Adam(P.baseline_epochs, learning_rate=1e-3, final_learning_rate=1e-5),
+            validation_fraction=0.2, seed=0, progress=progress,
         )
         metrics, _ = compare(
-            system, gnet, base, reference, out_dir, data_states=data.states, label="G-LPNet"
+            system, (gnet, record), base, reference, out_dir, data_states=data.states, label="G-LPNet"
         )
         metrics["n_parameters"] = gnet.n_parameters
         metrics["test_initial_conditions"] = test0
