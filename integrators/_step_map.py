@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from liepoisson._validation import as_state, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
@@ -62,7 +62,7 @@ class AbstractStepMap(eqx.Module):
             )
         return self.h
 
-    def rollout(self, y0: Any, n_steps: int, *, save_every: int = 1) -> jax.Array:
+    def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1) -> jax.Array:
         r"""Iterate the step: $y_k = \Phi_h^k(y_0)$ for $k = 0, s, 2s, \dots, n$ ($s$ =
         `save_every`, which must divide `n_steps`).
 
@@ -87,7 +87,7 @@ class AbstractStepMap(eqx.Module):
         out = _rollout_compiled(self, jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
         return out[0] if y0.ndim == 1 else out
 
-    def poisson_defect(self, y: Any) -> jax.Array:
+    def poisson_defect(self, y: ArrayLike) -> jax.Array:
         r"""$\max_{ab}|(J\,\mathbb B(y)\,J^\top - \mathbb B(\Phi_h(y)))_{ab}|$ per point, with
         $J = \partial\Phi_h/\partial y$ (forward-mode autodiff): zero, up to round-off, exactly
         when the step is a Poisson map. `y` of shape `(..., dim)`; returns `(...)`."""

@@ -191,7 +191,7 @@ class Trajectories:
         seed = _check_seed(seed)
         y0, y1 = self.pairs()
         n = y0.shape[0]
-        n_val = int(round(float(validation_fraction) * n))
+        n_val = round(float(validation_fraction) * n)
         if n - n_val < 1:
             raise ValueError(
                 f"validation_fraction={validation_fraction} leaves no training pair out of {n}"

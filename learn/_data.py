@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from integrators import Trajectories
 from liepoisson._validation import fraction, pairs, positive_float, positive_int
@@ -36,7 +35,7 @@ def _split(y0, y1, validation_fraction, seed):
     return (y0[tr], y1[tr]), (y0[va], y1[va])
 
 
-def prepare(data: Trajectories | tuple[Any, Any], system: AbstractPoissonSystem, h: float | None,
+def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPoissonSystem, h: float | None,
             validation_fraction: float, seed: int) -> PairData:
     """Turn `data` into training/validation pairs for `system`: an `integrators.Trajectories`
     (consecutive states; its own split) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h`."""

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
+from numpy.typing import ArrayLike
 
 from integrators import Trajectories
 from liepoisson._validation import positive_float, positive_int
@@ -132,7 +133,7 @@ def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:
 
 def fit(
     model: _Map,
-    data: Trajectories | tuple[np.ndarray, np.ndarray],
+    data: Trajectories | tuple[ArrayLike, ArrayLike],
     *,
     optimiser: Optimiser | Sequence[Optimiser] | None = None,
     epochs: int | None = None,
