@@ -63,7 +63,7 @@ def main():
 
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     y0s = np.random.default_rng(0).uniform(-2.0, 2.0, size=(args.n_traj, 3))
-    n_steps = int(round(args.t_final / args.h))
+    n_steps = round(args.t_final / args.h)
     t_eval = args.h * np.arange(n_steps + 1)
     rtol, atol = 1e-13, 1e-14
     n_sub = min(args.scipy_subset, args.n_traj)
