@@ -7,7 +7,6 @@ import datetime
 import json
 import numbers
 import os
-import tempfile
 from collections.abc import Sequence
 from typing import Any
 
@@ -16,6 +15,8 @@ import numpy as np
 import liepoisson
 from liepoisson._validation import positive_float
 from liepoisson.systems import AbstractPoissonSystem, from_name
+
+from ._files import atomic_path
 
 #: Version of the on-disk layout; `Trajectories.load` refuses any other.
 FORMAT_VERSION = 1
@@ -241,30 +242,18 @@ class Trajectories:
         file nor clobbers an existing one."""
         import h5py
 
-        path = os.fspath(path)
-        directory = os.path.dirname(os.path.abspath(path))
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
-        os.close(fd)
-        try:
-            with h5py.File(tmp, "w") as f:
-                f.create_dataset("trajectories", data=self.states)
-                f.create_dataset("times", data=self.times)
-                f.attrs["system"] = self.system.name
-                f.attrs["system_params"] = json.dumps(self.system.params, sort_keys=True)
-                f.attrs["h"] = self.h
-                f.attrs["integrator"] = self.integrator
-                f.attrs["tolerance"] = _NO_TOLERANCE if self.tolerance is None else self.tolerance
-                f.attrs["seed"] = np.int64(_NO_SEED if self.seed is None else self.seed)
-                f.attrs["created"] = self.created
-                f.attrs["liepoisson_version"] = self.liepoisson_version
-                f.attrs["format_version"] = np.int64(FORMAT_VERSION)
-            with open(tmp, "rb+") as fh:  # data on disk before the rename makes it visible
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+            f.create_dataset("trajectories", data=self.states)
+            f.create_dataset("times", data=self.times)
+            f.attrs["system"] = self.system.name
+            f.attrs["system_params"] = json.dumps(self.system.params, sort_keys=True)
+            f.attrs["h"] = self.h
+            f.attrs["integrator"] = self.integrator
+            f.attrs["tolerance"] = _NO_TOLERANCE if self.tolerance is None else self.tolerance
+            f.attrs["seed"] = np.int64(_NO_SEED if self.seed is None else self.seed)
+            f.attrs["created"] = self.created
+            f.attrs["liepoisson_version"] = self.liepoisson_version
+            f.attrs["format_version"] = np.int64(FORMAT_VERSION)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Trajectories:

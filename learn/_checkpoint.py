@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from typing import Any
 
 import equinox as eqx
@@ -13,6 +12,8 @@ import h5py
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from integrators._files import atomic_path
 
 FORMAT = "learn-model"
 FORMAT_VERSION = 1
@@ -45,36 +46,25 @@ def jsonable(value: Any) -> Any:
 def write(path: Any, attrs: dict[str, Any], groups: dict[str, Any]) -> None:
     """Write `attrs` (JSON-encoded when not scalar/str) and `groups` = {name: list of arrays or
     dict of arrays} atomically to `path`."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=directory)
-    os.close(fd)
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["format_version"] = FORMAT_VERSION
-            for key, value in attrs.items():
-                if isinstance(value, (str, int, float, bool, np.integer, np.floating)):
-                    f.attrs[key] = value
-                else:
-                    f.attrs[key + "_json"] = json.dumps(value)
-            for name, content in groups.items():
-                g = f.create_group(name)
-                if isinstance(content, dict):
-                    g.attrs["kind"] = "dict"
-                    for k, v in content.items():
-                        g.create_dataset(k, data=np.asarray(v))
-                else:
-                    g.attrs["kind"] = "list"
-                    g.attrs["count"] = len(content)
-                    for i, v in enumerate(content):
-                        g.create_dataset(f"{i:04d}", data=np.asarray(v))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        for key, value in attrs.items():
+            if isinstance(value, (str, int, float, bool, np.integer, np.floating)):
+                f.attrs[key] = value
+            else:
+                f.attrs[key + "_json"] = json.dumps(value)
+        for name, content in groups.items():
+            g = f.create_group(name)
+            if isinstance(content, dict):
+                g.attrs["kind"] = "dict"
+                for k, v in content.items():
+                    g.create_dataset(k, data=np.asarray(v))
+            else:
+                g.attrs["kind"] = "list"
+                g.attrs["count"] = len(content)
+                for i, v in enumerate(content):
+                    g.create_dataset(f"{i:04d}", data=np.asarray(v))
 
 
 def read(path: Any) -> tuple[dict[str, Any], dict[str, Any]]:
