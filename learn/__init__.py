@@ -23,9 +23,8 @@ from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activat
 from ._lpnet import LPNet as LPNet
 from ._parametrisation import (
     AbstractStepParametrisation as AbstractStepParametrisation,
-    LieAlgebraParametrisation as LieAlgebraParametrisation,
     SE3RotationShear as SE3RotationShear,
-    SO3Rotation as SO3Rotation,
+    TestFlowParametrisation as TestFlowParametrisation,
     default_parametrisation as default_parametrisation,
 )
 from ._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord

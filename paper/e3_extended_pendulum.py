@@ -14,7 +14,7 @@ trajectory's end.
 
 Parametrisation. The paper composes three per-component flows $\mathbb T_3\mathbb T_2\mathbb T_1$
 (each for $h/3$, closed-form alphas, $\alpha_3 = 0$) and so learns 2 outputs: 642 parameters.
-We use `learn.LieAlgebraParametrisation`: one exact test flow of $H = \alpha\cdot y$ for time
+We use `learn.TestFlowParametrisation`: one exact test flow of $H = \alpha\cdot y$ for time
 $h$ with the full $\alpha\in\mathbb R^3$ (Casimir-projected, found from each pair by
 Gauss-Newton), so the network has 3 outputs: 659 parameters. Both are families of exact Poisson
 maps of the affine bracket that preserve $C$ to round-off and reach every nearby point on the
@@ -90,7 +90,7 @@ class E3(AbstractExperiment):
         fit = {"optimiser": adam, "validation_fraction": 0.5, "seed": 0}
         ((net, record),), seed_metrics = lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=seed,
-                                     parametrisation=learn.LieAlgebraParametrisation(system)),
+                                     parametrisation=learn.TestFlowParametrisation(system)),
             lambda seed: fit,
             data, P.refine_iterations, system, reference, [0], progress, "E3",
         )

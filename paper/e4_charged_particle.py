@@ -18,7 +18,7 @@ long-time energy drift is not monotone in the training loss: a 45,000-step run r
 
 Parametrisation. The paper composes $\mathbb T_2\mathbb T_1$ (each for $h/2$: $\mathbb T_1$ the
 flow of $\alpha\cdot p$, $\mathbb T_2$ of $\beta\cdot x$, closed-form parameters). We use
-`learn.LieAlgebraParametrisation`: one exact test flow of $H = a\cdot p + \beta\cdot x$ for time
+`learn.TestFlowParametrisation`: one exact test flow of $H = a\cdot p + \beta\cdot x$ for time
 $h$ (`ChargedParticle.test_flow`), parameters found from each pair by Gauss-Newton. Both are
 4-parameter families of exact Poisson maps of the same bracket that reach every nearby point
 from $y$ (the map from parameters to $y_1$ is a local diffeomorphism near zero: $a$ sets
@@ -105,7 +105,7 @@ class E4(AbstractExperiment):
         }
         net, record = learn.fit(
             learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
-                        parametrisation=learn.LieAlgebraParametrisation(system)),
+                        parametrisation=learn.TestFlowParametrisation(system)),
             data, **fit,
         )
         net.save(out_dir / "lpnet.h5")

@@ -4,7 +4,7 @@
 Data: 500 heyoka trajectories x 100 steps, h = 0.1, I = M = diag(1, 2, 1), initial conditions
 uniform in the cube of half-width 0.1 around Pi = (1, 1, 1), p = (-1, 1, 2) (all six
 components). Model: MLP 6x64 sigmoid giving alpha = (A, b) of one exact coadjoint flow
-exp(h M(alpha)) (`learn.LieAlgebraParametrisation`, alpha from each pair by Gauss-Newton,
+exp(h M(alpha)) (`learn.TestFlowParametrisation`, alpha from each pair by Gauss-Newton,
 Casimir-projected), loss on the state, 80/20 split. Training: "quick" uses Adam 1e-3 decaying
 to 1e-5 in mini-batches; "full" uses full-batch L-BFGS-B from the random start with normalised
 inputs and outputs (lower loss and energy error than the Adam budget that fits on 2 cores; not
@@ -106,7 +106,7 @@ class E5(AbstractExperiment):
         stages += (learn.QuasiNewton(P.refine_iterations, "lbfgsb"),) if P.refine_iterations else ()
         fit = {"optimiser": stages, "validation_fraction": 0.2, "seed": 0, "progress": progress,
                "normalise": P.normalise}
-        parametrisation = learn.LieAlgebraParametrisation(system)
+        parametrisation = learn.TestFlowParametrisation(system)
         net, record = learn.fit(
             learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0, parametrisation=parametrisation),
             data, **fit,
