@@ -10,5 +10,6 @@ from ._diagnostics import (
 )
 from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
+from ._plots import plot_comparison as plot_comparison
 from ._step_map import AbstractStepMap as AbstractStepMap, StepCost as StepCost
 from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

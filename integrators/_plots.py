@@ -1,0 +1,123 @@
+"""Figures of trajectories and their conservation: the one plotting path of the library
+(matplotlib's object API, no pyplot: no GUI backend, no global state). matplotlib is an
+extra (`pip install 'liepoisson[paper]'`)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from liepoisson.systems import AbstractPoissonSystem
+
+from ._diagnostics import DiagnosticsReport
+
+# Line styles by position: the reference first, then the maps compared with it.
+_STYLES = ("b-", "r--", "g:", "m-.", "c--", "y:")
+# Exact zeros (t = 0, round-off hits) have no place on a log axis: floored there.
+_LOG_FLOOR = 1e-17
+
+
+def figure(**kwargs: Any):
+    """A matplotlib `Figure` (object API), or ImportError saying how to get matplotlib."""
+    try:
+        from matplotlib.figure import Figure
+    except ImportError as err:
+        raise ImportError("figures need matplotlib: pip install 'liepoisson[paper]'") from err
+    return Figure(**kwargs)
+
+
+def plot_comparison(
+    out_dir: str | os.PathLike,
+    system: AbstractPoissonSystem,
+    times: np.ndarray,
+    curves: dict[str, tuple[np.ndarray, DiagnosticsReport]],
+    *,
+    data_states: np.ndarray | None = None,
+    show_steps: int = 2000,
+) -> list[str]:
+    """Write the paper's four figures for one trajectory computed by several maps; returns
+    the file names written into `out_dir`.
+
+    `curves` maps a label to `(states (T, dim), report)` with `report` from
+    `integrators.diagnostics` (against the reference, for the trajectory error); the first
+    entry is the reference (e.g. heyoka). Figures: `components.png` (each component against
+    time, the first `show_steps` steps), `phase_portrait.png` (first three components, with
+    `data_states` (n_traj, T, dim) in grey), `conservation.png` (relative energy error and
+    Casimir drifts, log axis) and `trajectory_error.png` (the maps after the reference).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    names = system.state_names
+    labels = list(curves)
+    styles = dict(zip(labels, _STYLES))
+    files = []
+    k = min(show_steps + 1, len(times))
+
+    fig = figure(figsize=(8, 1.8 * system.dim))
+    axes = fig.subplots(system.dim, 1, sharex=True, squeeze=False)[:, 0]
+    for i, ax in enumerate(axes):
+        for label, (states, _) in curves.items():
+            ax.plot(times[:k], states[:k, i], styles[label], lw=1.0, label=label)
+        ax.set_ylabel(names[i])
+    axes[0].legend(loc="upper right", fontsize=7)
+    axes[-1].set_xlabel("t")
+    fig.tight_layout()
+    fig.savefig(out_dir / "components.png", dpi=110)
+    files.append("components.png")
+
+    if system.dim >= 3:
+        fig = figure(figsize=(6, 6))
+        ax = fig.add_subplot(projection="3d")
+        if data_states is not None:
+            for traj in np.asarray(data_states).reshape(-1, *np.shape(data_states)[-2:]):
+                ax.plot(*traj[:, :3].T, "k-", lw=0.4, alpha=0.5)
+        for label in labels[:2]:  # the reference and the first map: more is unreadable in 3D
+            ax.plot(*curves[label][0][:, :3].T, styles[label], lw=0.7, label=label)
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        ax.set_zlabel(names[2])
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(out_dir / "phase_portrait.png", dpi=110)
+        files.append("phase_portrait.png")
+
+    n_cas = system.n_casimirs
+    fig = figure(figsize=(8, 2.4 * (1 + n_cas)))
+    axes = fig.subplots(1 + n_cas, 1, sharex=True, squeeze=False)[:, 0]
+    for label, (_, report) in curves.items():
+        t = times[: len(report.energy)]  # a diverged rollout is reported up to its divergence
+        # Absolute values on a log axis: the errors span from round-off (Casimirs of the
+        # learned maps) to O(1) (an unstructured baseline).
+        axes[0].semilogy(t, np.maximum(np.abs(report.energy_error_relative), _LOG_FLOOR),
+                         styles[label][0] + "-", lw=0.8, label=label)
+        for j in range(n_cas):
+            drift = np.maximum(np.abs(np.asarray(report.casimir_drift_relative)[:, j]), _LOG_FLOOR)
+            axes[1 + j].semilogy(t, drift, styles[label][0] + "-", lw=0.8, label=label)
+    axes[0].set_ylabel("|E(t)-E(0)|/<E>")
+    for j in range(n_cas):
+        axes[1 + j].set_ylabel(f"|C{j + 1}(t)-C{j + 1}(0)|/<C{j + 1}>")
+    axes[0].legend(fontsize=7)
+    axes[-1].set_xlabel("t")
+    fig.tight_layout()
+    fig.savefig(out_dir / "conservation.png", dpi=110)
+    files.append("conservation.png")
+
+    fig = figure(figsize=(8, 3))
+    ax = fig.subplots()
+    for label in labels[1:]:
+        report = curves[label][1]
+        if report.trajectory_error is None:
+            raise ValueError(f"curves[{label!r}]: the report has no trajectory error (diagnostics without reference)")
+        n = len(report.trajectory_error)
+        ax.semilogy(times[1:n], np.maximum(np.asarray(report.trajectory_error)[1:], _LOG_FLOOR),
+                    styles[label][0] + "-", lw=0.8, label=label)
+    ax.set_xlabel("t")
+    ax.set_ylabel("|y(t) - y_ref(t)|")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out_dir / "trajectory_error.png", dpi=110)
+    files.append("trajectory_error.png")
+    return files
