@@ -24,8 +24,13 @@ from ._coadjoint import (
     rotation_coefficients as rotation_coefficients,
 )
 from ._casimirs import polynomial_casimirs as polynomial_casimirs
+from ._inverse import gauss_newton_parameters as gauss_newton_parameters
 from ._namespace import HEYOKA as HEYOKA, JAX as JAX, NUMPY as NUMPY
 from ._polynomial import Polynomial as Polynomial
+from ._rotation_shear import (
+    se3_rotation_shear as se3_rotation_shear,
+    se3_rotation_shear_parameters as se3_rotation_shear_parameters,
+)
 
 from . import systems as systems  # noqa: E402  (systems build on the algebra)
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
+from ._inverse import checked_flow_parameters
 from ._polynomial import Polynomial
 from ._validation import as_scalar_time, as_state
 
@@ -199,6 +200,37 @@ class LieAlgebra:
         # The fast paths are written for sign = -1; sign = +1 reverses time.
         t = jnp.broadcast_to(-self.sign * t, batch)
         return self.exact_flow(self._C, alpha, t, mu)
+
+    def coadjoint_flow_parameters(
+        self, mu0: Any, mu1: Any, t: Any, *, rtol: float = 1e-10
+    ) -> np.ndarray:
+        r"""The parameters $\alpha$ with `coadjoint_flow(alpha, t, mu0) == mu1`, orthogonal to
+        the Casimir gradients at `mu0` (paper eqs. Loss_function and alpha_mod_Casimirs).
+
+        The inverse of the exact flow is the flow's own (`exact_flow.parameters`): the
+        shortest rotation in closed form for so(3) (`RodriguesFlow`), Gauss-Newton otherwise.
+
+        **Arguments:** `mu0`, `mu1` of shape `(..., n)`; `t` a finite, non-zero scalar;
+        `rtol`: the relative Casimir mismatch beyond which a pair is rejected, and
+        (times 100, relative to the size of the states) the largest residual accepted.
+
+        **Returns:** `alpha`, `(..., n)`. Raises `ValueError` naming the pair (its index over
+        the flattened leading axes) when a Casimir differs between `mu0` and `mu1`, when the
+        solution is not unique (antiparallel so(3) pair) or when no solution is found.
+        """
+        return checked_flow_parameters(
+            mu0,
+            mu1,
+            t,
+            rtol,
+            dim=self.dim,
+            names=("mu0", "mu1"),
+            flow=self.coadjoint_flow,
+            casimirs=self.casimirs,
+            casimir_gradients=self.casimir_gradients,
+            # The exact flows are written for sign = -1; sign = +1 reverses time.
+            solve=lambda a, b, t, G: self.exact_flow.parameters(self._C, a, b, -self.sign * t, G),
+        )
 
     # -- Casimirs --------------------------------------------------------------------------
     def casimirs(self, mu: Any) -> jax.Array:

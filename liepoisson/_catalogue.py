@@ -132,6 +132,7 @@ def direct_sum(*algebras: LieAlgebra, name: str | None = None) -> LieAlgebra:
         [g.exact_flow for g in algebras],
         [g.dim for g in algebras],
         [g.structure_constants for g in algebras],
+        n_casimirs=[g.n_casimirs for g in algebras],
     )
     return LieAlgebra(
         C,

@@ -4,20 +4,31 @@ Every flow here follows the body convention of DESIGN.md (`sign = -1`):
 $\mathbb{M}(\alpha)_{ad} = -C_{abd}\,\alpha_b$, so that $\dot\mu = \mathbb{B}(\mu)\,\alpha$.
 `LieAlgebra` converts other signs by reversing time. The generic path is the matrix
 exponential; `RodriguesFlow` (so(3)) and `SE3Flow` (se(3)) are closed-form fast paths with
-the same interface, tested against it.
+the same interface, tested against it. Each flow also knows its inverse, `parameters`: the
+closed form of the shortest rotation for so(3), Gauss-Newton (`gauss_newton_parameters`)
+otherwise.
 """
 
 from __future__ import annotations
 
 import abc
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._inverse import gauss_newton_parameters
+from ._validation import is_traced
+
 # Below this rotation angle the closed-form coefficients switch to their Taylor series; the
 # first neglected term is O(theta^6) < 1e-18, far below round-off.
 _SMALL_ANGLE = 1e-3
+# Below this ratio |a x b| / (a . b) the shortest rotation's angle/sine uses its series
+# (relative error O(r^6) < 1e-24).
+_SMALL_RATIO = 1e-4
+# |a x b| <= this * |a| |b| with a . b < 0: antiparallel, the rotation axis is not unique.
+_ANTIPARALLEL = 1e-8
 
 
 def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -52,14 +63,90 @@ def rotate(k: jax.Array, v: jax.Array) -> jax.Array:
     return v - sinc[..., None] * kv + c1[..., None] * _cross(k, kv)
 
 
+@jax.jit
+def _shortest_rotation(a: jax.Array, b: jax.Array) -> jax.Array:
+    r"""$\theta\,(a\times b)/|a\times b|$, $\theta = \operatorname{atan2}(|a\times b|, a\cdot b)$:
+    the rotation vector $w$ of the shortest rotation, $\exp(\hat w)\,a = b$ for $|a| = |b|$.
+
+    Zero when $a \times b = 0$ and $a\cdot b \ge 0$ (coinciding or zero vectors); the series
+    $(1 - r^2/3 + r^4/5)/(a\cdot b)$, $r = |a\times b|/(a\cdot b)$, for small angles, so value
+    and gradient stay finite at zero rotation (double `where`). Exactly antiparallel rows also
+    give zero: callers reject them first (`_check_not_antiparallel`).
+    """
+    cross = jnp.cross(a, b)
+    s2 = jnp.sum(cross * cross, axis=-1)
+    c = jnp.sum(a * b, axis=-1)
+    small = (c > 0) & (s2 < (_SMALL_RATIO * c) ** 2)
+    degenerate = (s2 == 0) & ~small
+    c_small = jnp.where(small, c, 1.0)
+    r2 = jnp.where(small, s2, 0.0) / (c_small * c_small)
+    s = jnp.sqrt(jnp.where(small | degenerate, 1.0, s2))
+    factor = jnp.where(
+        small,
+        (1.0 - r2 / 3.0 + r2 * r2 / 5.0) / c_small,
+        jnp.where(degenerate, 0.0, jnp.arctan2(s, c) / s),
+    )
+    return factor[..., None] * cross
+
+
+def _check_not_antiparallel(a: Any, b: Any, names: tuple[str, str]) -> None:
+    """`ValueError` naming the first antiparallel pair of rows (skipped for traced values)."""
+    if is_traced(a) or is_traced(b):
+        return
+    a, b = np.asarray(a).reshape(-1, 3), np.asarray(b).reshape(-1, 3)
+    s = np.linalg.norm(np.cross(a, b), axis=-1)
+    c = np.einsum("ia,ia->i", a, b)
+    anti = (s <= _ANTIPARALLEL * np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)) & (c < 0)
+    if np.any(anti):
+        i = int(np.argmax(anti))
+        raise ValueError(
+            f"pair {i}: {names[0]} = {a[i].tolist()} and {names[1]} = {b[i].tolist()} are "
+            "antiparallel; the rotation axis carrying one to the other is not unique"
+        )
+
+
 class AbstractCoadjointFlow(abc.ABC):
-    """How to evaluate $\\exp(t\\,\\mathbb{M}(\\alpha))\\mu$ for one algebra (body convention)."""
+    """How to evaluate $\\exp(t\\,\\mathbb{M}(\\alpha))\\mu$ for one algebra (body convention),
+    and its inverse."""
 
     @abc.abstractmethod
     def __call__(
         self, structure_constants: np.ndarray, alpha: jax.Array, t: jax.Array, mu: jax.Array
     ) -> jax.Array:
         """`alpha`, `mu` of shape `(..., n)` and `t` of shape `(...)`, already broadcast."""
+
+    @abc.abstractmethod
+    def parameters(
+        self,
+        structure_constants: np.ndarray,
+        mu0: jax.Array,
+        mu1: jax.Array,
+        t: Any,
+        casimir_gradients: jax.Array,
+    ) -> jax.Array:
+        r"""The parameters $\alpha$ with $\exp(t\,\mathbb{M}(\alpha))\,\mu_0 = \mu_1$,
+        orthogonal to the Casimir gradients at $\mu_0$ (paper eq. alpha_mod_Casimirs).
+
+        **Arguments:** `mu0`, `mu1` of shape `(N, n)` on one coadjoint orbit; `t` a non-zero
+        scalar of either sign (body convention: `LieAlgebra` passes `-sign * t`);
+        `casimir_gradients` `(N, k, n)`, the gradients at `mu0` of the algebra's Casimirs in
+        its order (a closed form orthogonal to them by construction may ignore them).
+
+        **Returns:** `alpha` `(N, n)` with `self(C, alpha, t, mu0) == mu1`. May raise
+        `ValueError` naming a pair whose solution is not unique; otherwise unchecked: use
+        `LieAlgebra.coadjoint_flow_parameters`, which validates the input, compares the
+        Casimirs of each pair and checks the residual.
+        """
+
+    # A flow without state is defined by its type: equal flows share compiled code (the
+    # structure constants are an argument). A flow with state compares by identity.
+    def __eq__(self, other):
+        if self is other:
+            return True
+        return type(self) is type(other) and not vars(self) and not vars(other)
+
+    def __hash__(self):
+        return hash(type(self)) if not vars(self) else id(self)
 
 
 # `jax.scipy.linalg.expm` is inaccurate for 1-norms above ~5 (its Pade-13 branch: errors of
@@ -92,7 +179,8 @@ def _expm(A: jax.Array) -> jax.Array:
 
 
 class MatrixExponentialFlow(AbstractCoadjointFlow):
-    r"""Generic path: $\exp(t\,\mathbb{M}(\alpha))\,\mu$ by scaling and squaring."""
+    r"""Generic path: $\exp(t\,\mathbb{M}(\alpha))\,\mu$ by scaling and squaring; inverse by
+    Gauss-Newton (`gauss_newton_parameters`)."""
 
     def __call__(self, structure_constants, alpha, t, mu):
         C = jnp.asarray(structure_constants)
@@ -103,15 +191,31 @@ class MatrixExponentialFlow(AbstractCoadjointFlow):
         E = _expm(A.reshape((-1, n, n))).reshape(batch + (n, n))
         return jnp.einsum("...ad,...d->...a", E, mu)
 
+    def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
+        flow = jax.tree_util.Partial(self, structure_constants)
+        return gauss_newton_parameters(flow, mu0, mu1, t, casimir_gradients)
+
     def __repr__(self):
         return "MatrixExponentialFlow()"
 
 
 class RodriguesFlow(AbstractCoadjointFlow):
-    r"""so(3): $\dot\Pi = -\alpha\times\Pi$, the rotation $\Pi(t) = \exp(-t\hat\alpha)\Pi(0)$."""
+    r"""so(3): $\dot\Pi = -\alpha\times\Pi$, the rotation $\Pi(t) = \exp(-t\hat\alpha)\Pi(0)$.
+
+    `parameters` is the closed form of the shortest rotation carrying $\Pi^0$ to $\Pi^1$:
+    $t\alpha = -\theta\,(\Pi^0\times\Pi^1)/|\Pi^0\times\Pi^1|$ with $\theta =
+    \operatorname{atan2}(|\Pi^0\times\Pi^1|, \Pi^0\cdot\Pi^1)$, so $\alpha\perp\Pi^0$, the
+    Casimir gradient (the paper's eq. SO3_A_def with the exact angle instead of
+    $\sin\theta$). Zero for coinciding points; `ValueError` for antiparallel ones.
+    """
 
     def __call__(self, structure_constants, alpha, t, mu):
         return rotate(t[..., None] * alpha, mu)
+
+    def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
+        _check_not_antiparallel(mu0, mu1, ("mu0", "mu1"))
+        # exp(-t hat(alpha)) = exp(hat w) for t alpha = -w
+        return -_shortest_rotation(mu0, mu1) / t
 
     def __repr__(self):
         return "RodriguesFlow()"
@@ -137,17 +241,29 @@ class SE3Flow(AbstractCoadjointFlow):
         Vtb = tb - c1[..., None] * ktb + c2[..., None] * _cross(k, ktb)
         return jnp.concatenate([Pi_r - _cross(Vtb, p_t), p_t], axis=-1)
 
+    def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
+        # One exp(t M(A, b)) has no simple closed-form inverse (`se3_rotation_shear` is a
+        # different, two-flow step that has one).
+        flow = jax.tree_util.Partial(self, structure_constants)
+        return gauss_newton_parameters(flow, mu0, mu1, t, casimir_gradients)
+
     def __repr__(self):
         return "SE3Flow()"
 
 
 class DirectSumFlow(AbstractCoadjointFlow):
-    """Blockwise flow of a direct sum: each summand keeps its own (fast) path."""
+    """Blockwise flow of a direct sum: each summand keeps its own (fast) path.
 
-    def __init__(self, flows, dims, structure_constants):
+    `n_casimirs`, the number of Casimirs of each summand (the algebra's Casimirs are the
+    summands' in order, as `direct_sum` builds them), makes the inverse blockwise too; without
+    it the inverse is Gauss-Newton on the whole sum.
+    """
+
+    def __init__(self, flows, dims, structure_constants, n_casimirs=None):
         self.flows = tuple(flows)
         self.dims = tuple(int(d) for d in dims)
         self.blocks = tuple(np.asarray(c) for c in structure_constants)
+        self.n_casimirs = None if n_casimirs is None else tuple(int(k) for k in n_casimirs)
 
     def __call__(self, structure_constants, alpha, t, mu):
         out, start = [], 0
@@ -155,6 +271,20 @@ class DirectSumFlow(AbstractCoadjointFlow):
             sl = slice(start, start + n)
             out.append(flow(C, alpha[..., sl], t, mu[..., sl]))
             start += n
+        return jnp.concatenate(out, axis=-1)
+
+    def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
+        k = casimir_gradients.shape[-2]
+        if self.n_casimirs is None or sum(self.n_casimirs) != k:
+            flow = jax.tree_util.Partial(self, structure_constants)
+            return gauss_newton_parameters(flow, mu0, mu1, t, casimir_gradients)
+        # Each summand's Casimirs depend on its own block only: the problem separates.
+        out, start, row = [], 0, 0
+        for flow, n, k, C in zip(self.flows, self.dims, self.n_casimirs, self.blocks):
+            sl, rows = slice(start, start + n), slice(row, row + k)
+            grads = casimir_gradients[..., rows, sl]
+            out.append(flow.parameters(C, mu0[..., sl], mu1[..., sl], t, grads))
+            start, row = start + n, row + k
         return jnp.concatenate(out, axis=-1)
 
     def __repr__(self):

@@ -67,9 +67,10 @@ def as_scalar_time(t: Any, name: str = "t") -> jax.Array:
 
 def positive_float(x: Any, name: str) -> float:
     """A finite, strictly positive Python float (step sizes, masses, tolerances)."""
-    if isinstance(x, bool) or not isinstance(x, numbers.Real):
-        if not (isinstance(x, np.ndarray) and x.ndim == 0):
-            raise TypeError(f"{name} must be a positive real number; got {type(x).__name__} {x!r}")
+    if (isinstance(x, bool) or not isinstance(x, numbers.Real)) and not (
+        isinstance(x, np.ndarray) and x.ndim == 0
+    ):
+        raise TypeError(f"{name} must be a positive real number; got {type(x).__name__} {x!r}")
     value = float(x)
     if not np.isfinite(value) or value <= 0.0:
         raise ValueError(f"{name} must be finite and > 0; got {value!r}")
@@ -134,13 +135,33 @@ def states(x: Any, name: str, dim: int) -> np.ndarray:
     return np.asarray(as_state(x, name, dim))
 
 
-def pairs(y0: Any, y1: Any, dim: int) -> tuple[np.ndarray, np.ndarray]:
+def pairs(
+    y0: Any, y1: Any, dim: int, names: tuple[str, str] = ("y0", "y1")
+) -> tuple[np.ndarray, np.ndarray]:
     """Two finite state arrays of the same shape `(..., dim)`."""
-    y0 = states(y0, "y0", dim)
-    y1 = states(y1, "y1", dim)
+    y0 = states(y0, names[0], dim)
+    y1 = states(y1, names[1], dim)
     if y0.shape != y1.shape:
-        raise ValueError(f"y0 and y1 must have the same shape; got {y0.shape} and {y1.shape}")
+        raise ValueError(
+            f"{names[0]} and {names[1]} must have the same shape; got {y0.shape} and {y1.shape}"
+        )
     return y0, y1
+
+
+def nonzero_time(t: Any, name: str = "t") -> float:
+    """A finite, non-zero real scalar (a time that may run backwards)."""
+    if is_traced(t):
+        raise TypeError(f"{name} must be a concrete real number here, not a traced JAX value")
+    arr = np.asarray(t) if isinstance(t, (np.ndarray, jax.Array, np.generic)) else None
+    real = isinstance(t, numbers.Real) and not isinstance(t, bool)
+    if arr is not None:
+        real = arr.shape == () and np.issubdtype(arr.dtype, np.number) and not np.iscomplexobj(arr)
+    if not real:
+        raise TypeError(f"{name} must be a real scalar; got {type(t).__name__} {t!r}")
+    value = float(t)
+    if not np.isfinite(value) or value == 0.0:
+        raise ValueError(f"{name} must be finite and non-zero; got {value!r}")
+    return value
 
 
 def check_system(system: Any):

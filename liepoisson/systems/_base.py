@@ -4,6 +4,7 @@ the exact flows of linear test Hamiltonians $H = \langle\alpha, y\rangle$."""
 from __future__ import annotations
 
 import abc
+import functools
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -11,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
 from .._polynomial import Polynomial
 from .._validation import as_scalar_time, as_state
@@ -130,6 +132,33 @@ class AbstractPoissonSystem(abc.ABC):
             jnp.broadcast_to(y, batch + (self.dim,)),
         )
 
+    def test_flow_parameters(self, y0: Any, y1: Any, t: Any, *, rtol: float = 1e-10) -> np.ndarray:
+        r"""The parameters $\alpha$ with `test_flow(alpha, t, y0) == y1`, orthogonal to the
+        Casimir gradients at `y0` (paper eqs. Loss_function and alpha_mod_Casimirs).
+
+        Gauss-Newton on `test_flow` (`liepoisson.gauss_newton_parameters`); Lie-Poisson
+        systems use their algebra's exact flow and its closed forms instead.
+
+        **Arguments:** `y0`, `y1` of shape `(..., dim)`; `t` a finite, non-zero scalar;
+        `rtol`: the relative Casimir mismatch beyond which a pair is rejected, and (times 100,
+        relative to the size of the states) the largest residual accepted.
+
+        **Returns:** `alpha`, `(..., dim)`. Raises `ValueError` naming the pair (its index over
+        the flattened leading axes) when a Casimir differs or no solution is found.
+        """
+        return checked_flow_parameters(
+            y0,
+            y1,
+            t,
+            rtol,
+            dim=self.dim,
+            names=("y0", "y1"),
+            flow=self.test_flow,
+            casimirs=self.casimirs,
+            casimir_gradients=self.casimir_gradients,
+            solve=functools.partial(gauss_newton_parameters, self.test_flow),
+        )
+
     # -- heyoka ---------------------------------------------------------------------------
     def heyoka_system(self) -> list[tuple[Any, Any]]:
         """The ODE as heyoka `(variable, right-hand side)` pairs, $\\mathbb{B}(y)\\nabla H$,
@@ -236,3 +265,6 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
+
+    def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
+        return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol)
