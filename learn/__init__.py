@@ -13,6 +13,7 @@ from ._baseline import MLPBaseline as MLPBaseline
 from ._fit import (
     Adam as Adam,
     Checkpoint as Checkpoint,
+    Progress as Progress,
     QuasiNewton as QuasiNewton,
     alpha_mse as alpha_mse,
     default_optimiser as default_optimiser,

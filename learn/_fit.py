@@ -5,9 +5,10 @@ them runs as stages, each starting from the weights the previous one kept."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 import equinox as eqx
@@ -110,6 +111,23 @@ class Checkpoint:
         positive_int(self.every, "Checkpoint.every")
 
 
+@dataclasses.dataclass(frozen=True)
+class Progress:
+    """What a `learn.fit` callback receives: the stage (index and optimiser name), how far it
+    is (`iteration` of `total` epochs or iterations; for `QuasiNewton` reported once per
+    start) and the latest losses (`val_loss` NaN where not measured)."""
+
+    stage: int
+    optimiser: str
+    iteration: int
+    total: int
+    train_loss: float
+    val_loss: float
+
+
+Callback = Callable[[Progress], None]
+
+
 def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
     """BFGS with the identity warm start (3500 iterations, 4 starts) for a G-LPNet, as the
     paper; 100,000 epochs of Adam (learning rate 1e-3) for the MLP-based maps."""
@@ -144,6 +162,7 @@ def fit(
     normalise: bool = False,
     checkpoint: Checkpoint | None = None,
     progress: bool = True,
+    callback: Callback | None = None,
 ) -> tuple[_Map, TrainingRecord]:
     r"""Train a learned map on data pairs; returns `(fitted model, TrainingRecord)`.
 
@@ -166,7 +185,8 @@ def fit(
       normalising reaches a lower loss (1.6e-11 vs 3-4e-11 after 1e5 epochs) but the
       10,000-step rollout drifts more in energy (2e-3..0.6 vs 4e-4..7e-4).
     - `checkpoint`: a `Checkpoint` for the Adam stage.
-    - `progress`: tqdm bars with the losses.
+    - `progress`: tqdm bars with the losses; `callback(learn.Progress)`: called as training
+      goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
     if not isinstance(model, AbstractLearnedMap):
         raise TypeError(f"model must be a learn.LPNet, GLPNet or MLPBaseline; got {type(model).__name__}")
@@ -186,6 +206,8 @@ def fit(
         raise ValueError(f"loss='alpha' trains an LPNet's parameters alpha; {type(model).__name__} has none")
     if normalise and isinstance(model, GLPNet):
         raise ValueError("normalise=True sets the scalings of an MLP; a GLPNet has none")
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback must be callable as callback(learn.Progress); got {callback!r}")
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
         raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
     if checkpoint is not None and sum(isinstance(s, Adam) for s in stages) != 1:
@@ -209,14 +231,15 @@ def fit(
     }
     history = {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)}
     records = []
-    for stage in stages:
+    for index, stage in enumerate(stages):
         offset = int(history["epoch"][-1]) if len(history["epoch"]) else 0
+        report = None if callback is None else functools.partial(_report, callback, index, type(stage).__name__)
         if isinstance(stage, Adam):
-            model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress)
-            hist = dict(hist, epoch=hist["epoch"] + offset)
+            model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress,
+                                         report)
         else:
-            model, rec, hist = _run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress)
-            hist = dict(hist, epoch=hist["epoch"] + offset)
+            model, rec, hist = _run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
+        hist = dict(hist, epoch=hist["epoch"] + offset)
         history = {k: np.concatenate([history[k], hist[k]]) for k in history}
         records.append(rec)
     record = TrainingRecord(
@@ -226,6 +249,10 @@ def fit(
         val_loss=records[-1].val_loss, wall_time_s=float(sum(r.wall_time_s for r in records)),
     )
     return model, record
+
+
+def _report(callback: Callback, stage: int, name: str, done: int, total: int, train: float, val: float) -> None:
+    callback(Progress(stage, name, done, total, train, val))
 
 
 def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise: bool):
@@ -248,7 +275,7 @@ def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise:
     return model, (pairs.y0, pairs.y1), (pairs.y0_val, pairs.y1_val), state_mse
 
 
-def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress):
+def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress, report):
     log_every = stage.log_every if stage.log_every is not None else max(1, stage.epochs // 1000)
     best, info = train_adam(
         model, train, val, loss_fn,
@@ -258,6 +285,7 @@ def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, pro
         checkpoint_every=10_000 if checkpoint is None else checkpoint.every,
         resume=checkpoint is not None and checkpoint.resume,
         settings={**settings, **dataclasses.asdict(stage), "log_every": log_every}, desc=type(model).__name__,
+        on_chunk=None if report is None else lambda done, lt, lv: report(done, stage.epochs, lt, lv),
     )
     rec = StageRecord(
         optimiser="Adam", settings=dataclasses.asdict(stage), iterations=info["epochs"],
@@ -267,7 +295,7 @@ def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, pro
     return best, rec, info["history"]
 
 
-def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, progress: bool):
+def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, progress: bool, report):
     """Every start minimised, the best kept if it beats `model` (see `QuasiNewton`)."""
     (X, T), (Xv, Tv) = train, val
     has_val = Xv.shape[0] > 0
@@ -319,6 +347,8 @@ def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int,
         else:
             x, hist = minimise(x0, stage.iterations, progress, desc)
         results.append((*losses(x), r, x, hist))
+        if report is not None:
+            report((r + 1) * stage.iterations, stage.restarts * stage.iterations, results[-1][1], results[-1][2])
     wall = time.perf_counter() - start
     crit, train_loss, val_loss, best_r, x, hist = min(results, key=lambda t: (t[0], t[3]))
     crit0, train0, val0 = losses(flat0)

@@ -45,9 +45,11 @@ def train_adam(
     resume: bool,
     settings: dict[str, Any],
     desc: str,
+    on_chunk: Callable[[int, float, float], None] | None = None,
 ):
     """Minimise `loss_fn(model, inputs, targets)` (a mean over samples) with Adam.
 
+    `on_chunk(epochs_done, train_loss, val_loss)` is called after every compiled chunk.
     Returns `(best_model, info)`: the weights with the lowest validation loss (training loss
     when there is no validation set) and a dict with the history and timings.
     """
@@ -182,6 +184,8 @@ def train_adam(
             epoch += k
             bar.update(k)
             bar.set_postfix(train=f"{lt[-1]:.3g}", val=f"{lv[-1]:.3g}", best=f"{float(carry[3]):.3g}")
+            if on_chunk is not None:
+                on_chunk(epoch, float(lt[-1]), float(lv[-1]))
             if not np.all(np.isfinite(lt)):
                 bad = int(e[np.argmax(~np.isfinite(lt))])
                 stopped = f"non-finite training loss at epoch {bad}; kept the best weights before it"
