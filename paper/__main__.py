@@ -1,9 +1,14 @@
 """`python -m paper`: reproduce the paper's experiments and print the paper's numbers beside ours.
 
-    python -m paper                   # every experiment at the quick profile, then the summary
-    python -m paper run E1 --full     # one (or more) experiments at the paper's budget
-    python -m paper list              # what is available
-    python -m paper table             # the summary of the results already on disk
+    python -m paper                         # every experiment at the quick profile, then the summary
+    python -m paper run E1 --full           # one (or more) experiments at the paper's budget
+    python -m paper --profile smoke         # every experiment in seconds (meaningless numbers)
+    python -m paper list                    # what is available
+    python -m paper table                   # the summary of the results in --out
+    python -m paper table --reference       # the committed --full results (paper/reference/)
+
+Runs write into `--out DIR` (default `./paper-results`, one folder per experiment); the
+committed reference results in `paper/reference/` are never written by a run.
 """
 
 from __future__ import annotations
@@ -12,9 +17,14 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 
-from ._experiment import RESULTS_DIR, atomic_write_text
+from integrators._files import atomic_write_text
+
+from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir
 from ._registry import EXPERIMENTS
+
+PROFILES = ("smoke", "quick", "full")
 
 
 def summary_table(results: dict[str, dict]) -> str:
@@ -29,22 +39,36 @@ def summary_table(results: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _load_saved() -> dict[str, dict]:
+def load_results(folder: Path) -> dict[str, dict]:
+    """The `metrics.json` of every experiment found in `folder`; a file that is not a JSON
+    object is skipped with a warning naming it."""
     out = {}
     for exp_id in EXPERIMENTS:
-        path = RESULTS_DIR / exp_id / "metrics.json"
-        if path.exists():
-            try:
-                out[exp_id] = json.loads(path.read_text())
-            except json.JSONDecodeError as err:
-                print(f"warning: {path} is not valid JSON ({err}); rerun `python -m paper run {exp_id}`")
+        path = folder / exp_id / "metrics.json"
+        if not path.exists():
+            continue
+        try:
+            metrics = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            print(f"warning: skipping {path}: not valid JSON ({err}); rerun `python -m paper run {exp_id}`",
+                  file=sys.stderr)
+            continue
+        if not isinstance(metrics, dict):
+            print(f"warning: skipping {path}: expected a JSON object, got {type(metrics).__name__}", file=sys.stderr)
+            continue
+        out[exp_id] = metrics
     return out
 
 
-def _run(ids: list[str], profile: str, progress: bool) -> int:
+def _run(ids: list[str], profile: str, progress: bool, out: Path) -> int:
     unknown = [i for i in ids if i not in EXPERIMENTS]
     if unknown:
         print(f"unknown experiment(s) {unknown}; available: {', '.join(EXPERIMENTS)}", file=sys.stderr)
+        return 2
+    try:
+        check_out_dir(out)
+    except ValueError as err:
+        print(err, file=sys.stderr)
         return 2
     results = {}
     t0 = time.perf_counter()
@@ -52,26 +76,38 @@ def _run(ids: list[str], profile: str, progress: bool) -> int:
         exp = EXPERIMENTS[exp_id]
         print(f"== {exp_id}: {exp.title} ({profile} profile)")
         t = time.perf_counter()
-        results[exp_id] = exp.execute(profile=profile, progress=progress)
-        print(f"   done in {time.perf_counter() - t:.0f} s -> {RESULTS_DIR / exp_id}")
+        results[exp_id] = exp.execute(profile=profile, progress=progress, out_dir=out / exp_id)
+        print(f"   done in {time.perf_counter() - t:.0f} s -> {out / exp_id}")
     table = summary_table(results)
     print()
     print(table)
-    print(f"total {time.perf_counter() - t0:.0f} s")
-    atomic_write_text(RESULTS_DIR / "summary.md", table)
+    print(f"total {time.perf_counter() - t0:.0f} s; results in {out}")
+    atomic_write_text(out / "summary.md", table)
     return 0
+
+
+def _options(parser: argparse.ArgumentParser, top: bool) -> None:
+    # On the top level and on `run` alike; the subcommand's value wins when given there.
+    default = (lambda v: v) if top else (lambda v: argparse.SUPPRESS)
+    parser.add_argument("--out", type=Path, default=default(DEFAULT_OUT),
+                        help="folder for the results (default ./paper-results)")
+    parser.add_argument("--profile", choices=PROFILES, default=default(None),
+                        help="training budget: smoke (seconds), quick (default, < 10 min), full (the paper's)")
+    parser.add_argument("--full", action="store_true", default=default(False), help="short for --profile full")
+    parser.add_argument("--no-progress", action="store_true", default=default(False), help="no progress bars")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m paper", description=__doc__.splitlines()[0])
+    _options(parser, top=True)
     sub = parser.add_subparsers(dest="command")
     run = sub.add_parser("run", help="run experiments")
     run.add_argument("ids", nargs="+", help=f"experiment ids ({', '.join(EXPERIMENTS)})")
-    run.add_argument("--full", action="store_true", help="the paper's training budget")
-    run.add_argument("--no-progress", action="store_true", help="no progress bars")
-    run.add_argument("--profile", choices=("smoke", "quick", "full"), help=argparse.SUPPRESS)
+    _options(run, top=False)
     sub.add_parser("list", help="list the experiments")
-    sub.add_parser("table", help="print the summary of saved results")
+    table = sub.add_parser("table", help="print the summary of saved results")
+    table.add_argument("--out", type=Path, default=argparse.SUPPRESS, help="folder to read (default ./paper-results)")
+    table.add_argument("--reference", action="store_true", help=f"the committed reference results ({REFERENCE_DIR})")
     args = parser.parse_args(argv)
 
     if args.command == "list":
@@ -79,16 +115,19 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{exp_id}: {exp.title}")
         return 0
     if args.command == "table":
-        saved = _load_saved()
+        folder = REFERENCE_DIR if args.reference else args.out
+        saved = load_results(folder)
         if not saved:
-            print("no results yet: run `python -m paper`")
+            print(f"no results in {folder}: run `python -m paper --out {folder}` (or read the committed "
+                  "ones with `python -m paper table --reference`)")
             return 0
         print(summary_table(saved))
         return 0
-    if args.command == "run":
-        profile = args.profile or ("full" if args.full else "quick")
-        return _run(args.ids, profile, not args.no_progress)
-    return _run(list(EXPERIMENTS), "quick", True)
+    if args.profile and args.full and args.profile != "full":
+        parser.error(f"--full and --profile {args.profile} disagree")
+    profile = args.profile or ("full" if args.full else "quick")
+    ids = args.ids if args.command == "run" else list(EXPERIMENTS)
+    return _run(ids, profile, not args.no_progress, args.out)
 
 
 if __name__ == "__main__":

@@ -6,13 +6,17 @@ import abc
 import dataclasses
 import json
 import math
-import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-RESULTS_DIR = Path(__file__).resolve().parent / "results"
+from integrators._files import atomic_write_text
+
+# The committed results of `python -m paper run ... --full`, quoted by the README and
+# BENCHMARKS.md: read by `python -m paper table --reference`, never written by a run.
+REFERENCE_DIR = Path(__file__).resolve().parent / "reference"
+# Where runs write, relative to the working directory.
+DEFAULT_OUT = Path("paper-results")
 
 # The keys every experiment's metrics.json carries (issue 4), for ours and for the baseline.
 METRIC_KEYS = (
@@ -51,20 +55,6 @@ class PaperValue:
     text: str
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write via a temporary file renamed into place: an interruption never leaves half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {k: _jsonable(v) for k, v in x.items()}
@@ -98,6 +88,16 @@ def fmt(x: Any) -> str:
     return f"{x:.2e}"
 
 
+def check_out_dir(out_dir: Path) -> None:
+    """ValueError if `out_dir` lies inside the committed reference results."""
+    resolved = Path(out_dir).resolve()
+    if resolved == REFERENCE_DIR or REFERENCE_DIR in resolved.parents:
+        raise ValueError(
+            f"out_dir {str(out_dir)!r} is inside {REFERENCE_DIR}, the committed reference results, "
+            "which a run never overwrites; write elsewhere (python -m paper --out DIR)"
+        )
+
+
 class AbstractExperiment(abc.ABC):
     """One experiment of the paper: `run(profile)` returns its metrics (ours and baseline)."""
 
@@ -121,7 +121,10 @@ class AbstractExperiment(abc.ABC):
         """Run at `profile` ("quick" or "full"), write figures into `out_dir`, return metrics."""
 
     def execute(self, profile: str = "quick", progress: bool = True, out_dir: Path | None = None):
-        out_dir = RESULTS_DIR / self.id if out_dir is None else Path(out_dir)
+        """Run, then write `metrics.json` and `table.md` (and the figures, data sets and models)
+        into `out_dir` (default `./paper-results/<id>`); returns the metrics."""
+        out_dir = Path(DEFAULT_OUT / self.id if out_dir is None else out_dir)
+        check_out_dir(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
         metrics = self.run(profile, out_dir, progress)

@@ -47,7 +47,7 @@ PROFILES = {
     # on the committed data: 32,000 mini-batch Adam steps (800 epochs of 40 batches of 1000,
     # 300 s) reached MSE 7.2e-6 and a 0.83% energy error (commit d61c18e); 3000 full-batch
     # L-BFGS-B iterations from the random start with normalised inputs/outputs (588 s) reach
-    # 5.0e-6 and 0.31% (paper/results/E5).
+    # 5.0e-6 and 0.31% (paper/reference/E5).
     "full": Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=1000,
                     refine_iterations=3000, normalise=True),
 }
