@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from paper.__main__ import main, summary_table
-from paper._experiment import METRIC_KEYS
+from paper._experiment import METRIC_KEYS, REFERENCE_DIR
 from paper._registry import EXPERIMENTS
 
 EPS = np.finfo(np.float64).eps
@@ -52,3 +52,49 @@ def test_cli_list(capsys):
 def test_cli_unknown_experiment(capsys):
     assert main(["run", "E99", "--no-progress"]) == 2
     assert "unknown experiment" in capsys.readouterr().err
+
+
+def _tree(folder):
+    """Every file below `folder` with its size and modification time."""
+    return {(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
+
+
+def test_cli_run_writes_only_to_out(tmp_path, monkeypatch):
+    package = REFERENCE_DIR.parent
+    before = _tree(package)
+    monkeypatch.chdir(tmp_path)  # the default --out is relative to the working directory
+    assert main(["run", "E6", "--profile", "smoke", "--no-progress"]) == 0
+    metrics = json.loads((tmp_path / "paper-results" / "E6" / "metrics.json").read_text())
+    assert metrics["profile"] == "smoke"
+    assert "E6 (smoke)" in (tmp_path / "paper-results" / "summary.md").read_text()
+    after = {entry for entry in _tree(package) if "__pycache__" not in entry[0]}
+    assert after == {entry for entry in before if "__pycache__" not in entry[0]}
+
+
+def test_run_refuses_the_reference_folder(tmp_path, capsys):
+    with pytest.raises(ValueError, match="reference"):
+        EXPERIMENTS["E6"].execute(profile="smoke", progress=False, out_dir=REFERENCE_DIR / "E6")
+    assert main(["run", "E6", "--profile", "smoke", "--out", str(REFERENCE_DIR)]) == 2
+    assert "never overwrites" in capsys.readouterr().err
+
+
+def test_cli_table(tmp_path, capsys):
+    assert main(["table", "--out", str(tmp_path)]) == 0
+    assert f"no results in {tmp_path}" in capsys.readouterr().out
+    (tmp_path / "E1").mkdir()
+    (tmp_path / "E1" / "metrics.json").write_text("{not json")
+    (tmp_path / "E6").mkdir()
+    (tmp_path / "E6" / "metrics.json").write_text(
+        (REFERENCE_DIR / "E6" / "metrics.json").read_text()
+    )
+    assert main(["table", "--out", str(tmp_path)]) == 0
+    captured = capsys.readouterr()
+    assert "E1" in captured.err and "not valid JSON" in captured.err
+    assert "| E6 (full) |" in captured.out and "| E1 " not in captured.out
+
+
+def test_cli_table_reference(capsys):
+    assert main(["table", "--reference"]) == 0
+    out = capsys.readouterr().out
+    for exp_id in EXPERIMENTS:  # every experiment has committed --full results
+        assert f"| {exp_id} (full) |" in out
