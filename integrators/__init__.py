@@ -6,6 +6,7 @@ from . import splitting as splitting
 from ._diagnostics import (
     DiagnosticsReport as DiagnosticsReport,
     diagnostics as diagnostics,
+    error_growth_rate as error_growth_rate,
     plot_diagnostics as plot_diagnostics,
 )
 from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -35,6 +37,11 @@ class DiagnosticsReport:
     - `energy`: $E(t) = H(y(t))$; `energy_error_relative`: $(E(t) - E(0))/\langle E\rangle$
       (the paper's relative energy error), with the same safe denominator.
     - `trajectory_error`: $\|y(t) - y_\text{ref}(t)\|_2$ per time, or `None` without reference.
+    - `integrals`, `integral_error_relative`: name $\to I(t)$ and $(I(t) - I(0))/\langle I\rangle$
+      for the extra conserved quantities passed to `diagnostics` (e.g. the charged particle's
+      $I = x_1p_2 - x_2p_1 + r^3/3$).
+    - `diverged_at_step`: the first step at which some trajectory is not finite (everything
+      above covers the steps before it), or `None`.
     """
 
     times: np.ndarray
@@ -44,6 +51,9 @@ class DiagnosticsReport:
     energy: np.ndarray
     energy_error_relative: np.ndarray
     trajectory_error: np.ndarray | None
+    integrals: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    integral_error_relative: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    diverged_at_step: int | None = None
 
     @property
     def max_casimir_drift(self) -> float:
@@ -80,9 +90,24 @@ class DiagnosticsReport:
     def mean_trajectory_error(self) -> float | None:
         return None if self.trajectory_error is None else float(np.mean(self.trajectory_error))
 
+    def max_integral_error(self, name: str) -> float:
+        """$\\max_t |I(t) - I(0)|/|\\langle I\rangle|$ of the integral `name`."""
+        if name not in self.integral_error_relative:
+            raise KeyError(f"no integral {name!r}; this report has {sorted(self.integral_error_relative)}")
+        return float(np.max(np.abs(self.integral_error_relative[name])))
+
+    def error_growth_rate(self, window: tuple[float, float]) -> float:
+        """`error_growth_rate` of the largest trajectory error at each time over `window`."""
+        if self.trajectory_error is None:
+            raise ValueError("error_growth_rate needs a report made with a reference")
+        error = self.trajectory_error.reshape(-1, self.trajectory_error.shape[-1]).max(axis=0)
+        return error_growth_rate(self.times[: len(error)], error, window)
+
     def summary(self) -> dict[str, float | None]:
         """The scalar figures, for tables and logs."""
         return {
+            "diverged_at_step": self.diverged_at_step,
+            **{f"max_integral_error[{k}]": self.max_integral_error(k) for k in self.integral_error_relative},
             "max_casimir_drift": self.max_casimir_drift,
             "mean_casimir_drift": self.mean_casimir_drift,
             "max_casimir_drift_relative": self.max_casimir_drift_relative,
@@ -110,17 +135,16 @@ def _as_path(trajectory: Any, name: str, dim: int) -> tuple[np.ndarray, np.ndarr
         raise TypeError(f"{name} must be an array (T, {dim}) or (n_traj, T, {dim}); got {type(trajectory).__name__}") from err
     if arr.ndim not in (2, 3) or arr.shape[-1] != dim:
         raise ValueError(f"{name} must have shape (T, {dim}) or (n_traj, T, {dim}); got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-        raise ValueError(f"{name} must be finite; found {arr[bad]} at index {bad}")
     return arr, None
 
 
 def diagnostics(
-    trajectory: Any,
+    trajectory: ArrayLike | Trajectories,
     system: AbstractPoissonSystem,
-    reference: Any = None,
-    times: Any = None,
+    reference: ArrayLike | Trajectories | None = None,
+    times: ArrayLike | None = None,
+    *,
+    integrals: dict[str, Callable[[np.ndarray], ArrayLike]] | None = None,
 ) -> DiagnosticsReport:
     r"""Casimir drift, relative energy error and (with `reference`) the error over time.
 
@@ -131,6 +155,12 @@ def diagnostics(
     - `reference`: same shape (or a `Trajectories`), e.g. the ground truth, or `None`.
     - `times`: `(T,)`; default the times of `trajectory` or `reference` if either is a
       `Trajectories`, else the step index `0..T-1`.
+    - `integrals`: name $\to$ `f(y)`, further conserved quantities evaluated on states
+      `(..., dim)` and reported like the energy.
+
+    A trajectory that stops being finite (a diverged rollout) is reported up to the step
+    before the first non-finite state of any trajectory (`diverged_at_step`); a non-finite
+    initial state or reference is a `ValueError`.
 
     **Returns:** a `DiagnosticsReport` (see there for the definitions).
     """
@@ -146,18 +176,61 @@ def diagnostics(
     if times.shape != (T,):
         raise ValueError(f"times must have shape ({T},) to match trajectory; got {times.shape}")
 
+    if ref is not None and ref.shape != y.shape:
+        raise ValueError(f"reference must have the trajectory's shape {y.shape}; got {ref.shape}")
+    finite = np.all(np.isfinite(y), axis=-1).reshape(-1, T).all(axis=0)  # (T,)
+    diverged = None if finite.all() else int(np.argmin(finite))
+    if diverged == 0:
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(y[..., 0, :]))[0])
+        raise ValueError(f"trajectory must start finite; the initial state at index {bad} is {y[..., 0, :][bad]}")
+    if ref is not None and not np.all(np.isfinite(ref)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(ref))[0])
+        raise ValueError(f"reference must be finite; found {ref[bad]} at index {bad}")
+    if diverged is not None:
+        y, times = y[..., :diverged, :], times[:diverged]
+        ref = None if ref is None else ref[..., :diverged, :]
+
     C = np.asarray(system.casimirs(y))  # (..., T, k)
     dC = C - C[..., :1, :]
     dC_rel = dC / _safe_denominator(np.mean(C, axis=-2, keepdims=True))
     E = np.asarray(system.hamiltonian(y))  # (..., T)
     dE_rel = (E - E[..., :1]) / _safe_denominator(np.mean(E, axis=-1, keepdims=True))
 
+    values, errors = {}, {}
+    for name, f in (integrals or {}).items():
+        if not callable(f):
+            raise TypeError(f"integrals[{name!r}] must be callable f(y) -> values; got {f!r}")
+        I = np.broadcast_to(np.asarray(f(y), dtype=np.float64), E.shape)
+        values[name] = I
+        errors[name] = (I - I[..., :1]) / _safe_denominator(np.mean(I, axis=-1, keepdims=True))
     error = None
     if ref is not None:
-        if ref.shape != y.shape:
-            raise ValueError(f"reference must have the trajectory's shape {y.shape}; got {ref.shape}")
         error = np.linalg.norm(y - ref, axis=-1)
-    return DiagnosticsReport(times, C, dC, dC_rel, E, dE_rel, error)
+    return DiagnosticsReport(times, C, dC, dC_rel, E, dE_rel, error, values, errors, diverged)
+
+
+def error_growth_rate(times: ArrayLike, error: ArrayLike, window: tuple[float, float]) -> float:
+    r"""The rate $\lambda$ of $e(t) \approx c\,e^{\lambda t}$: least-squares slope of $\log e$
+    against $t$ over the points with $t$ in `window` $= (t_0, t_1)$ and $e > 0$.
+
+    Raises `ValueError` for mismatched shapes, a window with $t_0 \ge t_1$, or fewer than two
+    usable points in it."""
+    times = np.asarray(times, dtype=np.float64)
+    error = np.asarray(error, dtype=np.float64)
+    if times.ndim != 1 or times.shape != error.shape:
+        raise ValueError(f"times and error must be 1-D of the same shape; got {times.shape} and {error.shape}")
+    try:
+        t0, t1 = (float(w) for w in window)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"window must be a pair (t_min, t_max); got {window!r}") from err
+    if not t0 < t1:
+        raise ValueError(f"window must have t_min < t_max; got {window!r}")
+    mask = (times >= t0) & (times <= t1) & (error > 0) & np.isfinite(error)
+    if mask.sum() < 2:
+        raise ValueError(
+            f"error_growth_rate needs at least 2 points with error > 0 in the window {window}; got {int(mask.sum())}"
+        )
+    return float(np.polyfit(times[mask], np.log(error[mask]), 1)[0])
 
 
 def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, title: str = "") -> None:

@@ -13,25 +13,24 @@ from learn import AbstractLearnedMap, TrainingRecord
 
 
 def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, reference: np.ndarray,
-                    defect_points: int = 200) -> dict[str, Any]:
+                    defect_points: int = 200, integrals: dict | None = None) -> dict[str, Any]:
     """Metrics of `model` (trained as `record` says) rolled out from `reference[:, 0]` for as
     many steps as `reference` has.
 
     `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`. Energy and Casimir errors are
     relative to the time mean as in the paper (`(E(t) - E(0)) / <E>`); maxima are over all
-    trajectories and times, means over both. Returns the metrics, the rollout and the reports.
+    trajectories and times, means over both; `integrals` (name -> function of the state) are
+    reported as `<name>_rel_err_max` the same way. Returns the metrics, the rollout and the report.
     """
     reference = np.asarray(reference)
     n_points = reference.shape[1]
     t0 = time.perf_counter()
     y = np.asarray(model.rollout(reference[:, 0], n_points - 1))
     rollout_time = time.perf_counter() - t0
-    # An unstructured baseline may blow up: measure it on the steps before the first
-    # non-finite state and say where it diverged.
-    bad = ~np.all(np.isfinite(y), axis=(0, 2))
-    n_ok = int(np.argmax(bad)) if bad.any() else n_points
-    n_ok = max(n_ok, 1)
-    report = it.diagnostics(y[:, :n_ok], system, reference=reference[:, :n_ok])
+    # An unstructured baseline may blow up: diagnostics measures it on the steps before the
+    # first non-finite state and says where it diverged.
+    report = it.diagnostics(y, system, reference=reference, integrals=integrals)
+    n_ok = n_points if report.diverged_at_step is None else report.diverged_at_step
     energy = np.abs(report.energy_error_relative)
     pick_from = y[:, :n_ok].reshape(-1, y.shape[-1])
     rng = np.random.default_rng(0)
@@ -48,22 +47,25 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, r
         "wall_time_s": record.wall_time_s,
         "rollout_time_s": rollout_time,
     }
-    if n_ok < n_points:
-        metrics["diverged_at_step"] = n_ok
+    for name in integrals or {}:
+        metrics[f"{name}_rel_err_max"] = report.max_integral_error(name)
+    if report.diverged_at_step is not None:
+        metrics["diverged_at_step"] = report.diverged_at_step
     return {"metrics": metrics, "rollout": y, "report": report}
 
 
 Trained = tuple[AbstractLearnedMap, TrainingRecord]
 
 
-def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_states=None, label="LPNet", show=0):
+def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_states=None, label="LPNet", show=0,
+            integrals=None):
     """Metrics of `ours = (model, record)` with the baseline's beside them, and the paper's
     figures for trajectory `show` of `reference` (a `Trajectories`).
 
     Returns `(metrics, rollouts)`, `rollouts = {"ours": ..., "baseline": ...}` of shape
     `(n_traj, n_steps+1, dim)`, so that experiments measure more without rolling out again."""
-    res = measure_rollout(*ours, system, reference.states)
-    bres = measure_rollout(*baseline, system, reference.states)
+    res = measure_rollout(*ours, system, reference.states, integrals=integrals)
+    bres = measure_rollout(*baseline, system, reference.states, integrals=integrals)
     metrics = dict(res["metrics"])
     metrics["baseline"] = bres["metrics"]
     truth = reference.states[show]
@@ -76,7 +78,9 @@ def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_s
         print(f"  ({err}; skipping figures)")
         metrics["figures"] = []
     # Ground truth's own conservation, for the paper's "more precise than the ground truth".
-    gt = it.diagnostics(reference.states, system)
+    gt = it.diagnostics(reference.states, system, integrals=integrals)
+    for name in integrals or {}:
+        metrics[f"ground_truth_{name}_rel_err_max"] = gt.max_integral_error(name)
     if system.n_casimirs:
         metrics["ground_truth_casimir_rel_drift_max"] = gt.max_casimir_drift_relative
     metrics["ground_truth_energy_rel_err_max"] = gt.max_energy_error
@@ -84,7 +88,7 @@ def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_s
 
 
 def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,
-                        full_vectors=False):
+                        full_vectors=False, integrals=None):
     """A G-LPNet (`n_modules` modules, exactly Poisson) trained on the same pairs (all of them,
     as the paper trains G-LPNets) and rolled out from the same initial conditions: what an
     exact Poisson map makes of the same data. Returns `(model, metrics)`."""
@@ -94,7 +98,7 @@ def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, 
         validation_fraction=0.0, seed=0, progress=progress,
     )
     gnet.save(out_dir / "glpnet.h5")
-    return gnet, measure_rollout(gnet, record, system, reference.states)["metrics"]
+    return gnet, measure_rollout(gnet, record, system, reference.states, integrals=integrals)["metrics"]
 
 
 def refine_after_adam(adam: Trained, data, iterations, system, reference, progress):

@@ -64,13 +64,6 @@ Y0 = np.array([1.0, 0.5, 0.5, 1.0])  # (p1, p2, x1, x2)
 HIDDEN = (32, 32, 32)
 
 
-def integral_rel_err_max(system, states) -> float:
-    r"""$\max |I(t) - I(0)| / |\langle I\rangle|$ over trajectories and times (as the paper's
-    energy error: relative to the time mean)."""
-    I = np.asarray(system.angular_integral(np.asarray(states)))
-    return float(np.max(np.abs(I - I[:, :1]) / np.abs(np.mean(I, axis=1, keepdims=True))))
-
-
 class E4(AbstractExperiment):
     id = "E4"
     title = "charged particle in a magnetic field, LPNet from one trajectory"
@@ -111,24 +104,15 @@ class E4(AbstractExperiment):
         net.save(out_dir / "lpnet.h5")
         record.save(out_dir / "lpnet-training.h5")
         base = learn.fit(learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data, **fit)
-        metrics, rollouts = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
-        y0s = reference.states[:, 0]
-        n = reference.states.shape[1] - 1
-        metrics["integral_rel_err_max"] = integral_rel_err_max(system, rollouts["ours"])
-        metrics["baseline"]["integral_rel_err_max"] = integral_rel_err_max(
-            system, rollouts["baseline"]
-        )
-        metrics["ground_truth_integral_rel_err_max"] = integral_rel_err_max(
-            system, reference.states
-        )
+        # The second integral I = x1 p2 - x2 p1 + r^3/3, reported like the energy.
+        integrals = {"integral": system.angular_integral}
+        metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states,
+                             integrals=integrals)
         if P.glpnet_iterations:
-            gnet, metrics["glpnet"] = glpnet_on_same_data(
+            metrics["glpnet"] = glpnet_on_same_data(
                 system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
-                n_modules=P.glpnet_modules, full_vectors=True,
-            )
-            metrics["glpnet"]["integral_rel_err_max"] = integral_rel_err_max(
-                system, gnet.rollout(y0s, n)
-            )
+                n_modules=P.glpnet_modules, full_vectors=True, integrals=integrals,
+            )[1]
         n_train = round(0.8 * (P.n_points - 1))
         metrics["adam_steps"] = P.epochs * (n_train // P.batch_size if P.batch_size else 1)
         metrics["start_point"] = start

@@ -59,14 +59,6 @@ PREDICTION_STEPS = 100
 GROWTH_WINDOW = (1.0, 10.0)
 
 
-def error_growth_rate(times: np.ndarray, error: np.ndarray, window=GROWTH_WINDOW) -> float:
-    """Least-squares slope of log(error) against t over `window`: error ~ exp(rate t)."""
-    mask = (times >= window[0]) & (times <= window[1]) & (error > 0) & np.isfinite(error)
-    if mask.sum() < 2:
-        return float("nan")
-    return float(np.polyfit(times[mask], np.log(error[mask]), 1)[0])
-
-
 class E5(AbstractExperiment):
     id = "E5"
     title = "Kirchhoff's equations (underwater vehicle, se(3)*), LPNet from 500 trajectories"
@@ -121,8 +113,8 @@ class E5(AbstractExperiment):
             (rollouts["ours"], metrics),
             (rollouts["baseline"], metrics["baseline"]),
         ):
-            err = it.diagnostics(y[0], system, reference=reference.states[0]).trajectory_error
-            target["error_growth_rate"] = error_growth_rate(times, np.asarray(err).reshape(-1))
+            report = it.diagnostics(y[0], system, reference=reference.states[0], times=times)
+            target["error_growth_rate"] = report.error_growth_rate(GROWTH_WINDOW)
         metrics["lyapunov_exponent"] = {
             "t10": it.lyapunov_exponent(system, y0, 10.0),
             f"t{P.lyapunov_long_time:g}": it.lyapunov_exponent(system, y0, P.lyapunov_long_time),
