@@ -4,7 +4,6 @@ reference, and a plot of them."""
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable
 from typing import Any
 
@@ -231,37 +230,3 @@ def error_growth_rate(times: ArrayLike, error: ArrayLike, window: tuple[float, f
             f"error_growth_rate needs at least 2 points with error > 0 in the window {window}; got {int(mask.sum())}"
         )
     return float(np.polyfit(times[mask], np.log(error[mask]), 1)[0])
-
-
-def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, title: str = "") -> None:
-    """Plot $|E(t)-E(0)|/|\\langle E\\rangle|$, $|C(t)-C(0)|/|\\langle C\\rangle|$ and the
-    trajectory error (log scale, one line per trajectory) to `path` (any matplotlib format)."""
-    if not isinstance(report, DiagnosticsReport):
-        raise TypeError(f"report must be a DiagnosticsReport; got {type(report).__name__}")
-    try:
-        from matplotlib.figure import Figure  # no pyplot: no GUI backend, no global state
-    except ImportError as err:
-        raise ImportError(
-            "plot_diagnostics needs matplotlib: pip install 'liepoisson[paper]'"
-        ) from err
-
-    def lines(a: np.ndarray) -> np.ndarray:  # (T, n_lines) for ax.semilogy
-        a = np.abs(a)
-        a = a.reshape(-1, a.shape[-1]) if a.ndim > 1 else a[None]
-        return np.where(a.T > 0, a.T, np.nan)  # exact zeros (t = 0) have no place on a log axis
-
-    panels = [("relative energy error", report.energy_error_relative)]
-    if report.casimirs.shape[-1]:
-        drift = np.moveaxis(report.casimir_drift_relative, -1, 0)  # one panel line per Casimir
-        panels.append(("relative Casimir drift", drift.reshape(-1, drift.shape[-1])))
-    if report.trajectory_error is not None:
-        panels.append(("trajectory error", report.trajectory_error))
-    fig = Figure(figsize=(5.0, 2.2 * len(panels)), layout="constrained")
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
-    for ax, (label, data) in zip(axes, panels):
-        ax.semilogy(report.times, lines(data), lw=0.8)
-        ax.set_ylabel(label)
-    axes[-1].set_xlabel("t")
-    if title:
-        axes[0].set_title(title)
-    fig.savefig(os.fspath(path))

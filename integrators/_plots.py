@@ -121,3 +121,33 @@ def plot_comparison(
     fig.savefig(out_dir / "trajectory_error.png", dpi=110)
     files.append("trajectory_error.png")
     return files
+
+
+def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, title: str = "") -> None:
+    """Plot $|E(t)-E(0)|/|\\langle E\\rangle|$, $|C(t)-C(0)|/|\\langle C\\rangle|$ and the
+    trajectory error (log scale, one line per trajectory) to `path` (any matplotlib format)."""
+    if not isinstance(report, DiagnosticsReport):
+        raise TypeError(f"report must be a DiagnosticsReport; got {type(report).__name__}")
+
+    def lines(a: np.ndarray) -> np.ndarray:  # (T, n_lines) for ax.semilogy
+        a = np.abs(a)
+        a = a.reshape(-1, a.shape[-1]) if a.ndim > 1 else a[None]
+        return np.where(a.T > 0, a.T, np.nan)  # exact zeros (t = 0) have no place on a log axis
+
+    panels = [("relative energy error", report.energy_error_relative)]
+    if report.casimirs.shape[-1]:
+        drift = np.moveaxis(report.casimir_drift_relative, -1, 0)  # one panel line per Casimir
+        panels.append(("relative Casimir drift", drift.reshape(-1, drift.shape[-1])))
+    for name, values in report.integral_error_relative.items():
+        panels.append((f"relative error of {name}", values))
+    if report.trajectory_error is not None:
+        panels.append(("trajectory error", report.trajectory_error))
+    fig = figure(figsize=(5.0, 2.2 * len(panels)), layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, data) in zip(axes, panels):
+        ax.semilogy(report.times, lines(data), lw=0.8)
+        ax.set_ylabel(label)
+    axes[-1].set_xlabel("t")
+    if title:
+        axes[0].set_title(title)
+    fig.savefig(os.fspath(path))
