@@ -1,5 +1,7 @@
 """Classical splitting: observed order against heyoka, Casimirs to round-off, shapes, validation."""
 
+import equinox as eqx
+import jax
 import numpy as np
 import pytest
 
@@ -21,6 +23,7 @@ CASES = [(m, BODY, PI0) for m in splitting.METHODS if m is not splitting.BlanesM
 
 
 def _flows_per_step(method) -> int:
+    """Exact sub-flows of one step, counted from the methods' definitions (not their code)."""
     n = len(method.system.hamiltonian_splitting())
     if isinstance(method, splitting.LieTrotter):
         return n
@@ -30,16 +33,20 @@ def _flows_per_step(method) -> int:
     return strang * len(getattr(method, "coefficients", [1.0]))
 
 
+# The step map as a pytree argument: h is traced, so one compilation serves every step size.
+_jitted_step = jax.jit(lambda method, y: method.step(y))
+
+
 @pytest.mark.parametrize("cls, system, y0", CASES, ids=lambda v: getattr(v, "__name__", type(v).__name__))
 def test_observed_order(cls, system, y0):
-    method = cls(system)
     steps = STEPS[cls.order]
     ref = it.ground_truth(system, y0, h=1.0, n_steps=1).states[0, -1]
     errors = []
     for n in steps:  # `step` compiles once for all h (rollout would recompile per n_steps)
+        method = cls(system, h=1.0 / n)
         y = y0
         for _ in range(n):
-            y = method.step(y, 1.0 / n)
+            y = _jitted_step(method, y)
         errors.append(np.linalg.norm(np.asarray(y) - ref))
     slope = np.polyfit(np.log(steps), -np.log(errors), 1)[0]
     assert abs(slope - cls.order) < 0.1, (errors, slope)
@@ -47,9 +54,9 @@ def test_observed_order(cls, system, y0):
 
 @pytest.mark.parametrize("cls", [m for m in splitting.METHODS if m is not splitting.BlanesMoan4])
 def test_casimir_round_off_over_1e4_steps(cls):
-    method = cls(BODY)
+    method = cls(BODY, h=0.1)
     n_steps = 10_000
-    ys = np.asarray(method.rollout(PI0, 0.1, n_steps))
+    ys = np.asarray(method.rollout(PI0, n_steps))
     C = np.asarray(BODY.casimirs(ys))[:, 0]
     drift = np.max(np.abs(C - C[0])) / C[0]
     # Each exact sub-flow is a rotation that changes |Pi|^2 by a few eps (relative); those
@@ -60,7 +67,7 @@ def test_casimir_round_off_over_1e4_steps(cls):
 
 
 def test_blanes_moan_casimir_round_off():
-    ys = np.asarray(splitting.BlanesMoan4(PENDULUM).rollout([0.0, 1.5, 2.35], 0.1, 10_000))
+    ys = np.asarray(splitting.BlanesMoan4(PENDULUM, h=0.1).rollout([0.0, 1.5, 2.35], 10_000))
     C = np.asarray(PENDULUM.casimirs(ys))[:, 0]
     scale = np.max(np.abs(ys[:, 2]))  # C = r - u^2 - v^2 cancels terms of size |r|
     assert np.max(np.abs(C - C[0])) < 10 * np.sqrt(13e4) * EPS * scale
@@ -74,34 +81,37 @@ def test_blanes_moan_casimir_round_off():
 def test_other_systems_strang_close_to_ground_truth(system):
     y0 = {"HeavyTop": [0.3, -0.2, 0.5, 0.1, 0.6, 0.79], "Kirchhoff": [1, 1, 1, -1, 1, 2], "ChargedParticle": [1, 0.5, 0.5, 1]}[system.name]
     ref = it.ground_truth(system, y0, 0.01, 100).states[0]
-    ys = np.asarray(splitting.Strang(system).rollout(y0, 0.01, 100))
+    ys = np.asarray(splitting.Strang(system, h=0.01).rollout(y0, 100))
     np.testing.assert_allclose(ys, ref, atol=1e-4)  # Strang: O(h^2) over t = 1
 
 
 def test_shapes_and_batching():
-    method = splitting.Strang(BODY)
+    method = splitting.Strang(BODY, h=0.1)
     y0s = PI0 + np.random.default_rng(0).uniform(-0.1, 0.1, (5, 3))
-    many = method.rollout(y0s, 0.1, 7)
+    many = method.rollout(y0s, 7)
     assert many.shape == (5, 8, 3) and many.dtype == np.float64
-    one = method.rollout(y0s[2], 0.1, 7)
+    one = method.rollout(y0s[2], 7)
     assert one.shape == (8, 3)
     np.testing.assert_allclose(many[2], one, rtol=0, atol=4 * EPS)
     np.testing.assert_array_equal(many[:, 0], y0s)
-    np.testing.assert_allclose(method.step(y0s, 0.1), many[:, 1], rtol=0, atol=4 * EPS)
-    assert method.step(PI0, 0.1).shape == (3,)
+    # `step` takes one state; many states go through jax.vmap
+    np.testing.assert_allclose(jax.vmap(method.step)(y0s), many[:, 1], rtol=0, atol=4 * EPS)
+    assert method.step(PI0).shape == (3,)
 
 
 def test_strang_is_symmetric():
-    method = splitting.Strang(BODY)
-    # Phi_{-h} o Phi_h = id: step backwards by flowing the pieces for negative time
-    y1 = np.asarray(method.step(PI0, 0.3))
-    back = method._step(y1, -0.3)
+    method = splitting.Strang(BODY, h=0.3)
+    # Phi_{-h} o Phi_h = id: step backwards by flowing the pieces for negative time (the
+    # constructor takes h > 0 only; tree_at builds the same method with h = -0.3)
+    backwards = eqx.tree_at(lambda m: m.h, method, -0.3)
+    y1 = np.asarray(method.step(PI0))
+    back = np.asarray(backwards.step(y1))
     np.testing.assert_allclose(back, PI0, rtol=0, atol=8 * EPS)
 
 
 def test_blanes_moan_needs_two_terms():
     with pytest.raises(ValueError, match=r"RigidBody.*3 pieces"):
-        splitting.BlanesMoan4(BODY)
+        splitting.BlanesMoan4(BODY, h=0.1)
 
 
 @pytest.mark.parametrize(
@@ -109,8 +119,11 @@ def test_blanes_moan_needs_two_terms():
     [
         ({"h": 0.0}, ValueError, ["h", "> 0", "0.0"]),
         ({"h": -1.0}, ValueError, ["h", "-1.0"]),
-        ({"n_steps": 0}, ValueError, ["n_steps", "0"]),
+        ({"h": "0.1"}, TypeError, ["h", "str"]),
+        ({"n_steps": -1}, ValueError, ["n_steps", "-1"]),
         ({"n_steps": 1.5}, TypeError, ["n_steps", "1.5"]),
+        ({"save_every": 2}, ValueError, ["save_every", "divide", "3"]),
+        ({"save_every": 0}, ValueError, ["save_every", "0"]),
         ({"y0": [np.nan, 0, 1]}, ValueError, ["y0", "finite"]),
         ({"y0": [1.0, 2.0]}, ValueError, ["y0", "(2,)"]),
     ],
@@ -118,11 +131,16 @@ def test_blanes_moan_needs_two_terms():
 def test_validation(kwargs, error, words):
     args = {"y0": PI0, "h": 0.1, "n_steps": 3} | kwargs
     with pytest.raises(error) as info:
-        splitting.Strang(BODY).rollout(**args)
+        h = args.pop("h")
+        splitting.Strang(BODY, h=h).rollout(**args)
     for w in words:
         assert w in str(info.value)
 
 
+def test_n_steps_zero_is_the_initial_state():
+    np.testing.assert_array_equal(splitting.Strang(BODY, h=0.1).rollout(PI0, 0), PI0[None])
+
+
 def test_system_type_checked():
     with pytest.raises(TypeError, match="system"):
-        splitting.Strang("RigidBody")
+        splitting.Strang("RigidBody", h=0.1)

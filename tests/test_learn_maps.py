@@ -1,6 +1,7 @@
 """learn maps: LPNet, GLPNet and MLPBaseline as maps (no training): conservation, Poisson
 defect, rollout shapes, input errors."""
 
+import jax
 import numpy as np
 import pytest
 
@@ -28,10 +29,10 @@ def glpnet(rb):
 
 def test_parameter_counts(rb):
     net = learn.LPNet(rb, hidden=(16, 16, 16))
-    n = sum(x.size for x in __import__("jax").tree_util.tree_leaves(net))
-    assert n == 659  # the paper's count for the rigid body
+    # the paper's count for the rigid body: (3 + 1) 16 + 2 (16 + 1) 16 + (16 + 1) 3
+    assert net.n_parameters == 659
     g = learn.GLPNet(rb, n_modules=6)
-    assert g.a.size + g.c.size + g.b.size == 18
+    assert g.a.size + g.c.size + g.b.size == g.n_parameters == 18
     assert learn.GLPNet(rb, n_modules=6, full_vectors=True).c.shape == (6, 3)
 
 
@@ -82,7 +83,10 @@ def test_rollout_shapes(lpnet, glpnet, rb):
         assert net.rollout(np.ones(3), 5).shape == (6, 3)
         assert net.rollout(np.ones((4, 3)), 5).shape == (4, 6, 3)
         assert net.rollout(np.ones(3), 0).shape == (1, 3)
-        assert net.step(np.ones((2, 4, 3))).shape == (2, 4, 3)
+        # `step` takes one state; batches go through jax.vmap
+        assert jax.vmap(jax.vmap(net.step))(np.ones((2, 4, 3))).shape == (2, 4, 3)
+        with pytest.raises(ValueError, match="one state"):
+            net.step(np.ones((2, 4, 3)))
         one = np.asarray(net.rollout(np.array([0.3, 0.2, 0.1]), 3))
         np.testing.assert_allclose(one[1], np.asarray(net.step(one[0])), rtol=4 * EPS, atol=0)
 
@@ -109,11 +113,13 @@ def test_bad_inputs_name_the_argument(rb, lpnet):
         lpnet.rollout(np.ones(3), -1)
     with pytest.raises(ValueError, match="y"):
         lpnet.step(np.array([np.nan, 0.0, 1.0]))
-    with pytest.raises(ValueError, match="time step"):
+    with pytest.raises(ValueError, match="no step size h"):
         learn.LPNet(rb).rollout(np.ones(3), 2)
     with pytest.raises(ValueError, match="n_modules"):
         learn.GLPNet(rb, n_modules=0)
     with pytest.raises(ValueError, match="order"):
         learn.GLPNet(rb, n_modules=2, order=(0, 3))
     with pytest.raises(TypeError, match="parametrisation"):
+        learn.LPNet(rb, parametrisation=3)
+    with pytest.raises(ValueError, match="parametrisation 'so3'"):
         learn.LPNet(rb, parametrisation="so3")

@@ -87,14 +87,27 @@ def test_rejects_mismatched_casimirs_and_bad_input(system):
     y0 = np.array([[1.0, 1.0, 1.0, -1.0, 1.0, 2.0], [1.0, 1.0, 1.0, -1.0, 1.0, 2.0]])
     y1 = y0.copy()
     y1[1, 0] += 1e-6  # changes Pi . p only
-    with pytest.raises(ValueError, match=r"pair 1: the Casimir Pi \. p"):
+    # lp.se3()'s Casimirs are (|p|^2, Pi . p): Casimir 1 is Pi . p
+    with pytest.raises(ValueError, match=r"pair 1: Casimir 1 "):
         param.params_from_pair(y0, y1, H)
     y1 = y0.copy()
     y1[0, 5] += 1e-6  # changes |p|
-    with pytest.raises(ValueError, match="pair 0"):
+    with pytest.raises(ValueError, match="pair 0: Casimir 0 "):
         param.params_from_pair(y0, y1, H)
     with pytest.raises(ValueError, match="se\\(3\\)"):
         learn.SE3RotationShear(lp.systems.RigidBody())
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="library: SE3RotationShear.params_from_pair(y0, y1, h) reports errors as mu0/mu1 "
+    "(the names of liepoisson.se3_rotation_shear_parameters)",
+)
+def test_errors_name_the_arguments_y0_y1(system):
+    param = learn.SE3RotationShear(system)
+    y0 = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match="y1"):
+        param.params_from_pair(y0, y0[:5], H)
 
 
 def test_lpnet_with_se3_rotation_shear(system):
@@ -106,7 +119,7 @@ def test_lpnet_with_se3_rotation_shear(system):
     )
     data = it.ground_truth(system, y0, h=H, n_steps=10)
     net = learn.LPNet(system, hidden=(8,), parametrisation=learn.SE3RotationShear(system), key=0)
-    net = net.fit(data, epochs=5, progress=False)
+    net, _ = learn.fit(net, data, optimiser=learn.Adam(5), progress=False)
     y = np.asarray(net.rollout(y0, 20))
     C = np.asarray(system.casimirs(y))
     np.testing.assert_allclose(

@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from helpers import SYSTEMS, algebra, system
 
+import learn
 import liepoisson as lp
+from integrators import splitting
 
 
 def _so3():
@@ -196,3 +198,64 @@ def test_system_methods_validate_states(name):
 def test_system_parameters(make, exc, pattern):
     with pytest.raises(exc, match=pattern):
         make()
+
+
+# -- one validation module for every package ----------------------------------------------------
+def _pairs():
+    y0 = np.random.default_rng(0).normal(size=(10, 3))
+    return y0, y0 + 0.01
+
+
+def _fit(**kwargs):
+    body = system("RigidBody")
+    args = {"data": _pairs(), "h": 0.1, "optimiser": learn.Adam(1), "progress": False} | kwargs
+    return learn.fit(learn.LPNet(body, hidden=(2,)), args.pop("data"), **args)
+
+
+def _strang(h=0.1):
+    return splitting.Strang(system("RigidBody"), h=h)
+
+
+_BODY = system("RigidBody")
+_Y_NAN = np.array([0.1, np.nan, 0.3])
+
+
+@pytest.mark.parametrize(
+    "call, exc, message",
+    [
+        # integers (positive_int)
+        (lambda: _strang().rollout(np.ones(3), -1), ValueError, "n_steps must be an integer >= 0; got -1"),
+        (lambda: _strang().rollout(np.ones(3), 2, save_every=0), ValueError, "save_every must be an integer >= 1; got 0"),
+        (lambda: learn.GLPNet(_BODY, n_modules=0), ValueError, "n_modules must be an integer >= 1; got 0"),
+        (lambda: learn.Adam(0), ValueError, "Adam.epochs must be an integer >= 1; got 0"),
+        (lambda: _fit(seed=-1), ValueError, "seed must be an integer >= 0; got -1"),
+        (lambda: learn.QuasiNewton(2.5), TypeError, "QuasiNewton.iterations must be an integer >= 1; got float 2.5"),
+        # step sizes and rates (positive_float)
+        (lambda: _strang(h=0.0), ValueError, "h must be finite and > 0; got 0.0"),
+        (lambda: learn.LPNet(_BODY, h=-1.0), ValueError, "h must be finite and > 0; got -1.0"),
+        (lambda: learn.MLPBaseline(_BODY, h=np.inf), ValueError, "h must be finite and > 0; got inf"),
+        (lambda: learn.Adam(learning_rate=0), ValueError, "Adam.learning_rate must be finite and > 0; got 0.0"),
+        (lambda: _fit(h=0.0), ValueError, "h must be finite and > 0; got 0.0"),
+        # fractions
+        (lambda: _fit(validation_fraction=1.5), ValueError, r"validation_fraction must be in \[0, 1\); got 1.5"),
+        # states and pairs (states, pairs, as_state)
+        (lambda: _strang().rollout(_Y_NAN, 2), ValueError, r"y0 must be finite; found nan at index \(1,\)"),
+        (lambda: _strang().rollout(np.ones(4), 2), ValueError, r"y0 must have shape \(\.\.\., 3\).*got shape \(4,\)"),
+        (lambda: _strang().step(_Y_NAN), ValueError, r"y must be finite; found nan at index \(1,\)"),
+        (lambda: learn.LPNet(_BODY, h=0.1).step(_Y_NAN), ValueError, r"y must be finite; found nan at index \(1,\)"),
+        (lambda: _strang().poisson_defect("y"), TypeError, "y must be an array"),
+        (lambda: _fit(data=(_pairs()[0], _pairs()[1][:5])), ValueError, r"y0 and y1 must have the same shape; got \(10, 3\) and \(5, 3\)"),
+        (lambda: _fit(data=(_pairs()[0], np.full((10, 3), np.inf))), ValueError, r"y1 must be finite; found inf at index \(0, 0\)"),
+        # systems (check_system)
+        (lambda: splitting.Strang("RigidBody", h=0.1), TypeError, "system must be a liepoisson.systems.AbstractPoissonSystem; got str"),
+        (lambda: learn.LPNet("RigidBody"), TypeError, "system must be a liepoisson.systems.AbstractPoissonSystem; got str"),
+        (lambda: learn.GLPNet("RigidBody"), TypeError, "system must be a liepoisson.systems.AbstractPoissonSystem; got str"),
+        (lambda: learn.MLPBaseline(3), TypeError, "system must be a liepoisson.systems.AbstractPoissonSystem; got int"),
+        (lambda: learn.TestFlowParametrisation(None), TypeError, "system must be a liepoisson.systems.AbstractPoissonSystem; got NoneType"),
+    ],
+)
+def test_every_package_validates_alike(call, exc, message):
+    """integrators, learn and liepoisson share one validation module: the same check gives
+    the same message (argument, expectation, value received) wherever it is called from."""
+    with pytest.raises(exc, match=message):
+        call()
