@@ -232,7 +232,7 @@ def fit(
     history = {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)}
     records = []
     for index, stage in enumerate(stages):
-        offset = int(history["epoch"][-1]) if len(history["epoch"]) else 0
+        offset = sum(r.iterations for r in records)  # epochs and iterations run so far
         report = None if callback is None else functools.partial(_report, callback, index, type(stage).__name__)
         if isinstance(stage, Adam):
             model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress,

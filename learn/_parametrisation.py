@@ -133,7 +133,7 @@ class SE3RotationShear(AbstractStepParametrisation):
 
     def params_from_pair(self, y0, y1, h):
         return lp.se3_rotation_shear_parameters(
-            y0, y1, positive_float(h, "h"), sign=self.system.algebra.sign, rtol=self.rtol
+            y0, y1, positive_float(h, "h"), sign=self.system.algebra.sign, rtol=self.rtol, names=("y0", "y1")
         )
 
 

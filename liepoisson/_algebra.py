@@ -202,7 +202,7 @@ class LieAlgebra:
         return self.exact_flow(self._C, alpha, t, mu)
 
     def coadjoint_flow_parameters(
-        self, mu0: Any, mu1: Any, t: Any, *, rtol: float = 1e-10
+        self, mu0: Any, mu1: Any, t: Any, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
     ) -> np.ndarray:
         r"""The parameters $\alpha$ with `coadjoint_flow(alpha, t, mu0) == mu1`, orthogonal to
         the Casimir gradients at `mu0` (paper eqs. Loss_function and alpha_mod_Casimirs).
@@ -212,7 +212,8 @@ class LieAlgebra:
 
         **Arguments:** `mu0`, `mu1` of shape `(..., n)`; `t` a finite, non-zero scalar;
         `rtol`: the relative Casimir mismatch beyond which a pair is rejected, and
-        (times 100, relative to the size of the states) the largest residual accepted.
+        (times 100, relative to the size of the states) the largest residual accepted;
+        `names`: how error messages call the two states.
 
         **Returns:** `alpha`, `(..., n)`. Raises `ValueError` naming the pair (its index over
         the flattened leading axes) when a Casimir differs between `mu0` and `mu1`, when the
@@ -224,7 +225,7 @@ class LieAlgebra:
             t,
             rtol,
             dim=self.dim,
-            names=("mu0", "mu1"),
+            names=names,
             flow=self.coadjoint_flow,
             casimirs=self.casimirs,
             casimir_gradients=self.casimir_gradients,

@@ -88,7 +88,7 @@ def _body_rotation_shear_parameters(mu0, mu1, tau):
 
 
 def se3_rotation_shear_parameters(
-    mu0: Any, mu1: Any, t: Any, *, sign: int = -1, rtol: float = 1e-10
+    mu0: Any, mu1: Any, t: Any, *, sign: int = -1, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
 ) -> np.ndarray:
     r"""The parameters $(A, b)$ with `se3_rotation_shear((A, b), t, mu0, sign=sign) == mu1`.
 
@@ -99,7 +99,7 @@ def se3_rotation_shear_parameters(
 
     **Arguments:** `mu0`, `mu1` of shape `(..., 6)`; `t` a finite, non-zero scalar; `sign` as
     in `se3_rotation_shear`; `rtol`: the relative Casimir mismatch beyond which a pair is
-    rejected.
+    rejected; `names`: how error messages call the two states.
 
     **Returns:** `(..., 6)`. Raises `ValueError` naming the pair when a Casimir ($|p|^2$,
     $\Pi\cdot p$) differs, when $p = 0$ or when $p^0$ and $p^1$ are antiparallel.
@@ -112,7 +112,7 @@ def se3_rotation_shear_parameters(
         t,
         rtol,
         dim=6,
-        names=("mu0", "mu1"),
+        names=names,
         flow=functools.partial(se3_rotation_shear, sign=sign),
         casimirs=algebra.casimirs,
         casimir_gradients=algebra.casimir_gradients,

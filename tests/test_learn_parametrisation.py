@@ -81,12 +81,6 @@ def test_so3_rotation_rejects_mismatched_casimirs_and_antiparallel():
         p.params_from_pair(y0, y0[:, :2], H)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="library: on a Lie-Poisson system params_from_pair(y0, y1, h) reports errors as "
-    "mu0/mu1 (AbstractLiePoissonSystem.test_flow_parameters delegates to "
-    "LieAlgebra.coadjoint_flow_parameters, whose names are mu0/mu1)",
-)
 def test_errors_name_the_arguments_y0_y1():
     p = learn.TestFlowParametrisation(lp.systems.RigidBody())
     y0 = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])

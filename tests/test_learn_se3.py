@@ -98,11 +98,6 @@ def test_rejects_mismatched_casimirs_and_bad_input(system):
         learn.SE3RotationShear(lp.systems.RigidBody())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="library: SE3RotationShear.params_from_pair(y0, y1, h) reports errors as mu0/mu1 "
-    "(the names of liepoisson.se3_rotation_shear_parameters)",
-)
 def test_errors_name_the_arguments_y0_y1(system):
     param = learn.SE3RotationShear(system)
     y0 = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 2.0])

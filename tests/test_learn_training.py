@@ -266,12 +266,6 @@ def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     assert hist["train_loss"][-1] == pytest.approx(record.train_loss, rel=1e-6)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="library (learn/_fit.py, offset = history['epoch'][-1]): quasi-Newton iterations are "
-    "numbered from the last logged Adam epoch (epochs - 1), not from the epochs run, so "
-    "iteration k after 200 epochs is recorded as 199 + k (it was 200 + k)",
-)
 def test_refinement_iterations_numbered_after_adam_epochs(rb, pairs):
     stages = (learn.Adam(20, learning_rate=1e-2, log_every=1), learn.QuasiNewton(5))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)

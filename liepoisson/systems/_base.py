@@ -267,4 +267,4 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
         return self.algebra.coadjoint_flow(alpha, t, y)
 
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
-        return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol)
+        return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol, names=("y0", "y1"))
