@@ -25,6 +25,14 @@ LEARNED = ["LPNet", "GLPNet", "MLPBaseline"]
 # pendulum (it needs two), and Strang on the pendulum too (a system that is not Lie-Poisson)
 MAPS = SPLITTING + ["Strang/ExtendedPendulum"] + LEARNED
 POISSON = [name for name in MAPS if name not in ("LPNet", "MLPBaseline")]
+# The compositions take 3-20 s each to compile and go through the same shared rollout as
+# Strang; by default their compiled checks run with -m slow (their orders and Casimir
+# conservation are tested by default in test_integrators_splitting.py).
+HEAVY = {"TripleJump", "Suzuki", "McLachlan4", "Yoshida6", "BlanesMoan4"}
+
+
+def compiled(names):
+    return [pytest.param(n, marks=pytest.mark.slow) if n in HEAVY else n for n in names]
 
 # Exact sub-flows per step, from the methods' definitions: N pieces, Strang 2N - 1 flows,
 # a composition of s Strang steps s (2N - 1), Blanes-Moan's PRK_6 7 + 6; one test flow per
@@ -101,7 +109,7 @@ def rollouts(name: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(m.rollout(y0, N_STEPS)), np.asarray(m.rollout(many, N_STEPS))
 
 
-@pytest.mark.parametrize("name", MAPS)
+@pytest.mark.parametrize("name", compiled(MAPS))
 def test_rollout_agrees_with_the_step_iterated_by_hand(name):
     y0, many = initial_states(step_map(name))
     one, batch = rollouts(name)
@@ -118,7 +126,7 @@ def test_rollout_agrees_with_the_step_iterated_by_hand(name):
     np.testing.assert_allclose(batch, ref_batch, rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("name", MAPS)
+@pytest.mark.parametrize("name", compiled(MAPS))
 def test_save_every_keeps_every_kth_state_exactly(name):
     m = step_map(name)
     y0, many = initial_states(m)
@@ -180,7 +188,7 @@ def test_poisson_defect_shapes():
 # Compiling the Jacobian of BlanesMoan4's 13 pendulum flows takes 10-20 s: slow run only
 # (the pendulum's defect is checked by default through Strang)
 @pytest.mark.parametrize(
-    "name", [pytest.param(n, marks=pytest.mark.slow) if n == "BlanesMoan4" else n for n in POISSON]
+    "name", compiled(POISSON)
 )
 def test_poisson_defect_at_round_off(name):
     m = step_map(name)
@@ -203,7 +211,7 @@ def test_poisson_defect_of_an_unstructured_step(name):
         assert np.min(defect) > 1e-3
 
 
-@pytest.mark.parametrize("name", MAPS)
+@pytest.mark.parametrize("name", compiled(MAPS))
 def test_cost_counts_the_exact_sub_flows(name, monkeypatch):
     m = step_map(name)
     cost = m.cost()
