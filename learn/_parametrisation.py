@@ -64,6 +64,14 @@ class AbstractStepParametrisation(abc.ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.system!r}, rtol={self.rtol:g})"
 
+    # A parametrisation is a static part of an LPNet's pytree: equal ones (same kind, same
+    # system object, same rtol) let two networks share compiled code.
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and other.system is self.system and other.rtol == self.rtol
+
+    def __hash__(self) -> int:
+        return hash((type(self), id(self.system), self.rtol))
+
 
 class TestFlowParametrisation(AbstractStepParametrisation):
     r"""Any system with exact test flows (Lie-Poisson on any algebra, or the affine/canonical
