@@ -3,6 +3,7 @@ flows $\varphi^{[k]}_t$ of the pieces $H = \sum_k H_k$ given by `system.hamilton
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import ClassVar
 
 import equinox as eqx
@@ -26,24 +27,40 @@ class AbstractSplittingMethod(AbstractStepMap):
     `exact_flows_per_step`; `rollout`, `poisson_defect` and `cost` are shared.
 
     **Arguments:** `system`, an `AbstractPoissonSystem` whose `hamiltonian_splitting()` gives
-    the pieces; `h` > 0, the step size.
+    the pieces; `h` > 0, the step size; `ordering`, a permutation of the pieces' indices (default
+    their order in `hamiltonian_splitting()`): the orderings of the same method can differ by
+    orders of magnitude in energy error (for the rigid body: Fasso, *Comparison of splitting
+    algorithms for the rigid body*, J. Comput. Phys. 189 (2003) 527-538), e.g.
+    `[Strang(body, h, ordering=p) for p in itertools.permutations(range(3))]`.
     """
 
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float
+    ordering: tuple[int, ...] = eqx.field(static=True)
     order: ClassVar[int]
 
-    def __init__(self, system: AbstractPoissonSystem, h: float):
+    def __init__(self, system: AbstractPoissonSystem, h: float, ordering: Sequence[int] | None = None):
         self.system = check_system(system)
         terms = system.hamiltonian_splitting()
         if not terms or not all(isinstance(t, CollectiveTerm) for t in terms):
             raise TypeError(f"{system!r}.hamiltonian_splitting() must return CollectiveTerms; got {terms!r}")
         self.h = positive_float(h, "h")
+        n = len(terms)
+        try:
+            ordering = tuple(range(n)) if ordering is None else tuple(int(k) for k in ordering)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"ordering must be a permutation of range({n}); got {ordering!r}") from err
+        if sorted(ordering) != list(range(n)):
+            raise ValueError(
+                f"ordering must be a permutation of range({n}) (the {n} pieces of {system!r}); got {ordering}"
+            )
+        self.ordering = ordering
 
     @property
     def terms(self) -> tuple[CollectiveTerm, ...]:
-        """The pieces $H_1, \\dots, H_N$ (their flows are applied in this order)."""
-        return tuple(self.system.hamiltonian_splitting())
+        r"""The pieces $H_1, \dots, H_N$ in `ordering` (their flows are applied in this order)."""
+        pieces = self.system.hamiltonian_splitting()
+        return tuple(pieces[k] for k in self.ordering)
 
     def flow(self, k: int, t: float, y: jax.Array) -> jax.Array:
         r"""Exact flow $\varphi^{[k]}_t(y)$ of the $k$-th piece."""
