@@ -8,6 +8,7 @@ import weakref
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from liepoisson._validation import as_state, positive_float, positive_int
 from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
@@ -52,7 +53,7 @@ def taylor_integrator(
     return cache[key]
 
 
-def _initial_conditions(system: AbstractPoissonSystem, y0: Any) -> np.ndarray:
+def _initial_conditions(system: AbstractPoissonSystem, y0: ArrayLike) -> np.ndarray:
     y0 = np.asarray(as_state(y0, "y0", system.dim))
     if y0.ndim == 1:
         y0 = y0[None]
@@ -74,7 +75,7 @@ def _progress_bar(total: int, progress: bool | None):
 
 def ground_truth(
     system: AbstractPoissonSystem,
-    y0: Any,
+    y0: ArrayLike,
     h: float,
     n_steps: int,
     tol: float | None = None,

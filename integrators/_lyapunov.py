@@ -2,9 +2,8 @@ r"""Largest Lyapunov exponent from heyoka's variational equations."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from liepoisson._validation import as_state, positive_float
 from liepoisson.systems import AbstractPoissonSystem
@@ -14,7 +13,7 @@ from ._ground_truth import EPS, taylor_integrator
 
 def lyapunov_exponent(
     system: AbstractPoissonSystem,
-    y0: Any,
+    y0: ArrayLike,
     t_final: float,
     *,
     renormalization_time: float = 1.0,

@@ -13,6 +13,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
@@ -141,25 +142,25 @@ class LieAlgebra:
         return f"LieAlgebra(name={self.name!r}, dim={self.dim}, n_casimirs={self.n_casimirs})"
 
     # -- Lie algebra operations ----------------------------------------------------------
-    def bracket(self, xi: Any, eta: Any) -> jax.Array:
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         r"""$[\xi, \eta]_d = C_{abd}\,\xi_a\,\eta_b$, batched over leading axes."""
         xi = as_state(xi, "xi", self.dim)
         eta = as_state(eta, "eta", self.dim)
         return jnp.einsum("abd,...a,...b->...d", self._C, xi, eta)
 
-    def ad(self, xi: Any) -> jax.Array:
+    def ad(self, xi: ArrayLike) -> jax.Array:
         r"""Matrix of $\mathrm{ad}_\xi = [\xi, \cdot]$: $(\mathrm{ad}_\xi)_{db} = C_{abd}\,\xi_a$."""
         xi = as_state(xi, "xi", self.dim)
         return jnp.einsum("abd,...a->...db", self._C, xi)
 
-    def ad_star(self, xi: Any, mu: Any) -> jax.Array:
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         r"""$(\mathrm{ad}^*_\xi\mu)_b = \langle \mu, [\xi, e_b]\rangle = C_{abd}\,\xi_a\,\mu_d$."""
         xi = as_state(xi, "xi", self.dim)
         mu = as_state(mu, "mu", self.dim)
         return jnp.einsum("abd,...a,...d->...b", self._C, xi, mu)
 
     # -- Lie-Poisson structure -----------------------------------------------------------
-    def poisson_tensor(self, mu: Any) -> jax.Array:
+    def poisson_tensor(self, mu: ArrayLike) -> jax.Array:
         r"""$\mathbb{B}(\mu)_{ab} = \mathrm{sign}\cdot C_{abd}\,\mu_d$, shape `(..., n, n)`."""
         mu = as_state(mu, "mu", self.dim)
         return self.sign * jnp.einsum("abd,...d->...ab", self._C, mu)
@@ -178,13 +179,13 @@ class LieAlgebra:
                 out[a][b] = entry
         return out
 
-    def coadjoint_generator(self, alpha: Any) -> jax.Array:
+    def coadjoint_generator(self, alpha: ArrayLike) -> jax.Array:
         r"""$\mathbb{M}(\alpha)_{ad} = \mathrm{sign}\cdot C_{abd}\,\alpha_b$: $\dot\mu = \mathbb{M}(\alpha)\mu$
         is the flow of $H = \langle\alpha, \mu\rangle$."""
         alpha = as_state(alpha, "alpha", self.dim)
         return self.sign * jnp.einsum("abd,...b->...ad", self._C, alpha)
 
-    def coadjoint_flow(self, alpha: Any, t: Any, mu: Any) -> jax.Array:
+    def coadjoint_flow(self, alpha: ArrayLike, t: ArrayLike, mu: ArrayLike) -> jax.Array:
         r"""$\exp(t\,\mathbb{M}(\alpha))\,\mu$: exact flow of $H = \langle \alpha, \mu\rangle$.
 
         `alpha` and `mu` of shape `(..., n)` and `t` a scalar or array, broadcast against each
@@ -202,7 +203,7 @@ class LieAlgebra:
         return self.exact_flow(self._C, alpha, t, mu)
 
     def coadjoint_flow_parameters(
-        self, mu0: Any, mu1: Any, t: Any, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
+        self, mu0: ArrayLike, mu1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
     ) -> np.ndarray:
         r"""The parameters $\alpha$ with `coadjoint_flow(alpha, t, mu0) == mu1`, orthogonal to
         the Casimir gradients at `mu0` (paper eqs. Loss_function and alpha_mod_Casimirs).
@@ -234,14 +235,14 @@ class LieAlgebra:
         )
 
     # -- Casimirs --------------------------------------------------------------------------
-    def casimirs(self, mu: Any) -> jax.Array:
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         """Values of the independent Casimirs, shape `(..., k)`."""
         mu = as_state(mu, "mu", self.dim)
         comps = [mu[..., i] for i in range(self.dim)]
         vals = [jnp.broadcast_to(p.evaluate(comps), mu.shape[:-1]) for p in self.casimir_polynomials]
         return jnp.stack(vals, axis=-1) if vals else jnp.zeros(mu.shape[:-1] + (0,))
 
-    def casimir_gradients(self, mu: Any) -> jax.Array:
+    def casimir_gradients(self, mu: ArrayLike) -> jax.Array:
         """Gradients $\\partial C_j/\\partial\\mu$, shape `(..., k, n)`."""
         mu = as_state(mu, "mu", self.dim)
         comps = [mu[..., i] for i in range(self.dim)]
@@ -251,7 +252,7 @@ class LieAlgebra:
         ]
         return jnp.stack(rows, axis=-2) if rows else jnp.zeros(mu.shape[:-1] + (0, self.dim))
 
-    def orbit_dimension(self, mu: Any, rtol: float = 1e-10) -> int | np.ndarray:
+    def orbit_dimension(self, mu: ArrayLike, rtol: float = 1e-10) -> int | np.ndarray:
         r"""Dimension of the coadjoint orbit through $\mu$: $\operatorname{rank}\mathbb{B}(\mu)$."""
         B = np.asarray(self.poisson_tensor(mu))
         s = np.linalg.svd(B, compute_uv=False)

@@ -17,6 +17,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._inverse import gauss_newton_parameters
 from ._validation import is_traced
@@ -121,7 +122,7 @@ class AbstractCoadjointFlow(abc.ABC):
         structure_constants: np.ndarray,
         mu0: jax.Array,
         mu1: jax.Array,
-        t: Any,
+        t: ArrayLike,
         casimir_gradients: jax.Array,
     ) -> jax.Array:
         r"""The parameters $\alpha$ with $\exp(t\,\mathbb{M}(\alpha))\,\mu_0 = \mu_1$,

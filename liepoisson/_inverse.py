@@ -17,6 +17,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._validation import nonzero_time, pairs, positive_float, positive_int
 
@@ -34,7 +35,7 @@ def gauss_newton_parameters(
     flow: Flow,
     mu0: jax.Array,
     mu1: jax.Array,
-    t: Any,
+    t: ArrayLike,
     casimir_gradients: jax.Array,
     *,
     max_iter: int = 30,
@@ -106,9 +107,9 @@ def _gauss_newton_one(flow, mu0, mu1, casimir_gradients, *, t, max_iter):
 
 
 def checked_flow_parameters(
-    y0: Any,
-    y1: Any,
-    t: Any,
+    y0: ArrayLike,
+    y1: ArrayLike,
+    t: ArrayLike,
     rtol: Any,
     *,
     dim: int,

@@ -18,6 +18,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._catalogue import se3, se3_structure_constants
 from ._coadjoint import SE3Flow, _check_not_antiparallel, _shortest_rotation
@@ -45,7 +46,7 @@ def _body_rotation_shear(alpha: jax.Array, tau: jax.Array, mu: jax.Array) -> jax
     return _FLOW(_C, jnp.concatenate([zero, alpha[..., 3:]], axis=-1), tau, rotated)
 
 
-def se3_rotation_shear(alpha: Any, t: Any, mu: Any, *, sign: int = -1) -> jax.Array:
+def se3_rotation_shear(alpha: ArrayLike, t: ArrayLike, mu: ArrayLike, *, sign: int = -1) -> jax.Array:
     r"""One rotation-then-shear step $\mathbb T_{(0,b)}\,\mathbb T_{(A,0)}\,\mu$ on se(3)*.
 
     **Arguments:** `alpha` $= (A, b)$ and `mu` $= (\Pi, p)$ of shape `(..., 6)`, `t` a scalar or
@@ -88,7 +89,7 @@ def _body_rotation_shear_parameters(mu0, mu1, tau):
 
 
 def se3_rotation_shear_parameters(
-    mu0: Any, mu1: Any, t: Any, *, sign: int = -1, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
+    mu0: ArrayLike, mu1: ArrayLike, t: ArrayLike, *, sign: int = -1, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
 ) -> np.ndarray:
     r"""The parameters $(A, b)$ with `se3_rotation_shear((A, b), t, mu0, sign=sign) == mu1`.
 

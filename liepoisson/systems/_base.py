@@ -11,6 +11,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
@@ -70,17 +71,17 @@ class AbstractPoissonSystem(abc.ABC):
     def _components(self, y: jax.Array) -> list[jax.Array]:
         return [y[..., i] for i in range(self.dim)]
 
-    def hamiltonian(self, y: Any) -> jax.Array:
+    def hamiltonian(self, y: ArrayLike) -> jax.Array:
         """$H(y)$, shape `(...)` for `y` of shape `(..., dim)`."""
         y = as_state(y, "y", self.dim)
         return jnp.broadcast_to(self.hamiltonian_components(self._components(y), JAX), y.shape[:-1])
 
-    def hamiltonian_gradient(self, y: Any) -> jax.Array:
+    def hamiltonian_gradient(self, y: ArrayLike) -> jax.Array:
         """$\\nabla H(y)$, shape `(..., dim)` (JAX autodiff of the one formula)."""
         y = as_state(y, "y", self.dim)
         return jax.grad(lambda z: jnp.sum(self.hamiltonian(z)))(y)
 
-    def poisson_tensor(self, y: Any) -> jax.Array:
+    def poisson_tensor(self, y: ArrayLike) -> jax.Array:
         """$\\mathbb{B}(y)$, shape `(..., dim, dim)`."""
         y = as_state(y, "y", self.dim)
         rows = self.poisson_tensor_components(self._components(y))
@@ -90,19 +91,19 @@ class AbstractPoissonSystem(abc.ABC):
             -2,
         )
 
-    def vector_field(self, y: Any) -> jax.Array:
+    def vector_field(self, y: ArrayLike) -> jax.Array:
         """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
         y = as_state(y, "y", self.dim)
         return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.hamiltonian_gradient(y))
 
-    def casimirs(self, y: Any) -> jax.Array:
+    def casimirs(self, y: ArrayLike) -> jax.Array:
         """Values of the Casimirs, shape `(..., k)` (`k` may be 0)."""
         y = as_state(y, "y", self.dim)
         comps = self._components(y)
         vals = [jnp.broadcast_to(p.evaluate(comps), y.shape[:-1]) for p in self.casimir_polynomials]
         return jnp.stack(vals, -1) if vals else jnp.zeros(y.shape[:-1] + (0,))
 
-    def casimir_gradients(self, y: Any) -> jax.Array:
+    def casimir_gradients(self, y: ArrayLike) -> jax.Array:
         """Gradients of the Casimirs, shape `(..., k, dim)`."""
         y = as_state(y, "y", self.dim)
         comps = self._components(y)
@@ -116,7 +117,7 @@ class AbstractPoissonSystem(abc.ABC):
     def n_casimirs(self) -> int:
         return len(self.casimir_polynomials)
 
-    def test_flow(self, alpha: Any, t: Any, y: Any) -> jax.Array:
+    def test_flow(self, alpha: ArrayLike, t: ArrayLike, y: ArrayLike) -> jax.Array:
         r"""Exact flow of the test Hamiltonian $H = \langle\alpha, y\rangle$ for time `t`.
 
         Batched over leading axes (broadcast), usable under `jit`, `vmap` and `grad`. For a
@@ -132,7 +133,7 @@ class AbstractPoissonSystem(abc.ABC):
             jnp.broadcast_to(y, batch + (self.dim,)),
         )
 
-    def test_flow_parameters(self, y0: Any, y1: Any, t: Any, *, rtol: float = 1e-10) -> np.ndarray:
+    def test_flow_parameters(self, y0: ArrayLike, y1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10) -> np.ndarray:
         r"""The parameters $\alpha$ with `test_flow(alpha, t, y0) == y1`, orthogonal to the
         Casimir gradients at `y0` (paper eqs. Loss_function and alpha_mod_Casimirs).
 
@@ -224,7 +225,7 @@ class CollectiveTerm:
         c = system.casimirs(y) if self.uses_casimirs else None
         return s, c
 
-    def value(self, system: AbstractPoissonSystem, y: Any) -> jax.Array:
+    def value(self, system: AbstractPoissonSystem, y: ArrayLike) -> jax.Array:
         """$H_k(y)$."""
         y = as_state(y, "y", system.dim)
         s, c = self._arguments(system, y)
@@ -236,7 +237,7 @@ class CollectiveTerm:
         g = jax.grad(lambda z: jnp.sum(self._call(z, c)))(s)
         return jnp.einsum("md,...m->...d", jnp.asarray(self.forms), g)
 
-    def flow(self, system: AbstractPoissonSystem, t: Any, y: Any) -> jax.Array:
+    def flow(self, system: AbstractPoissonSystem, t: ArrayLike, y: ArrayLike) -> jax.Array:
         """Exact flow of this term for time `t`."""
         y = as_state(y, "y", system.dim)
         return system.test_flow(self.frozen_alpha(system, y), t, y)
