@@ -202,7 +202,7 @@ class Trajectories:
         return (y0[train], y1[train]), (y0[val], y1[val])
 
     # -- subsets ----------------------------------------------------------------------------
-    def select(self, indices: Any) -> Trajectories:
+    def select(self, indices: int | slice | Sequence[int] | np.ndarray) -> Trajectories:
         """The trajectories `indices` (int, slice, sequence or boolean mask); always 3-D."""
         if isinstance(indices, numbers.Integral) and not isinstance(indices, bool):
             i = int(indices)

@@ -77,7 +77,7 @@ class AbstractLearnedMap(AbstractStepMap):
         return _checkpoint.replace_array_leaves(model, weights, f"path {os.fspath(path)!r}")
 
 
-def check_file_matches(path: Any, attrs: dict[str, Any], class_name: str, system: AbstractPoissonSystem) -> None:
+def check_file_matches(path: str | os.PathLike, attrs: dict[str, Any], class_name: str, system: AbstractPoissonSystem) -> None:
     """ValueError unless the file at `path` holds a `class_name` for `system`."""
     if attrs.get("class") != class_name:
         raise ValueError(f"path {os.fspath(path)!r} holds a {attrs.get('class')}, not a {class_name}")

@@ -9,7 +9,6 @@ flow's type (closed form for so(3) and the se(3) rotation-shear, Gauss-Newton ot
 from __future__ import annotations
 
 import abc
-from typing import Any
 
 import jax
 import numpy as np
@@ -157,7 +156,7 @@ def parametrisation_from_name(name: str, system: AbstractPoissonSystem) -> Abstr
     return PARAMETRISATIONS[name](system)
 
 
-def default_parametrisation(system: Any) -> AbstractStepParametrisation:
+def default_parametrisation(system: AbstractPoissonSystem) -> AbstractStepParametrisation:
     """`TestFlowParametrisation`: one exact test flow per step, for every system (every system
     of the library has exact test flows)."""
     return TestFlowParametrisation(check_system(system))
