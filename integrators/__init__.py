@@ -3,7 +3,13 @@
 import liepoisson as _liepoisson  # noqa: F401  (first: it switches JAX to float64)
 
 from . import splitting as splitting
-from ._compare import Comparison as Comparison, ComparisonRow as ComparisonRow, compare as compare
+from ._compare import (
+    Comparison as Comparison,
+    ComparisonRow as ComparisonRow,
+    Convergence as Convergence,
+    compare as compare,
+    convergence as convergence,
+)
 from ._diagnostics import (
     DiagnosticsReport as DiagnosticsReport,
     diagnostics as diagnostics,

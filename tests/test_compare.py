@@ -57,3 +57,30 @@ def test_compare_arguments():
         it.compare([strang], body, Y0S[:, :2], t_final=10.0)
     with pytest.raises(ValueError, match="at least one"):
         it.compare({}, body, Y0S, t_final=10.0)
+
+
+@pytest.mark.parametrize("make, order", [
+    (lambda body, h: it.splitting.Strang(body, h=h), 2),
+    (lambda body, h: it.RK4(body, h=h), 4),
+])
+def test_convergence_observes_the_order(make, order, tmp_path):
+    body = system("RigidBody")
+    c = it.convergence(lambda h: make(body, h), body, Y0S, t_final=10.0, hs=[0.2, 0.1, 0.05, 0.025])
+    # The log-log slope over h = 0.2 .. 0.025 (measured 2.002 and 3.994).
+    assert abs(c.order - order) < 0.05
+    # Each halving of h divides the error by about 2^order.
+    assert np.all(np.abs(np.log2(c.errors[:-1] / c.errors[1:]) - order) < 0.2)
+    c.plot(tmp_path / "convergence.png", label="method")
+    assert (tmp_path / "convergence.png").stat().st_size > 0
+
+
+def test_convergence_arguments():
+    body = system("RigidBody")
+    with pytest.raises(ValueError, match="must divide t_final"):
+        it.convergence(lambda h: it.RK4(body, h=h), body, Y0S, t_final=1.0, hs=[0.3, 0.1])
+    with pytest.raises(ValueError, match="at least 2"):
+        it.convergence(lambda h: it.RK4(body, h=h), body, Y0S, t_final=1.0, hs=[0.1])
+    with pytest.raises(ValueError, match="hs\\[1\\]"):
+        it.convergence(lambda h: it.RK4(body, h=h), body, Y0S, t_final=1.0, hs=[0.1, -0.1])
+    with pytest.raises(TypeError, match="must return an integrators.AbstractStepMap"):
+        it.convergence(lambda h: "RK4", body, Y0S, t_final=1.0, hs=[0.1, 0.05])
