@@ -2,6 +2,7 @@
 result files, keys, the structure guarantees that hold whatever the training budget."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,3 +99,34 @@ def test_cli_table_reference(capsys):
     out = capsys.readouterr().out
     for exp_id in EXPERIMENTS:  # every experiment has committed --full results
         assert f"| {exp_id} (full) |" in out
+
+
+def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
+    """`--profile/--out/--no-progress` route to the run without a subcommand (every experiment)
+    and on `run`; `--full` is short for `--profile full`; the default out is ./paper-results."""
+    import paper.__main__ as cli
+
+    calls = []
+
+    def fake_run(ids, profile, progress, out):
+        calls.append((ids, profile, progress, out))
+        return 0
+
+    monkeypatch.setattr(cli, "_run", fake_run)
+    assert main(["--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    assert calls.pop() == (list(EXPERIMENTS), "smoke", False, tmp_path)
+    argv = ["run", "E6", "E1", "--profile", "smoke", "--no-progress", "--out", str(tmp_path / "x")]
+    assert main(argv) == 0
+    assert calls.pop() == (["E6", "E1"], "smoke", False, tmp_path / "x")
+    # Given on the top level before the subcommand.
+    assert main(["--out", str(tmp_path), "--profile", "smoke", "run", "E6"]) == 0
+    assert calls.pop() == (["E6"], "smoke", True, tmp_path)
+    assert main(["run", "E6", "--full"]) == 0
+    assert calls.pop() == (["E6"], "full", True, Path("paper-results"))
+    assert main([]) == 0
+    assert calls.pop() == (list(EXPERIMENTS), "quick", True, Path("paper-results"))
+    with pytest.raises(SystemExit):
+        main(["run", "E6", "--full", "--profile", "smoke"])
+    with pytest.raises(SystemExit):
+        main(["--profile", "medium"])
+    assert not calls
