@@ -4,7 +4,7 @@ reference, and a plot of them."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -90,7 +90,7 @@ class DiagnosticsReport:
         return None if self.trajectory_error is None else float(np.mean(self.trajectory_error))
 
     def max_integral_error(self, name: str) -> float:
-        """$\\max_t |I(t) - I(0)|/|\\langle I\rangle|$ of the integral `name`."""
+        r"""$\max_t |I(t) - I(0)|/|\langle I\rangle|$ of the integral `name`."""
         if name not in self.integral_error_relative:
             raise KeyError(f"no integral {name!r}; this report has {sorted(self.integral_error_relative)}")
         return float(np.max(np.abs(self.integral_error_relative[name])))
@@ -143,7 +143,7 @@ def diagnostics(
     reference: ArrayLike | Trajectories | None = None,
     times: ArrayLike | None = None,
     *,
-    integrals: dict[str, Callable[[np.ndarray], ArrayLike]] | None = None,
+    integrals: Mapping[str, Callable[[np.ndarray], ArrayLike]] | None = None,
 ) -> DiagnosticsReport:
     r"""Casimir drift, relative energy error and (with `reference`) the error over time.
 
@@ -181,7 +181,8 @@ def diagnostics(
     diverged = None if finite.all() else int(np.argmin(finite))
     if diverged == 0:
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(y[..., 0, :]))[0])
-        raise ValueError(f"trajectory must start finite; the initial state at index {bad} is {y[..., 0, :][bad]}")
+        where = f"trajectory {bad[0]}, component {bad[1]}" if y.ndim == 3 else f"component {bad[0]}"
+        raise ValueError(f"trajectory must start finite; the initial state has {where} = {y[..., 0, :][bad]}")
     if ref is not None and not np.all(np.isfinite(ref)):
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(ref))[0])
         raise ValueError(f"reference must be finite; found {ref[bad]} at index {bad}")
@@ -199,7 +200,9 @@ def diagnostics(
     for name, f in (integrals or {}).items():
         if not callable(f):
             raise TypeError(f"integrals[{name!r}] must be callable f(y) -> values; got {f!r}")
-        I = np.broadcast_to(np.asarray(f(y), dtype=np.float64), E.shape)
+        I = np.asarray(f(y), dtype=np.float64)
+        if I.shape != E.shape:
+            raise ValueError(f"integrals[{name!r}] must return one value per state, shape {E.shape}; got {I.shape}")
         values[name] = I
         errors[name] = (I - I[..., :1]) / _safe_denominator(np.mean(I, axis=-1, keepdims=True))
     error = None
@@ -210,7 +213,11 @@ def diagnostics(
 
 def error_growth_rate(times: ArrayLike, error: ArrayLike, window: tuple[float, float]) -> float:
     r"""The rate $\lambda$ of $e(t) \approx c\,e^{\lambda t}$: least-squares slope of $\log e$
-    against $t$ over the points with $t$ in `window` $= (t_0, t_1)$ and $e > 0$.
+    against $t$ over the points with $t$ in `window` $= (t_0, t_1)$ and finite $e > 0$.
+
+    **Arguments:** `times` and `error`, both `(T,)`; `window`, a pair $t_0 < t_1$.
+
+    **Returns:** $\lambda$ (the paper's "error ~ exp(0.25 t)" for Kirchhoff, E5).
 
     Raises `ValueError` for mismatched shapes, a window with $t_0 \ge t_1$, or fewer than two
     usable points in it."""
@@ -219,14 +226,19 @@ def error_growth_rate(times: ArrayLike, error: ArrayLike, window: tuple[float, f
     if times.ndim != 1 or times.shape != error.shape:
         raise ValueError(f"times and error must be 1-D of the same shape; got {times.shape} and {error.shape}")
     try:
-        t0, t1 = (float(w) for w in window)
+        bounds = np.asarray(window, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise TypeError(f"window must be a pair (t_min, t_max); got {window!r}") from err
+        raise TypeError(f"window must be a pair of numbers (t_min, t_max); got {window!r}") from err
+    if bounds.shape != (2,):
+        raise ValueError(f"window must be a pair (t_min, t_max); got {window!r}")
+    t0, t1 = float(bounds[0]), float(bounds[1])
     if not t0 < t1:
         raise ValueError(f"window must have t_min < t_max; got {window!r}")
-    mask = (times >= t0) & (times <= t1) & (error > 0) & np.isfinite(error)
+    inside = (times >= t0) & (times <= t1)
+    mask = inside & (error > 0) & np.isfinite(error)
     if mask.sum() < 2:
         raise ValueError(
-            f"error_growth_rate needs at least 2 points with error > 0 in the window {window}; got {int(mask.sum())}"
+            f"error_growth_rate needs at least 2 points with t in window {window!r} and finite error > 0; "
+            f"{int(inside.sum())} times lie in the window, {int(mask.sum())} of them with such an error"
         )
     return float(np.polyfit(times[mask], np.log(error[mask]), 1)[0])

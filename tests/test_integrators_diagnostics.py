@@ -54,11 +54,24 @@ def test_plot(tmp_path):
     assert (tmp_path / "d.png").stat().st_size > 1000
 
 
+def test_plot_has_a_panel_per_integral(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from matplotlib.figure import Figure
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, path, **kw: saved.append(fig))
+    ys = it.splitting.Strang(BODY, h=0.1).rollout([1.0, 0.5, 0.2], 20)
+    r = it.diagnostics(ys, BODY, integrals={"I": lambda z: z[..., 0] + 1.0})
+    it.plot_diagnostics(r, tmp_path / "d.png")
+    labels = [ax.get_ylabel() for ax in saved[0].axes]
+    assert labels == ["relative energy error", "relative Casimir drift", "relative error of I"]
+
+
 @pytest.mark.parametrize(
     "args, error, words",
     [
         ((np.ones((4, 2)),), ValueError, ["trajectory", "(4, 2)"]),
-        ((np.full((4, 3), np.nan),), ValueError, ["trajectory", "start finite"]),
+        ((np.full((4, 3), np.nan),), ValueError, ["trajectory", "start finite", "component 0 = nan"]),
         ((np.ones((4, 3)), np.ones((5, 3))), ValueError, ["reference", "(5, 3)"]),
     ],
 )
@@ -104,27 +117,80 @@ def test_integrals_against_numpy():
         report.max_integral_error("J")
     with pytest.raises(TypeError, match="integrals"):
         it.diagnostics(y, BODY, integrals={"I": 3.0})
+    with pytest.raises(ValueError, match=r"integrals\['I'\] must return one value per state, shape \(21,\)"):
+        it.diagnostics(y, BODY, integrals={"I": lambda z: z[..., :2]})
+
+
+def test_integrals_of_many_trajectories_against_numpy():
+    # Per trajectory time means; the second has <I> = 0, so its error falls back to I(t) - I(0).
+    rng = np.random.default_rng(1)
+    y = rng.normal(size=(2, 6, 3))
+    y[0, :, 0] = [2.0, 2.5, 3.0, 3.5, 4.0, 4.5]  # <I> = 3.25, largest error 2.5/3.25
+    y[1, :, 0] = [1.0, -2.0, 3.0, -1.0, 2.0, -3.0]  # <I> = 0, largest error |-3 - 1| = 4
+    report = it.diagnostics(y, BODY, integrals={"I": lambda z: z[..., 0], "J": lambda z: z[..., 1] * z[..., 2]})
+    I, J = y[..., 0], y[..., 1] * y[..., 2]
+    expected_I = np.stack([(I[0] - I[0, 0]) / I[0].mean(), I[1] - I[1, 0]])
+    expected_J = (J - J[:, :1]) / J.mean(axis=1, keepdims=True)
+    np.testing.assert_array_equal(report.integrals["I"], I)
+    np.testing.assert_allclose(report.integral_error_relative["I"], expected_I, rtol=4 * EPS, atol=0)
+    np.testing.assert_allclose(report.integral_error_relative["J"], expected_J, rtol=16 * EPS, atol=0)
+    assert report.max_integral_error("I") == 4.0
+    assert report["max_integral_error[J]"] == pytest.approx(np.abs(expected_J).max(), rel=16 * EPS)
+
+
+def test_charged_particle_integral_is_conserved_by_the_ground_truth():
+    # E4's second integral: heyoka at its tightest tolerance keeps it to round-off, Strang does not.
+    system = lp.systems.ChargedParticle()
+    y0 = np.array([0.1, 0.2, 1.0, 0.5])
+    gt = it.ground_truth(system, y0, 0.1, 200)
+    integrals = {"I": system.angular_integral}
+    r = it.diagnostics(gt, system, integrals=integrals)
+    np.testing.assert_allclose(r.integrals["I"], np.asarray(system.angular_integral(gt.states)), rtol=0, atol=0)
+    assert r.max_integral_error("I") < 1e3 * EPS
+    r = it.diagnostics(it.splitting.Strang(system, h=0.1).rollout(y0, 200), system, integrals=integrals)
+    assert r.max_integral_error("I") > 1e-8
 
 
 @pytest.mark.parametrize("k", [1, 7, 19])
 def test_diverged_rollout_is_reported_up_to_the_first_non_finite_step(k):
     ys = np.array(it.splitting.Strang(BODY, h=0.1).rollout(np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4]]), 20))
-    ref = ys.copy()
+    ref = it.ground_truth(BODY, ys[:, 0], 0.1, 20)
+    clean_states = ys.copy()
     ys[1, k:, 2] = np.inf
     ys[1, k + 1 :] = np.nan
-    report = it.diagnostics(ys, BODY, reference=ref)
-    clean = it.diagnostics(ys[:, :k], BODY, reference=ref[:, :k])
+    ys[0, k + 1 :, 0] = np.nan  # a later divergence of another trajectory does not matter
+    integrals = {"I": lambda z: z[..., 0] + 2.0}
+    report = it.diagnostics(ys, BODY, reference=ref, integrals=integrals)
+    # The independent figure: the same function on the finite prefix, cut by hand.
+    clean = it.diagnostics(clean_states[:, :k], BODY, reference=ref.states[:, :k], times=ref.times[:k],
+                           integrals=integrals)
     assert report.diverged_at_step == k and report.summary()["diverged_at_step"] == k
     assert clean.diverged_at_step is None
     assert report.summary() | {"diverged_at_step": None} == clean.summary()
-    np.testing.assert_array_equal(report.energy, clean.energy)
+    for field in ("times", "casimirs", "casimir_drift_relative", "energy", "energy_error_relative",
+                  "trajectory_error"):
+        np.testing.assert_array_equal(report[field], clean[field])
+    assert report.times.shape == (k,) and report.trajectory_error.shape == (2, k)
+    np.testing.assert_array_equal(report.integral_error_relative["I"], clean.integral_error_relative["I"])
+
+
+def test_single_diverged_trajectory():
+    y = np.array(it.splitting.Strang(BODY, h=0.1).rollout(np.array([1.0, 0.5, 0.2]), 10))
+    y[4, 1] = -np.inf
+    report = it.diagnostics(y, BODY, times=np.linspace(0.0, 1.0, 11))
+    assert report.diverged_at_step == 4 and report.energy.shape == (4,)
+    np.testing.assert_array_equal(report.times, np.linspace(0.0, 1.0, 11)[:4])
+    finite = it.diagnostics(y[:4], BODY)
+    assert finite.diverged_at_step is None and finite.summary()["diverged_at_step"] is None
 
 
 def test_non_finite_start_or_reference_raises():
     y = np.ones((2, 5, 3))
     y[1, 0, 1] = np.nan
-    with pytest.raises(ValueError, match=r"initial state at index \(1, 1\)"):
+    with pytest.raises(ValueError, match=r"initial state has trajectory 1, component 1 = nan"):
         it.diagnostics(y, BODY)
+    with pytest.raises(ValueError, match=r"initial state has component 2 = inf"):
+        it.diagnostics(np.array([[1.0, 0.0, np.inf], [1.0, 0.0, 0.0]]), BODY)
     ref = np.ones((5, 3))
     ref[3, 0] = np.inf
     with pytest.raises(ValueError, match="reference must be finite"):
@@ -138,10 +204,12 @@ def test_error_growth_rate():
     noisy = 1e-3 * np.exp(0.25 * t) * np.exp(np.random.default_rng(0).normal(0.0, 0.05, t.size))
     # 5% log-normal noise over 91 points: the slope's standard error is ~0.05/(sd(t) sqrt(91)) ~ 2e-3.
     assert abs(it.error_growth_rate(t, noisy, (1.0, 10.0)) - 0.25) < 1e-2
-    ys = np.asarray(it.splitting.Strang(BODY, h=0.1).rollout(np.array([1.0, 0.5, 0.2]), 100))
-    report = it.diagnostics(ys, BODY, reference=ys + 1e-6 * np.exp(0.3 * np.arange(101) * 0.1)[:, None],
-                            times=0.1 * np.arange(101))
-    # |y - ref| = sqrt(3) 1e-6 exp(0.3 t): the report's rate is that of the largest error.
+    ys = np.asarray(it.splitting.Strang(BODY, h=0.1).rollout(np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4]]), 100))
+    grid = 0.1 * np.arange(101)
+    offset = np.stack([1e-6 * np.exp(0.3 * grid), 1e-7 * np.exp(0.1 * grid)])[..., None]
+    report = it.diagnostics(ys, BODY, reference=ys + offset, times=grid)
+    # |y - ref| = sqrt(3) 1e-6 exp(0.3 t) > sqrt(3) 1e-7 exp(0.1 t): the report's rate is that of
+    # the largest error at each time (the mean's would be ~0.02 lower).
     assert report.error_growth_rate((1.0, 10.0)) == pytest.approx(0.3, abs=1e-9)
     with pytest.raises(ValueError, match="t_min < t_max"):
         it.error_growth_rate(t, t + 1, (5.0, 1.0))
@@ -149,5 +217,16 @@ def test_error_growth_rate():
         it.error_growth_rate(t, np.zeros_like(t), (1.0, 10.0))
     with pytest.raises(ValueError, match="same shape"):
         it.error_growth_rate(t, t[:5], (1.0, 10.0))
+    with pytest.raises(ValueError, match="1-D"):
+        it.error_growth_rate(t[None], t[None] + 1, (1.0, 10.0))
+    with pytest.raises(ValueError, match="window must be a pair"):
+        it.error_growth_rate(t, t + 1, (1.0, 5.0, 10.0))
+    with pytest.raises(TypeError, match="window must be a pair of numbers"):
+        it.error_growth_rate(t, t + 1, ("a", "b"))
+    with pytest.raises(ValueError, match="1 times lie in the window"):
+        it.error_growth_rate(t, t + 1, (2.01, 2.1))
+    # Only the points inside the window count: a jump outside it does not change the rate.
+    jumped = np.where(t < 1.0, 1e3, 1e-3 * np.exp(0.25 * t))
+    assert it.error_growth_rate(t, jumped, (1.0, 10.0)) == pytest.approx(0.25, abs=1e-12)
     with pytest.raises(ValueError, match="with a reference"):
         it.diagnostics(ys, BODY).error_growth_rate((1.0, 10.0))
