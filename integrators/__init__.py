@@ -15,6 +15,7 @@ from ._diagnostics import (
     diagnostics as diagnostics,
     error_growth_rate as error_growth_rate,
 )
+from ._exact import ExactFlow as ExactFlow
 from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4

@@ -24,6 +24,7 @@ from ._coadjoint import (
     rotation_coefficients as rotation_coefficients,
 )
 from ._casimirs import polynomial_casimirs as polynomial_casimirs
+from ._elliptic import ellipj as ellipj
 from ._inverse import gauss_newton_parameters as gauss_newton_parameters
 from ._namespace import HEYOKA as HEYOKA, JAX as JAX, NUMPY as NUMPY
 from ._polynomial import Polynomial as Polynomial

@@ -11,7 +11,7 @@ import jax
 import numpy as np
 
 from liepoisson._validation import check_system, positive_float
-from liepoisson.systems import AbstractPoissonSystem, CollectiveTerm
+from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem
 
 from .._step_map import AbstractStepMap
 
@@ -31,25 +31,51 @@ class AbstractSplittingMethod(AbstractStepMap):
     their order in `hamiltonian_splitting()`): the orderings of the same method can differ by
     orders of magnitude in energy error (for the rigid body: Fasso, *Comparison of splitting
     algorithms for the rigid body*, J. Comput. Phys. 189 (2003) 527-538), e.g.
-    `[Strang(body, h, ordering=p) for p in itertools.permutations(range(3))]`.
+    `[Strang(body, h, ordering=p) for p in itertools.permutations(range(3))]`; `terms`, your
+    own exact pieces instead of `hamiltonian_splitting()` (e.g. `[FreeRigidBodyTerm(I),
+    CollectiveTerm(...)]`), checked to sum to $H$ at sample points.
     """
 
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float
     ordering: tuple[int, ...] = eqx.field(static=True)
+    pieces: tuple[AbstractExactTerm, ...] = eqx.field(static=True)
     order: ClassVar[int]
 
-    def __init__(self, system: AbstractPoissonSystem, h: float, ordering: Sequence[int] | None = None):
+    def __init__(
+        self,
+        system: AbstractPoissonSystem,
+        h: float,
+        ordering: Sequence[int] | None = None,
+        *,
+        terms: Sequence[AbstractExactTerm] | None = None,
+    ):
         self.system = check_system(system)
-        terms = system.hamiltonian_splitting()
-        if not terms or not all(isinstance(t, CollectiveTerm) for t in terms):
-            raise TypeError(f"{system!r}.hamiltonian_splitting() must return CollectiveTerms; got {terms!r}")
+        if terms is None:
+            terms = tuple(system.hamiltonian_splitting())
+            where = f"{system!r}.hamiltonian_splitting()"
+        else:
+            try:
+                terms = tuple(terms)
+            except TypeError as err:
+                raise TypeError(f"terms must be a sequence of exact pieces; got {terms!r}") from err
+            where = "terms"
+        if not terms or not all(isinstance(t, AbstractExactTerm) for t in terms):
+            raise TypeError(
+                f"{where} must be a non-empty sequence of exact pieces (CollectiveTerm, FreeRigidBodyTerm, "
+                f"or your own AbstractExactTerm); got {terms!r}"
+            )
+        if where == "terms":
+            check_pieces_sum_to_hamiltonian(system, terms)
+        self.pieces = terms
         self.h = positive_float(h, "h")
         n = len(terms)
         try:
             ordering = tuple(range(n)) if ordering is None else tuple(int(k) for k in ordering)
         except (TypeError, ValueError) as err:
-            raise TypeError(f"ordering must be a permutation of range({n}); got {ordering!r}") from err
+            raise TypeError(
+                f"ordering must be a permutation of range({n}); got {ordering!r}"
+            ) from err
         if sorted(ordering) != list(range(n)):
             raise ValueError(
                 f"ordering must be a permutation of range({n}) (the {n} pieces of {system!r}); got {ordering}"
@@ -57,15 +83,33 @@ class AbstractSplittingMethod(AbstractStepMap):
         self.ordering = ordering
 
     @property
-    def terms(self) -> tuple[CollectiveTerm, ...]:
+    def terms(self) -> tuple[AbstractExactTerm, ...]:
         r"""The pieces $H_1, \dots, H_N$ in `ordering` (their flows are applied in this order)."""
-        pieces = self.system.hamiltonian_splitting()
-        return tuple(pieces[k] for k in self.ordering)
+        return tuple(self.pieces[k] for k in self.ordering)
 
     def flow(self, k: int, t: float, y: jax.Array) -> jax.Array:
         r"""Exact flow $\varphi^{[k]}_t(y)$ of the $k$-th piece."""
         return self.terms[k].flow(self.system, t, y)
 
+
+def check_pieces_sum_to_hamiltonian(
+    system: AbstractPoissonSystem, terms: Sequence[AbstractExactTerm]
+) -> None:
+    r"""Raise `ValueError` unless $\sum_k H_k = H$ up to a constant at random sample points (to
+    $10^3\varepsilon$ relative to the sizes of the values: a few dozen roundings)."""
+    y = np.random.default_rng(0).normal(size=(16, system.dim))
+    H = np.asarray(system.hamiltonian(y))
+    parts = np.stack([np.asarray(t.value(system, y)) for t in terms])
+    diff = H - parts.sum(axis=0)
+    diff = diff - diff[0]  # a constant offset does not change the flow
+    scale = np.abs(H).max() + np.abs(parts).sum(axis=0).max()
+    if not np.all(np.abs(diff) <= 1e3 * np.finfo(np.float64).eps * scale):
+        k = int(np.argmax(np.abs(diff)))
+        raise ValueError(
+            f"terms must sum to the Hamiltonian of {system!r}; at y = {y[k].round(3).tolist()} "
+            f"H - sum(terms) differs from its value at another point by {diff[k]:.3g} "
+            f"(terms: {[t.name or repr(t) for t in terms]})"
+        )
 
 
 def symmetric_coefficients(half: tuple[float, ...]) -> np.ndarray:

@@ -24,9 +24,9 @@ class BlanesMoan4(AbstractSplittingMethod):
     \varphi^A_{a_2h}\varphi^B_{b_1h}\varphi^A_{a_1h}$ with
     $a_1 = 0.0792036964311957$, $a_2 = 0.353172906049774$, $a_3 = -0.0420650803577195$,
     $a_4 = 1 - 2(a_1 + a_2 + a_3)$, $b_1 = 0.209515106613362$, $b_2 = -0.143851773179818$,
-    $b_3 = 1/2 - (b_1 + b_2)$. $H_A$ is the first piece of `hamiltonian_splitting()`.
+    $b_3 = 1/2 - (b_1 + b_2)$. $H_A$ is the first piece (of `terms` or `hamiltonian_splitting()`, in `ordering`).
 
-    Raises `ValueError` for a system whose splitting does not have exactly two pieces.
+    Raises `ValueError` for a splitting that does not have exactly two pieces.
     """
 
     order = 4
@@ -34,11 +34,11 @@ class BlanesMoan4(AbstractSplittingMethod):
     b: ClassVar[np.ndarray] = _B_FULL
 
     def __check_init__(self):
-        n = len(self.system.hamiltonian_splitting())
+        n = len(self.pieces)
         if n != 2:
             raise ValueError(
-                f"BlanesMoan4 needs a two-part splitting H = H_A + H_B; {self.system!r} splits "
-                f"into {n} pieces"
+                f"BlanesMoan4 needs a two-part splitting H = H_A + H_B; the splitting of "
+                f"{self.system!r} has {n} pieces"
             )
 
     def step(self, y):

@@ -1,6 +1,7 @@
 """Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle."""
 
 from ._base import (
+    AbstractExactTerm as AbstractExactTerm,
     AbstractLiePoissonSystem as AbstractLiePoissonSystem,
     AbstractPoissonSystem as AbstractPoissonSystem,
     CollectiveTerm as CollectiveTerm,
@@ -8,6 +9,10 @@ from ._base import (
 from ._charged_particle import (
     ChargedParticle as ChargedParticle,
     segment_field_integral as segment_field_integral,
+)
+from ._free_rigid_body import (
+    FreeRigidBodyTerm as FreeRigidBodyTerm,
+    free_rigid_body_flow as free_rigid_body_flow,
 )
 from ._heavy_top import HeavyTop as HeavyTop
 from ._kirchhoff import Kirchhoff as Kirchhoff

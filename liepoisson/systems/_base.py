@@ -87,7 +87,10 @@ class AbstractPoissonSystem(abc.ABC):
         rows = self.poisson_tensor_components(self._components(y))
         batch = y.shape[:-1]
         return jnp.stack(
-            [jnp.stack([jnp.broadcast_to(jnp.asarray(e, jnp.float64), batch) for e in r], -1) for r in rows],
+            [
+                jnp.stack([jnp.broadcast_to(jnp.asarray(e, jnp.float64), batch) for e in r], -1)
+                for r in rows
+            ],
             -2,
         )
 
@@ -133,7 +136,9 @@ class AbstractPoissonSystem(abc.ABC):
             jnp.broadcast_to(y, batch + (self.dim,)),
         )
 
-    def test_flow_parameters(self, y0: ArrayLike, y1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10) -> np.ndarray:
+    def test_flow_parameters(
+        self, y0: ArrayLike, y1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10
+    ) -> np.ndarray:
         r"""The parameters $\alpha$ with `test_flow(alpha, t, y0) == y1`, orthogonal to the
         Casimir gradients at `y0` (paper eqs. Loss_function and alpha_mod_Casimirs).
 
@@ -182,7 +187,29 @@ class AbstractPoissonSystem(abc.ABC):
         return list(zip(ys, rhs))
 
 
-class CollectiveTerm:
+class AbstractExactTerm(abc.ABC):
+    r"""A piece $H_k$ of a splitting $H = \sum_k H_k$ whose flow $\varphi^{[k]}_t$ is known
+    exactly: `value(system, y)` $= H_k(y)$ and `flow(system, t, y)` $= \varphi^{[k]}_t(y)$,
+    both batched over leading axes and traceable. The flow must be the exact Hamiltonian flow
+    of $H_k$ for the system's bracket (so it is Poisson and conserves the Casimirs).
+
+    Final kinds: `CollectiveTerm` (functions of Poisson-commuting linear forms, solved by a
+    frozen test flow) and `FreeRigidBodyTerm` (Euler's equations, solved by Jacobi elliptic
+    functions).
+    """
+
+    name: str
+
+    @abc.abstractmethod
+    def value(self, system: AbstractPoissonSystem, y: ArrayLike) -> jax.Array:
+        """$H_k(y)$, shape `(...)`."""
+
+    @abc.abstractmethod
+    def flow(self, system: AbstractPoissonSystem, t: ArrayLike, y: ArrayLike) -> jax.Array:
+        """The exact flow of $H_k$ for time `t`, shape of `y`."""
+
+
+class CollectiveTerm(AbstractExactTerm):
     r"""A piece $H_k(y) = \varphi(L y, C(y))$ of a Hamiltonian, with linear forms $L$ (rows)
     that Poisson-commute, $L_i^\top \mathbb{B}(y) L_j = 0$, and optionally the Casimirs $C$.
 

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._catalogue import so3
 from .._validation import positive_vector
 from ._base import AbstractLiePoissonSystem, CollectiveTerm
+from ._free_rigid_body import free_rigid_body_flow
 
 
 def _axis_term(axis: int, weight: float, dim: int, name: str) -> CollectiveTerm:
@@ -39,3 +42,8 @@ class RigidBody(AbstractLiePoissonSystem):
     def hamiltonian_splitting(self):
         r"""$H = \sum_i \Pi_i^2/(2I_i)$: each piece rotates $\Pi$ about the body axis $e_i$."""
         return tuple(_axis_term(i, 1.0 / self.inertia[i], 3, f"T{i + 1}") for i in range(3))
+
+    def exact_flow(self, t: ArrayLike, y: ArrayLike) -> jax.Array:
+        r"""The exact solution $\Pi(t)$ from $\Pi(0) = $ `y` by Jacobi elliptic functions
+        (`liepoisson.systems.free_rigid_body_flow`), batched over `y`."""
+        return free_rigid_body_flow(self.inertia, t, y)
