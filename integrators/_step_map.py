@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import as_state, positive_int, states
+from liepoisson._validation import as_state, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
 
@@ -54,6 +54,15 @@ class AbstractStepMap(eqx.Module):
         """How many exact sub-flows (test flows) one step evaluates."""
 
     # -- shared ------------------------------------------------------------------------------
+    def with_h(self, h: float) -> AbstractStepMap:
+        r"""The same map at step size `h` (> 0), everything else unchanged: $\Phi_h$ of a
+        splitting method at another step, or a learned map run at a step it was not trained
+        at (meaningful for maps whose step is a splitting of a learned Hamiltonian, e.g. a
+        symmetric `learn.GLPNet`; an LPNet's $\alpha(y)$ was fitted to its training step, and
+        at another step its test flow is only a first-order approximation)."""
+        h = positive_float(h, "h")
+        return eqx.tree_at(lambda m: m.h, self, h, is_leaf=lambda x: x is None)
+
     def _check_h(self) -> float:
         if self.h is None:
             raise ValueError(

@@ -10,6 +10,7 @@ exact Poisson map.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -18,12 +19,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from numpy.typing import ArrayLike
+
+from integrators._splitting._strang import strang_compose
 from integrators._step_map import check_state
-from liepoisson._validation import check_system, positive_float, positive_int
+from liepoisson import JAX
+from liepoisson._validation import as_state, check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
-from ._mlp import ACTIVATIONS, as_key, check_activation
+from ._mlp import ACTIVATIONS, activation_antiderivative, as_key, check_activation
 
 
 def _check_order(order: Sequence[int] | None, n_modules: int, dim: int) -> tuple[int, ...]:
@@ -53,7 +58,17 @@ class GLPNet(AbstractLearnedMap):
 
     **Arguments:** `system`; `n_modules` $M$; `order` of the basis vectors (default cycling);
     `key`; `full_vectors`; `activation` $\sigma$ (paper: sigmoid); `h` (`None`: set by
-    `learn.fit`).
+    `learn.fit`); `symmetric`: the data-driven Strang splitting below.
+
+    **As a splitting method.** Module $s$ is the exact flow of the ridge Hamiltonian
+    $\Phi_s(\langle\alpha_s, y\rangle)$, $\Phi_s' = a_s\sigma + b_s$, so the network is a
+    splitting of the learned Hamiltonian $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$
+    (`hamiltonian`). The paper's network (default) applies each module over $h/M$: Lie-Trotter
+    for $\widetilde H$ with $w = 1/M$, order 1. `symmetric=True` applies modules $1..M-1$ over
+    $h/2$, module $M$ over $h$, then $M-1..1$ over $h/2$ ($2M - 1$ flows): Strang for
+    $\widetilde H$ with $w = 1$, symmetric and of order 2 in $h$, so it can be run at other step
+    sizes (`with_h`) and inside the compositions of `integrators.splitting` through
+    `learned_system()` (e.g. `it.splitting.Yoshida6(gnet.learned_system(), h)`).
     """
 
     a: jax.Array
@@ -63,6 +78,7 @@ class GLPNet(AbstractLearnedMap):
     system: AbstractPoissonSystem = eqx.field(static=True)
     order: tuple[int, ...] = eqx.field(static=True)
     full_vectors: bool = eqx.field(static=True)
+    symmetric: bool = eqx.field(static=True)
     h: float | None
 
     def __init__(
@@ -75,11 +91,15 @@ class GLPNet(AbstractLearnedMap):
         full_vectors: bool = False,
         activation: str = "sigmoid",
         h: float | None = None,
+        symmetric: bool = False,
     ):
         self.system = check_system(system)
         n_modules = positive_int(n_modules, "n_modules")
         self.order = _check_order(order, n_modules, system.dim)
         self.full_vectors = bool(full_vectors)
+        if not isinstance(symmetric, (bool, np.bool_)):
+            raise TypeError(f"symmetric must be True or False; got {symmetric!r}")
+        self.symmetric = bool(symmetric)
         self.activation = check_activation(activation)
         self.h = None if h is None else positive_float(h, "h")
         ka, kc, kb = jax.random.split(as_key(key), 3)
@@ -98,20 +118,50 @@ class GLPNet(AbstractLearnedMap):
             return self.c
         return self.c[:, None] * jnp.eye(self.system.dim)[jnp.asarray(self.order)]
 
+    def module_flow(self, s: int, t: float, y: jax.Array) -> jax.Array:
+        r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
+        with the rate $q_s = a_s\sigma(\langle\alpha_s, y\rangle) + b_s$ frozen (it is
+        conserved)."""
+        alpha = self.module_vectors()[s]
+        q = self.a[s] * ACTIVATIONS[self.activation](jnp.dot(alpha, y)) + self.b[s]
+        return self.system.test_flow(q * alpha, t, y)
+
     def step(self, y: jax.Array) -> jax.Array:
         y = check_state(y, self.system.dim)
-        act = ACTIVATIONS[self.activation]
-        vectors = self.module_vectors()
+        if self.symmetric:
+            flows = [functools.partial(self.module_flow, s) for s in range(self.n_modules)]
+            return strang_compose(flows, y, self.h)
         dt = self.h / self.n_modules
         for s in range(self.n_modules):
-            alpha = vectors[s]
-            q = self.a[s] * act(jnp.dot(alpha, y)) + self.b[s]
-            y = self.system.test_flow(q * alpha, dt, y)
+            y = self.module_flow(s, dt, y)
         return y
 
     @property
     def exact_flows_per_step(self) -> int:
-        return self.n_modules
+        return 2 * self.n_modules - 1 if self.symmetric else self.n_modules
+
+    @property
+    def hamiltonian_weight(self) -> float:
+        r"""$w$ in $\widetilde H = w\sum_s\Phi_s$: 1 (symmetric, Strang) or $1/M$ (Lie-Trotter)."""
+        return 1.0 if self.symmetric else 1.0 / self.n_modules
+
+    def hamiltonian(self, y: ArrayLike) -> jax.Array:
+        r"""The learned Hamiltonian $\widetilde H(y) = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$
+        (up to a constant), shape `(...)` for `y` of shape `(..., dim)`. Needs an activation
+        with a closed-form antiderivative (`sigmoid`, `tanh`, `identity`)."""
+        y = as_state(y, "y", self.system.dim)
+        antiderivative = activation_antiderivative(self.activation)
+        s = jnp.einsum("md,...d->...m", self.module_vectors(), y)
+        return self.hamiltonian_weight * jnp.sum(self.a * antiderivative(s, JAX) + self.b * s, axis=-1)
+
+    def learned_system(self):
+        r"""The Poisson system $\dot y = \mathbb B(y)\nabla\widetilde H$ with this network's
+        learned Hamiltonian and the system's bracket, split into its ridge pieces (one
+        `CollectiveTerm` per module): every method of `integrators.splitting` runs on it, and
+        `Strang(gnet.learned_system(), h)` is the symmetric network at step `h`."""
+        from ._learned_system import LearnedHamiltonian
+
+        return LearnedHamiltonian(self)
 
     def hyperparameters(self) -> dict[str, Any]:
         return {
@@ -119,6 +169,7 @@ class GLPNet(AbstractLearnedMap):
             "order": list(self.order),
             "full_vectors": self.full_vectors,
             "activation": self.activation,
+            "symmetric": self.symmetric,
         }
 
 

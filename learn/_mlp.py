@@ -47,6 +47,24 @@ def check_hidden(hidden: Any) -> tuple[int, ...]:
     return tuple(positive_int(w, f"hidden[{i}]") for i, w in enumerate(hidden))
 
 
+def activation_antiderivative(activation: str):
+    r"""$A$ with $A' = \sigma$ as `A(x, xp)` on a math namespace (numpy, JAX or heyoka), for the
+    activations whose antiderivative is elementary: sigmoid ($\log(1 + e^x)$), tanh
+    ($\log\cosh x$), identity ($x^2/2$). `ValueError` for the others."""
+    if activation == "sigmoid":
+        return lambda x, xp: jax.nn.softplus(x) if xp.name == "jax" else xp.log(1.0 + xp.exp(x))
+    if activation == "tanh":
+        return lambda x, xp: (
+            jnp.logaddexp(x, -x) - np.log(2.0) if xp.name == "jax" else xp.log(0.5 * (xp.exp(x) + xp.exp(-x)))
+        )
+    if activation == "identity":
+        return lambda x, xp: 0.5 * x * x
+    raise ValueError(
+        f"the learned Hamiltonian needs an activation with an elementary antiderivative "
+        f"('sigmoid', 'tanh' or 'identity'); got {activation!r}"
+    )
+
+
 def check_activation(activation: Any) -> str:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}; got {activation!r}")

@@ -2,22 +2,32 @@ r"""Strang splitting (order 2, symmetric): the basic step of every composition m
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable, Sequence
+
 import jax
 
 from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 
-def strang_step(method: AbstractSplittingMethod, y: jax.Array, h: float) -> jax.Array:
+def strang_compose(flows: Sequence[Callable[[float, jax.Array], jax.Array]], y: jax.Array, h: float) -> jax.Array:
     r"""$\varphi^{[1]}_{h/2}\circ\cdots\circ\varphi^{[N-1]}_{h/2}\circ\varphi^{[N]}_h\circ
-    \varphi^{[N-1]}_{h/2}\circ\cdots\circ\varphi^{[1]}_{h/2}$ (applied right to left)."""
-    n = len(method.terms)
+    \varphi^{[N-1]}_{h/2}\circ\cdots\circ\varphi^{[1]}_{h/2}$ (applied right to left) for
+    `flows[k](t, y)` $= \varphi^{[k+1]}_t(y)$: the one Strang composition, shared by the
+    classical methods and the symmetric G-LPNet."""
+    n = len(flows)
     for k in range(n - 1):
-        y = method.flow(k, 0.5 * h, y)
-    y = method.flow(n - 1, h, y)
+        y = flows[k](0.5 * h, y)
+    y = flows[n - 1](h, y)
     for k in reversed(range(n - 1)):
-        y = method.flow(k, 0.5 * h, y)
+        y = flows[k](0.5 * h, y)
     return y
+
+
+def strang_step(method: AbstractSplittingMethod, y: jax.Array, h: float) -> jax.Array:
+    """The Strang step of `method`'s pieces in its `ordering`."""
+    return strang_compose([functools.partial(method.flow, k) for k in range(len(method.terms))], y, h)
 
 
 def strang_flows(method: AbstractSplittingMethod) -> int:
