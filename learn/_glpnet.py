@@ -18,7 +18,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-
 from numpy.typing import ArrayLike
 
 from integrators._splitting._strang import strang_compose

@@ -36,7 +36,7 @@ def test_learned_hamiltonian_is_the_sum_of_the_module_potentials():
     g = net(full_vectors=True)
     # Independent: finite differences of H~ along the flow's generator. Each module flow is
     # the test flow with rate a_s sigma(<alpha_s, y>) + b_s = d/dx of its potential.
-    H = lambda y: np.asarray(g.hamiltonian(y))  # noqa: E731
+    H = lambda y: np.asarray(g.hamiltonian(y))
     y = Y[0]
     grad_fd = np.array([(H(y + 1e-6 * e) - H(y - 1e-6 * e)) / 2e-6 for e in np.eye(3)])
     vectors = np.asarray(g.module_vectors())
