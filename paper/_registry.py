@@ -6,5 +6,6 @@ from .e3_extended_pendulum import EXPERIMENT as _E3
 from .e4_charged_particle import EXPERIMENT as _E4
 from .e5_kirchhoff import EXPERIMENT as _E5
 from .e6_glpnet_rigid_body import EXPERIMENT as _E6
+from .w1_learned_vs_classical import EXPERIMENT as _W1
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1)}
