@@ -1,8 +1,9 @@
 """`python -m paper`: reproduce the paper's experiments and print the paper's numbers beside ours.
 
-    python -m paper                         # every experiment at the quick profile, then the summary
+    python -m paper                         # the paper's experiments E1-E6 (quick profile), then the summary
     python -m paper run E1 --full           # one (or more) experiments at the paper's budget
-    python -m paper --profile smoke         # every experiment in seconds (meaningless numbers)
+    python -m paper run W1                  # the learned-vs-classical study (beyond the paper)
+    python -m paper --profile smoke         # E1-E6 in seconds (meaningless numbers)
     python -m paper list                    # what is available
     python -m paper table                   # the summary of the results in --out
     python -m paper table --reference       # the committed --full results (paper/reference/)
@@ -22,7 +23,7 @@ from pathlib import Path
 from integrators._files import atomic_write_text
 
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir
-from ._registry import EXPERIMENTS
+from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 
 PROFILES = ("smoke", "quick", "full")
 
@@ -126,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile and args.full and args.profile != "full":
         parser.error(f"--full and --profile {args.profile} disagree")
     profile = args.profile or ("full" if args.full else "quick")
-    ids = args.ids if args.command == "run" else list(EXPERIMENTS)
+    ids = args.ids if args.command == "run" else list(PAPER_EXPERIMENTS)
     return _run(ids, profile, not args.no_progress, args.out)
 
 

@@ -9,12 +9,12 @@ import pytest
 
 from paper.__main__ import main, summary_table
 from paper._experiment import METRIC_KEYS, REFERENCE_DIR
-from paper._registry import EXPERIMENTS
+from paper._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 
 EPS = np.finfo(np.float64).eps
 
 
-@pytest.mark.parametrize("exp_id", [e for e in EXPERIMENTS if e.startswith("E")])
+@pytest.mark.parametrize("exp_id", PAPER_EXPERIMENTS)
 def test_experiment_smoke(exp_id, tmp_path):
     exp = EXPERIMENTS[exp_id]
     metrics = exp.execute(profile="smoke", progress=False, out_dir=tmp_path)
@@ -138,7 +138,7 @@ def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
 
     monkeypatch.setattr(cli, "_run", fake_run)
     assert main(["--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
-    assert calls.pop() == (list(EXPERIMENTS), "smoke", False, tmp_path)
+    assert calls.pop() == (list(PAPER_EXPERIMENTS), "smoke", False, tmp_path)
     argv = ["run", "E6", "E1", "--profile", "smoke", "--no-progress", "--out", str(tmp_path / "x")]
     assert main(argv) == 0
     assert calls.pop() == (["E6", "E1"], "smoke", False, tmp_path / "x")
@@ -148,7 +148,7 @@ def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
     assert main(["run", "E6", "--full"]) == 0
     assert calls.pop() == (["E6"], "full", True, Path("paper-results"))
     assert main([]) == 0
-    assert calls.pop() == (list(EXPERIMENTS), "quick", True, Path("paper-results"))
+    assert calls.pop() == (list(PAPER_EXPERIMENTS), "quick", True, Path("paper-results"))
     with pytest.raises(SystemExit):
         main(["run", "E6", "--full", "--profile", "smoke"])
     with pytest.raises(SystemExit):
