@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .._step_map import check_state
@@ -21,9 +23,12 @@ class AbstractCompositionMethod(AbstractSplittingMethod):
     coefficients: ClassVar[np.ndarray]
 
     def step(self, y):
-        y = check_state(y, self.system.dim)
-        for gamma in self.coefficients:
-            y = strang_step(self, y, float(gamma) * self.h)
+        # A scan over the table, not a Python loop: one Strang step is traced and compiled
+        # once (7x less code for Yoshida6, and for its Jacobian in `poisson_defect`).
+        def body(y, gamma):
+            return strang_step(self, y, gamma * self.h), None
+
+        y, _ = jax.lax.scan(body, check_state(y, self.system.dim), jnp.asarray(self.coefficients))
         return y
 
     @property
