@@ -265,22 +265,29 @@ def _plots(rows, out_dir: Path) -> list[str]:
     """Per system: work-precision (error at t = 100 vs cost per unit time) and energy error vs h."""
     names = []
     for name in sorted({r["system"] for r in rows}):
-        fig = figure(figsize=(12, 4.8))
+        fig = figure(figsize=(12, 4.8))  # says how to install matplotlib if it is missing
+        import matplotlib
+
         axes = fig.subplots(1, 2)
         sub = [r for r in rows if r["system"] == name]
-        for method in dict.fromkeys(r["method"] for r in sub):
+        methods = list(dict.fromkeys(r["method"] for r in sub))
+        colours = [matplotlib.colormaps["tab20"](k % 20) for k in range(len(methods))]
+        for method, colour in zip(methods, colours):
             pts = sorted((r for r in sub if r["method"] == method), key=lambda r: r["h"])
             hs = np.array([r["h"] for r in pts])
             cost = np.array([r["cost_vs_strang"] / r["h"] for r in pts])  # work per unit time
             err = np.array([r["error_t100"] for r in pts])
             energy = np.array([r["energy_error_long"] for r in pts])
             learned = method in ("LPNet", "G-LPNet (sym.)")
-            style = {"marker": "o", "lw": 2.2} if learned else {"marker": ".", "lw": 0.9}
+            style = {"marker": "o", "lw": 2.6, "color": "black" if method == "LPNet" else "crimson"} if learned \
+                else {"marker": ".", "lw": 1.0, "color": colour, "ls": "--" if method.startswith("Strang") else "-"}
             axes[0].loglog(cost, np.maximum(err, 1e-17), label=method, **style)
             axes[1].loglog(hs, np.maximum(energy, 1e-17), label=method, **style)
         axes[0].set_xlabel("cost per unit time (Strang steps of h = 1)")
         axes[0].set_ylabel("global error at t = 100")
         axes[0].set_title(f"{name}: work-precision")
+        axes[1].set_xticks(sorted({r["h"] for r in sub}), [f"{h:g}" for h in sorted({r["h"] for r in sub})])
+        axes[1].minorticks_off()
         axes[1].set_xlabel("h")
         axes[1].set_ylabel("max relative energy error")
         axes[1].set_title(f"{name}: energy error vs step size")
