@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from liepoisson._validation import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._step_map import AbstractStepMap, check_state
+from ._step_map import AbstractStepMap, check_state, xla_flops
 
 
 class RK4(AbstractStepMap):
@@ -67,17 +67,24 @@ class ImplicitMidpoint(AbstractStepMap):
         self.h = positive_float(h, "h")
         self.newton_iterations = positive_int(newton_iterations, "newton_iterations")
 
+    def _newton(self, y: jax.Array, z: jax.Array) -> jax.Array:
+        """One Newton step on the stage equation $z - y - h f((y + z)/2) = 0$."""
+        h, f = self.h, self.system.vector_field
+        jac = jax.jacfwd(f)(0.5 * (y + z))
+        return z - jnp.linalg.solve(jnp.eye(self.system.dim) - 0.5 * h * jac, z - y - h * f(0.5 * (y + z)))
+
+    def _guess(self, y: jax.Array) -> jax.Array:
+        return y + self.h * self.system.vector_field(y)  # explicit Euler
+
     def step(self, y: jax.Array) -> jax.Array:
-        y, h, f = check_state(y, self.system.dim), self.h, self.system.vector_field
-        eye = jnp.eye(self.system.dim)
+        y = check_state(y, self.system.dim)
+        return jax.lax.fori_loop(0, self.newton_iterations, lambda _, z: self._newton(y, z), self._guess(y))
 
-        def residual(z):
-            return z - y - h * f(0.5 * (y + z))
-
-        def newton(_, z):
-            return z - jnp.linalg.solve(eye - 0.5 * h * jax.jacfwd(f)(0.5 * (y + z)), residual(z))
-
-        return jax.lax.fori_loop(0, self.newton_iterations, newton, y + h * f(y))
+    def step_flops(self) -> float:
+        """The Euler guess plus `newton_iterations` Newton steps (the loop body counts once)."""
+        y = jnp.zeros(self.system.dim)
+        guess = xla_flops(lambda m, y: m._guess(y), self, y)
+        return guess + self.newton_iterations * xla_flops(lambda m, y: m._newton(y, y), self, y)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -107,16 +109,26 @@ class AbstractStepMap(eqx.Module):
 
     def cost(self) -> StepCost:
         """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
-        compiled step."""
+        compiled step (`step_flops`)."""
         self._check_h()
-        y = jnp.zeros(self.system.dim)
-        dynamic, static = eqx.partition(self, eqx.is_array)
-        compiled = jax.jit(lambda d, y: eqx.combine(d, static).step(y)).lower(dynamic, y).compile()
-        analysis = compiled.cost_analysis()
-        if isinstance(analysis, (list, tuple)):  # older jax: one entry per device
-            analysis = analysis[0] if analysis else {}
-        flops = float((analysis or {}).get("flops", np.nan))
-        return StepCost(flops=flops, exact_flows=self.exact_flows_per_step)
+        return StepCost(flops=self.step_flops(), exact_flows=self.exact_flows_per_step)
+
+    def step_flops(self) -> float:
+        """XLA's flop count of one compiled step. XLA counts the body of a loop (`scan`,
+        `fori_loop`) once, so maps that loop inside `step` override this with the count per
+        iteration times the number of iterations."""
+        return xla_flops(lambda m, y: m.step(y), self, jnp.zeros(self.system.dim))
+
+
+def xla_flops(fn: Callable[..., Any], *args: Any) -> float:
+    """XLA's cost-analysis flop count of `fn(*args)` compiled (array leaves traced, the rest
+    static); NaN where the backend does not report it."""
+    dynamic, static = eqx.partition(args, eqx.is_array)
+    compiled = jax.jit(lambda d: fn(*eqx.combine(d, static))).lower(dynamic).compile()
+    analysis = compiled.cost_analysis()
+    if isinstance(analysis, (list, tuple)):  # older jax: one entry per device
+        analysis = analysis[0] if analysis else {}
+    return float((analysis or {}).get("flops", np.nan))
 
 
 def check_state(y: jax.Array, dim: int) -> jax.Array:
