@@ -95,7 +95,7 @@ class AbstractStepMap(eqx.Module):
         y0 = states(y0, "y0", dim)
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
-        out = _rollout_compiled(self, jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
+        out = _rollout_compiled(_traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
         return out[0] if y0.ndim == 1 else out
 
     def poisson_defect(self, y: ArrayLike) -> jax.Array:
@@ -105,7 +105,7 @@ class AbstractStepMap(eqx.Module):
         self._check_h()
         dim = self.system.dim
         y = states(y, "y", dim)
-        return _defect_compiled(self, jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
+        return _defect_compiled(_traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
 
     def cost(self) -> StepCost:
         """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
@@ -141,6 +141,13 @@ def check_state(y: jax.Array, dim: int) -> jax.Array:
             "jax.vmap(map.step), for many)"
         )
     return y
+
+
+def _traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
+    """`step_map` with `h` as a 0-d float64 array, so that `eqx.filter_jit` traces it instead
+    of baking it in: one compiled rollout (or defect) serves every step size of a map (a sweep
+    over h compiles once per map and shape, not once per h)."""
+    return eqx.tree_at(lambda m: m.h, step_map, jnp.asarray(step_map.h, dtype=jnp.float64))
 
 
 @eqx.filter_jit
