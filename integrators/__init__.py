@@ -20,5 +20,9 @@ from ._ground_truth import ground_truth as ground_truth, taylor_integrator as ta
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics
-from ._step_map import AbstractStepMap as AbstractStepMap, StepCost as StepCost
+from ._step_map import (
+    AbstractStepMap as AbstractStepMap,
+    RolloutDivergedError as RolloutDivergedError,
+    StepCost as StepCost,
+)
 from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

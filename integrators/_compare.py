@@ -160,9 +160,9 @@ def compare(
     for label, m in maps.items():
         per_output = plans[label]
         n_steps = per_output * n_outputs
-        jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output))  # compile
+        jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output, nonfinite="return"))  # compile
         start = time.perf_counter()
-        y = np.asarray(jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output)))
+        y = np.asarray(jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output, nonfinite="return")))
         seconds = (time.perf_counter() - start) / (n_steps * len(y0s))
         report = diagnostics(y, system, reference=ref, times=times)
         good = y[0, : len(report.times)]
@@ -230,7 +230,7 @@ def convergence(
         m = make(float(h))
         if not isinstance(m, AbstractStepMap) or m.system is not system:
             raise TypeError(f"make({h:g}) must return an integrators.AbstractStepMap of {system!r}; got {m!r}")
-        y = np.asarray(m.rollout(y0s, n, save_every=n))[:, -1]
+        y = np.asarray(m.rollout(y0s, n, save_every=n, nonfinite="return"))[:, -1]
         errors.append(float(np.max(np.linalg.norm(y - truth, axis=-1))))
     errors = np.asarray(errors)
     usable = errors > 0

@@ -4,12 +4,14 @@ symbolically from the system's own Hamiltonian and Poisson tensor (`system.heyok
 from __future__ import annotations
 
 import json
+import os
 import weakref
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from liepoisson._progress import progress_bar, show_progress
 from liepoisson._validation import as_state, positive_float, positive_int
 from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
 
@@ -65,12 +67,23 @@ def _initial_conditions(system: AbstractPoissonSystem, y0: ArrayLike) -> np.ndar
 
 
 def _progress_bar(total: int, progress: bool | None):
-    from tqdm.auto import tqdm
+    # Auto: on a terminal, and only for a run that is still going after a few seconds.
+    return progress_bar(total, "ground truth", "traj", progress, delay=3.0 if progress is None else 0.0)
 
-    if progress is None:
-        # Auto: only a run that is still going after a few seconds earns a bar.
-        return tqdm(total=total, desc="ground truth", unit="traj", delay=3.0, leave=False)
-    return tqdm(total=total, desc="ground truth", unit="traj", disable=not progress)
+
+def check_fits_in_memory(shape: tuple[int, ...], what: str) -> None:
+    """`ValueError` (before allocating) if a float64 array of `shape` is larger than the
+    machine's available physical memory."""
+    need = 8 * int(np.prod(shape, dtype=np.float64))
+    try:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # not available on this platform
+        return
+    if need > free:
+        raise ValueError(
+            f"{what} of shape {shape} need {need / 2**30:.3g} GiB, more than the {free / 2**30:.3g} GiB "
+            "of memory available; ask for fewer trajectories or steps, or save in chunks"
+        )
 
 
 def ground_truth(
@@ -99,8 +112,8 @@ def ground_truth(
     - `y0`: `(dim,)` or `(n_traj, dim)`, finite.
     - `h`: sampling step (> 0); `n_steps`: number of steps (integer >= 1).
     - `tol`: heyoka tolerance (> 0), default machine epsilon.
-    - `progress`: `True`/`False` to force the tqdm bar; `None` shows it only for a run still
-      going after 3 s.
+    - `progress`: `True`/`False` to force the tqdm bar; `None` shows it only on a terminal
+      and for a run still going after 3 s.
     - `max_steps`: heyoka's cap on steps per trajectory (0: none).
     - `seed`: the seed that drew `y0`, if any; recorded in the data set's metadata.
 
@@ -116,9 +129,12 @@ def ground_truth(
     h = positive_float(h, "h")
     n_steps = positive_int(n_steps, "n_steps")
     tol_used = EPS if tol is None else positive_float(tol, "tol")
+    if not tol_used < 1.0:
+        raise ValueError(f"tol must be a relative tolerance in (0, 1), e.g. 1e-12; got {tol!r}")
+    max_steps = positive_int(max_steps, "max_steps", minimum=0)
     y0 = _initial_conditions(system, y0)
-    if progress is not None and not isinstance(progress, bool):
-        raise TypeError(f"progress must be True, False or None; got {progress!r}")
+    show_progress(progress)  # validates it before any work
+    check_fits_in_memory((y0.shape[0], n_steps + 1, system.dim), "the requested trajectories (n_traj, n_steps + 1, dim)")
 
     ta = taylor_integrator(system, tol_used)
     grid = h * np.arange(n_steps + 1, dtype=np.float64)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import as_state, positive_float
+from liepoisson._validation import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._ground_truth import EPS, taylor_integrator
@@ -37,6 +37,7 @@ def lyapunov_exponent(
     **Returns:** $\lambda$ as a float, or with `return_history=True` a tuple
     `(lambda, times, running_estimates)`.
     """
+    system = check_system(system)
     y0 = np.asarray(as_state(y0, "y0", system.dim))
     if y0.ndim != 1:
         raise ValueError(f"y0 must have shape ({system.dim},); got {y0.shape}")

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from liepoisson._validation import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._step_map import AbstractStepMap, check_state, xla_flops
+from ._step_map import AbstractStepMap, check_state, traced_h, xla_flops
 
 
 class RK4(AbstractStepMap):
@@ -83,8 +83,8 @@ class ImplicitMidpoint(AbstractStepMap):
     def step_flops(self) -> float:
         """The Euler guess plus `newton_iterations` Newton steps (the loop body counts once)."""
         y = jnp.zeros(self.system.dim)
-        guess = xla_flops(lambda m, y: m._guess(y), self, y)
-        return guess + self.newton_iterations * xla_flops(lambda m, y: m._newton(y, y), self, y)
+        guess = xla_flops(lambda m, y: m._guess(y), traced_h(self), y)
+        return guess + self.newton_iterations * xla_flops(lambda m, y: m._newton(y, y), traced_h(self), y)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -73,7 +73,7 @@ class AbstractStepMap(eqx.Module):
             )
         return self.h
 
-    def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1) -> jax.Array:
+    def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1, nonfinite: str = "raise") -> jax.Array:
         r"""Iterate the step: $y_k = \Phi_h^k(y_0)$ for $k = 0, s, 2s, \dots, n$ ($s$ =
         `save_every`, which must divide `n_steps`).
 
@@ -83,6 +83,12 @@ class AbstractStepMap(eqx.Module):
         **Returns:** `(n_steps // save_every + 1, dim)`, or `(n_traj, n_steps // save_every + 1,
         dim)` for many initial conditions; entry 0 is `y0`. Compiled once per map, shape and
         `n_steps` (`jax.lax.scan`, vectorised over trajectories with `jax.vmap`).
+
+        A trajectory that leaves the finite range (a learned map far outside its training
+        region, too large a step) raises `RolloutDivergedError` naming the trajectory, the steps
+        between which it diverged and its last finite state (`nonfinite="raise"`, the default);
+        `nonfinite="return"` returns the states with their non-finite tail instead
+        (`integrators.diagnostics` reports up to the first non-finite step).
         """
         self._check_h()
         dim = self.system.dim
@@ -92,10 +98,14 @@ class AbstractStepMap(eqx.Module):
             raise ValueError(
                 f"save_every must divide n_steps; got n_steps={n_steps}, save_every={save_every}"
             )
+        if nonfinite not in ("raise", "return"):
+            raise ValueError(f"nonfinite must be 'raise' or 'return'; got {nonfinite!r}")
         y0 = states(y0, "y0", dim)
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
-        out = _rollout_compiled(_traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
+        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
+        if nonfinite == "raise":
+            _check_finite(self, out, save_every)
         return out[0] if y0.ndim == 1 else out
 
     def poisson_defect(self, y: ArrayLike) -> jax.Array:
@@ -105,7 +115,7 @@ class AbstractStepMap(eqx.Module):
         self._check_h()
         dim = self.system.dim
         y = states(y, "y", dim)
-        return _defect_compiled(_traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
+        return _defect_compiled(traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
 
     def cost(self) -> StepCost:
         """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
@@ -117,18 +127,69 @@ class AbstractStepMap(eqx.Module):
         """XLA's flop count of one compiled step. XLA counts the body of a loop (`scan`,
         `fori_loop`) once, so maps that loop inside `step` override this with the count per
         iteration times the number of iterations."""
-        return xla_flops(lambda m, y: m.step(y), self, jnp.zeros(self.system.dim))
+        return xla_flops(lambda m, y: m.step(y), traced_h(self), jnp.zeros(self.system.dim))
+
+
+_FLOPS: dict[Any, float] = {}
+
+
+class RolloutDivergedError(FloatingPointError):
+    """A rollout left the finite range. Attributes: `trajectory` (index into `y0`), `step`
+    (the first saved step that is not finite), `last_finite_step`, `state` (the state there)
+    and `states` (the whole output, with its non-finite tail)."""
+
+    def __init__(self, message: str, *, trajectory: int, step: int, last_finite_step: int, state: np.ndarray,
+                 states: np.ndarray):
+        super().__init__(message)
+        self.trajectory, self.step, self.last_finite_step = trajectory, step, last_finite_step
+        self.state, self.states = state, states
+
+
+def _check_finite(step_map: AbstractStepMap, out: jax.Array, save_every: int) -> None:
+    """Raise `RolloutDivergedError` for the earliest non-finite saved state of `out`
+    `(N, T, dim)` (ties: the lowest trajectory index)."""
+    y = np.asarray(out)
+    finite = np.isfinite(y).all(axis=-1)
+    if finite.all():
+        return
+    first = np.where(finite.all(axis=1), y.shape[1], np.argmin(finite, axis=1))
+    i = int(np.argmin(first))
+    k = int(first[i])
+    last = y[i, k - 1]
+    when = f"at step {k}" if save_every == 1 else f"between steps {(k - 1) * save_every} and {k * save_every}"
+    raise RolloutDivergedError(
+        f"{type(step_map).__name__} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
+        f"{when}; its last finite state (step {(k - 1) * save_every}) is {np.round(last, 6).tolist()}. "
+        "The map left the finite range (a learned map far outside its training data, or too large a "
+        "step); pass nonfinite='return' to get the states with their non-finite tail",
+        trajectory=i, step=k * save_every, last_finite_step=(k - 1) * save_every, state=last, states=y,
+    )
 
 
 def xla_flops(fn: Callable[..., Any], *args: Any) -> float:
     """XLA's cost-analysis flop count of `fn(*args)` compiled (array leaves traced, the rest
-    static); NaN where the backend does not report it."""
+    static); NaN where the backend does not report it. Remembered per code of `fn`, static
+    leaves and array shapes (a count does not depend on the arrays' values; pass maps through
+    `traced_h` so that their step size is one of those arrays)."""
     dynamic, static = eqx.partition(args, eqx.is_array)
+    key = None
+    if getattr(fn, "__closure__", True) is None:  # a plain function or lambda: its code names it
+        leaves, treedef = jax.tree_util.tree_flatten(static)
+        shapes = tuple((x.shape, str(x.dtype)) for x in jax.tree_util.tree_leaves(dynamic))
+        key = (fn.__code__, treedef, tuple(leaves), shapes)
+        try:
+            if key in _FLOPS:
+                return _FLOPS[key]
+        except TypeError:  # an unhashable static leaf: count without remembering
+            key = None
     compiled = jax.jit(lambda d: fn(*eqx.combine(d, static))).lower(dynamic).compile()
     analysis = compiled.cost_analysis()
     if isinstance(analysis, (list, tuple)):  # older jax: one entry per device
         analysis = analysis[0] if analysis else {}
-    return float((analysis or {}).get("flops", np.nan))
+    flops = float((analysis or {}).get("flops", np.nan))
+    if key is not None:
+        _FLOPS[key] = flops
+    return flops
 
 
 def check_state(y: jax.Array, dim: int) -> jax.Array:
@@ -143,7 +204,7 @@ def check_state(y: jax.Array, dim: int) -> jax.Array:
     return y
 
 
-def _traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
+def traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
     """`step_map` with `h` as a 0-d float64 array, so that `eqx.filter_jit` traces it instead
     of baking it in: one compiled rollout (or defect) serves every step size of a map (a sweep
     over h compiles once per map and shape, not once per h)."""

@@ -14,7 +14,7 @@ import numpy as np
 
 import liepoisson
 from liepoisson._validation import positive_float
-from liepoisson.systems import AbstractPoissonSystem, from_name
+from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path
 
@@ -256,11 +256,13 @@ class Trajectories:
             f.attrs["format_version"] = np.int64(FORMAT_VERSION)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Trajectories:
-        """Read a file written by `save`; the system is rebuilt by
-        `liepoisson.systems.from_name(name, params)`. Raises `ValueError` naming the file for a
-        file that is not HDF5, is truncated, lacks the datasets or attributes, or has another
-        `format_version`."""
+    def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -> Trajectories:
+        """Read a file written by `save`. The system is rebuilt from the file
+        (`liepoisson.systems.from_name(name, params)`: catalogue systems and user
+        `LiePoissonSystem`s, whose definition is saved) or, given `system`, checked to match the
+        file (for a system class of your own, or a splitting that could not be saved). Raises
+        `ValueError` naming the file for a file that is not HDF5, is truncated, lacks the
+        datasets or attributes, has another `format_version`, or holds another system."""
         import h5py
 
         path = os.fspath(path)
@@ -299,9 +301,9 @@ class Trajectories:
 
         try:
             params = json.loads(text(attrs["system_params"]))
-            system = from_name(text(attrs["system"]), params)
-        except (ValueError, TypeError) as err:
-            raise ValueError(f"{path!r}: cannot rebuild the system: {err}") from err
+        except ValueError as err:
+            raise ValueError(f"{path!r}: the system parameters are not JSON: {err}") from err
+        system = system_for_file(text(attrs["system"]), params, system, f"the file {path!r}")
         seed = int(attrs["seed"])
         try:
             return cls(

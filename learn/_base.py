@@ -15,7 +15,7 @@ import numpy as np
 import liepoisson as lp
 from integrators import AbstractStepMap
 from liepoisson._validation import check_system
-from liepoisson.systems import AbstractPoissonSystem
+from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from . import _checkpoint
 
@@ -65,24 +65,34 @@ class AbstractLearnedMap(AbstractStepMap):
         _checkpoint.write(path, self.file_attributes(), {"weights": _checkpoint.array_leaves(self)})
 
     @classmethod
-    def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem) -> Self:
-        """Read a map written by `save` (or the best weights of an Adam checkpoint) for
-        `system`, which must match the file's system."""
-        system = check_system(system)
+    def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -> Self:
+        """Read a map written by `save` (or the best weights of an Adam checkpoint). The
+        system is rebuilt from the file (catalogue systems and user `LiePoissonSystem`s) or,
+        given `system`, checked to match it (same algebra, Hamiltonian values at the saved
+        probe points for a user system; same parameters otherwise)."""
         attrs, groups = _checkpoint.read(path)
-        check_file_matches(path, attrs, cls.__name__, system)
-        h = attrs["h"]
-        model = cls(system, key=0, h=None if np.isnan(h) else float(h), **attrs["hyperparameters"])
-        weights = groups["best"] if "best" in groups else groups["weights"]
+        system = check_file_matches(path, attrs, cls.__name__, system)
+        try:
+            h = float(attrs["h"])
+            model = cls(system, key=0, h=None if np.isnan(h) else h, **attrs["hyperparameters"])
+            weights = groups["best"] if "best" in groups else groups["weights"]
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(
+                f"path {os.fspath(path)!r} is not a complete {cls.__name__} file ({type(err).__name__}: {err})"
+            ) from err
         return _checkpoint.replace_array_leaves(model, weights, f"path {os.fspath(path)!r}")
 
 
-def check_file_matches(path: str | os.PathLike, attrs: dict[str, Any], class_name: str, system: AbstractPoissonSystem) -> None:
-    """ValueError unless the file at `path` holds a `class_name` for `system`."""
+def check_file_matches(
+    path: str | os.PathLike, attrs: dict[str, Any], class_name: str, system: AbstractPoissonSystem | None
+) -> AbstractPoissonSystem:
+    """The system of the file at `path`, which must hold a `class_name`: rebuilt from the file
+    when `system` is None, else `system` checked to match it. `ValueError` otherwise."""
     if attrs.get("class") != class_name:
         raise ValueError(f"path {os.fspath(path)!r} holds a {attrs.get('class')}, not a {class_name}")
-    if attrs.get("system") != system.name or attrs.get("system_params") != _checkpoint.jsonable(system.params):
-        raise ValueError(
-            f"system {system!r} does not match the file {os.fspath(path)!r}, written for "
-            f"{attrs.get('system')}({attrs.get('system_params')})"
-        )
+    if system is not None:
+        system = check_system(system)
+    name, params = attrs.get("system"), attrs.get("system_params")
+    if not isinstance(name, str) or not isinstance(params, dict):
+        raise ValueError(f"path {os.fspath(path)!r} does not record its system (attributes 'system', 'system_params')")  # noqa: TRY004 (a damaged file)
+    return system_for_file(name, params, system, f"the file {os.fspath(path)!r}")

@@ -70,24 +70,42 @@ def write(path: Any, attrs: dict[str, Any], groups: dict[str, Any]) -> None:
 def read(path: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """`(attrs, groups)` as written by `write` (JSON attributes decoded)."""
     path = os.fspath(path)
+    expected = "a learn model, checkpoint or training record file (written by .save or learn.fit)"
     if not os.path.exists(path):
         raise FileNotFoundError(f"path {path!r} does not exist")
-    with h5py.File(path, "r") as f:
-        if f.attrs.get("format") != FORMAT:
-            raise ValueError(f"path {path!r} is not a learn model/checkpoint file")
-        attrs: dict[str, Any] = {}
-        for key, value in f.attrs.items():
-            if isinstance(value, bytes):
-                value = value.decode()
-            if isinstance(value, np.generic):
-                value = value.item()
-            if key.endswith("_json"):
-                key, value = key[: -len("_json")], json.loads(value)
-            attrs[key] = value
-        groups: dict[str, Any] = {}
-        for name, g in f.items():
-            if g.attrs["kind"] == "dict":
-                groups[name] = {k: np.asarray(v) for k, v in g.items()}
-            else:
-                groups[name] = [np.asarray(g[f"{i:04d}"]) for i in range(int(g.attrs["count"]))]
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"path {path!r} is a folder; expected {expected}")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise ValueError(
+            f"path {path!r} is not a readable HDF5 file (corrupt, truncated or another format); expected {expected}"
+        ) from err
+    try:
+        with f:
+            if f.attrs.get("format") != FORMAT:
+                what = ("a trajectory data set (read it with integrators.Trajectories.load)"
+                        if "trajectories" in f and "format_version" in f.attrs else "another kind of HDF5 file")
+                raise ValueError(f"path {path!r} holds {what}; expected {expected}")
+            attrs: dict[str, Any] = {}
+            for key, value in f.attrs.items():
+                if isinstance(value, bytes):
+                    value = value.decode()
+                if isinstance(value, np.generic):
+                    value = value.item()
+                if key.endswith("_json"):
+                    key, value = key[: -len("_json")], json.loads(value)
+                attrs[key] = value
+            groups: dict[str, Any] = {}
+            for name, g in f.items():
+                if g.attrs["kind"] == "dict":
+                    groups[name] = {k: np.asarray(v) for k, v in g.items()}
+                else:
+                    groups[name] = [np.asarray(g[f"{i:04d}"]) for i in range(int(g.attrs["count"]))]
+    except ValueError as err:
+        if str(err).startswith(f"path {path!r}"):
+            raise
+        raise ValueError(f"path {path!r} is damaged (corrupt HDF5 data or attributes): {err}") from err
+    except (OSError, KeyError, TypeError, AttributeError) as err:
+        raise ValueError(f"path {path!r} is damaged (corrupt HDF5 data or attributes): {type(err).__name__}: {err}") from err
     return attrs, groups

@@ -6,6 +6,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
+from liepoisson._inverse import check_casimirs_agree
 from liepoisson._validation import fraction, pairs, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -35,10 +36,24 @@ def _split(y0, y1, validation_fraction, seed):
     return (y0[tr], y1[tr]), (y0[va], y1[va])
 
 
+# Pairs whose Casimirs differ by more than this (relative to |grad C| |y|) cannot be joined by a
+# Casimir-preserving map: far above the drift of any integrator (heyoka data: ~1e-15), far below
+# a mislabelled or mixed-up pair.
+CASIMIR_RTOL = 1e-8
+
+
+def _check_casimirs(system: AbstractPoissonSystem, y0: np.ndarray, y1: np.ndarray, label) -> None:
+    if system.n_casimirs:
+        G = np.asarray(system.casimir_gradients(y0))
+        check_casimirs_agree(y0, y1, CASIMIR_RTOL, system.casimirs, G, ("y0", "y1"), label)
+
+
 def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPoissonSystem, h: float | None,
-            validation_fraction: float, seed: int) -> PairData:
+            validation_fraction: float, seed: int, *, conserves_casimirs: bool = False) -> PairData:
     """Turn `data` into training/validation pairs for `system`: an `integrators.Trajectories`
-    (consecutive states; its own split) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h`."""
+    (consecutive states; its own split) or a tuple `(y0, y1)` of arrays `(N, dim)` with `h`.
+    With `conserves_casimirs` (a model that moves on coadjoint orbits), every pair's Casimirs
+    must agree to `CASIMIR_RTOL`; the error names the pair as the user's data indexes it."""
     validation_fraction = fraction(validation_fraction, "validation_fraction")
     seed = positive_int(seed, "seed", minimum=0)
     if isinstance(data, (tuple, list)):
@@ -51,6 +66,8 @@ def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPo
         y0, y1 = y0.reshape(-1, system.dim), y1.reshape(-1, system.dim)
         if y0.shape[0] == 0:
             raise ValueError("data must contain at least one pair; got 0")
+        if conserves_casimirs:
+            _check_casimirs(system, y0, y1, lambda i: f"data pair {i}")
         train, val = _split(y0, y1, validation_fraction, seed)
         return PairData(train, val, h)
     if not isinstance(data, Trajectories):
@@ -66,6 +83,10 @@ def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPo
             f"data is for {data.system!r} (dim {data.system.dim}); the model is for {system!r} "
             f"(dim {system.dim})"
         )
+    if conserves_casimirs:
+        n_steps = data.states.shape[1] - 1
+        _check_casimirs(system, *data.pairs(),
+                        lambda i: f"data trajectory {i // n_steps}, step {i % n_steps} -> {i % n_steps + 1}")
     if validation_fraction > 0:
         (y0, y1), (v0, v1) = data.split(validation_fraction, seed)
         y0, y1 = pairs(y0, y1, system.dim)

@@ -19,6 +19,7 @@ from jax.flatten_util import ravel_pytree
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
+from liepoisson._progress import show_progress
 from liepoisson._validation import positive_float, positive_int
 
 from ._base import AbstractLearnedMap
@@ -161,7 +162,7 @@ def fit(
     loss: str = "state",
     normalise: bool = False,
     checkpoint: Checkpoint | None = None,
-    progress: bool = True,
+    progress: bool | None = None,
     callback: Callback | None = None,
 ) -> tuple[_Map, TrainingRecord]:
     r"""Train a learned map on data pairs; returns `(fitted model, TrainingRecord)`.
@@ -185,7 +186,7 @@ def fit(
       normalising reaches a lower loss (1.6e-11 vs 3-4e-11 after 1e5 epochs) but the
       10,000-step rollout drifts more in energy (2e-3..0.6 vs 4e-4..7e-4).
     - `checkpoint`: a `Checkpoint` for the Adam stage.
-    - `progress`: tqdm bars with the losses; `callback(learn.Progress)`: called as training
+    - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal); `callback(learn.Progress)`: called as training
       goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
     if not isinstance(model, AbstractLearnedMap):
@@ -215,13 +216,15 @@ def fit(
     if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not isinstance(model, GLPNet):
         raise ValueError("QuasiNewton(warm_start=True) is the G-LPNet's identity warm start; "
                          f"use warm_start=False for a {type(model).__name__}")
-    pairs = prepare(data, model.system, h, validation_fraction, seed)
+    pairs = prepare(data, model.system, h, validation_fraction, seed,
+                    conserves_casimirs=not isinstance(model, MLPBaseline))
     if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
         raise ValueError(
             f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "
             "with h=None (or the data's h), or data sampled at the model's step"
         )
     model = eqx.tree_at(lambda m: m.h, model, pairs.h, is_leaf=lambda x: x is None)
+    progress = show_progress(progress)
     model, train, val, loss_fn = _objective(model, pairs, loss, normalise)
     X, T = (jnp.asarray(a) for a in train)
     Xv, Tv = (jnp.asarray(a) for a in val)

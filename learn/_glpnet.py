@@ -55,7 +55,8 @@ class GLPNet(AbstractLearnedMap):
     Casimir-conserving for any parameters. Trained by default with BFGS and the identity warm
     start (`learn.fit(gnet, data)`, see `learn.QuasiNewton`).
 
-    **Arguments:** `system`; `n_modules` $M$; `order` of the basis vectors (default cycling);
+    **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$:
+    each basis direction twice, the paper's 6 for so(3)); `order` of the basis vectors (default cycling);
     `key`; `full_vectors`; `activation` $\sigma$ (paper: sigmoid); `h` (`None`: set by
     `learn.fit`); `symmetric`: the data-driven Strang splitting below.
 
@@ -83,7 +84,7 @@ class GLPNet(AbstractLearnedMap):
     def __init__(
         self,
         system: AbstractPoissonSystem,
-        n_modules: int = 6,
+        n_modules: int | None = None,
         order: Sequence[int] | None = None,
         key: int | jax.Array = 0,
         *,
@@ -93,7 +94,9 @@ class GLPNet(AbstractLearnedMap):
         symmetric: bool = False,
     ):
         self.system = check_system(system)
-        n_modules = positive_int(n_modules, "n_modules")
+        # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
+        # algebra's G-LPNet can rotate about each axis on both sides of the others.
+        n_modules = 2 * system.dim if n_modules is None else positive_int(n_modules, "n_modules")
         self.order = _check_order(order, n_modules, system.dim)
         self.full_vectors = bool(full_vectors)
         if not isinstance(symmetric, (bool, np.bool_)):

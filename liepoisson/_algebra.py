@@ -7,6 +7,7 @@ $\dot\mu = \mathbb{B}(\mu)\,\partial H/\partial\mu$.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -19,7 +20,7 @@ from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
 from ._inverse import checked_flow_parameters
 from ._polynomial import Polynomial
-from ._validation import as_scalar_time, as_state
+from ._validation import as_scalar_time, as_state, broadcast_batch
 
 # Structure constants given as floats (e.g. computed ones) may carry round-off: accept
 # violations of antisymmetry and Jacobi up to 1e-10 relative to the size of the constants.
@@ -67,6 +68,27 @@ def _check_structure_constants(C: Any) -> np.ndarray:
     return C
 
 
+def generic_corank(C: np.ndarray) -> int:
+    r"""$n - \max_\mu \operatorname{rank} C_{abd}\mu_d$ over seeded random $\mu$: the number of
+    independent Casimirs near a generic point."""
+    mus = np.random.default_rng(0).normal(size=(4, C.shape[0]))
+    B = np.einsum("abd,kd->kab", C, mus)
+    return C.shape[0] - max(int(np.linalg.matrix_rank(b)) for b in B)
+
+
+def _warn_if_casimirs_missing(C: np.ndarray, found: int, degree: int, name: Any) -> None:
+    corank = generic_corank(C)
+    if found < corank:
+        warnings.warn(
+            f"LieAlgebra {name or ''}: found {found} polynomial Casimir(s) of degree <= {degree}, "
+            f"but the Poisson tensor has generic corank {corank}, so {corank - found} independent "
+            f"Casimir(s) are missing (Casimir drift will not cover them). Raise the degree searched "
+            f"(LieAlgebra(C, max_casimir_degree={degree + 2})), or pass casimirs=[...] yourself if "
+            "they are not polynomial (e.g. rational or logarithmic Casimirs of solvable algebras)",
+            stacklevel=3,
+        )
+
+
 class LieAlgebra:
     r"""A real Lie algebra $\mathfrak g$ given by structure constants, with the Lie-Poisson
     structure on $\mathfrak g^*$.
@@ -105,6 +127,7 @@ class LieAlgebra:
             raise ValueError(f"basis_names must have {n} entries; got {len(basis_names)}")
         if casimirs is None:
             casimirs = polynomial_casimirs(C, max_degree=max_casimir_degree)
+            _warn_if_casimirs_missing(C, len(casimirs), max_casimir_degree, name)
         else:
             casimirs = tuple(casimirs)
             for i, p in enumerate(casimirs):
@@ -140,6 +163,41 @@ class LieAlgebra:
 
     def __repr__(self) -> str:
         return f"LieAlgebra(name={self.name!r}, dim={self.dim}, n_casimirs={self.n_casimirs})"
+
+    # -- portable definition ---------------------------------------------------------------
+    def definition(self) -> dict[str, Any]:
+        """Everything that defines this algebra as JSON values (saved with data sets and models
+        of user systems): structure constants, name, basis names, sign, Casimir polynomials and
+        the kind of coadjoint-flow evaluator. `LieAlgebra.from_definition` inverts it."""
+        return {
+            "name": self.name,
+            "basis_names": list(self.basis_names),
+            "structure_constants": self._C.tolist(),
+            "sign": self.sign,
+            "casimirs": [[[c, list(e)] for c, e in p.terms] for p in self.casimir_polynomials],
+            "coadjoint_flow": type(self.exact_flow).__name__,
+        }
+
+    @classmethod
+    def from_definition(cls, definition: Any, what: str = "definition") -> LieAlgebra:
+        """The algebra of `definition()`; `ValueError` naming `what` for a malformed one. The
+        closed-form evaluators (`RodriguesFlow`, `SE3Flow`) are restored; any other evaluator
+        is replaced by the matrix exponential (the same exact flow)."""
+        from ._coadjoint import RodriguesFlow, SE3Flow
+
+        try:
+            C = np.asarray(definition["structure_constants"], dtype=np.float64)
+            n = C.shape[0]
+            casimirs = tuple(
+                Polynomial(n, tuple((float(c), tuple(int(k) for k in e)) for c, e in terms))
+                for terms in definition["casimirs"]
+            )
+            flows = {"RodriguesFlow": RodriguesFlow, "SE3Flow": SE3Flow}
+            flow = flows.get(definition.get("coadjoint_flow"), MatrixExponentialFlow)()
+            return cls(C, definition["name"], definition["basis_names"], casimirs=casimirs,
+                       coadjoint_flow=flow, sign=int(definition["sign"]))
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+            raise ValueError(f"{what} is not a valid Lie algebra definition: {type(err).__name__}: {err}") from err
 
     # -- Lie algebra operations ----------------------------------------------------------
     def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
@@ -195,12 +253,23 @@ class LieAlgebra:
         alpha = as_state(alpha, "alpha", self.dim)
         mu = as_state(mu, "mu", self.dim)
         t = as_scalar_time(t)
-        batch = jnp.broadcast_shapes(alpha.shape[:-1], mu.shape[:-1], t.shape)
+        batch = broadcast_batch(self.dim, alpha=alpha.shape[:-1], mu=mu.shape[:-1], t=t.shape)
         alpha = jnp.broadcast_to(alpha, batch + (self.dim,))
         mu = jnp.broadcast_to(mu, batch + (self.dim,))
         # The fast paths are written for sign = -1; sign = +1 reverses time.
         t = jnp.broadcast_to(-self.sign * t, batch)
-        return self.exact_flow(self._C, alpha, t, mu)
+        out = self.exact_flow(self._C, alpha, t, mu)
+        if not isinstance(out, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(out))):
+            # Finite inputs (checked above), non-finite result: exp(t M(alpha)) overflowed, which
+            # happens on non-compact algebras, where the flow grows like exp(|t alpha|).
+            k = np.unravel_index(int(np.argmax(~np.isfinite(np.asarray(out)).any(axis=-1))), batch) if batch else ()
+            size = float(np.abs(np.asarray(t)[k]) * np.linalg.norm(np.asarray(alpha)[k]))
+            raise FloatingPointError(
+                f"coadjoint_flow overflowed at batch index {tuple(int(i) for i in k)}: |t| |alpha| = {size:.3g}; "
+                f"exp(t M(alpha)) on {self.name} grows like exp(|t alpha|) and exceeds float64. "
+                "Use smaller alpha or t (a learned map far outside its training data produces such alpha)"
+            )
+        return out
 
     def coadjoint_flow_parameters(
         self, mu0: ArrayLike, mu1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")

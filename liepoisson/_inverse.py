@@ -106,6 +106,35 @@ def _gauss_newton_one(flow, mu0, mu1, casimir_gradients, *, t, max_iter):
     return P @ z
 
 
+def check_casimirs_agree(
+    a: np.ndarray,
+    b: np.ndarray,
+    rtol: float,
+    casimirs: Callable[[Any], jax.Array],
+    gradients: np.ndarray,
+    names: tuple[str, str],
+    label: Callable[[int], str] = lambda i: f"pair {i}",
+) -> None:
+    r"""`ValueError` naming the first pair (`label(i)`) of rows `a`, `b` `(N, dim)` whose Casimirs
+    differ by more than `rtol` relative to $\max(|\nabla C||y|, |C|)$ (`gradients` at `a`,
+    `(N, k, dim)`): no Poisson map, hence no Casimir-preserving step, connects them."""
+    if not gradients.shape[-2]:
+        return
+    C0, C1 = np.asarray(casimirs(a)), np.asarray(casimirs(b))
+    # A Casimir change comparable to rtol times |grad C| |y| is round-off-level.
+    cscale = np.linalg.norm(gradients, axis=-1) * np.linalg.norm(a, axis=-1)[:, None]
+    cscale = np.maximum(cscale, np.abs(C0)) + np.finfo(float).tiny
+    bad = np.abs(C1 - C0) > rtol * cscale
+    if np.any(bad):
+        i, j = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(
+            f"{label(i)}: Casimir {j} differs between {names[0]} and {names[1]} "
+            f"({C0[i, j]:.17g} vs {C1[i, j]:.17g}, relative "
+            f"{abs(C1[i, j] - C0[i, j]) / cscale[i, j]:.3g} > rtol = {rtol:g}); no Poisson "
+            "map connects them"
+        )
+
+
 def checked_flow_parameters(
     y0: ArrayLike,
     y1: ArrayLike,
@@ -133,20 +162,7 @@ def checked_flow_parameters(
     batch = a.shape[:-1]
     a, b = a.reshape(-1, dim), b.reshape(-1, dim)
     G = np.asarray(casimir_gradients(a))
-    if G.shape[-2]:
-        C0, C1 = np.asarray(casimirs(a)), np.asarray(casimirs(b))
-        # A Casimir change comparable to rtol times |grad C| |y| is round-off-level.
-        cscale = np.linalg.norm(G, axis=-1) * np.linalg.norm(a, axis=-1)[:, None]
-        cscale = np.maximum(cscale, np.abs(C0)) + np.finfo(float).tiny
-        bad = np.abs(C1 - C0) > rtol * cscale
-        if np.any(bad):
-            i, j = (int(v) for v in np.argwhere(bad)[0])
-            raise ValueError(
-                f"pair {i}: Casimir {j} differs between {names[0]} and {names[1]} "
-                f"({C0[i, j]:.17g} vs {C1[i, j]:.17g}, relative "
-                f"{abs(C1[i, j] - C0[i, j]) / cscale[i, j]:.3g} > rtol = {rtol:g}); no Poisson "
-                "map connects them"
-            )
+    check_casimirs_agree(a, b, rtol, casimirs, G, names)
     alpha = np.asarray(solve(a, b, t, G))
     res = np.max(np.abs(np.asarray(flow(alpha, t, a)) - b), axis=-1)
     scale = np.maximum(np.max(np.abs(a), axis=-1), np.max(np.abs(b), axis=-1))

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 from ._catalogue import se3, se3_structure_constants
 from ._coadjoint import SE3Flow, _check_not_antiparallel, _shortest_rotation
 from ._inverse import checked_flow_parameters
-from ._validation import as_scalar_time, as_state
+from ._validation import as_scalar_time, as_state, broadcast_batch
 
 _FLOW = SE3Flow()
 _C = se3_structure_constants()
@@ -59,7 +59,7 @@ def se3_rotation_shear(alpha: ArrayLike, t: ArrayLike, mu: ArrayLike, *, sign: i
     alpha = as_state(alpha, "alpha", 6)
     mu = as_state(mu, "mu", 6)
     t = as_scalar_time(t)
-    batch = jnp.broadcast_shapes(alpha.shape[:-1], mu.shape[:-1], t.shape)
+    batch = broadcast_batch(6, alpha=alpha.shape[:-1], mu=mu.shape[:-1], t=t.shape)
     alpha = jnp.broadcast_to(alpha, batch + (6,))
     mu = jnp.broadcast_to(mu, batch + (6,))
     return _body_rotation_shear(alpha, jnp.broadcast_to(-sign * t, batch), mu)

@@ -173,3 +173,16 @@ def check_system(system: Any):
             f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
         )
     return system
+
+
+def broadcast_batch(dim: int, **batches: tuple[int, ...]) -> tuple[int, ...]:
+    """The broadcast of the named batch shapes (e.g. `alpha=alpha.shape[:-1], mu=...,
+    t=t.shape`); `ValueError` naming them all if they do not broadcast."""
+    try:
+        return tuple(np.broadcast_shapes(*batches.values()))
+    except ValueError:
+        given = ", ".join(f"{k} {v}" for k, v in batches.items())
+        raise ValueError(
+            f"the batch shapes of {given} do not broadcast (states and parameters have shape "
+            f"(..., {dim}), times shape (...), and their leading axes broadcast together)"
+        ) from None

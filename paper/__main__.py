@@ -35,7 +35,13 @@ def summary_table(results: dict[str, dict]) -> str:
     ]
     for exp_id, metrics in results.items():
         exp = EXPERIMENTS[exp_id]
-        for label, paper, ours, base in exp.rows(metrics):
+        try:
+            rows = list(exp.rows(metrics))
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+            print(f"warning: skipping {exp_id}: its metrics.json lacks or garbles what the table needs "
+                  f"({type(err).__name__}: {err}); rerun `python -m paper run {exp_id}`", file=sys.stderr)
+            continue
+        for label, paper, ours, base in rows:
             lines.append(f"| {exp_id} ({metrics.get('profile')}) | {label} | {paper} | {ours} | {base} |")
     return "\n".join(lines) + "\n"
 
@@ -61,7 +67,7 @@ def load_results(folder: Path) -> dict[str, dict]:
     return out
 
 
-def _run(ids: list[str], profile: str, progress: bool, out: Path) -> int:
+def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
     unknown = [i for i in ids if i not in EXPERIMENTS]
     if unknown:
         print(f"unknown experiment(s) {unknown}; available: {', '.join(EXPERIMENTS)}", file=sys.stderr)
@@ -128,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--full and --profile {args.profile} disagree")
     profile = args.profile or ("full" if args.full else "quick")
     ids = args.ids if args.command == "run" else list(PAPER_EXPERIMENTS)
-    return _run(ids, profile, not args.no_progress, args.out)
+    return _run(ids, profile, False if args.no_progress else None, args.out)  # None: bars on a terminal only
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, r
     reference = np.asarray(reference)
     n_points = reference.shape[1]
     t0 = time.perf_counter()
-    y = np.asarray(model.rollout(reference[:, 0], n_points - 1))
+    y = np.asarray(model.rollout(reference[:, 0], n_points - 1, nonfinite="return"))
     rollout_time = time.perf_counter() - t0
     # An unstructured baseline may blow up: diagnostics measures it on the steps before the
     # first non-finite state and says where it diverged.

@@ -144,11 +144,11 @@ def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
     assert calls.pop() == (["E6", "E1"], "smoke", False, tmp_path / "x")
     # Given on the top level before the subcommand.
     assert main(["--out", str(tmp_path), "--profile", "smoke", "run", "E6"]) == 0
-    assert calls.pop() == (["E6"], "smoke", True, tmp_path)
+    assert calls.pop() == (["E6"], "smoke", None, tmp_path)
     assert main(["run", "E6", "--full"]) == 0
-    assert calls.pop() == (["E6"], "full", True, Path("paper-results"))
+    assert calls.pop() == (["E6"], "full", None, Path("paper-results"))
     assert main([]) == 0
-    assert calls.pop() == (list(PAPER_EXPERIMENTS), "quick", True, Path("paper-results"))
+    assert calls.pop() == (list(PAPER_EXPERIMENTS), "quick", None, Path("paper-results"))
     with pytest.raises(SystemExit):
         main(["run", "E6", "--full", "--profile", "smoke"])
     with pytest.raises(SystemExit):

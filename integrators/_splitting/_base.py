@@ -3,6 +3,7 @@ flows $\varphi^{[k]}_t$ of the pieces $H = \sum_k H_k$ given by `system.hamilton
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from typing import ClassVar
 
@@ -11,7 +12,7 @@ import jax
 import numpy as np
 
 from liepoisson._validation import check_system, positive_float
-from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem
+from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem, check_splitting
 
 from .._step_map import AbstractStepMap
 
@@ -52,21 +53,9 @@ class AbstractSplittingMethod(AbstractStepMap):
     ):
         self.system = check_system(system)
         if terms is None:
-            terms = tuple(system.hamiltonian_splitting())
-            where = f"{system!r}.hamiltonian_splitting()"
+            terms = _default_terms(system)
         else:
-            try:
-                terms = tuple(terms)
-            except TypeError as err:
-                raise TypeError(f"terms must be a sequence of exact pieces; got {terms!r}") from err
-            where = "terms"
-        if not terms or not all(isinstance(t, AbstractExactTerm) for t in terms):
-            raise TypeError(
-                f"{where} must be a non-empty sequence of exact pieces (CollectiveTerm, FreeRigidBodyTerm, "
-                f"or your own AbstractExactTerm); got {terms!r}"
-            )
-        if where == "terms":
-            check_pieces_sum_to_hamiltonian(system, terms)
+            terms = check_splitting(system, terms, "terms")
         self.pieces = terms
         self.h = positive_float(h, "h")
         n = len(terms)
@@ -92,24 +81,22 @@ class AbstractSplittingMethod(AbstractStepMap):
         return self.terms[k].flow(self.system, t, y)
 
 
-def check_pieces_sum_to_hamiltonian(
-    system: AbstractPoissonSystem, terms: Sequence[AbstractExactTerm]
-) -> None:
-    r"""Raise `ValueError` unless $\sum_k H_k = H$ up to a constant at random sample points (to
-    $10^3\varepsilon$ relative to the sizes of the values: a few dozen roundings)."""
-    y = np.random.default_rng(0).normal(size=(16, system.dim))
-    H = np.asarray(system.hamiltonian(y))
-    parts = np.stack([np.asarray(t.value(system, y)) for t in terms])
-    diff = H - parts.sum(axis=0)
-    diff = diff - diff[0]  # a constant offset does not change the flow
-    scale = np.abs(H).max() + np.abs(parts).sum(axis=0).max()
-    if not np.all(np.abs(diff) <= 1e3 * np.finfo(np.float64).eps * scale):
-        k = int(np.argmax(np.abs(diff)))
-        raise ValueError(
-            f"terms must sum to the Hamiltonian of {system!r}; at y = {y[k].round(3).tolist()} "
-            f"H - sum(terms) differs from its value at another point by {diff[k]:.3g} "
-            f"(terms: {[t.name or repr(t) for t in terms]})"
-        )
+_TERMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _default_terms(system: AbstractPoissonSystem) -> tuple[AbstractExactTerm, ...]:
+    """`system.hamiltonian_splitting()`, the same objects for every method built on `system`:
+    the pieces are a static field, so equal pieces let `rollout` reuse its compiled code across
+    methods' instances and step sizes instead of recompiling for each new instance."""
+    try:
+        return _TERMS[system]
+    except (KeyError, TypeError):
+        terms = tuple(system.hamiltonian_splitting())
+    try:
+        _TERMS[system] = terms
+    except TypeError:  # a system that cannot be weakly referenced: no cache
+        pass
+    return terms
 
 
 def symmetric_coefficients(half: tuple[float, ...]) -> np.ndarray:

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._step_map import check_state, xla_flops
+from .._step_map import check_state, traced_h, xla_flops
 from ._base import AbstractSplittingMethod, symmetric_coefficients
 from ._strang import strang_flows, strang_step
 
@@ -38,7 +38,7 @@ class AbstractCompositionMethod(AbstractSplittingMethod):
     def step_flops(self) -> float:
         """One Strang step's flops times the number of stages (the scan body counts once)."""
         y = jnp.zeros(self.system.dim)
-        return len(self.coefficients) * xla_flops(lambda m, y: strang_step(m, y, m.h), self, y)
+        return len(self.coefficients) * xla_flops(lambda m, y: strang_step(m, y, m.h), traced_h(self), y)
 
 
 _CBRT2 = 2.0 ** (1.0 / 3.0)

@@ -18,5 +18,11 @@ from ._heavy_top import HeavyTop as HeavyTop
 from ._kirchhoff import Kirchhoff as Kirchhoff
 from ._lie_poisson import LiePoissonSystem as LiePoissonSystem
 from ._pendulum import ExtendedPendulum as ExtendedPendulum
-from ._registry import SYSTEMS as SYSTEMS, from_name as from_name
+from ._registry import (
+    SYSTEMS as SYSTEMS,
+    check_system_matches as check_system_matches,
+    from_name as from_name,
+    system_for_file as system_for_file,
+)
 from ._rigid_body import RigidBody as RigidBody
+from ._splitting_check import check_splitting as check_splitting

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
 from .._polynomial import Polynomial
-from .._validation import as_scalar_time, as_state
+from .._validation import as_scalar_time, as_state, broadcast_batch
 
 
 class AbstractPoissonSystem(abc.ABC):
@@ -129,7 +129,7 @@ class AbstractPoissonSystem(abc.ABC):
         alpha = as_state(alpha, "alpha", self.dim)
         y = as_state(y, "y", self.dim)
         t = as_scalar_time(t)
-        batch = jnp.broadcast_shapes(alpha.shape[:-1], y.shape[:-1], t.shape)
+        batch = broadcast_batch(self.dim, alpha=alpha.shape[:-1], y=y.shape[:-1], t=t.shape)
         return self._test_flow(
             jnp.broadcast_to(alpha, batch + (self.dim,)),
             jnp.broadcast_to(t, batch),

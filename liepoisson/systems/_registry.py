@@ -1,13 +1,18 @@
-"""Rebuild a system from its name and parameters (as stored in data files)."""
+"""Rebuild a system from its name and parameters (as stored in data files and models), or check
+that a system given by the user matches them."""
 
 from __future__ import annotations
 
+import json
 from typing import Any
+
+import numpy as np
 
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
 from ._heavy_top import HeavyTop
 from ._kirchhoff import Kirchhoff
+from ._lie_poisson import KIND, LiePoissonSystem
 from ._pendulum import ExtendedPendulum
 from ._rigid_body import RigidBody
 
@@ -15,9 +20,74 @@ SYSTEMS: dict[str, type] = {
     cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle)
 }
 
+# A system given to a loader reproduces the saved Hamiltonian at the probe points to this
+# relative tolerance: the same formula evaluated by another code path differs by a few
+# roundings per operation, far below 1e-12 for any Hamiltonian of a few dozen operations.
+_PROBE_RTOL = 1e-12
+
 
 def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoissonSystem:
-    """`from_name("RigidBody", {"inertia": [1, 2, 3]})` -> `RigidBody(inertia=[1, 2, 3])`."""
+    """`from_name("RigidBody", {"inertia": [1, 2, 3]})` -> `RigidBody(inertia=[1, 2, 3])`; a user
+    `LiePoissonSystem` is rebuilt from the definition in its `params` (`params["kind"]`)."""
+    if isinstance(params, dict) and params.get("kind") == KIND:
+        return LiePoissonSystem.from_params(name, params)
     if name not in SYSTEMS:
-        raise ValueError(f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}")
+        raise ValueError(
+            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)} and user LiePoissonSystems "
+            "(saved with their definition). For a system class of your own, pass system=... to the loader"
+        )
     return SYSTEMS[name](**(params or {}))
+
+
+def _normalise(params: Any) -> Any:
+    return json.loads(json.dumps(params, sort_keys=True))
+
+
+def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[str, Any], where: str) -> None:
+    """`ValueError` unless `system` is the system saved as `(name, params)` in `where` (a file).
+
+    A user `LiePoissonSystem` matches when its algebra (structure constants, sign) is the same
+    and its Hamiltonian reproduces the saved values at the saved probe points; any other system
+    when its name and parameters are equal."""
+    saved = f"{name}" if not isinstance(params, dict) or params.get("kind") == KIND else f"{name}({params})"
+    prefix = f"system {system!r} does not match {where}, written for {saved}"
+    if system.name != name:
+        raise ValueError(f"{prefix}: the names differ ({system.name!r} vs {name!r})")
+    if isinstance(params, dict) and params.get("kind") == KIND:
+        if not isinstance(system, LiePoissonSystem):
+            raise ValueError(f"{prefix}: the file holds a LiePoissonSystem, got a {type(system).__name__}")
+        try:
+            algebra = params["algebra"]
+            C = np.asarray(algebra["structure_constants"], dtype=np.float64)
+            y = np.asarray(params["probes"]["y"], dtype=np.float64)
+            H = np.asarray(params["probes"]["H"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{where} holds a damaged system definition: {type(err).__name__}: {err}") from err
+        if C.shape != system.algebra.structure_constants.shape or not np.array_equal(
+            C, system.algebra.structure_constants
+        ) or int(algebra.get("sign", -1)) != system.algebra.sign:
+            raise ValueError(f"{prefix}: the algebras differ (structure constants or sign)")
+        mine = np.asarray(system.hamiltonian(y))
+        if not np.allclose(mine, H, rtol=_PROBE_RTOL, atol=_PROBE_RTOL * float(np.max(np.abs(H), initial=1.0))):
+            k = int(np.argmax(np.abs(mine - H)))
+            raise ValueError(
+                f"{prefix}: the Hamiltonians differ (at the saved probe point {y[k].round(4).tolist()} the "
+                f"file has H = {H[k]!r}, the given system {mine[k]!r})"
+            )
+        return
+    if _normalise(system.params) != _normalise(params):
+        raise ValueError(f"{prefix}: the parameters differ ({system.params} vs {params})")
+
+
+def system_for_file(name: str, params: dict[str, Any], system: AbstractPoissonSystem | None, where: str) -> AbstractPoissonSystem:
+    """The system saved in `where` as `(name, params)`: rebuilt (`from_name`) when `system` is
+    None, else `system` itself after `check_system_matches`. `ValueError` naming `where`."""
+    if system is None:
+        try:
+            return from_name(name, params)
+        except (ValueError, TypeError) as err:
+            raise ValueError(f"{where}: cannot rebuild the system: {err}") from err
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem or None; got {type(system).__name__}")
+    check_system_matches(system, name, params, where)
+    return system
