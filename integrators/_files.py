@@ -96,3 +96,22 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write `text` to `path` atomically (see `atomic_path`)."""
     with atomic_path(path) as tmp, open(tmp, "w") as f:
         f.write(text)
+
+
+def open_hdf5(path: str | os.PathLike, expected: str):
+    """`h5py.File(path, "r")`, or an error naming `path` and what was `expected` there:
+    `FileNotFoundError`, `IsADirectoryError`, or `ValueError` for a file that is not readable
+    HDF5 (a text file, a truncated or corrupt one)."""
+    import h5py
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"no such file: {path!r} (expected {expected})")
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"path {path!r} is a folder; expected {expected}")
+    try:
+        return h5py.File(path, "r")
+    except OSError as err:
+        raise ValueError(
+            f"path {path!r} is not a readable HDF5 file (corrupt, truncated or another format); expected {expected}"
+        ) from err

@@ -103,7 +103,8 @@ class AbstractStepMap(eqx.Module):
         y0 = states(y0, "y0", dim)
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
-        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, save_every)
+        every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32 if save_every < 2**31 else jnp.int64)
+        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, every)
         if nonfinite == "raise":
             _check_finite(self, out, save_every)
         return out[0] if y0.ndim == 1 else out
@@ -212,10 +213,12 @@ def traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
 
 
 @eqx.filter_jit
-def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, save_every: int) -> jax.Array:
-    """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`."""
+def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, save_every: int | jax.Array) -> jax.Array:
+    """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`. `save_every` is the Python int 1, or a traced
+    integer (then one program serves every spacing of the outputs: a study at several h with
+    the same output times compiles once per map)."""
     step = jax.vmap(step_map.step)
-    if save_every == 1:
+    if isinstance(save_every, int) and save_every == 1:
 
         def body(y, _):
             y = step(y)

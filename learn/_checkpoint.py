@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from integrators._files import atomic_path
+from integrators._files import atomic_path, open_hdf5
 
 FORMAT = "learn-model"
 FORMAT_VERSION = 1
@@ -71,16 +71,7 @@ def read(path: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """`(attrs, groups)` as written by `write` (JSON attributes decoded)."""
     path = os.fspath(path)
     expected = "a learn model, checkpoint or training record file (written by .save or learn.fit)"
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"path {path!r} does not exist")
-    if os.path.isdir(path):
-        raise IsADirectoryError(f"path {path!r} is a folder; expected {expected}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as err:
-        raise ValueError(
-            f"path {path!r} is not a readable HDF5 file (corrupt, truncated or another format); expected {expected}"
-        ) from err
+    f = open_hdf5(path, expected)
     try:
         with f:
             if f.attrs.get("format") != FORMAT:

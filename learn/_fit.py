@@ -9,7 +9,7 @@ import functools
 import os
 import time
 from collections.abc import Callable, Sequence
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import equinox as eqx
 import jax
@@ -298,32 +298,79 @@ def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, pro
     return best, rec, info["history"]
 
 
+_CACHE: dict[Any, Any] = {}
+
+
+def _compiled(key: Any, build: Callable[[], Any]) -> Any:
+    """`build()` once per `key` (a compiled function kept for later fits of the same model
+    structure); unhashable keys build anew."""
+    try:
+        if key not in _CACHE:
+            if len(_CACHE) >= 64:  # a long sweep over many structures: start afresh
+                _CACHE.clear()
+            _CACHE[key] = build()
+        return _CACHE[key]
+    except TypeError:
+        return build()
+
+
+class _FlatLoss:
+    r"""`loss(x, (X, h), T)`: the training loss of the model with flat parameters `x` and step
+    size `h` (traced). Equal (same hash) for the same loss, model structure and parameter
+    layout, whatever the step size, so that `jax.jit` caches and the quasi-Newton minimisers
+    compile once per structure, not once per fit."""
+
+    def __init__(self, loss_fn, static, params):
+        self.loss_fn = loss_fn
+        self.has_h = hasattr(static, "h")  # every learned map has one; a bare module may not
+        self.static = eqx.tree_at(lambda m: m.h, static, 0.0, is_leaf=lambda v: v is None) if self.has_h else static
+        self.layout = (jax.tree_util.tree_structure(params),
+                       tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(params)))
+        self.unravel = ravel_pytree(params)[1]
+
+    def _key(self):
+        return (self.loss_fn, self.static, self.layout)
+
+    def __hash__(self):
+        return hash(self._key())
+
+    def __eq__(self, other):
+        return isinstance(other, _FlatLoss) and self._key() == other._key()
+
+    def __call__(self, x, Xh, T):
+        X, h = Xh
+        model = eqx.combine(self.unravel(x), self.static)
+        if self.has_h:
+            model = eqx.tree_at(lambda m: m.h, model, h)
+        return self.loss_fn(model, X, T)
+
+
+def _flat_loss(loss_fn, static, params) -> _FlatLoss:
+    return _compiled(("loss", _FlatLoss(loss_fn, static, params)), lambda: _FlatLoss(loss_fn, static, params))
+
+
 def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, progress: bool, report):
     """Every start minimised, the best kept if it beats `model` (see `QuasiNewton`)."""
     (X, T), (Xv, Tv) = train, val
     has_val = Xv.shape[0] > 0
     params, static = eqx.partition(model, eqx.is_inexact_array)
     flat0, unravel = ravel_pytree(params)
-
-    def loss(x, X, T):
-        return loss_fn(eqx.combine(unravel(x), static), X, T)
-
-    evaluate = jax.jit(loss)
-    minimise = minimiser(stage.method, loss, X, T)  # compiled once, reused by every start
+    # The step size travels with the data, (X, h): one compiled loss serves a sweep over h.
+    h = jnp.asarray(0.0 if getattr(model, "h", None) is None else model.h, dtype=jnp.float64)
+    Xh, Xvh = (X, h), (Xv, h)
+    loss = _flat_loss(loss_fn, static, params)
+    evaluate = _compiled(("evaluate", loss), lambda: jax.jit(loss))
+    minimise = minimiser(stage.method, loss, Xh, T)  # compiled once, reused by every start
     warm = stage.warm_start and model.activation != "identity"
     if warm:
         linear = eqx.tree_at(lambda m: m.activation, model, "identity")
         lin_params, lin_static = eqx.partition(linear, eqx.is_inexact_array)
         lin_unravel = ravel_pytree(lin_params)[1]  # same flat layout, other static activation
-
-        def linear_loss(x, X, T):
-            return loss_fn(eqx.combine(lin_unravel(x), lin_static), X, T)
-
-        minimise_linear = minimiser(stage.method, linear_loss, X, T)
+        minimise_linear = minimiser(stage.method, _flat_loss(loss_fn, lin_static, lin_params), Xh, T)
 
     def losses(x):
-        train_loss = float(evaluate(x, X, T))
-        val_loss = float(evaluate(x, Xv, Tv)) if has_val else float("nan")
+        train_loss = float(evaluate(x, Xh, T))
+        val_loss = float(evaluate(x, Xvh, Tv)) if has_val else float("nan")
         crit = val_loss if has_val else train_loss
         return (crit if np.isfinite(crit) else np.inf), train_loss, val_loss
 

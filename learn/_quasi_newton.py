@@ -40,12 +40,28 @@ def check_method(method: Any) -> str:
     return method
 
 
+_VALUE_AND_GRAD: dict[Any, Any] = {}
+
+
+def _value_and_grad(loss):
+    """`jax.jit(jax.value_and_grad(loss))`, one per `loss` (by equality: a loss object equal to
+    an earlier one reuses its compiled code)."""
+    try:
+        if loss not in _VALUE_AND_GRAD:
+            if len(_VALUE_AND_GRAD) >= 64:
+                _VALUE_AND_GRAD.clear()
+            _VALUE_AND_GRAD[loss] = jax.jit(jax.value_and_grad(loss))
+        return _VALUE_AND_GRAD[loss]
+    except TypeError:  # unhashable
+        return jax.jit(jax.value_and_grad(loss))
+
+
 def minimiser(method: str, loss: Callable[[jax.Array, Any, Any], jax.Array], X: Any, Y: Any):
     """`minimise(x0, max_iter, progress, desc) -> (x, {"epoch", "train_loss"})` for
     `loss(x, X, Y)`; `x` is the best iterate seen."""
     check_method(method)
     if method in _SCIPY:
-        value_and_grad = jax.jit(jax.value_and_grad(loss))
+        value_and_grad = _value_and_grad(loss)
 
         def minimise(x0, max_iter, progress, desc):
             return _scipy(_SCIPY[method], value_and_grad, x0, X, Y, max_iter, progress, desc)

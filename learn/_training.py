@@ -18,6 +18,8 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
+from liepoisson.systems import check_system_matches
+
 from . import _checkpoint
 
 CHUNK = 1000
@@ -83,6 +85,10 @@ def train_adam(
         attrs, groups = _checkpoint.read(checkpoint)
         if attrs.get("class") != type(model).__name__:
             raise ValueError(f"checkpoint {checkpoint!r} holds a {attrs.get('class')}, not a {type(model).__name__}")
+        try:
+            check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {checkpoint!r}")
+        except ValueError as err:
+            raise ValueError(f"cannot resume: {err}") from None
         if attrs["hyperparameters"] != _checkpoint.jsonable(model.hyperparameters()):
             raise ValueError(
                 f"checkpoint {checkpoint!r} was written for a model with hyperparameters "

@@ -96,3 +96,29 @@ def test_arguments():
         net(activation="relu").hamiltonian(Y)
     with pytest.raises(ValueError, match="h"):
         net().with_h(0.0)
+
+
+def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
+    """Quasi-Newton losses are compiled once per model structure with h as an argument: a fit
+    at h = 0.2 after one at h = 0.1 (cache warm) equals a fit at h = 0.2 from a cold cache."""
+    import learn._fit as fit_module
+    import learn._quasi_newton as qn_module
+
+    body = lp.systems.RigidBody()
+    y0 = np.random.default_rng(0).uniform(-1.0, 1.0, size=(6, 3))
+    opt = learn.QuasiNewton(15, "bfgs")
+
+    def fitted(h):
+        data = it.ground_truth(body, y0, h=h, n_steps=5, seed=0)
+        model, _ = learn.fit(learn.GLPNet(body, key=0, symmetric=True), data, optimiser=opt,
+                             validation_fraction=0.0, progress=False)
+        return model
+
+    fitted(0.1)
+    warm = fitted(0.2)
+    fit_module._CACHE.clear()
+    qn_module._VALUE_AND_GRAD.clear()
+    cold = fitted(0.2)
+    for name in ("a", "b", "c"):
+        np.testing.assert_array_equal(np.asarray(getattr(warm, name)), np.asarray(getattr(cold, name)))
+    assert warm.h == cold.h == 0.2

@@ -92,8 +92,8 @@ def test_model_loaders_name_a_data_set_for_what_it_is(files, loader):
         (lambda d: learn.GLPNet.load(d / "glpnet.h5", lp.systems.RigidBody(inertia=(1.0, 2.0, 4.0))),
          r"does not match the file .*glpnet\.h5.*parameters differ"),
         (lambda d: learn.GLPNet.load(d / "model_truncated.h5"), r"model_truncated\.h5.*(not a readable HDF5 file|damaged)"),
-        (lambda d: it.Trajectories.load(d / "missing.h5"), r"no such data file.*missing\.h5"),
-        (lambda d: learn.GLPNet.load(d / "missing.h5"), r"missing\.h5.*does not exist"),
+        (lambda d: it.Trajectories.load(d / "missing.h5"), r"no such file: .*missing\.h5"),
+        (lambda d: learn.GLPNet.load(d / "missing.h5"), r"no such file: .*missing\.h5.*expected a learn model"),
         (lambda d: learn.GLPNet.load(d / "folder.h5"), r"folder\.h5.*is a folder"),
         (lambda d: it.Trajectories.load(d / "data.h5", system="RigidBody"), r"system must be an AbstractPoissonSystem or None; got str"),
     ],
@@ -101,6 +101,20 @@ def test_model_loaders_name_a_data_set_for_what_it_is(files, loader):
 def test_load_mistakes_are_named(files, load, pattern):
     with pytest.raises((ValueError, TypeError, FileNotFoundError, IsADirectoryError), match=pattern):
         load(files)
+
+
+def test_resuming_from_a_checkpoint_of_another_system_or_model_is_refused(tmp_path):
+    data = it.ground_truth(BODY, Y0, h=0.1, n_steps=4)
+    path = tmp_path / "ckpt.h5"
+    kwargs = {"optimiser": learn.Adam(20), "progress": False}
+    learn.fit(learn.LPNet(BODY, hidden=(4,)), data, checkpoint=learn.Checkpoint(path, every=10), **kwargs)
+    other = lp.systems.RigidBody(inertia=(1.0, 2.0, 4.0))
+    other_data = it.ground_truth(other, Y0, h=0.1, n_steps=4)
+    resume = learn.Checkpoint(path, every=10, resume=True)
+    with pytest.raises(ValueError, match=r"cannot resume: system RigidBody\(inertia=\[1\.0, 2\.0, 4\.0\]\) does not match checkpoint"):
+        learn.fit(learn.LPNet(other, hidden=(4,)), other_data, checkpoint=resume, **kwargs)
+    with pytest.raises(ValueError, match=r"hyperparameters"):
+        learn.fit(learn.LPNet(BODY, hidden=(5,)), data, checkpoint=resume, **kwargs)
 
 
 # -- [save] ---------------------------------------------------------------------------------
