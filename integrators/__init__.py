@@ -16,7 +16,11 @@ from ._diagnostics import (
     error_growth_rate as error_growth_rate,
 )
 from ._exact import ExactFlow as ExactFlow
-from ._ground_truth import ground_truth as ground_truth, taylor_integrator as taylor_integrator
+from ._ground_truth import (
+    ground_truth as ground_truth,
+    save_ground_truth as save_ground_truth,
+    taylor_integrator as taylor_integrator,
+)
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics

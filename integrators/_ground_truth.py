@@ -3,11 +3,16 @@ symbolically from the system's own Hamiltonian and Poisson tensor (`system.heyok
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
+import logging
 import os
 import weakref
+from collections.abc import Container, Iterator
 from typing import Any
 
+import h5py
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -15,7 +20,10 @@ from liepoisson._progress import progress_bar, show_progress
 from liepoisson._validation import as_state, positive_float, positive_int
 from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
 
-from ._trajectories import Trajectories
+from ._distributed import check_client, map_unordered
+from ._trajectories import Trajectories, _check_seed, write_attributes
+
+log = logging.getLogger("liepoisson")
 
 #: Default tolerance of the Taylor integrator: double-precision machine epsilon.
 EPS = float(np.finfo(np.float64).eps)
@@ -68,7 +76,8 @@ def _initial_conditions(system: AbstractPoissonSystem, y0: ArrayLike) -> np.ndar
 
 def _progress_bar(total: int, progress: bool | None):
     # Auto: on a terminal, and only for a run that is still going after a few seconds.
-    return progress_bar(total, "ground truth", "traj", progress, delay=3.0 if progress is None else 0.0)
+    return progress_bar(total, "ground truth", "traj", progress, delay=3.0 if progress is None else 0.0,
+                        unit_scale=True)
 
 
 def check_fits_in_memory(shape: tuple[int, ...], what: str) -> None:
@@ -86,6 +95,92 @@ def check_fits_in_memory(shape: tuple[int, ...], what: str) -> None:
         )
 
 
+@dataclasses.dataclass(frozen=True)
+class _Job:
+    """A validated ground-truth request."""
+
+    system: AbstractPoissonSystem
+    y0: np.ndarray
+    h: float
+    n_steps: int
+    tol: float
+    max_steps: int
+    chunk_size: int
+    seed: int | None
+
+    @property
+    def grid(self) -> np.ndarray:
+        return self.h * np.arange(self.n_steps + 1, dtype=np.float64)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (self.y0.shape[0], self.n_steps + 1, self.system.dim)
+
+    def chunks(self, skip: Container[int] = ()) -> Iterator[tuple[int, tuple[Any, ...]]]:
+        """`(k, (start, y0[start:stop], grid, tol, max_steps))` for every chunk k not in `skip`."""
+        grid = self.grid
+        for k, start in enumerate(range(0, self.y0.shape[0], self.chunk_size)):
+            if k not in skip:
+                yield k, (start, self.y0[start : start + self.chunk_size], grid, self.tol, self.max_steps)
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-self.y0.shape[0] // self.chunk_size)
+
+    def fingerprint(self) -> str:
+        """What makes two requests the same computation (for resuming a file)."""
+        return json.dumps({
+            "system": self.system.name, "system_params": self.system.params, "h": self.h,
+            "n_steps": self.n_steps, "tol": self.tol, "max_steps": self.max_steps,
+            "chunk_size": self.chunk_size, "seed": self.seed,
+            "y0_sha256": hashlib.sha256(np.ascontiguousarray(self.y0).tobytes()).hexdigest(),
+            "n_traj": self.y0.shape[0],
+        }, sort_keys=True)
+
+    def trajectories(self, states: np.ndarray) -> Trajectories:
+        """`states` `(n, m, dim)` at the first `m` output times, with this job's provenance."""
+        return Trajectories(states, self.h, self.system, times=self.grid[: states.shape[1]], integrator="heyoka-taylor",
+                            tolerance=self.tol, seed=self.seed)
+
+
+def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size) -> _Job:
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+    h = positive_float(h, "h")
+    n_steps = positive_int(n_steps, "n_steps")
+    tol_used = EPS if tol is None else positive_float(tol, "tol")
+    if not tol_used < 1.0:
+        raise ValueError(f"tol must be a relative tolerance in (0, 1), e.g. 1e-12; got {tol!r}")
+    max_steps = positive_int(max_steps, "max_steps", minimum=0)
+    y0 = _initial_conditions(system, y0)
+    show_progress(progress)  # validates it before any work
+    if chunk_size is None:  # about 16 MiB of output per chunk
+        chunk_size = max(1, 2**24 // (8 * (n_steps + 1) * system.dim))
+    chunk_size = min(positive_int(chunk_size, "chunk_size"), y0.shape[0])
+    return _Job(system, y0, h, n_steps, tol_used, max_steps, chunk_size, _check_seed(seed))
+
+
+def integrate_chunk(
+    system: AbstractPoissonSystem, start: int, y0: np.ndarray, grid: np.ndarray, tol: float, max_steps: int
+) -> np.ndarray:
+    """The states `(len(y0), len(grid), dim)` of the trajectories from `y0` (numbered from
+    `start` in errors), by one compiled integrator of this process (reused across calls)."""
+    import heyoka as hy
+
+    ta = taylor_integrator(system, tol)
+    out = np.empty((y0.shape[0], grid.shape[0], system.dim))
+    for i, y in enumerate(y0):
+        ta.time = 0.0
+        ta.state[:] = y
+        outcome, *_, states = ta.propagate_grid(grid, max_steps=max_steps)
+        if outcome != hy.taylor_outcome.time_limit:
+            raise RuntimeError(
+                f"heyoka stopped trajectory {start + i} (y0={y.tolist()}) at t={ta.time} with outcome {outcome}"
+            )
+        out[i] = states
+    return out
+
+
 def ground_truth(
     system: AbstractPoissonSystem,
     y0: ArrayLike,
@@ -96,6 +191,8 @@ def ground_truth(
     progress: bool | None = None,
     max_steps: int = 0,
     seed: int | None = None,
+    client: Any = None,
+    chunk_size: int | None = None,
 ) -> Trajectories:
     r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ with heyoka's adaptive Taylor method and
     sample it at $t_n = n h$, $n = 0..n_\text{steps}$.
@@ -116,41 +213,108 @@ def ground_truth(
       and for a run still going after 3 s.
     - `max_steps`: heyoka's cap on steps per trajectory (0: none).
     - `seed`: the seed that drew `y0`, if any; recorded in the data set's metadata.
+    - `client`: a `dask.distributed.Client` (extra `dask`): the trajectories are integrated
+      in chunks of `chunk_size` on its workers (each worker compiles the integrator once).
+      The result is bitwise the same as without. For ensembles larger than memory, write
+      them to a file chunk by chunk with `save_ground_truth`.
+    - `chunk_size`: trajectories per task (default: about 16 MiB of output per chunk).
 
     **Returns:** `Trajectories` with `states` of shape `(n_traj, n_steps + 1, dim)`.
 
     Raises `RuntimeError` naming the trajectory if heyoka stops early (non-finite state, step
     cap).
     """
-    import heyoka as hy
+    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size)
+    client = check_client(client)
+    check_fits_in_memory(job.shape, "the requested trajectories (n_traj, n_steps + 1, dim)")
+    out = np.empty(job.shape)
+    with _progress_bar(job.shape[0], progress) as bar:
+        for k, states in map_unordered(integrate_chunk, job.chunks(), client=client, shared=(job.system,)):
+            start = k * job.chunk_size
+            out[start : start + states.shape[0]] = states
+            bar.update(states.shape[0])
+    return job.trajectories(out)
 
-    if not isinstance(system, AbstractPoissonSystem):
-        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
-    h = positive_float(h, "h")
-    n_steps = positive_int(n_steps, "n_steps")
-    tol_used = EPS if tol is None else positive_float(tol, "tol")
-    if not tol_used < 1.0:
-        raise ValueError(f"tol must be a relative tolerance in (0, 1), e.g. 1e-12; got {tol!r}")
-    max_steps = positive_int(max_steps, "max_steps", minimum=0)
-    y0 = _initial_conditions(system, y0)
-    show_progress(progress)  # validates it before any work
-    check_fits_in_memory((y0.shape[0], n_steps + 1, system.dim), "the requested trajectories (n_traj, n_steps + 1, dim)")
 
-    ta = taylor_integrator(system, tol_used)
-    grid = h * np.arange(n_steps + 1, dtype=np.float64)
-    out = np.empty((y0.shape[0], n_steps + 1, system.dim))
-    with _progress_bar(y0.shape[0], progress) as bar:
-        for i, y in enumerate(y0):
-            ta.time = 0.0
-            ta.state[:] = y
-            outcome, *_, states = ta.propagate_grid(grid, max_steps=max_steps)
-            if outcome != hy.taylor_outcome.time_limit:
-                raise RuntimeError(
-                    f"heyoka stopped trajectory {i} (y0={y.tolist()}) at t={ta.time} with "
-                    f"outcome {outcome}"
-                )
-            out[i] = states
-            bar.update(1)
-    return Trajectories(
-        out, h, system, times=grid, integrator="heyoka-taylor", tolerance=tol_used, seed=seed
-    )
+def save_ground_truth(
+    path: str | os.PathLike,
+    system: AbstractPoissonSystem,
+    y0: ArrayLike,
+    h: float,
+    n_steps: int,
+    tol: float | None = None,
+    *,
+    client: Any = None,
+    chunk_size: int | None = None,
+    progress: bool | None = None,
+    max_steps: int = 0,
+    seed: int | None = None,
+) -> str:
+    r"""`ground_truth(...)` written chunk by chunk to the HDF5 file `path` (the format of
+    `Trajectories.save`), never holding more than a few chunks in memory: for ensembles
+    larger than memory, and for large ones on a Dask cluster.
+
+    The chunks go to `.<name>.partial.h5` beside `path` as they finish (on the workers of
+    `client` if given, else here), which is renamed to `path` once complete. A rerun with the
+    same arguments after a crash or Ctrl-C computes only the chunks missing from the partial
+    file (a partial file of other arguments is started over). The data are bitwise those of
+    `ground_truth(system, y0, h, n_steps, tol)`. Read them back with `Trajectories.load(path)`,
+    or a part of them with `Trajectories.load(path, select=...)`.
+
+    Arguments as in `ground_truth`; `chunk_size` trajectories per chunk (default about 16 MiB
+    of output each). **Returns** `path`.
+    """
+    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size)
+    client = check_client(client)
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a file name (str or os.PathLike); got {type(path).__name__}")
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"cannot save to {path!r}: it is a folder; give a file name")
+    partial = _partial_path(path)
+    done = _open_partial(partial, job)
+    log.info("ground truth %s: %d of %d chunks already in %s", path, len(done), job.n_chunks, partial)
+    with _progress_bar(job.shape[0], progress) as bar:
+        bar.update(sum(min(job.chunk_size, job.shape[0] - k * job.chunk_size) for k in done))
+        for k, states in map_unordered(integrate_chunk, job.chunks(skip=done), client=client, shared=(job.system,)):
+            start = k * job.chunk_size
+            with h5py.File(partial, "r+") as f:  # closed after every chunk: a crash loses no chunk written
+                f["trajectories"][start : start + states.shape[0]] = states
+                f["chunk_done"][k] = True
+            bar.update(states.shape[0])
+    with h5py.File(partial, "r+") as f:
+        del f["chunk_done"]
+        del f.attrs["job"]
+        write_attributes(f, job.trajectories(job.y0[:1, None]).metadata)
+    with open(partial, "rb+") as fh:  # on disk before the rename makes it visible
+        os.fsync(fh.fileno())
+    os.replace(partial, path)  # the same folder: atomic
+    return path
+
+
+def _partial_path(path: str) -> str:
+    directory, name = os.path.split(os.path.abspath(path))
+    return os.path.join(directory, f".{name}.partial.h5")
+
+
+def _open_partial(partial: str, job: _Job) -> set[int]:
+    """The chunks already in the partial file of this job; creates it (over a partial file of
+    another job, or a damaged one) if needed."""
+    fingerprint = job.fingerprint()
+    if os.path.exists(partial):
+        try:
+            with h5py.File(partial, "r") as f:
+                if f.attrs.get("job") == fingerprint and f["trajectories"].shape == job.shape:
+                    return {int(k) for k in np.flatnonzero(f["chunk_done"][...])}
+        except (OSError, KeyError, ValueError):  # damaged by a crash mid-write: start over
+            pass
+        log.info("ground truth: starting %s over (it was of another request or damaged)", partial)
+    os.makedirs(os.path.dirname(partial), exist_ok=True)
+    with h5py.File(partial, "w") as f:
+        per_traj = job.shape[1] * job.shape[2]
+        f.create_dataset("trajectories", shape=job.shape, dtype=np.float64,
+                         chunks=(max(1, min(job.shape[0], 2**17 // per_traj)), *job.shape[1:]))
+        f.create_dataset("times", data=job.grid)
+        f.create_dataset("chunk_done", data=np.zeros(job.n_chunks, dtype=bool))
+        f.attrs["job"] = fingerprint
+    return set()

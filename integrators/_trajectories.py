@@ -16,7 +16,7 @@ import liepoisson
 from liepoisson._validation import positive_float
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
-from ._files import atomic_path
+from ._files import atomic_path, open_hdf5
 
 #: Version of the on-disk layout; `Trajectories.load` refuses any other.
 FORMAT_VERSION = 1
@@ -48,6 +48,44 @@ def _check_seed(seed: Any) -> int | None:
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or int(seed) < 0:
         raise TypeError(f"seed must be a non-negative integer or None; got {seed!r}")
     return int(seed)
+
+
+def write_attributes(f: Any, metadata: dict[str, Any]) -> None:
+    """Write `Trajectories.metadata` as the file's attributes (DESIGN.md section 4)."""
+    f.attrs["system"] = metadata["system"]
+    f.attrs["system_params"] = json.dumps(metadata["system_params"], sort_keys=True)
+    f.attrs["h"] = metadata["h"]
+    f.attrs["integrator"] = metadata["integrator"]
+    f.attrs["tolerance"] = _NO_TOLERANCE if metadata["tolerance"] is None else metadata["tolerance"]
+    f.attrs["seed"] = np.int64(_NO_SEED if metadata["seed"] is None else metadata["seed"])
+    f.attrs["created"] = metadata["created"]
+    f.attrs["liepoisson_version"] = metadata["liepoisson_version"]
+    f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+
+
+def _selection(select: Any, n_traj: int) -> Any:
+    """`select` of `Trajectories.load` as an h5py index that keeps the array 3-D."""
+    if select is None:
+        return slice(None)
+    if isinstance(select, numbers.Integral) and not isinstance(select, bool):
+        i = int(select)
+        if not -n_traj <= i < n_traj:
+            raise IndexError(f"select={i} is out of range for a file of {n_traj} trajectories")
+        return slice(i % n_traj, i % n_traj + 1)
+    if isinstance(select, slice):
+        if select.step is not None and select.step <= 0:
+            raise ValueError(f"select must be a slice with a positive step; got {select!r}")
+        if len(range(*select.indices(n_traj))) == 0:
+            raise IndexError(f"select={select!r} selects none of the file's {n_traj} trajectories")
+        return select
+    idx = np.asarray(select) if isinstance(select, (Sequence, np.ndarray)) else None
+    if idx is None or idx.ndim != 1 or idx.size == 0 or idx.dtype.kind not in "iu":
+        raise TypeError(f"select must be an int, a slice or a non-empty sequence of ints; got {select!r}")
+    if np.any(np.diff(idx) <= 0) or idx[0] < 0 or idx[-1] >= n_traj:
+        raise IndexError(
+            f"select must be increasing indices in [0, {n_traj}) for a file of {n_traj} trajectories; got {select!r}"
+        )
+    return idx
 
 
 class Trajectories:
@@ -245,35 +283,27 @@ class Trajectories:
         with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
             f.create_dataset("trajectories", data=self.states)
             f.create_dataset("times", data=self.times)
-            f.attrs["system"] = self.system.name
-            f.attrs["system_params"] = json.dumps(self.system.params, sort_keys=True)
-            f.attrs["h"] = self.h
-            f.attrs["integrator"] = self.integrator
-            f.attrs["tolerance"] = _NO_TOLERANCE if self.tolerance is None else self.tolerance
-            f.attrs["seed"] = np.int64(_NO_SEED if self.seed is None else self.seed)
-            f.attrs["created"] = self.created
-            f.attrs["liepoisson_version"] = self.liepoisson_version
-            f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+            write_attributes(f, self.metadata)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -> Trajectories:
+    def load(
+        cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None, *, select: Any = None
+    ) -> Trajectories:
         """Read a file written by `save`. The system is rebuilt from the file
         (`liepoisson.systems.from_name(name, params)`: catalogue systems and user
         `LiePoissonSystem`s, whose definition is saved) or, given `system`, checked to match the
         file (for a system class of your own, or a splitting that could not be saved). Raises
         `ValueError` naming the file for a file that is not HDF5, is truncated, lacks the
-        datasets or attributes, has another `format_version`, or holds another system."""
-        import h5py
+        datasets or attributes, has another `format_version`, or holds another system.
 
+        `select` reads only some trajectories of a file too large for memory: an int, a
+        `slice` or increasing indices (default: all)."""
         path = os.fspath(path)
-        if not os.path.isfile(path):
-            raise FileNotFoundError(f"no such data file: {path!r}")
-        try:
-            f = h5py.File(path, "r")
-        except OSError as err:
-            raise ValueError(
-                f"{path!r} is not a readable HDF5 file (corrupt, truncated or another format): {err}"
-            ) from err
+        if select is not None and (
+            isinstance(select, (str, bytes)) or not isinstance(select, (numbers.Integral, slice, Sequence, np.ndarray))
+        ):
+            raise TypeError(f"select must be an int, a slice or a non-empty sequence of ints; got {select!r}")
+        f = open_hdf5(path, "a liepoisson trajectory data set (written by Trajectories.save)")
         try:
             with f:
                 missing = [k for k in ("trajectories", "times") if k not in f]
@@ -289,9 +319,10 @@ class Trajectories:
                         f"format_version {FORMAT_VERSION}"
                     )
                 attrs = {a: f.attrs[a] for a in _REQUIRED_ATTRS}
-                states = f["trajectories"][...]
+                n_traj = f["trajectories"].shape[0] if f["trajectories"].ndim == 3 else 0
+                states = f["trajectories"][_selection(select, n_traj)]
                 times = f["times"][...]
-        except ValueError:
+        except (ValueError, IndexError):
             raise
         except (OSError, KeyError, TypeError) as err:
             raise ValueError(f"{path!r} is damaged (truncated or corrupt HDF5 data): {err}") from err

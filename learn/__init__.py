@@ -30,3 +30,9 @@ from ._parametrisation import (
     default_parametrisation as default_parametrisation,
 )
 from ._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
+from ._sweep import (
+    Sweep as Sweep,
+    SweepResult as SweepResult,
+    grid_points as grid_points,
+    sweep as sweep,
+)

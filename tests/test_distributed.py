@@ -1,0 +1,253 @@
+"""Scale-out on Dask: chunked ground truth (in memory and written chunk by chunk to HDF5,
+resumable) and training sweeps on a real `LocalCluster` of 2 worker processes."""
+
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+import sys
+import textwrap
+
+import cloudpickle
+import distributed
+import jax
+import numpy as np
+import pytest
+
+import integrators
+import learn
+import liepoisson as lp
+from integrators import _ground_truth
+
+
+@pytest.fixture(scope="module")
+def client():
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+BODY = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+
+
+def _y0(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).normal(size=(n, 3))
+
+
+def test_chunked_ground_truth_on_a_cluster_is_bitwise_the_single_process_result(client):
+    y0 = _y0(11)
+    here = integrators.ground_truth(BODY, y0, 0.1, 40)
+    there = integrators.ground_truth(BODY, y0, 0.1, 40, client=client, chunk_size=3)  # 4 chunks, last of 2
+    np.testing.assert_array_equal(there.states, here.states)
+    assert there.metadata == {**here.metadata, "created": there.created}
+
+
+def test_a_user_system_is_sent_to_the_workers_once_and_integrated_bitwise_alike(client):
+    algebra = lp.so3()
+    system = lp.systems.LiePoissonSystem(
+        algebra, lambda y, xp: 0.5 * (y[0] ** 2 + 0.5 * y[1] ** 2 + y[2] ** 2 / 3) + 0.1 * xp.cos(y[0]), name="mine"
+    )
+    y0 = _y0(7, seed=1)
+    here = integrators.ground_truth(system, y0, 0.05, 30)
+    there = integrators.ground_truth(system, y0, 0.05, 30, client=client, chunk_size=2)
+    np.testing.assert_array_equal(there.states, here.states)
+
+
+def test_save_ground_truth_writes_the_file_that_save_would_with_or_without_a_client(client, tmp_path):
+    y0 = _y0(9, seed=2)
+    reference = integrators.ground_truth(BODY, y0, 0.1, 25, seed=7)
+    for name, c in (("local.h5", None), ("cluster.h5", client)):
+        path = integrators.save_ground_truth(tmp_path / name, BODY, y0, 0.1, 25, client=c, chunk_size=4, seed=7)
+        assert path == os.fspath(tmp_path / name)
+        loaded = integrators.Trajectories.load(path)
+        np.testing.assert_array_equal(loaded.states, reference.states)
+        np.testing.assert_array_equal(loaded.times, reference.times)
+        assert {k: v for k, v in loaded.metadata.items() if k != "created"} == {
+            k: v for k, v in reference.metadata.items() if k != "created"
+        }
+    assert sorted(os.listdir(tmp_path)) == ["cluster.h5", "local.h5"]  # no partial file left
+    part = integrators.Trajectories.load(tmp_path / "local.h5", select=slice(2, 5))
+    np.testing.assert_array_equal(part.states, reference.states[2:5])
+    np.testing.assert_array_equal(integrators.Trajectories.load(tmp_path / "local.h5", select=[0, 8]).states,
+                                  reference.states[[0, 8]])
+
+
+_KILLED_RUN = textwrap.dedent(
+    """
+    import os, signal, sys
+    import numpy as np
+    import integrators, liepoisson as lp
+    from integrators import _ground_truth
+
+    calls = 0
+    original = _ground_truth.integrate_chunk
+
+    def integrate_then_die(*args):
+        global calls
+        calls += 1
+        if calls == 4:  # three chunks written, killed outright while computing the fourth
+            os.kill(os.getpid(), signal.SIGKILL)
+        return original(*args)
+
+    _ground_truth.integrate_chunk = integrate_then_die
+    y0 = np.random.default_rng(3).normal(size=(10, 3))
+    integrators.save_ground_truth(sys.argv[1], lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0)), y0, 0.1, 30,
+                                  chunk_size=2)
+    """
+)
+
+
+@pytest.fixture(scope="module")
+def killed_run(tmp_path_factory):
+    """A `save_ground_truth` run of 5 chunks killed (SIGKILL) after writing 3: its partial file."""
+    folder = tmp_path_factory.mktemp("killed")
+    target = folder / "truth.h5"
+    proc = subprocess.run([sys.executable, "-c", _KILLED_RUN, str(target)], check=False, capture_output=True,
+                          text=True)
+    assert proc.returncode == -9, proc.stderr
+    assert not target.exists()
+    partial = folder / ".truth.h5.partial.h5"
+    assert partial.exists()
+    return partial.read_bytes()
+
+
+@pytest.mark.parametrize("on_cluster", [False, True])
+def test_a_killed_run_resumes_computing_only_the_missing_chunks(killed_run, on_cluster, request, tmp_path,
+                                                                monkeypatch, caplog):
+    c = request.getfixturevalue("client") if on_cluster else None
+    (tmp_path / ".truth.h5.partial.h5").write_bytes(killed_run)
+    y0 = np.random.default_rng(3).normal(size=(10, 3))
+    computed = []
+    if not on_cluster:  # count the chunks computed here
+        original = _ground_truth.integrate_chunk
+        monkeypatch.setattr(_ground_truth, "integrate_chunk",
+                            lambda system, start, *a: computed.append(start) or original(system, start, *a))
+    with caplog.at_level(logging.INFO, logger="liepoisson"):
+        integrators.save_ground_truth(tmp_path / "truth.h5", BODY, y0, 0.1, 30, chunk_size=2, client=c)
+    assert "3 of 5 chunks already" in caplog.text
+    if not on_cluster:
+        assert computed == [6, 8]
+    resumed = integrators.Trajectories.load(tmp_path / "truth.h5")
+    np.testing.assert_array_equal(resumed.states, integrators.ground_truth(BODY, y0, 0.1, 30).states)
+    assert os.listdir(tmp_path) == ["truth.h5"]
+
+
+def test_a_partial_file_of_another_request_is_started_over(killed_run, tmp_path, caplog):
+    (tmp_path / ".truth.h5.partial.h5").write_bytes(killed_run)
+    y0 = np.random.default_rng(4).normal(size=(10, 3))  # other initial conditions
+    with caplog.at_level(logging.INFO, logger="liepoisson"):
+        integrators.save_ground_truth(tmp_path / "truth.h5", BODY, y0, 0.1, 30, chunk_size=2)
+    assert "0 of 5 chunks already" in caplog.text
+    np.testing.assert_array_equal(integrators.Trajectories.load(tmp_path / "truth.h5").states,
+                                  integrators.ground_truth(BODY, y0, 0.1, 30).states)
+
+
+def test_a_damaged_partial_file_is_started_over(tmp_path):
+    (tmp_path / ".truth.h5.partial.h5").write_bytes(b"not HDF5 at all")
+    y0 = _y0(3)
+    integrators.save_ground_truth(tmp_path / "truth.h5", BODY, y0, 0.1, 5)
+    np.testing.assert_array_equal(integrators.Trajectories.load(tmp_path / "truth.h5").states,
+                                  integrators.ground_truth(BODY, y0, 0.1, 5).states)
+
+
+def test_a_missing_dask_extra_is_named(monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    with pytest.raises(ImportError, match=r"liepoisson\[dask\]"):
+        integrators.ground_truth(BODY, _y0(2), 0.1, 3, client=object())
+
+
+def test_bad_client_chunk_size_path_and_select_are_refused(tmp_path):
+    with pytest.raises(TypeError, match="client must be a dask.distributed.Client"):
+        integrators.ground_truth(BODY, _y0(2), 0.1, 3, client="tcp://localhost:8786")
+    with pytest.raises(ValueError, match="chunk_size"):
+        integrators.ground_truth(BODY, _y0(2), 0.1, 3, chunk_size=0)
+    with pytest.raises(IsADirectoryError, match="it is a folder"):
+        integrators.save_ground_truth(tmp_path, BODY, _y0(2), 0.1, 3)
+    integrators.ground_truth(BODY, _y0(4), 0.1, 3).save(tmp_path / "t.h5")
+    with pytest.raises(IndexError, match="out of range for a file of 4"):
+        integrators.Trajectories.load(tmp_path / "t.h5", select=4)
+    with pytest.raises(IndexError, match="increasing indices"):
+        integrators.Trajectories.load(tmp_path / "t.h5", select=[2, 1])
+    with pytest.raises(TypeError, match="select must be"):
+        integrators.Trajectories.load(tmp_path / "t.h5", select="all")
+
+
+# -- sweeps ---------------------------------------------------------------------------------
+
+cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers cannot import tests/
+
+SWEEP_DATA = integrators.ground_truth(BODY, _y0(6, seed=5), 0.1, 12)
+SWEEP_GRID = {"n_modules": [2, 3], "seed": [0, 1]}
+SWEEP_OPTIMISER = learn.QuasiNewton(25, "bfgs", warm_start=True)
+
+
+def _make_glpnet(point):
+    return learn.GLPNet(BODY, n_modules=point["n_modules"], key=point["seed"])
+
+
+def _energy_of_first_step(model, point):
+    y = model.step(SWEEP_DATA.states[0, 0])
+    return {"energy_after_one_step": float(BODY.hamiltonian(y))}
+
+
+@pytest.fixture(scope="module")
+def sequential_fits():
+    return [learn.fit(_make_glpnet(p), SWEEP_DATA, optimiser=SWEEP_OPTIMISER, seed=p["seed"], progress=False)
+            for p in learn.grid_points(SWEEP_GRID)]
+
+
+@pytest.mark.parametrize("on_cluster", [False, True])
+def test_a_sweep_returns_the_numbers_of_sequential_fits_and_saves_every_point(
+    sequential_fits, on_cluster, request, tmp_path
+):
+    c = request.getfixturevalue("client") if on_cluster else None
+    result = learn.sweep(_make_glpnet, SWEEP_GRID, SWEEP_DATA, out=tmp_path / "sweep", client=c,
+                         optimiser=SWEEP_OPTIMISER, evaluate=_energy_of_first_step)
+    assert [r.point for r in result] == learn.grid_points(SWEEP_GRID)
+    assert [r.seed for r in result] == [0, 1, 0, 1]
+    for r, (model, record) in zip(result, sequential_fits):
+        assert r.metrics["val_loss"] == record.val_loss
+        assert r.metrics["train_loss"] == record.train_loss
+        loaded = r.model()
+        for a, b in zip(jax.tree_util.tree_leaves(loaded), jax.tree_util.tree_leaves(model)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert r.metrics["energy_after_one_step"] == float(BODY.hamiltonian(model.step(SWEEP_DATA.states[0, 0])))
+        assert r.record().val_loss == record.val_loss
+    reread = learn.Sweep.load(tmp_path / "sweep")
+    assert [r.metrics for r in reread] == [r.metrics for r in result]
+    assert "n_modules" in reread.table() and reread.best("val_loss").metrics["val_loss"] == min(
+        rec.val_loss for _, rec in sequential_fits)
+
+
+def test_a_rerun_sweep_trains_only_the_points_not_done(tmp_path, monkeypatch):
+    from learn import _sweep
+
+    trained = []
+    original = _sweep._train
+    monkeypatch.setattr(_sweep, "_train", lambda *a: trained.append(a[-1]) or original(*a))
+    out = tmp_path / "sweep"
+    grid = {"n_modules": [2], "seed": [0, 1, 2, 3]}
+    learn.sweep(_make_glpnet, [{"n_modules": 2, "seed": 0}, {"n_modules": 2, "seed": 2}], SWEEP_DATA, out=out,
+                optimiser=SWEEP_OPTIMISER)
+    trained.clear()
+    result = learn.sweep(_make_glpnet, grid, SWEEP_DATA, out=out, optimiser=SWEEP_OPTIMISER)
+    assert trained == [{"n_modules": 2, "seed": 1}, {"n_modules": 2, "seed": 3}]
+    assert len(result) == 4 and [r.seed for r in result] == [0, 1, 2, 3]
+
+
+def test_bad_sweep_arguments_are_refused(tmp_path):
+    with pytest.raises(TypeError, match="grid must be"):
+        learn.sweep(_make_glpnet, "seed", SWEEP_DATA, out=tmp_path)
+    with pytest.raises(TypeError, match=r"grid\['seed'\] must be a non-empty list"):
+        learn.sweep(_make_glpnet, {"seed": []}, SWEEP_DATA, out=tmp_path)
+    with pytest.raises(TypeError, match="unknown keyword argument"):
+        learn.sweep(_make_glpnet, {"seed": [0]}, SWEEP_DATA, out=tmp_path, optimizer=SWEEP_OPTIMISER)
+    with pytest.raises(ValueError, match="repeated points"):
+        learn.sweep(_make_glpnet, [{"seed": 0}, {"seed": 0}], SWEEP_DATA, out=tmp_path)
+    with pytest.raises(TypeError, match="must return a learn.LPNet"):
+        learn.sweep(lambda p: None, {"seed": [0]}, SWEEP_DATA, out=tmp_path)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(NotADirectoryError, match="is a file"):
+        learn.sweep(_make_glpnet, {"seed": [0]}, SWEEP_DATA, out=tmp_path / "file")
