@@ -7,6 +7,7 @@
     python -m paper list                    # what is available
     python -m paper table                   # the summary of the results in --out
     python -m paper table --reference       # the committed --full results (paper/reference/)
+    python -m paper run E1 --scheduler      # the independent trainings on a local Dask cluster
 
 Runs write into `--out DIR` (default `./paper-results`, one folder per experiment); the
 committed reference results in `paper/reference/` are never written by a run.
@@ -16,12 +17,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 from integrators._files import atomic_write_text
 
+from ._cluster import ENV, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 
@@ -102,6 +105,12 @@ def _options(parser: argparse.ArgumentParser, top: bool) -> None:
                         help="training budget: smoke (seconds), quick (default, < 10 min), full (the paper's)")
     parser.add_argument("--full", action="store_true", default=default(False), help="short for --profile full")
     parser.add_argument("--no-progress", action="store_true", default=default(False), help="no progress bars")
+    parser.add_argument(
+        "--scheduler", nargs="?", const="local", default=default(os.environ.get(ENV)), metavar="ADDRESS",
+        help="run the independent trainings (seeds, step sizes) on a Dask cluster: a scheduler address "
+             "(tcp://host:8786), or no value for a LocalCluster sized to this machine (extra 'dask'); "
+             f"default ${ENV}, else none (one process)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,7 +143,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--full and --profile {args.profile} disagree")
     profile = args.profile or ("full" if args.full else "quick")
     ids = args.ids if args.command == "run" else list(PAPER_EXPERIMENTS)
-    return _run(ids, profile, False if args.no_progress else None, args.out)  # None: bars on a terminal only
+    try:
+        with scheduler(args.scheduler) as where:
+            if where:
+                print(f"trainings on the {where}")
+            return _run(ids, profile, False if args.no_progress else None, args.out)  # None: bars on a terminal only
+    except (ImportError, ValueError) as err:  # no dask extra, unreachable scheduler
+        print(f"--scheduler: {err}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

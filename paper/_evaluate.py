@@ -11,6 +11,8 @@ import integrators as it
 import learn
 from learn import AbstractLearnedMap, TrainingRecord
 
+from ._cluster import map_trainings, on_cluster
+
 
 def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, reference: np.ndarray,
                     defect_points: int = 200, integrals: dict | None = None) -> dict[str, Any]:
@@ -118,6 +120,14 @@ def refine_after_adam(adam: Trained, data, iterations, system, reference, progre
     return refined, {k: metrics[k] for k in keys}
 
 
+def _one_seed(make, fit, data, refine_iterations, system, reference, seed, progress):
+    """One seed of `lpnet_seeds` (a task on the cluster when there is one)."""
+    first = learn.fit(make(seed), data, **fit(seed), progress=progress)
+    (net, rec), adam_only = refine_after_adam(first, data, refine_iterations, system, reference, progress)
+    energy = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max"]
+    return first, (net, rec), adam_only, energy
+
+
 def lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, progress, label):
     """Train `make(seed)` for each seed in `seeds` (`learn.fit` with the keyword arguments
     `fit(seed)`, an Adam stage, then `refine_after_adam`) and roll each out against `reference`.
@@ -127,10 +137,10 @@ def lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, pr
     the medians `energy_rel_err_max_median` and `adam_only_energy_median`, and `adam_only`,
     `wall_time_s` of the first seed (Adam plus refinement)."""
     trained, energies, adam_runs = [], [], []
-    for seed in seeds:
-        first = learn.fit(make(seed), data, **fit(seed), progress=progress)
-        (net, rec), adam_only = refine_after_adam(first, data, refine_iterations, system, reference, progress)
-        energy = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max"]
+    progress = progress and not on_cluster()
+    runs = map_trainings(_one_seed, [(make, fit, data, refine_iterations, system, reference, seed, progress)
+                                     for seed in seeds])
+    for seed, (first, (net, rec), adam_only, energy) in zip(seeds, runs):
         trained.append((net, rec))
         energies.append(energy)
         adam_runs.append(adam_only)

@@ -26,6 +26,7 @@ import learn
 import liepoisson as lp
 from integrators._plots import figure
 
+from ._cluster import map_trainings, on_cluster
 from ._experiment import AbstractExperiment, fmt
 
 
@@ -114,7 +115,7 @@ def _long_run(m: it.AbstractStepMap, system, y0s: np.ndarray, P: Profile) -> dic
     }
 
 
-def _train(system, data, h: float, P: Profile, progress: bool):
+def _train(system, data, P: Profile, progress: bool):
     lpnet, lrec = learn.fit(
         learn.LPNet(system, key=0), data,
         optimiser=learn.Adam(P.lpnet_epochs, learning_rate=1e-3, final_learning_rate=1e-5),
@@ -144,9 +145,10 @@ class W1(AbstractExperiment):
             data_y0 = centre + rng.uniform(-width, width, size=(50, system.dim))
             test_y0 = centre + np.random.default_rng(TEST_SEED).uniform(-width, width, size=(P.n_test, system.dim))
             reference = it.ground_truth(system, test_y0, h=T_ERROR / N_OUTPUTS, n_steps=N_OUTPUTS, seed=TEST_SEED)
-            for h in P.hs:
-                data = it.ground_truth(system, data_y0, h=h, n_steps=20, seed=DATA_SEED)
-                (lpnet, lrec), (gnet, grec) = _train(system, data, h, P, progress)
+            datasets = [it.ground_truth(system, data_y0, h=h, n_steps=20, seed=DATA_SEED) for h in P.hs]
+            # The trainings at the step sizes are independent: on a cluster (--scheduler) they run at once.
+            trainings = map_trainings(_train, [(system, data, P, progress and not on_cluster()) for data in datasets])
+            for h, ((lpnet, lrec), (gnet, grec)) in zip(P.hs, trainings):
                 maps = _baselines(system, h, P.all_baselines, P.all_orderings)
                 maps["LPNet"] = lpnet
                 maps["G-LPNet (sym.)"] = gnet

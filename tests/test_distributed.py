@@ -3,6 +3,7 @@ resumable) and training sweeps on a real `LocalCluster` of 2 worker processes.""
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import subprocess
@@ -251,3 +252,37 @@ def test_bad_sweep_arguments_are_refused(tmp_path):
     (tmp_path / "file").write_text("x")
     with pytest.raises(NotADirectoryError, match="is a file"):
         learn.sweep(_make_glpnet, {"seed": [0]}, SWEEP_DATA, out=tmp_path / "file")
+
+
+# -- python -m paper --scheduler ----------------------------------------------------------
+
+
+@pytest.mark.slow  # two E1 smoke runs and a cluster: 80 s
+def test_paper_trainings_on_a_local_cluster_give_the_numbers_of_one_process(tmp_path, capsys):
+    from paper.__main__ import main
+
+    assert main(["run", "E1", "--profile", "smoke", "--no-progress", "--out", str(tmp_path / "one")]) == 0
+    assert main(["run", "E1", "--profile", "smoke", "--no-progress", "--out", str(tmp_path / "dask"),
+                 "--scheduler"]) == 0
+    assert "trainings on the Dask scheduler" in capsys.readouterr().out
+    one, dask = (json.loads((tmp_path / d / "E1" / "metrics.json").read_text()) for d in ("one", "dask"))
+    assert len(one["train_loss_seeds"]) == 2  # two seeds: two tasks
+    for key in ("train_loss_seeds", "train_loss_seeds_adam_only"):  # the trainings: bitwise
+        assert dask[key] == one[key], key
+    # The rollout of a trained net over 300 steps in a worker process differs from this
+    # process's in the last digits (seen: 7e-15 relative), as if XLA's threaded reductions
+    # split differently; allow 1000 eps.
+    np.testing.assert_allclose(dask["energy_rel_err_max_seeds"], one["energy_rel_err_max_seeds"], rtol=1000 * 2.2e-16)
+
+
+def test_paper_scheduler_without_the_extra_or_unreachable_is_a_clear_error(tmp_path, monkeypatch, capsys):
+    from paper.__main__ import main
+
+    argv = ["run", "E6", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]
+    monkeypatch.setattr("paper._cluster.CONNECT_TIMEOUT", 1.0)
+    assert main([*argv, "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    assert "cannot reach a Dask scheduler" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    monkeypatch.setenv("LIEPOISSON_SCHEDULER", "local")
+    assert main(argv) == 2
+    assert "liepoisson[dask]" in capsys.readouterr().err
