@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike
 
 from liepoisson._progress import progress_bar, show_progress
 from liepoisson._validation import as_state, positive_float, positive_int
-from liepoisson.systems import SYSTEMS, AbstractPoissonSystem
+from liepoisson.systems import AbstractPoissonSystem
 
 from ._distributed import check_client, map_unordered
 from ._trajectories import Trajectories, _check_seed, write_attributes
@@ -29,8 +29,8 @@ log = logging.getLogger("liepoisson")
 EPS = float(np.finfo(np.float64).eps)
 
 # Compiling a taylor_adaptive (LLVM JIT) costs ~0.1-1 s, far more than integrating one
-# trajectory, so integrators are reused across calls. Catalogue systems are fully described by
-# (class, params); any other system (a user Hamiltonian) is cached on the object itself.
+# trajectory, so integrators are reused across calls: by value for systems that their params
+# describe (`system.value_key()`), else on the object itself.
 _CACHE_BY_PARAMS: dict[tuple[Any, ...], Any] = {}
 _CACHE_BY_OBJECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -49,8 +49,8 @@ def taylor_integrator(
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     tol = EPS if tol is None else positive_float(tol, "tol")
-    if SYSTEMS.get(system.name) is type(system):
-        key = (type(system), json.dumps(system.params, sort_keys=True), tol, variational)
+    if system.value_key() is not None:
+        key = (system.value_key(), tol, variational)
         cache = _CACHE_BY_PARAMS
     else:
         key = (tol, variational)

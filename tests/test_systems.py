@@ -380,3 +380,29 @@ def test_registry_round_trip(name):
     y = _random_state(name, np.random.default_rng(37))
     np.testing.assert_array_equal(np.asarray(again.vector_field(y)), np.asarray(sys.vector_field(y)))
     assert repr(again) == repr(sys)
+
+
+def test_systems_described_by_their_params_are_equal_by_value_so_compiled_code_is_shared():
+    import pickle
+
+    from liepoisson.systems import LiePoissonSystem, RigidBody
+
+    a, b, c = RigidBody(inertia=(1.0, 2.0, 3.0)), RigidBody(inertia=(1.0, 2.0, 3.0)), RigidBody(inertia=(1.0, 2.0, 4.0))
+    assert a == b and hash(a) == hash(b) and a != c
+    assert pickle.loads(pickle.dumps(a)) == a  # a copy on a Dask worker finds a's compiled code
+    assert a != lp.systems.Kirchhoff()
+    g = lp.so3()
+
+    def H(m, xp):
+        return 0.5 * (m[0] ** 2 + m[1] ** 2 / 2 + m[2] ** 2 / 3)
+
+    u, v = LiePoissonSystem(g, H, name="u"), LiePoissonSystem(g, H, name="u")
+    assert u == v and hash(u) == hash(v)
+    assert u != LiePoissonSystem(g, H, name="other name")
+    assert u != LiePoissonSystem(g, lambda m, xp: H(m, xp) + m[0], name="u")
+
+    class Opaque(RigidBody):  # a subclass that opts out: equal only to itself
+        equal_by_params = False
+
+    o = Opaque(inertia=(1.0, 2.0, 3.0))
+    assert o == o and o != Opaque(inertia=(1.0, 2.0, 3.0)) and o != a

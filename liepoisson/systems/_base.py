@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import abc
 import functools
+import json
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -67,6 +68,34 @@ class AbstractPoissonSystem(abc.ABC):
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
         return f"{type(self).__name__}({args})"
+
+    #: Whether `name` and `params` describe the system completely (the library's systems):
+    #: then two systems of the same class, name and params are equal (`==`, same hash), so
+    #: that what was compiled for one (a JAX training loss, a heyoka integrator) serves the
+    #: other, e.g. a copy unpickled on a Dask worker. Otherwise systems are equal only to
+    #: themselves: a subclass of your own whose params leave something out keeps this False.
+    equal_by_params: bool = False
+
+    def value_key(self) -> tuple[Any, ...] | None:
+        """`(class, name, params as JSON)` if `equal_by_params`, else None (compared by
+        identity). Computed once: a system does not change after construction."""
+        cached = self.__dict__.get("_value_key")
+        if cached is None:
+            cached = (type(self), self.name, json.dumps(self.params, sort_keys=True)) if self.equal_by_params else ()
+            self.__dict__["_value_key"] = cached
+        return cached or None
+
+    def __eq__(self, other: object) -> bool:
+        if self is other:
+            return True
+        if not isinstance(other, AbstractPoissonSystem):
+            return NotImplemented
+        key = self.value_key()
+        return key is not None and key == other.value_key()
+
+    def __hash__(self) -> int:
+        key = self.value_key()
+        return hash(key) if key is not None else id(self)
 
     def _components(self, y: jax.Array) -> list[jax.Array]:
         return [y[..., i] for i in range(self.dim)]

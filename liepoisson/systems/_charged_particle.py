@@ -92,6 +92,7 @@ class ChargedParticle(AbstractPoissonSystem):
     """
 
     name = "ChargedParticle"
+    equal_by_params = True  # name and params are the whole definition
     dim = 4
 
     def __init__(self, charge=1.0, mass=1.0, field_strength=1.0, potential_strength=0.01):

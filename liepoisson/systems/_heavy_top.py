@@ -21,6 +21,7 @@ class HeavyTop(AbstractLiePoissonSystem):
     """
 
     name = "HeavyTop"
+    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 3.0), mgl=1.0, center_of_mass=(0.0, 0.0, 1.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)

@@ -20,6 +20,7 @@ class Kirchhoff(AbstractLiePoissonSystem):
     """
 
     name = "Kirchhoff"
+    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)

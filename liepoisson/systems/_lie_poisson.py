@@ -129,6 +129,11 @@ class LiePoissonSystem(AbstractLiePoissonSystem):
         return f"LiePoissonSystem(name={self.name!r}, algebra={self.algebra.name!r}, dim={self.dim})"
 
     @property
+    def equal_by_params(self) -> bool:  # type: ignore[override]
+        """The definition is complete unless a splitting piece could not be saved."""
+        return not self._splitting or self.params["splitting"] is not None
+
+    @property
     def hamiltonian_expression(self) -> Any:
         """The Hamiltonian as an expression tree (`liepoisson._symbolic`), as saved in files."""
         return self._tree

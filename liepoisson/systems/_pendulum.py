@@ -19,6 +19,7 @@ class ExtendedPendulum(AbstractPoissonSystem):
     """
 
     name = "ExtendedPendulum"
+    equal_by_params = True  # name and params are the whole definition
     dim = 3
     _casimir = Polynomial(3, ((1.0, (0, 0, 1)), (-1.0, (2, 0, 0)), (-1.0, (0, 2, 0))))
 

@@ -26,6 +26,7 @@ class RigidBody(AbstractLiePoissonSystem):
     """
 
     name = "RigidBody"
+    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 3.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)
