@@ -286,3 +286,21 @@ def test_paper_scheduler_without_the_extra_or_unreachable_is_a_clear_error(tmp_p
     monkeypatch.setenv("LIEPOISSON_SCHEDULER", "local")
     assert main(argv) == 2
     assert "liepoisson[dask]" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # a cluster, 2000 trajectories and a sweep of 8 short fits: ~1 min
+def test_the_readme_dask_example_runs_as_a_script(tmp_path):
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (block,) = re.findall(r"```py\n(.*?)```", readme, re.DOTALL)
+    for full, small in (("size=(100_000, 3)", "size=(2000, 3)"), ("epochs=3000", "epochs=50")):
+        assert full in block, f"the README's Dask example no longer has {full!r}"
+        block = block.replace(full, small)
+    (tmp_path / "example.py").write_text(block)
+    proc = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.count("\n| ") >= 8  # a row per grid point
+    assert integrators.Trajectories.load(tmp_path / "truth.h5").n_traj == 2000
+    assert len(learn.Sweep.load(tmp_path / "sweep")) == 8
