@@ -5,8 +5,9 @@
     python -m paper run W1                  # the learned-vs-classical study (beyond the paper)
     python -m paper --profile smoke         # E1-E6 in seconds (meaningless numbers)
     python -m paper list                    # what is available
-    python -m paper table                   # the summary of the results in --out
-    python -m paper table --reference       # the committed --full results (paper/reference/)
+    python -m paper table                   # the verdict: each of the paper's claims, ours, reproduced?
+    python -m paper table --reference       # the same for the committed --full results (paper/reference/)
+    python -m paper table --long            # every figure beside the paper's
     python -m paper run E1 --scheduler      # the independent trainings on a local Dask cluster
 
 Runs write into `--out DIR` (default `./paper-results`, one folder per experiment); the
@@ -27,6 +28,7 @@ from integrators._files import atomic_write_text
 from ._cluster import ENV, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
+from ._verdict import verdict_table
 
 PROFILES = ("smoke", "quick", "full")
 
@@ -89,10 +91,14 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
         results[exp_id] = exp.execute(profile=profile, progress=progress, out_dir=out / exp_id)
         print(f"   done in {time.perf_counter() - t:.0f} s -> {out / exp_id}")
     table = summary_table(results)
-    print()
-    print(table)
-    print(f"total {time.perf_counter() - t0:.0f} s; results in {out}")
     atomic_write_text(out / "summary.md", table)
+    verdict = verdict_table(EXPERIMENTS, {k: v for k, v in results.items() if EXPERIMENTS[k].paper_values})
+    atomic_write_text(out / "verdict.md", verdict)
+    print()
+    if verdict.count("\n|") > 1:
+        print(verdict)
+    print(f"every figure beside the paper's: {out / 'summary.md'}; per experiment: {out}/<id>/table.md")
+    print(f"total {time.perf_counter() - t0:.0f} s; results in {out}")
     return 0
 
 
@@ -124,6 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     table = sub.add_parser("table", help="print the summary of saved results")
     table.add_argument("--out", type=Path, default=argparse.SUPPRESS, help="folder to read (default ./paper-results)")
     table.add_argument("--reference", action="store_true", help=f"the committed reference results ({REFERENCE_DIR})")
+    table.add_argument("--long", action="store_true", help="every figure beside the paper's, not only the verdict")
     args = parser.parse_args(argv)
 
     if args.command == "list":
@@ -137,7 +144,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"no results in {folder}: run `python -m paper --out {folder}` (or read the committed "
                   "ones with `python -m paper table --reference`)")
             return 0
-        print(summary_table(saved))
+        if args.long:
+            print(summary_table(saved))
+        else:
+            print(verdict_table(EXPERIMENTS, {k: v for k, v in saved.items() if EXPERIMENTS[k].paper_values}))
+            print(f"(every figure: python -m paper table --long{' --reference' if args.reference else ''})")
         return 0
     if args.profile and args.full and args.profile != "full":
         parser.error(f"--full and --profile {args.profile} disagree")

@@ -48,11 +48,15 @@ ADAM_ROWS = (
 
 @dataclasses.dataclass(frozen=True)
 class PaperValue:
-    """A number the paper reports, with how it compares (`<=`: the paper's value is a bound)."""
+    """A number the paper reports (`text` as the paper writes it) and how ours is judged
+    against it (`kind`, see `paper._verdict`): `"upper"` (an error, a loss: lower is better),
+    `"roundoff"` (the paper reports round-off or exactly 0), `"approx"` (a rate: about equal),
+    `"count"` (a number of parameters: equal)."""
 
     metric: str
     value: float
     text: str
+    kind: str = "upper"
 
 
 def _jsonable(x: Any) -> Any:
@@ -69,6 +73,16 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
         return str(x)
     return x
+
+
+def metric_value(metrics: dict[str, Any], key: str) -> Any:
+    """`metrics[key]`, a dotted key `glpnet.x` reading a nested block; None if absent."""
+    d: Any = metrics
+    for part in key.split("."):
+        if not isinstance(d, dict) or part not in d:
+            return None
+        d = d[part]
+    return d
 
 
 def fmt(x: Any) -> str:
@@ -145,22 +159,19 @@ class AbstractExperiment(abc.ABC):
     def rows(self, metrics: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         """(label, paper, ours, baseline); a dotted key `glpnet.x` reads a nested block."""
 
-        def get(d: dict[str, Any], key: str) -> Any:
-            for part in key.split("."):
-                if not isinstance(d, dict) or part not in d:
-                    return None
-                d = d[part]
-            return d
-
         base = metrics.get("baseline", {}) or {}
         out = []
         for key, label in self.table_rows:
-            ours = get(metrics, key)
+            ours = metric_value(metrics, key)
             if ours is None:
                 continue
             pv = self.paper_value(key)
-            out.append((label, pv.text if pv else "—", fmt(ours), fmt(get(base, key))))
+            out.append((label, pv.text if pv else "—", fmt(ours), fmt(metric_value(base, key))))
         return out
+
+    def label(self, key: str) -> str:
+        """The table label of the metric `key` (the key itself if it has none)."""
+        return dict(self.table_rows).get(key, key)
 
     def markdown_table(self, metrics: dict[str, Any]) -> str:
         lines = [

@@ -66,7 +66,7 @@ class E3(AbstractExperiment):
         PaperValue("train_loss", 1e-7, "1e-7..1e-8 (MSE of alpha)"),
         PaperValue("energy_rel_err_max", 1e-2, "0.5-1%"),
         PaperValue("energy_rel_err_max_per_trajectory", 1e-2, "about 1% or less"),
-        PaperValue("casimir_rel_drift_max", 1e-15, "round-off"),
+        PaperValue("casimir_rel_drift_max", 1e-15, "round-off", "roundoff"),
     )
     table_rows = (
         AbstractExperiment.table_rows[:3]

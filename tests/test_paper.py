@@ -154,3 +154,37 @@ def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
     with pytest.raises(SystemExit):
         main(["--profile", "medium"])
     assert not calls
+
+
+def test_verdict_judges_each_kind_of_claim():
+    from paper._experiment import PaperValue
+    from paper._verdict import judge
+
+    bound = PaperValue("energy_rel_err_max", 2e-2, "1-2%")
+    assert judge(bound, 1e-3) == "beaten (20x lower)"
+    assert judge(bound, 1.9e-2) == "reproduced"
+    assert judge(bound, 5e-2) == "not reached (2.5x the paper's)"
+    assert judge(bound, [1e-3, 3e-2]) == "not reached (1.5x the paper's)"  # per trajectory: the worst
+    assert judge(bound, None) == judge(bound, float("nan")) == "not measured"
+    roundoff = PaperValue("casimir_rel_drift_max", 1e-15, "round-off", "roundoff")
+    assert judge(roundoff, 3e-14) == "reproduced"
+    assert judge(roundoff, 1e-9).startswith("not reached")
+    assert judge(PaperValue("rate", 0.25, "~0.25", "approx"), 0.3) == "reproduced"
+    assert judge(PaperValue("rate", 0.25, "~0.25", "approx"), 0.5) == "differs (2x)"
+    assert judge(PaperValue("parameters", 21508, "21,508", "count"), "21,508") == "reproduced"
+    assert judge(PaperValue("parameters", 21508, "21,508", "count"), "21,638") == "differs (+0.6%)"
+
+
+def test_table_prints_one_verdict_row_per_claim_and_the_readme_shows_the_reference_verdict(capsys):
+    from paper.__main__ import load_results
+    from paper._verdict import verdict_table
+
+    assert main(["table", "--reference"]) == 0
+    out = capsys.readouterr().out
+    claims = sum(len(EXPERIMENTS[e].paper_values) for e in PAPER_EXPERIMENTS)
+    assert out.count("| E") == claims and f"{claims} claims:" in out
+    reference = {k: v for k, v in load_results(REFERENCE_DIR).items() if EXPERIMENTS[k].paper_values}
+    readme = (REFERENCE_DIR.parents[1] / "README.md").read_text()
+    assert verdict_table(EXPERIMENTS, reference) in readme, (
+        "the README's verdict is not that of paper/reference/: paste `python -m paper table --reference`"
+    )
