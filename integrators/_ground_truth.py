@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from liepoisson._progress import progress_bar, show_progress
-from liepoisson._validation import as_state, positive_float, positive_int
+from liepoisson._validation import positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._distributed import check_client, map_unordered
@@ -64,7 +64,7 @@ def taylor_integrator(
 
 
 def _initial_conditions(system: AbstractPoissonSystem, y0: ArrayLike) -> np.ndarray:
-    y0 = np.asarray(as_state(y0, "y0", system.dim))
+    y0 = np.asarray(system.check_regular(y0, "y0"))
     if y0.ndim == 1:
         y0 = y0[None]
     if y0.ndim != 2:

@@ -379,3 +379,19 @@ def test_progress_bars_only_on_a_terminal(monkeypatch):
     assert show_progress(None) is False and show_progress(True) is True
     monkeypatch.setattr(sys, "stderr", Stream(True))
     assert show_progress(None) is True and show_progress(False) is False
+
+
+def test_a_state_at_a_singular_point_is_refused_not_a_nan():
+    import integrators as it
+
+    s = lp.systems.ChargedParticle()
+    at_origin = [[1.0, 0.5, 0.3, 0.0], [1.0, 0.5, 0.0, 0.0]]
+    for method in (s.hamiltonian, s.hamiltonian_gradient, s.vector_field):
+        with pytest.raises(ValueError, match=r"y\[1\] = \[1\.0, 0\.5, 0\.0, 0\.0\] is a singular point of ChargedParticle"):
+            method(at_origin)
+    with pytest.raises(ValueError, match=r"y0 = .* singular point .* origin"):
+        it.ground_truth(s, [1.0, 0.5, 0.0, 0.0], 0.1, 3)
+    assert np.isfinite(s.hamiltonian(at_origin[0]))  # next to it: defined
+    assert np.all(np.isfinite(s.vector_field([1.0, 0.5, 1e-100, 0.0])))
+    with pytest.raises(ValueError, match="singular point"):  # r^2 underflows: the origin in float64
+        s.vector_field([1.0, 0.5, 1e-300, 0.0])

@@ -100,14 +100,39 @@ class AbstractPoissonSystem(abc.ABC):
     def _components(self, y: jax.Array) -> list[jax.Array]:
         return [y[..., i] for i in range(self.dim)]
 
+    def singular(self, y: jax.Array) -> jax.Array | None:
+        """Where $H$ or $\\mathbb{B}$ is not defined (e.g. a potential $1/r$ at $r = 0$): a
+        boolean array of shape `y.shape[:-1]`, or None for a system defined everywhere."""
+        return None
+
+    def check_regular(self, y: ArrayLike, name: str = "y") -> jax.Array:
+        """`y` as a state, or a `ValueError` naming the first state of `y` in the singular set
+        (only where `y` is concrete; inside `jit` nothing is checked)."""
+        y = as_state(y, name, self.dim)
+        if isinstance(y, jax.core.Tracer):
+            return y
+        bad = self.singular(y)
+        if bad is not None and bool(np.any(np.asarray(bad))):
+            index = tuple(int(i) for i in np.argwhere(np.atleast_1d(np.asarray(bad)))[0])[: y.ndim - 1]
+            state = np.asarray(y)[index] if y.ndim > 1 else np.asarray(y)
+            where = f"{name}[{', '.join(map(str, index))}]" if y.ndim > 1 else name
+            raise ValueError(
+                f"{where} = {state.tolist()} is a singular point of {self!r}: {self.singular_reason}; "
+                "move it off that set"
+            )
+        return y
+
+    #: What `singular` marks, for error messages.
+    singular_reason: str = "the Hamiltonian or the Poisson tensor is not defined there"
+
     def hamiltonian(self, y: ArrayLike) -> jax.Array:
         """$H(y)$, shape `(...)` for `y` of shape `(..., dim)`."""
-        y = as_state(y, "y", self.dim)
+        y = self.check_regular(y)
         return jnp.broadcast_to(self.hamiltonian_components(self._components(y), JAX), y.shape[:-1])
 
     def hamiltonian_gradient(self, y: ArrayLike) -> jax.Array:
         """$\\nabla H(y)$, shape `(..., dim)` (JAX autodiff of the one formula)."""
-        y = as_state(y, "y", self.dim)
+        y = self.check_regular(y)
         return jax.grad(lambda z: jnp.sum(self.hamiltonian(z)))(y)
 
     def poisson_tensor(self, y: ArrayLike) -> jax.Array:
@@ -125,7 +150,7 @@ class AbstractPoissonSystem(abc.ABC):
 
     def vector_field(self, y: ArrayLike) -> jax.Array:
         """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
-        y = as_state(y, "y", self.dim)
+        y = self.check_regular(y)
         return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.hamiltonian_gradient(y))
 
     def casimirs(self, y: ArrayLike) -> jax.Array:

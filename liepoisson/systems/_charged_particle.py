@@ -135,6 +135,11 @@ class ChargedParticle(AbstractPoissonSystem):
     def casimir_polynomials(self):
         return ()
 
+    singular_reason = "the potential k/r (and the field's |x|) is singular at the origin x = 0"
+
+    def singular(self, y):
+        return y[..., 2] ** 2 + y[..., 3] ** 2 == 0  # r^2 underflowing to 0 is the origin to float64
+
     def angular_integral(self, y) -> jnp.ndarray:
         r"""$I = x_1p_2 - x_2p_1 + q b_0 r^3/3$, conserved by the true flow."""
         y = as_state(y, "y", 4)
