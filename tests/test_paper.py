@@ -188,3 +188,19 @@ def test_table_prints_one_verdict_row_per_claim_and_the_readme_shows_the_referen
     assert verdict_table(EXPERIMENTS, reference) in readme, (
         "the README's verdict is not that of paper/reference/: paste `python -m paper table --reference`"
     )
+
+
+@pytest.mark.slow  # two E4 LPNets compiled and rolled out: ~40 s
+def test_e4_sweep_pipeline_writes_its_table_and_skips_done_points_on_rerun(tmp_path, capsys):
+    from paper import e4_sweep
+
+    argv = ["--out", str(tmp_path), "--seeds", "2", "--budgets", "smoke"]
+    assert e4_sweep.main(argv) == 0
+    rows = json.loads((tmp_path / "e4-sweep.json").read_text())
+    assert [(r["budget"], r["seed"]) for r in rows] == [("smoke", 0), ("smoke", 1)]
+    assert all(np.isfinite(r["energy_rel_err_max"]) and np.isfinite(r["integral_rel_err_max"]) for r in rows)
+    assert (tmp_path / "sweep.md").read_text().count("| smoke |") == 2
+    before = {str(p): p.stat().st_mtime_ns for p in (tmp_path / "points").glob("*/model.h5")}
+    assert len(before) == 2
+    assert e4_sweep.main(argv) == 0  # nothing retrained
+    assert {str(p): p.stat().st_mtime_ns for p in (tmp_path / "points").glob("*/model.h5")} == before
