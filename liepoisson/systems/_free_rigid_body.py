@@ -63,7 +63,7 @@ def _ratio(num: jax.Array, den: jax.Array) -> jax.Array:
 
 
 def free_rigid_body_flow(inertia: ArrayLike, t: ArrayLike, y: ArrayLike) -> jax.Array:
-    r"""$\Pi(t)$ of the free rigid body with principal moments `inertia` from $\Pi(0) = $ `y`
+    r"""$\Pi(t)$ of the free rigid body with principal moments `inertia` from $\Pi(0)$ = `y`
     (shape `(..., 3)`), exactly (to round-off), for any real `t`; traceable and batched.
 
     Conserves $|\Pi|^2$ and $H$ to round-off and is the time-$t$ map of

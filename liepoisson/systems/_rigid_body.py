@@ -45,6 +45,6 @@ class RigidBody(AbstractLiePoissonSystem):
         return tuple(_axis_term(i, 1.0 / self.inertia[i], 3, f"T{i + 1}") for i in range(3))
 
     def exact_flow(self, t: ArrayLike, y: ArrayLike) -> jax.Array:
-        r"""The exact solution $\Pi(t)$ from $\Pi(0) = $ `y` by Jacobi elliptic functions
+        r"""The exact solution $\Pi(t)$ from $\Pi(0)$ = `y` by Jacobi elliptic functions
         (`liepoisson.systems.free_rigid_body_flow`), batched over `y`."""
         return free_rigid_body_flow(self.inertia, t, y)
