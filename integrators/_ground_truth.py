@@ -8,6 +8,7 @@ import hashlib
 import json
 import logging
 import os
+import threading
 import weakref
 from collections.abc import Container, Iterator
 from typing import Any
@@ -31,8 +32,15 @@ EPS = float(np.finfo(np.float64).eps)
 # Compiling a taylor_adaptive (LLVM JIT) costs ~0.1-1 s, far more than integrating one
 # trajectory, so integrators are reused across calls: by value for systems that their params
 # describe (`system.value_key()`), else on the object itself.
-_CACHE_BY_PARAMS: dict[tuple[Any, ...], Any] = {}
-_CACHE_BY_OBJECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# An integrator is not thread-safe (it holds its state), so each thread has its own caches: the
+# threads of a Dask worker (or of any thread pool) integrate chunks at the same time.
+_CACHES = threading.local()
+
+
+def _caches() -> tuple[dict[tuple[Any, ...], Any], weakref.WeakKeyDictionary]:
+    if not hasattr(_CACHES, "by_params"):
+        _CACHES.by_params, _CACHES.by_object = {}, weakref.WeakKeyDictionary()
+    return _CACHES.by_params, _CACHES.by_object
 
 
 def taylor_integrator(
@@ -42,19 +50,20 @@ def taylor_integrator(
 
     With `variational=True` the state is augmented by the first-order variational equations
     (`heyoka.var_ode_sys`): `state[dim:].reshape(dim, dim)[i, j]` is $\\partial y_i/\\partial y_j(0)$.
-    Shared between calls: set `ta.time` and `ta.state` before every use.
+    Shared between calls of the same thread: set `ta.time` and `ta.state` before every use.
     """
     import heyoka as hy
 
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     tol = EPS if tol is None else positive_float(tol, "tol")
+    by_params, by_object = _caches()
     if system.value_key() is not None:
         key = (system.value_key(), tol, variational)
-        cache = _CACHE_BY_PARAMS
+        cache = by_params
     else:
         key = (tol, variational)
-        cache = _CACHE_BY_OBJECT.setdefault(system, {})
+        cache = by_object.setdefault(system, {})
     if key not in cache:
         ode = system.heyoka_system()
         if variational:

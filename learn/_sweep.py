@@ -110,7 +110,7 @@ class Sweep(Sequence[SweepResult]):
 
     def table(self, metrics: Sequence[str] | None = None) -> str:
         """A markdown table: one row per point, its settings and `metrics` (default all)."""
-        names = sorted({k for r in self.results for k in r.point})
+        names = sorted({k for r in self.results for k in r.point} - {"seed"})  # the fit's seed has its column
         metrics = list(metrics) if metrics is not None else sorted({k for r in self.results for k in r.metrics})
         lines = ["| " + " | ".join([*names, "seed", *metrics]) + " |", "|" + "---|" * (len(names) + 1 + len(metrics))]
         for r in self.results:

@@ -45,6 +45,17 @@ def test_chunked_ground_truth_on_a_cluster_is_bitwise_the_single_process_result(
     assert there.metadata == {**here.metadata, "created": there.created}
 
 
+def test_threads_of_one_worker_do_not_share_an_integrator():
+    # heyoka's integrator holds its state: two threads integrating chunks at once must each have
+    # their own (a shared one raised "the first element of the time grid must match ...").
+    y0 = _y0(16, seed=9)
+    here = integrators.ground_truth(BODY, y0, 0.1, 200)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=4, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as threads:
+        there = integrators.ground_truth(BODY, y0, 0.1, 200, client=threads, chunk_size=1)
+    np.testing.assert_array_equal(there.states, here.states)
+
+
 def test_a_user_system_is_sent_to_the_workers_once_and_integrated_bitwise_alike(client):
     algebra = lp.so3()
     system = lp.systems.LiePoissonSystem(
