@@ -78,8 +78,20 @@ def test_pieces_sum_to_the_hamiltonian_and_conserve_their_forms(make, n_pieces):
                                    rtol=1e3 * EPS, atol=1e3 * EPS * np.max(np.abs(y)) ** 2)
 
 
-@pytest.mark.parametrize("make", [generic_so4, diamond_with_ridges, user_rigid_body])
-@pytest.mark.parametrize("method, order", [(it.splitting.Strang, 2), (it.splitting.TripleJump, 4)])
+_SLOW = pytest.mark.slow  # ~10 s each (heyoka + two compiled rollouts); one of each kind runs by default
+
+
+@pytest.mark.parametrize(
+    "make, method, order",
+    [
+        (generic_so4, it.splitting.Strang, 2),
+        (diamond_with_ridges, it.splitting.Strang, 2),
+        (diamond_with_ridges, it.splitting.TripleJump, 4),
+        pytest.param(generic_so4, it.splitting.TripleJump, 4, marks=_SLOW),
+        pytest.param(user_rigid_body, it.splitting.Strang, 2, marks=_SLOW),  # also: equals the catalogue's Strang
+        pytest.param(user_rigid_body, it.splitting.TripleJump, 4, marks=_SLOW),
+    ],
+)
 def test_observed_order_of_the_automatic_splitting(make, method, order):
     system = make()
     y0 = 0.5 * np.random.default_rng(0).normal(size=(3, system.dim))

@@ -110,7 +110,9 @@ def test_data_set_round_trip_rebuilds_the_user_system(name, tmp_path):
     assert np.max(np.abs(again.states - data.states)) <= 1e3 * EPS * np.max(np.abs(data.states))
 
 
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n == "so4" else n for n in sorted(SYSTEMS)]  # ~17 s each
+)
 def test_model_round_trip_without_the_system(name, tmp_path):
     system = SYSTEMS[name]()
     y0 = np.random.default_rng(1).normal(size=(4, system.dim))
