@@ -118,11 +118,11 @@ def test_cli_table(tmp_path, capsys):
 def test_cli_table_reference(capsys):
     assert main(["table", "--reference"]) == 0
     out = capsys.readouterr().out
-    for exp_id in EXPERIMENTS:  # every paper experiment has committed --full results
-        # W1 (the learned-vs-classical study) is committed at the quick profile until its
-        # --full run (hours on 2 cores) is done; the table says which profile it is.
-        profile = "quick" if exp_id == "W1" else "full"
-        assert f"| {exp_id} ({profile}) |" in out
+    for exp_id in PAPER_EXPERIMENTS:  # every paper experiment has committed --full results
+        assert f"| {exp_id} (full) |" in out
+    assert "| W1 " not in out  # the paper makes no claim about W1: it is in --long only
+    main(["table", "--reference", "--long"])
+    assert "W1 (full)" in capsys.readouterr().out
 
 
 def test_cli_options_on_the_top_level_and_on_run(tmp_path, monkeypatch):
