@@ -199,6 +199,49 @@ class LieAlgebra:
         except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
             raise ValueError(f"{what} is not a valid Lie algebra definition: {type(err).__name__}: {err}") from err
 
+    @classmethod
+    def from_matrices(
+        cls, basis: Any, name: str | None = None, basis_names: Sequence[str] | None = None, **kwargs: Any
+    ) -> LieAlgebra:
+        r"""The algebra spanned by a basis of matrices $E_a$ under the commutator:
+        $[E_a, E_b] = E_aE_b - E_bE_a = C_{abd}\,E_d$, solved for $C$ by least squares.
+
+        **Arguments:** `basis`, an array `(n, m, m)` of linearly independent real matrices whose
+        commutators stay in their span (e.g. the $E_{ij} - E_{ji}$ of so(m)); `name`,
+        `basis_names` and the keyword arguments of `LieAlgebra`.
+
+        `ValueError` naming the pair whose commutator leaves the span, or when the matrices
+        are dependent.
+        """
+        try:
+            E = np.array(basis, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"basis must be an array (n, m, m) of real matrices; got {type(basis).__name__}") from err
+        if E.ndim != 3 or E.shape[1] != E.shape[2] or E.shape[0] < 1:
+            raise ValueError(f"basis must be an array (n, m, m) of n square matrices; got shape {E.shape}")
+        if not np.all(np.isfinite(E)):
+            raise ValueError("basis must be finite; got NaN or inf entries")
+        n = E.shape[0]
+        flat = E.reshape(n, -1).T  # (m*m, n): columns are the basis matrices
+        if np.linalg.matrix_rank(flat) < n:
+            raise ValueError(f"basis: the {n} matrices are linearly dependent (rank {np.linalg.matrix_rank(flat)})")
+        comm = np.einsum("aij,bjk->abik", E, E)
+        comm = (comm - comm.transpose(1, 0, 2, 3)).reshape(n * n, -1).T
+        coeffs, *_ = np.linalg.lstsq(flat, comm, rcond=None)
+        residual = np.abs(flat @ coeffs - comm).max(axis=0)
+        # Exact span: the residual is round-off of the lstsq solve, a few eps x |E|^2.
+        scale = max(1.0, float(np.abs(E).max()) ** 2)
+        worst = int(np.argmax(residual))
+        if residual[worst] > 1e3 * np.finfo(np.float64).eps * scale:
+            a, b = divmod(worst, n)
+            raise ValueError(
+                f"basis: the commutator [E_{a}, E_{b}] is not in the span of the basis (residual "
+                f"{residual[worst]:.2e}); the matrices do not span a Lie algebra"
+            )
+        C = coeffs.T.reshape(n, n, n)
+        C[np.abs(C) < 1e3 * np.finfo(np.float64).eps * scale] = 0.0  # exact zeros where round-off
+        return cls(C, name, basis_names, **kwargs)
+
     # -- Lie algebra operations ----------------------------------------------------------
     def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         r"""$[\xi, \eta]_d = C_{abd}\,\xi_a\,\eta_b$, batched over leading axes."""

@@ -192,3 +192,32 @@ def test_repr_and_names():
     g = algebra("se3")
     assert "se3" in repr(g) and g.basis_names == ("Pi1", "Pi2", "Pi3", "p1", "p2", "p3")
     assert algebra("so3+heisenberg").basis_names[3] == "heisenberg.mu_x"
+
+
+# -- LieAlgebra.from_matrices ---------------------------------------------------------------
+def test_from_matrices_gives_the_constants_of_so3_and_checks_its_input():
+    # so(3) in the basis of hat maps: [hat(e_a), hat(e_b)] = eps_abd hat(e_d), the Levi-Civita
+    # constants written out by hand.
+    hat = np.zeros((3, 3, 3))
+    for a, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        hat[a, i, j], hat[a, j, i] = -1.0, 1.0
+    g = lp.LieAlgebra.from_matrices(hat, "so3 from matrices")
+    eps = np.zeros((3, 3, 3))
+    for a, b, d in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        eps[a, b, d], eps[b, a, d] = 1.0, -1.0
+    # lstsq of an exact integer system: round-off of a few eps.
+    np.testing.assert_allclose(g.structure_constants, eps, atol=16 * EPS)
+    assert g.n_casimirs == 1 and g.name == "so3 from matrices"
+    with pytest.raises(ValueError, match=r"linearly dependent"):
+        lp.LieAlgebra.from_matrices(np.stack([hat[0], hat[1], hat[0] + hat[1]]))
+    sym = np.zeros((2, 2, 2))
+    sym[0] = [[1.0, 0.0], [0.0, -1.0]]
+    sym[1] = [[0.0, 1.0], [1.0, 0.0]]  # [sym0, sym1] is antisymmetric: leaves the span
+    with pytest.raises(ValueError, match=r"\[E_0, E_1\] is not in the span"):
+        lp.LieAlgebra.from_matrices(sym)
+    with pytest.raises(ValueError, match=r"basis must be an array \(n, m, m\).*\(3, 3\)"):
+        lp.LieAlgebra.from_matrices(np.eye(3))
+    with pytest.raises(TypeError, match=r"basis must be an array"):
+        lp.LieAlgebra.from_matrices("so3")
+    with pytest.raises(ValueError, match=r"basis must be finite"):
+        lp.LieAlgebra.from_matrices(hat * np.nan)

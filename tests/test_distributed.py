@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import cloudpickle
 import distributed
@@ -45,16 +46,29 @@ def test_chunked_ground_truth_on_a_cluster_is_bitwise_the_single_process_result(
     assert there.metadata == {**here.metadata, "created": there.created}
 
 
-@pytest.mark.slow  # an in-process cluster beside the module's cluster broke the next test in a full run (FE); alone it passes
+_THREADS_SCRIPT = """
+import distributed, numpy as np, integrators, liepoisson as lp
+body = lp.systems.RigidBody()
+y0 = np.random.default_rng(9).uniform(-1, 1, size=(16, 3))
+here = integrators.ground_truth(body, y0, 0.1, 200)
+with distributed.LocalCluster(n_workers=1, threads_per_worker=4, processes=False,
+                              dashboard_address=None) as cluster, distributed.Client(cluster) as threads:
+    there = integrators.ground_truth(body, y0, 0.1, 200, client=threads, chunk_size=1)
+np.testing.assert_array_equal(there.states, here.states)
+print("bitwise equal")
+"""
+
+
 def test_threads_of_one_worker_do_not_share_an_integrator():
     # heyoka's integrator holds its state: two threads integrating chunks at once must each have
     # their own (a shared one raised "the first element of the time grid must match ...").
-    y0 = _y0(16, seed=9)
-    here = integrators.ground_truth(BODY, y0, 0.1, 200)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=4, processes=False,
-                                  dashboard_address=None) as cluster, distributed.Client(cluster) as threads:
-        there = integrators.ground_truth(BODY, y0, 0.1, 200, client=threads, chunk_size=1)
-    np.testing.assert_array_equal(there.states, here.states)
+    # In its own process: an in-process cluster beside this module's cluster broke the next
+    # test's fixture in a full run.
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1]), "JAX_PLATFORMS": "cpu"}
+    done = subprocess.run([sys.executable, "-c", _THREADS_SCRIPT], check=False, capture_output=True, text=True, env=env,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().endswith("bitwise equal")
 
 
 def test_a_user_system_is_sent_to_the_workers_once_and_integrated_bitwise_alike(client):

@@ -98,6 +98,7 @@ def test_arguments():
         net().with_h(0.0)
 
 
+@pytest.mark.slow  # 23 s
 def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
     """Quasi-Newton losses are compiled once per model structure with h as an argument: a fit
     at h = 0.2 after one at h = 0.1 (cache warm) equals a fit at h = 0.2 from a cold cache."""

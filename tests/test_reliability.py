@@ -177,7 +177,8 @@ def _wait_for(pattern: str, timeout: float = 60.0) -> list[str]:
     raise AssertionError(f"nothing matched {pattern} within {timeout} s")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+# SIGTERM waits for h5py's write of 192 MB to return to Python (about 40 s): under -m slow.
+@pytest.mark.parametrize("sig", [signal.SIGKILL, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_a_killed_save_leaves_no_half_file_and_no_stale_temporary(tmp_path, sig):
     target = tmp_path / "big.h5"
     proc = _start(_SAVE_SCRIPT, str(target))
