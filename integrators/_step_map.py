@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from liepoisson import vmap_samples
 from liepoisson._validation import as_state, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -217,7 +218,7 @@ def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, sa
     """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`. `save_every` is the Python int 1, or a traced
     integer (then one program serves every spacing of the outputs: a study at several h with
     the same output times compiles once per map)."""
-    step = jax.vmap(step_map.step)
+    step = vmap_samples(step_map.step)
     if isinstance(save_every, int) and save_every == 1:
 
         def body(y, _):
@@ -248,4 +249,4 @@ def _defect_compiled(step_map: AbstractStepMap, y: jax.Array) -> jax.Array:
         B1 = step_map.system.poisson_tensor(z)
         return jnp.max(jnp.abs(J @ B0 @ J.T - B1))
 
-    return jax.vmap(one)(y)
+    return vmap_samples(one)(y)

@@ -19,6 +19,7 @@ from jax.flatten_util import ravel_pytree
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
+from liepoisson import vmap_samples
 from liepoisson._progress import show_progress
 from liepoisson._validation import positive_float, positive_int
 
@@ -140,7 +141,7 @@ def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
 def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Array:
     """Mean squared error of one learned step over pairs `(N, dim)`: the state loss of every
     learned map (paper eqs. Loss_function, Loss_function_G_LPNets)."""
-    return jnp.mean((jax.vmap(model.step)(y0) - y1) ** 2)
+    return jnp.mean((vmap_samples(model.step)(y0) - y1) ** 2)
 
 
 def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:

@@ -20,8 +20,10 @@ from ._coadjoint import (
     MatrixExponentialFlow as MatrixExponentialFlow,
     RodriguesFlow as RodriguesFlow,
     SE3Flow as SE3Flow,
+    expm_action as expm_action,
     rotate as rotate,
     rotation_coefficients as rotation_coefficients,
+    vmap_samples as vmap_samples,
 )
 from ._casimirs import polynomial_casimirs as polynomial_casimirs
 from ._elliptic import ellipj as ellipj

@@ -272,3 +272,74 @@ def test_batching_jit_vmap(name):
     np.testing.assert_allclose(jitted, out, atol=10 * EPS * np.max(np.abs(out)))
     vm = np.asarray(jax.vmap(jax.vmap(g.coadjoint_flow))(alpha, t, mu))
     np.testing.assert_allclose(vm, out, atol=10 * EPS * np.max(np.abs(out)))
+
+
+# -- expm_action: every path against scipy's expm ----------------------------------------------
+# 1-norms of A in every band of expm_action's paths: degree 12, 14, 18 Taylor, 2, 4 and 8
+# sub-steps, and beyond 8 the matrix exponential.
+_BAND_NORMS = (0.2, 0.45, 0.9, 1.8, 3.5, 7.0, 25.0)
+
+
+_ACTION = jax.jit(lp.vmap_samples(lp.expm_action))
+_MATRIX = jax.jit(lp.expm_action)  # not under vmap_samples: always the matrix exponential
+
+
+@pytest.mark.parametrize("norm", _BAND_NORMS)
+def test_expm_action_matches_scipy_on_every_path(norm):
+    import scipy.linalg
+
+    rng = np.random.default_rng(int(norm * 100))
+    A = rng.normal(size=(10, 6, 6))
+    A[:5] -= A[:5].transpose(0, 2, 1)  # rotations (compact algebras) and general matrices
+    A *= norm / np.abs(A).sum(axis=-2).max()  # the batch's largest 1-norm is `norm`
+    v = rng.normal(size=(10, 6))
+    reference = np.stack([scipy.linalg.expm(a) @ x for a, x in zip(A, v)])
+    scale = np.abs(reference).max() + np.abs(v).max()
+    for fn in (_ACTION, _MATRIX):
+        got = np.asarray(fn(jnp.asarray(A), jnp.asarray(v)))
+        # Taylor terms bounded by e^|A/m|; at most 8 sub-steps of 18 terms, or 48 squarings for
+        # the matrix path at norm 25 (each a few roundings of norm-sized numbers).
+        np.testing.assert_allclose(got, reference, rtol=0, atol=256 * EPS * max(1.0, norm) * scale)
+
+
+def test_expm_action_gradients_agree_across_paths():
+    # Under vmap_samples the paths differ by the batch's largest norm; derivatives of the
+    # small-norm sample must not depend on which path its batch took.
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(2, 4, 4)) * 0.05
+    big = A.copy()
+    big[1] *= 300.0  # the second sample moves the batch onto the matrix path
+    v = jnp.asarray(rng.normal(size=(2, 4)))
+    w = jnp.asarray(rng.normal(size=4))
+
+    def f(A):
+        return lp.vmap_samples(lp.expm_action)(A, v)[0] @ w
+
+    grad = jax.jit(jax.grad(f))
+    g_small, g_big = grad(jnp.asarray(A)), grad(jnp.asarray(big))
+    np.testing.assert_allclose(g_small[0], g_big[0], rtol=0, atol=64 * EPS)
+    j_small = jax.jit(jax.jacfwd(f))(jnp.asarray(A))
+    np.testing.assert_allclose(j_small, g_small, rtol=0, atol=64 * EPS)
+    # and both against a central difference of the exact map (truncation ~ eps^(2/3))
+    import scipy.linalg
+
+    def exact(a):
+        return scipy.linalg.expm(a) @ np.asarray(v[0]) @ np.asarray(w)
+
+    d = np.zeros((4, 4)); d[1, 2] = 1.0
+    step = 1e-5
+    fd = (exact(A[0] + step * d) - exact(A[0] - step * d)) / (2 * step)
+    np.testing.assert_allclose(float(g_small[0][1, 2]), fd, rtol=1e-8)
+
+
+def test_flows_under_vmap_samples_conserve_casimirs_at_large_alpha():
+    g = algebra("generic_so3")
+    rng = np.random.default_rng(4)
+    mu = jnp.asarray(rng.normal(size=(6, 3)))
+    flow = jax.jit(lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m)))
+    for size in (0.3, 5.0, 60.0):  # Taylor, sub-steps, matrix exponential
+        alpha = jnp.asarray(rng.normal(size=(6, 3)) * size)
+        out = flow(alpha, mu)
+        c0, c1 = np.asarray(g.casimirs(mu)), np.asarray(g.casimirs(out))
+        # the flow is exact up to round-off, growing with the number of sub-steps/squarings
+        np.testing.assert_allclose(c1, c0, rtol=256 * EPS * max(1.0, size))
