@@ -21,20 +21,9 @@ import learn
 from learn._fit import state_mse
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from any_algebra import SYSTEMS  # the benchmark's systems, not copied
+from any_algebra import SYSTEMS, casimir_drift  # the benchmark's, not copied
 
 EXPECTED_DEGREES = {"diamond": [1, 2], "filiform5": [1, 2, 3], "so4": [2, 2], "sl3": [2, 3]}
-
-
-def casimir_drift(y: np.ndarray, system) -> float:
-    """max_t |C(y_t) - C(y_0)| over each trajectory, in units of the size of the Casimir's terms
-    at that trajectory, max_t |y_t|^degree: a Casimir near zero (tr X^3 of sl(3), the
-    filiform's cubic) is not a relative-error denominator."""
-    algebra = system.algebra
-    C = np.asarray(algebra.casimirs(y))  # (n_traj, n_t, k)
-    degrees = np.array([p.degree for p in algebra.casimir_polynomials])
-    size = np.max(np.abs(y), axis=(-2, -1))[:, None] ** degrees[None, :]  # (n_traj, k)
-    return float(np.max(np.abs(C - C[:, :1]).max(axis=1) / np.maximum(size, 1.0)))
 
 
 @functools.cache

@@ -332,14 +332,19 @@ def test_expm_action_gradients_agree_across_paths():
     np.testing.assert_allclose(float(g_small[0][1, 2]), fd, rtol=1e-8)
 
 
-def test_flows_under_vmap_samples_conserve_casimirs_at_large_alpha():
+def test_casimir_drift_of_generic_flows_is_round_off_times_the_generator():
+    """Issue 11's bound for large |alpha| on the generic path (compact algebra): the drift of a
+    quadratic Casimir is at most 64 eps |t alpha| |mu|^2, on every path of `expm_action`
+    (measured: at most 18 eps |t alpha| |mu|^2 for |t alpha| from 0.3 to 1e4)."""
     g = algebra("generic_so3")
     rng = np.random.default_rng(4)
-    mu = jnp.asarray(rng.normal(size=(6, 3)))
-    flow = jax.jit(lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m)))
-    for size in (0.3, 5.0, 60.0):  # Taylor, sub-steps, matrix exponential
-        alpha = jnp.asarray(rng.normal(size=(6, 3)) * size)
-        out = flow(alpha, mu)
-        c0, c1 = np.asarray(g.casimirs(mu)), np.asarray(g.casimirs(out))
-        # the flow is exact up to round-off, growing with the number of sub-steps/squarings
-        np.testing.assert_allclose(c1, c0, rtol=256 * EPS * max(1.0, size))
+    mu = jnp.asarray(rng.normal(size=(50, 3)))
+    flows = (jax.jit(lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m))),
+             jax.jit(lambda a, m: g.coadjoint_flow(a, 1.0, m)))
+    for size in (0.3, 5.0, 60.0, 1e3, 1e4):  # Taylor, sub-steps, matrix with up to 16 squarings
+        alpha = jnp.asarray(rng.normal(size=(50, 3)) * size / np.sqrt(3.0))
+        for flow in flows:
+            out = np.asarray(flow(alpha, mu))
+            drift = np.abs(np.asarray(g.casimirs(out)) - np.asarray(g.casimirs(mu)))[:, 0]
+            bound = 64 * EPS * np.linalg.norm(np.asarray(alpha), axis=-1) * np.sum(np.asarray(mu) ** 2, axis=-1)
+            assert np.all(drift <= np.maximum(bound, 4 * EPS * np.sum(np.asarray(mu) ** 2, axis=-1)))
