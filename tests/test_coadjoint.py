@@ -348,3 +348,14 @@ def test_casimir_drift_of_generic_flows_is_round_off_times_the_generator():
             drift = np.abs(np.asarray(g.casimirs(out)) - np.asarray(g.casimirs(mu)))[:, 0]
             bound = 64 * EPS * np.linalg.norm(np.asarray(alpha), axis=-1) * np.sum(np.asarray(mu) ** 2, axis=-1)
             assert np.all(drift <= np.maximum(bound, 4 * EPS * np.sum(np.asarray(mu) ** 2, axis=-1)))
+
+
+def test_expm_action_degenerate_inputs():
+    # zero generator (coinciding points of a pair, alpha = 0): the identity, exactly, on both paths
+    v = jnp.asarray(np.random.default_rng(5).normal(size=(4, 5)))
+    zero = jnp.zeros((4, 5, 5))
+    np.testing.assert_array_equal(np.asarray(_ACTION(zero, v)), np.asarray(v))
+    np.testing.assert_array_equal(np.asarray(_MATRIX(zero, v)), np.asarray(v))
+    # a non-finite generator gives a non-finite result (rollouts then raise), never a finite guess
+    bad = zero.at[1, 0, 0].set(jnp.nan)
+    assert not np.all(np.isfinite(np.asarray(_ACTION(bad, v))))
