@@ -68,6 +68,29 @@ def test_w1_smoke(tmp_path):
     assert (tmp_path / "work_precision_rigid_body.png").stat().st_size > 0
 
 
+def test_hamiltonian_mismatch_is_blind_to_casimir_functions_only():
+    import liepoisson as lp
+    from paper.w1_learned_vs_classical import hamiltonian_mismatch
+
+    body = lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0))
+    y = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 2.0]) + np.random.default_rng(3).uniform(-0.3, 0.3, (50, 6))
+
+    def casimir_terms(z):  # a polynomial of degree 2 in the Casimirs |P|^2 and Pi.P
+        c = body.casimirs(z)
+        return 0.7 + 0.4 * c[..., 0] - 0.3 * c[..., 1] + 0.05 * c[..., 0] * c[..., 1]
+
+    shifted = hamiltonian_mismatch(lambda z: body.hamiltonian(z) + casimir_terms(z), body, y)
+    assert shifted["learned_hamiltonian_vs_H"] > 0.1  # the raw difference sees the Casimir terms
+    # Modulo Casimirs both measures are round-off: a least-squares fit of well-scaled columns
+    # (values O(10)) and gradients of O(10) terms, relative to max |H| and max |X_H| of O(1).
+    assert shifted["learned_hamiltonian_vs_H_mod_casimirs"] < 1e3 * EPS
+    assert shifted["learned_vector_field_vs_H"] < 1e3 * EPS
+    # A 1% change of H that is not a Casimir function is seen by all three, at about 1%.
+    scaled = hamiltonian_mismatch(lambda z: 1.01 * body.hamiltonian(z), body, y)
+    assert abs(scaled["learned_vector_field_vs_H"] - 0.01) < 1e-12
+    assert 1e-3 < scaled["learned_hamiltonian_vs_H_mod_casimirs"] <= scaled["learned_hamiltonian_vs_H"] < 0.02
+
+
 def test_cli_list(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out
