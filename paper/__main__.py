@@ -26,7 +26,7 @@ from pathlib import Path
 from integrators._files import atomic_write_text
 
 from ._cluster import ENV, scheduler
-from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir
+from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 from ._verdict import verdict_table
 
@@ -47,7 +47,7 @@ def summary_table(results: dict[str, dict]) -> str:
                   f"({type(err).__name__}: {err}); rerun `python -m paper run {exp_id}`", file=sys.stderr)
             continue
         for label, paper, ours, base in rows:
-            lines.append(f"| {exp_id} ({metrics.get('profile')}) | {label} | {paper} | {ours} | {base} |")
+            lines.append(markdown_row((f"{exp_id} ({metrics.get('profile')})", label, paper, ours, base)))
     return "\n".join(lines) + "\n"
 
 

@@ -85,6 +85,12 @@ def metric_value(metrics: dict[str, Any], key: str) -> Any:
     return d
 
 
+def markdown_row(cells) -> str:
+    """One row of a Markdown table; a "|" inside a cell (|rel. energy error|) is escaped, or
+    it would end the cell."""
+    return "| " + " | ".join(str(cell).replace("|", "\\|") for cell in cells) + " |"
+
+
 def fmt(x: Any) -> str:
     if x is None:
         return "—"
@@ -183,7 +189,7 @@ class AbstractExperiment(abc.ABC):
             f"| metric | paper | ours ({metrics.get('model', 'LPNet')}) | baseline ({metrics.get('baseline_model', 'MLP')}) |",
             "|---|---|---|---|",
         ]
-        lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in self.rows(metrics)]
+        lines += [markdown_row(row) for row in self.rows(metrics)]
         notes = metrics.get("notes")
         if notes:
             lines += ["", *[f"- {n}" for n in notes]]

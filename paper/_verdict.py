@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ._experiment import AbstractExperiment, PaperValue, fmt, metric_value
+from ._experiment import AbstractExperiment, PaperValue, fmt, markdown_row, metric_value
 
 #: "round-off" as the paper uses it: ours counts as round-off below this (relative drifts and
 #: defects of float64 computations over thousands of steps, ~1e4 eps).
@@ -62,7 +62,7 @@ def verdict_table(experiments: dict[str, AbstractExperiment], results: dict[str,
     """The verdict as a markdown table, and a count of each verdict."""
     rows = verdict_rows(experiments, results)
     lines = ["| experiment | quantity | paper | ours | verdict |", "|---|---|---|---|---|"]
-    lines += ["| " + " | ".join(cell.replace("|", "\\|") for cell in r) + " |" for r in rows]
+    lines += [markdown_row(r) for r in rows]
     counts: dict[str, int] = {}
     for r in rows:
         key = r[-1].split(" (")[0]

@@ -231,3 +231,20 @@ def test_e4_sweep_pipeline_writes_its_table_and_skips_done_points_on_rerun(tmp_p
     assert len(before) == 2
     assert e4_sweep.main(argv) == 0  # nothing retrained
     assert {str(p): p.stat().st_mtime_ns for p in (tmp_path / "points").glob("*/model.h5")} == before
+
+
+def test_markdown_rows_escape_pipes_inside_cells():
+    import re
+
+    from paper._experiment import markdown_row
+
+    row = markdown_row(["max |rel. energy error|", "< 0.3%", 0.0031])
+    cells = re.split(r"(?<!\\)\|", row)[1:-1]  # split on unescaped pipes only
+    assert [c.strip() for c in cells] == [r"max \|rel. energy error\|", "< 0.3%", "0.0031"]
+    # every row of every committed table has as many cells as its table's header
+    for table in REFERENCE_DIR.glob("*/table.md"):
+        blocks = re.split(r"\n(?!\|)[^\n]*\n", table.read_text())  # runs of consecutive "|" lines
+        for block in blocks:
+            rows = [ln for ln in block.splitlines() if ln.startswith("|")]
+            widths = [len(re.split(r"(?<!\\)\|", ln)) for ln in rows]
+            assert len(set(widths)) <= 1, (table.name, rows[widths.index(max(widths))])
