@@ -18,7 +18,7 @@ from liepoisson.systems import AbstractPoissonSystem
 
 from ._diagnostics import DiagnosticsReport, diagnostics
 from ._ground_truth import ground_truth
-from ._plots import figure
+from ._plots import figure, series_styles, span_decades
 from ._step_map import AbstractStepMap
 from ._trajectories import Trajectories
 
@@ -72,8 +72,10 @@ class Comparison:
         """Error at the final time against wall time per step (log-log), one point per map."""
         fig = figure(figsize=(6, 4), layout="constrained")
         ax = fig.subplots()
-        for r in self.rows:
-            ax.loglog([r.seconds_per_step], [max(r.error_final, 1e-17)], "o", label=r.label)
+        for r, style in zip(self.rows, series_styles(len(self.rows))):
+            style.pop("ls")
+            ax.loglog([r.seconds_per_step], [max(r.error_final, 1e-17)], ls="none", label=r.label, **style)
+        span_decades(ax, "x")
         ax.set_xlabel("wall time per step and trajectory [s]")
         ax.set_ylabel("|y(T) - y_ref(T)|")
         ax.legend(fontsize=7)
@@ -83,9 +85,9 @@ class Comparison:
         """Relative energy error against time (log axis), the largest over trajectories."""
         fig = figure(figsize=(7, 3.5), layout="constrained")
         ax = fig.subplots()
-        for label, report in self.reports.items():
+        for (label, report), style in zip(self.reports.items(), series_styles(len(self.reports))):
             e = np.abs(report.energy_error_relative).reshape(-1, len(report.times)).max(axis=0)
-            ax.semilogy(report.times, np.maximum(e, 1e-17), lw=0.8, label=label)
+            ax.semilogy(report.times, np.maximum(e, 1e-17), lw=0.8, label=label, markevery=0.1, ms=3, **style)
         ax.set_xlabel("t")
         ax.set_ylabel("|E(t) - E(0)| / <E>")
         ax.legend(fontsize=7)
@@ -196,6 +198,8 @@ class Convergence:
         fig = figure(figsize=(5, 4), layout="constrained")
         ax = fig.subplots()
         ax.loglog(self.hs, self.errors, "o-", label=f"{label} (observed order {self.order:.2f})".strip())
+        ax.set_xticks(self.hs, [f"{h:g}" for h in self.hs])  # the step sizes, not minor labels
+        ax.minorticks_off()
         ax.set_xlabel("h")
         ax.set_ylabel("|y(T) - y_ref(T)|")
         ax.legend(fontsize=7)

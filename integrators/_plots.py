@@ -20,6 +20,29 @@ _STYLES = ("b-", "r--", "g:", "m-.", "c--", "y:")
 _LOG_FLOOR = 1e-17
 
 
+def series_styles(n: int) -> list[dict[str, Any]]:
+    """`n` distinguishable line styles (colour, marker, dash) for up to 20 colours x 4 markers:
+    the default colour cycle repeats after 10 and a plot of many maps would share colours."""
+    from matplotlib import colormaps
+
+    markers, dashes = ("o", "s", "^", "D"), ("-", "--", "-.", ":")
+    return [{"color": colormaps["tab20"](k % 20), "marker": markers[(k // 10) % 4], "ls": dashes[(k // 5) % 4]}
+            for k in range(n)]
+
+
+def span_decades(ax: Any, axis: str = "x", decades: float = 1.2) -> None:
+    """Widen a log axis to at least `decades` (> 1) around its data and label only its powers
+    of ten, at least one of which is then in view: matplotlib labels the minor ticks of a
+    log axis spanning a decade or two, and those labels overlap."""
+    from matplotlib.ticker import NullFormatter
+
+    lo, hi = ax.get_xlim() if axis == "x" else ax.get_ylim()
+    if lo > 0 and hi > 0 and np.log10(hi / lo) < decades:
+        centre, half = np.sqrt(lo * hi), 10 ** (decades / 2)
+        (ax.set_xlim if axis == "x" else ax.set_ylim)(centre / half, centre * half)
+    (ax.xaxis if axis == "x" else ax.yaxis).set_minor_formatter(NullFormatter())
+
+
 def figure(**kwargs: Any):
     """A matplotlib `Figure` (object API), or ImportError saying how to get matplotlib."""
     try:

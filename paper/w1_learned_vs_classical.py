@@ -24,7 +24,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators._plots import figure
+from integrators._plots import figure, series_styles, span_decades
 
 from ._cluster import map_trainings, on_cluster
 from ._experiment import AbstractExperiment, fmt
@@ -308,13 +308,10 @@ def _plots(rows, out_dir: Path) -> list[str]:
     names = []
     for name in sorted({r["system"] for r in rows}):
         fig = figure(figsize=(12, 4.8))  # says how to install matplotlib if it is missing
-        import matplotlib
-
         axes = fig.subplots(1, 2)
         sub = [r for r in rows if r["system"] == name]
         methods = list(dict.fromkeys(r["method"] for r in sub))
-        colours = [matplotlib.colormaps["tab20"](k % 20) for k in range(len(methods))]
-        for method, colour in zip(methods, colours):
+        for method, classical_style in zip(methods, series_styles(len(methods))):
             pts = sorted((r for r in sub if r["method"] == method), key=lambda r: r["h"])
             hs = np.array([r["h"] for r in pts])
             cost = np.array([r["cost_vs_strang"] / r["h"] for r in pts])  # work per unit time
@@ -322,9 +319,10 @@ def _plots(rows, out_dir: Path) -> list[str]:
             energy = np.array([r["energy_error_long"] for r in pts])
             learned = method in ("LPNet", "G-LPNet (sym.)")
             style = {"marker": "o", "lw": 2.6, "color": "black" if method == "LPNet" else "crimson"} if learned \
-                else {"marker": ".", "lw": 1.0, "color": colour, "ls": "--" if method.startswith("Strang") else "-"}
+                else {**classical_style, "lw": 1.0, "ms": 4}
             axes[0].loglog(cost, np.maximum(err, 1e-17), label=method, **style)
             axes[1].loglog(hs, np.maximum(energy, 1e-17), label=method, **style)
+        span_decades(axes[0], "x")
         axes[0].set_xlabel("cost per unit time (Strang steps of h = 1)")
         axes[0].set_ylabel("global error at t = 100")
         axes[0].set_title(f"{name}: work-precision")

@@ -84,3 +84,17 @@ def test_convergence_arguments():
         it.convergence(lambda h: it.RK4(body, h=h), body, Y0S, t_final=1.0, hs=[0.1, -0.1])
     with pytest.raises(TypeError, match="must return an integrators.AbstractStepMap"):
         it.convergence(lambda h: "RK4", body, Y0S, t_final=1.0, hs=[0.1, 0.05])
+
+
+def test_plot_styles_are_distinct_and_log_axes_span_a_decade():
+    pytest.importorskip("matplotlib")
+    from integrators._plots import figure, series_styles, span_decades
+
+    styles = series_styles(40)  # W1 plots ~17 maps, a user comparison may plot more
+    assert len({(s["color"], s["marker"], s["ls"]) for s in styles}) == 40
+    ax = figure().subplots()
+    ax.loglog([2e-6, 5e-6], [1.0, 2.0], "o")  # less than half a decade: minor labels would overlap
+    span_decades(ax, "x")
+    lo, hi = ax.get_xlim()
+    assert np.log10(hi / lo) >= 1.2 - 1e-12 and lo < 2e-6 and hi > 5e-6
+    assert any(lo <= 10.0**k <= hi for k in range(-8, 0))  # a labelled power of ten in view
