@@ -132,6 +132,15 @@ class Sweep(Sequence[SweepResult]):
         return cls(out, [r for r in (_read_result(out / "points" / k) for k in keys) if r is not None])
 
 
+def _index(out: Path) -> list[str]:
+    """The point keys listed in `out/sweep.json` (none if it is missing or unreadable)."""
+    try:
+        keys = json.loads((out / "sweep.json").read_text())["points"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [k for k in keys if isinstance(k, str)] if isinstance(keys, list) else []
+
+
 def _read_result(folder: Path) -> SweepResult | None:
     try:
         data = json.loads((folder / _RESULT).read_text())
@@ -182,7 +191,8 @@ def sweep(
     - `data`: a `Trajectories` or `(y0, y1)` pairs for every point, or `data(point)`.
     - `out`: the folder of results: `out/points/<key>/` holds `model.h5`, `record.h5` and
       `result.json` (written last, so a point is done exactly when it exists) for each point
-      as soon as it finishes; `out/sweep.json` lists the grid. A rerun skips done points.
+      as soon as it finishes; `out/sweep.json` lists the points of every grid run in `out`.
+      A rerun skips done points.
     - `client`: a `dask.distributed.Client` (extra `dask`): the points are trained on its
       workers (`make_model`, `data`, `evaluate` are sent with cloudpickle; shared data once
       per worker). Without one, in this process one after the other. The numbers are the
@@ -192,8 +202,9 @@ def sweep(
     - `fit_kwargs`: the arguments of `learn.fit` common to all points (e.g. `optimiser=`,
       `h=`); a point's own setting of the same name wins.
 
-    **Returns** a `Sweep` of `SweepResult`s in grid order (`.table()`, `.best(metric)`,
-    `.model()`, `.record()`); `learn.Sweep.load(out)` reads it back.
+    **Returns** a `Sweep` of this grid's `SweepResult`s in grid order (`.table()`,
+    `.best(metric)`, `.model()`, `.record()`); `learn.Sweep.load(out)` reads back every
+    finished point in `out`, of this grid and earlier ones.
     """
     points = grid_points(grid)
     if not callable(make_model):
@@ -219,7 +230,9 @@ def sweep(
     if len(set(keys)) != len(keys):
         raise ValueError("grid has repeated points; every point must differ in some setting")
     (out / "points").mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "sweep.json", json.dumps({"points": keys}, indent=1))
+    # The index keeps the points of earlier grids in this folder (a rerun on a smaller or
+    # different grid must not hide them from `Sweep.load`), then this grid's new ones.
+    atomic_write_text(out / "sweep.json", json.dumps({"points": list(dict.fromkeys([*_index(out), *keys]))}, indent=1))
 
     results: dict[str, SweepResult] = {}
     todo = []

@@ -14,10 +14,10 @@ from learn import AbstractLearnedMap, TrainingRecord
 from ._cluster import map_trainings, on_cluster
 
 
-def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, reference: np.ndarray,
+def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, system, reference: np.ndarray,
                     defect_points: int = 200, integrals: dict | None = None) -> dict[str, Any]:
-    """Metrics of `model` (trained as `record` says) rolled out from `reference[:, 0]` for as
-    many steps as `reference` has.
+    """Metrics of `model` (trained as `record` says; `None`: no losses reported) rolled out
+    from `reference[:, 0]` for as many steps as `reference` has.
 
     `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`. Energy and Casimir errors are
     relative to the time mean as in the paper (`(E(t) - E(0)) / <E>`); maxima are over all
@@ -38,15 +38,15 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord, system, r
     rng = np.random.default_rng(0)
     pick = pick_from[rng.choice(len(pick_from), size=min(defect_points, len(pick_from)), replace=False)]
     metrics = {
-        "train_loss": record.train_loss,
-        "val_loss": record.val_loss,
+        "train_loss": None if record is None else record.train_loss,
+        "val_loss": None if record is None else record.val_loss,
         "energy_rel_err_max": float(np.max(energy)),
         "energy_rel_err_mean": float(np.mean(energy)),
         "energy_rel_err_max_per_trajectory": np.max(energy, axis=1),
         "casimir_rel_drift_max": report.max_casimir_drift_relative if system.n_casimirs else None,
         "traj_err_final": float(np.max(report.trajectory_error[:, -1])),
         "poisson_defect_max": float(np.max(np.asarray(model.poisson_defect(pick)))),
-        "wall_time_s": record.wall_time_s,
+        "wall_time_s": None if record is None else record.wall_time_s,
         "rollout_time_s": rollout_time,
     }
     for name in integrals or {}:

@@ -262,6 +262,11 @@ def test_a_rerun_sweep_trains_only_the_points_not_done(tmp_path, monkeypatch):
     result = learn.sweep(_make_glpnet, grid, SWEEP_DATA, out=out, optimiser=SWEEP_OPTIMISER)
     assert trained == [{"n_modules": 2, "seed": 1}, {"n_modules": 2, "seed": 3}]
     assert len(result) == 4 and [r.seed for r in result] == [0, 1, 2, 3]
+    # A rerun on a smaller grid returns that grid, and the folder still lists every point.
+    trained.clear()
+    small = learn.sweep(_make_glpnet, {"n_modules": [2], "seed": [3]}, SWEEP_DATA, out=out, optimiser=SWEEP_OPTIMISER)
+    assert trained == [] and [r.seed for r in small] == [3]
+    assert sorted(r.seed for r in learn.Sweep.load(out)) == [0, 1, 2, 3]
 
 
 def test_bad_sweep_arguments_are_refused(tmp_path):
