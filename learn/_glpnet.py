@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 
 from integrators._splitting._strang import strang_compose
 from integrators._step_map import check_state
+from integrators.splitting import AbstractCompositionMethod
 from liepoisson import JAX
 from liepoisson._validation import as_state, check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
@@ -58,7 +59,12 @@ class GLPNet(AbstractLearnedMap):
     **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$:
     each basis direction twice, the paper's 6 for so(3)); `order` of the basis vectors (default cycling);
     `key`; `full_vectors`; `activation` $\sigma$ (paper: sigmoid); `h` (`None`: set by
-    `learn.fit`); `symmetric`: the data-driven Strang splitting below.
+    `learn.fit`); `symmetric`: the data-driven Strang splitting below; `linear_term`: a fourth
+    scalar per module, $q_s = a_s\sigma(x) + e_s x + b_s$ with $x = \langle\alpha_s, y\rangle$,
+    so that a quadratic piece of $\widetilde H$ is exact and the sigmoid carries the rest. A
+    sigmoid alone is linear only in the limit $c_s \to 0$, and its cubic term,
+    $-a_sc_s^3x^3/48$, has the opposite sign to its linear term $a_sc_sx/4$: it cannot fit
+    $\Phi_s' = x/I - 0.1\sin x$.
 
     **As a splitting method.** Module $s$ is the exact flow of the ridge Hamiltonian
     $\Phi_s(\langle\alpha_s, y\rangle)$, $\Phi_s' = a_s\sigma + b_s$, so the network is a
@@ -74,11 +80,13 @@ class GLPNet(AbstractLearnedMap):
     a: jax.Array
     c: jax.Array
     b: jax.Array
+    e: jax.Array | None
     activation: str
     system: AbstractPoissonSystem = eqx.field(static=True)
     order: tuple[int, ...] = eqx.field(static=True)
     full_vectors: bool = eqx.field(static=True)
     symmetric: bool = eqx.field(static=True)
+    linear_term: bool = eqx.field(static=True)
     h: float | None
 
     def __init__(
@@ -92,6 +100,7 @@ class GLPNet(AbstractLearnedMap):
         activation: str = "sigmoid",
         h: float | None = None,
         symmetric: bool = False,
+        linear_term: bool = False,
     ):
         self.system = check_system(system)
         # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
@@ -102,6 +111,9 @@ class GLPNet(AbstractLearnedMap):
         if not isinstance(symmetric, (bool, np.bool_)):
             raise TypeError(f"symmetric must be True or False; got {symmetric!r}")
         self.symmetric = bool(symmetric)
+        if not isinstance(linear_term, (bool, np.bool_)):
+            raise TypeError(f"linear_term must be True or False; got {linear_term!r}")
+        self.linear_term = bool(linear_term)
         self.activation = check_activation(activation)
         self.h = None if h is None else positive_float(h, "h")
         ka, kc, kb = jax.random.split(as_key(key), 3)
@@ -109,6 +121,7 @@ class GLPNet(AbstractLearnedMap):
         self.a = jax.random.normal(ka, (n_modules,), jnp.float64)
         self.c = jax.random.normal(kc, shape, jnp.float64)
         self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64)
+        self.e = jnp.zeros(n_modules, jnp.float64) if self.linear_term else None
 
     @property
     def n_modules(self) -> int:
@@ -125,7 +138,10 @@ class GLPNet(AbstractLearnedMap):
         with the rate $q_s = a_s\sigma(\langle\alpha_s, y\rangle) + b_s$ frozen (it is
         conserved)."""
         alpha = self.module_vectors()[s]
-        q = self.a[s] * ACTIVATIONS[self.activation](jnp.dot(alpha, y)) + self.b[s]
+        x = jnp.dot(alpha, y)
+        q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
+        if self.linear_term:
+            q = q + self.e[s] * x
         return self.system.test_flow(q * alpha, t, y)
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -154,7 +170,8 @@ class GLPNet(AbstractLearnedMap):
         y = as_state(y, "y", self.system.dim)
         antiderivative = activation_antiderivative(self.activation)
         s = jnp.einsum("md,...d->...m", self.module_vectors(), y)
-        return self.hamiltonian_weight * jnp.sum(self.a * antiderivative(s, JAX) + self.b * s, axis=-1)
+        e = 0.0 if self.e is None else self.e
+        return self.hamiltonian_weight * jnp.sum(self.a * antiderivative(s, JAX) + 0.5 * e * s**2 + self.b * s, axis=-1)
 
     def learned_system(self):
         r"""The Poisson system $\dot y = \mathbb B(y)\nabla\widetilde H$ with this network's
@@ -165,6 +182,40 @@ class GLPNet(AbstractLearnedMap):
 
         return LearnedHamiltonian(self)
 
+    def composed(self, method: Any) -> GLPNet:
+        r"""The symmetric network whose step is the composition `method` of this network's
+        Strang step, $S_{\gamma_r h}\circ\cdots\circ S_{\gamma_1 h}$ with the palindromic
+        table $\gamma$ of an `integrators.splitting` composition (`TripleJump`, `Suzuki`,
+        `McLachlan4`, `Yoshida6`; class or instance): the same map, to round-off, as one
+        symmetric `GLPNet`. Adjacent flows of one module merge, and module $s$ run over
+        $\gamma h/2$ is module $s$ with $(a_s, b_s)$ scaled by $\gamma$, so $M$ modules become
+        $r(M-1)+1$ (`TripleJump`: $3M-2$).
+
+        The data-driven splitting of higher order: fit a symmetric network (a Strang step, order
+        2), compose it, and fit again from there (`learn.fit(..., optimiser=QuasiNewton(...,
+        warm_start=False))`); the refit moves the pieces from the modified Hamiltonian of the
+        Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
+        this lowers the loss by about 1000x, where a `TripleJump`-sized network trained from
+        the identity warm start stays near a Strang-like minimum."""
+        cls = method if isinstance(method, type) else type(method)
+        if not (isinstance(cls, type) and issubclass(cls, AbstractCompositionMethod)):
+            raise TypeError(
+                "method must be a composition of Strang steps from integrators.splitting (TripleJump, "
+                f"Suzuki, McLachlan4, Yoshida6), class or instance; got {method!r}"
+            )
+        if not self.symmetric:
+            raise ValueError(
+                "composed needs a symmetric G-LPNet (its step is a Strang step); got symmetric=False: "
+                "train GLPNet(system, symmetric=True) and compose that"
+            )
+        modules, weights = _composed_palindrome(self.n_modules, np.asarray(cls.coefficients, dtype=np.float64))
+        src = jnp.asarray(modules)
+        w = jnp.asarray(weights)
+        net = GLPNet(self.system, len(modules), [self.order[m] for m in modules], full_vectors=self.full_vectors,
+                     activation=self.activation, h=self.h, symmetric=True, linear_term=self.linear_term)
+        net = eqx.tree_at(lambda n: (n.a, n.c, n.b), net, (self.a[src] * w, self.c[src], self.b[src] * w))
+        return eqx.tree_at(lambda n: n.e, net, self.e[src] * w) if self.linear_term else net
+
     def hyperparameters(self) -> dict[str, Any]:
         return {
             "n_modules": self.n_modules,
@@ -172,7 +223,28 @@ class GLPNet(AbstractLearnedMap):
             "full_vectors": self.full_vectors,
             "activation": self.activation,
             "symmetric": self.symmetric,
+            "linear_term": self.linear_term,
         }
+
+
+def _composed_palindrome(n_modules: int, gammas: np.ndarray) -> tuple[list[int], list[float]]:
+    r"""Modules and weights of the symmetric network equal to $S_{\gamma_r h}\circ\cdots\circ
+    S_{\gamma_1 h}$ for a Strang step $S$ of `n_modules` modules: the flows $(s, \tau)$ (module,
+    time in units of $h$) of the composition, adjacent flows of one module merged, give a
+    palindrome whose first half (run over $h/2$: weight $2\tau$) and centre (run over $h$:
+    weight $\tau$) are the new modules."""
+    half = list(range(n_modules - 1))
+    flows: list[list] = []
+    for g in gammas:
+        for s, tau in [(s, 0.5 * g) for s in half] + [(n_modules - 1, g)] + [(s, 0.5 * g) for s in reversed(half)]:
+            if flows and flows[-1][0] == s:
+                flows[-1][1] += tau
+            else:
+                flows.append([s, tau])
+    centre = len(flows) // 2  # the merged list is an odd palindrome since gammas is
+    modules = [s for s, _ in flows[: centre + 1]]
+    weights = [2.0 * tau for _, tau in flows[:centre]] + [flows[centre][1]]
+    return modules, weights
 
 
 def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float = 0.05) -> GLPNet:
@@ -185,7 +257,13 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     $b'_s = b_s/\epsilon_s - \sigma_0 a'_s$. $\epsilon_s$ keeps
     $|\epsilon_s\langle\alpha_s, y\rangle| \le$ `width` on the data, where the neglected
     curvature is a relative $O(\text{width}^2)$.
+
+    With a linear term (`linear_term=True`) the map is exact: $e'_s = a_s + e_s$, $a'_s = 0$,
+    $b'_s = b_s$, $\alpha'_s = \alpha_s$, and the sigmoid starts from zero.
     """
+    if net.linear_term:
+        zero = jnp.zeros_like(linear.a)
+        return eqx.tree_at(lambda n: (n.a, n.c, n.b, n.e), net, (zero, linear.c, linear.b, linear.a + linear.e))
     act = ACTIVATIONS[net.activation]
     s0, s1 = float(act(0.0)), float(jax.grad(act)(0.0))
     if s1 == 0.0:

@@ -38,6 +38,7 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         self.weight = float(net.hamiltonian_weight)
         self.a = self.weight * np.asarray(net.a, dtype=np.float64)
         self.b = self.weight * np.asarray(net.b, dtype=np.float64)
+        self.e = self.weight * (np.zeros_like(self.a) if net.e is None else np.asarray(net.e, dtype=np.float64))
 
     @property
     def params(self):
@@ -47,6 +48,7 @@ class LearnedHamiltonian(AbstractPoissonSystem):
             "vectors": self.vectors.tolist(),
             "a": self.a.tolist(),
             "b": self.b.tolist(),
+            "e": self.e.tolist(),
         }
 
     @property
@@ -55,9 +57,11 @@ class LearnedHamiltonian(AbstractPoissonSystem):
 
     def hamiltonian_components(self, y, xp):
         total = 0.0
-        for alpha, a, b in zip(self.vectors, self.a, self.b):
+        for alpha, a, b, e in zip(self.vectors, self.a, self.b, self.e):
             s = sum(float(alpha[d]) * y[d] for d in range(self.dim) if alpha[d] != 0.0)
             total = total + float(a) * self._antiderivative(s, xp) + float(b) * s
+            if e != 0.0:
+                total = total + 0.5 * float(e) * s * s
         return total
 
     def poisson_tensor_components(self, y):
@@ -78,10 +82,12 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         return tuple(
             CollectiveTerm(
                 alpha,
-                lambda s, a=float(a), b=float(b): a * self._antiderivative(s[0], _JAX) + b * s[0],
+                lambda s, a=float(a), b=float(b), e=float(e): (
+                    a * self._antiderivative(s[0], _JAX) + b * s[0] + 0.5 * e * s[0] ** 2
+                ),
                 name=f"module{k + 1}",
             )
-            for k, (alpha, a, b) in enumerate(zip(self.vectors, self.a, self.b))
+            for k, (alpha, a, b, e) in enumerate(zip(self.vectors, self.a, self.b, self.e))
         )
 
 
