@@ -21,6 +21,7 @@ from ._fit import (
     state_mse as state_mse,
 )
 from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
+from ._fit_splitting import fit_splitting as fit_splitting
 from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
 from ._lpnet import LPNet as LPNet
 from ._parametrisation import (

@@ -197,18 +197,13 @@ class GLPNet(AbstractLearnedMap):
         Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
         this lowers the loss by about 1000x, where a `TripleJump`-sized network trained from
         the identity warm start stays near a Strang-like minimum."""
-        cls = method if isinstance(method, type) else type(method)
-        if not (isinstance(cls, type) and issubclass(cls, AbstractCompositionMethod)):
-            raise TypeError(
-                "method must be a composition of Strang steps from integrators.splitting (TripleJump, "
-                f"Suzuki, McLachlan4, Yoshida6), class or instance; got {method!r}"
-            )
+        gammas = composition_coefficients(method)
         if not self.symmetric:
             raise ValueError(
                 "composed needs a symmetric G-LPNet (its step is a Strang step); got symmetric=False: "
                 "train GLPNet(system, symmetric=True) and compose that"
             )
-        modules, weights = _composed_palindrome(self.n_modules, np.asarray(cls.coefficients, dtype=np.float64))
+        modules, weights = _composed_palindrome(self.n_modules, gammas)
         src = jnp.asarray(modules)
         w = jnp.asarray(weights)
         net = GLPNet(self.system, len(modules), [self.order[m] for m in modules], full_vectors=self.full_vectors,
@@ -225,6 +220,18 @@ class GLPNet(AbstractLearnedMap):
             "symmetric": self.symmetric,
             "linear_term": self.linear_term,
         }
+
+
+def composition_coefficients(method: Any) -> np.ndarray:
+    r"""The table $\gamma$ of a composition of Strang steps (`integrators.splitting`
+    `TripleJump`, `Suzuki`, `McLachlan4`, `Yoshida6`; class or instance)."""
+    cls = method if isinstance(method, type) else type(method)
+    if not issubclass(cls, AbstractCompositionMethod):
+        raise TypeError(
+            "method must be a composition of Strang steps from integrators.splitting (TripleJump, "
+            f"Suzuki, McLachlan4, Yoshida6), class or instance; got {method!r}"
+        )
+    return np.asarray(cls.coefficients, dtype=np.float64)
 
 
 def _composed_palindrome(n_modules: int, gammas: np.ndarray) -> tuple[list[int], list[float]]:

@@ -229,3 +229,21 @@ def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
     for name in ("a", "b", "c"):
         np.testing.assert_array_equal(np.asarray(getattr(warm, name)), np.asarray(getattr(cold, name)))
     assert warm.h == cold.h == 0.2
+
+
+@pytest.mark.slow  # 50 s: three BFGS fits (compilation)
+def test_fit_splitting_recipe():
+    system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+    y0 = np.random.default_rng(3).uniform(-1.0, 1.0, size=(6, 3))
+    data = it.ground_truth(system, y0, h=0.2, n_steps=10, progress=False)
+    strang, (r1,) = learn.fit_splitting(system, data, None, iterations=60, progress=False)
+    assert strang.symmetric and strang.linear_term and strang.n_modules == 3 and strang.h == 0.2
+    tj, (r1b, r2) = learn.fit_splitting(system, data, iterations=60, progress=False)
+    assert tj.n_modules == 7 and r1b.train_loss == r1.train_loss  # same seed, same first stage
+    # The refit starts at TripleJump of the Strang fit and keeps only an improvement.
+    (X, T), _ = data.split(0.2, 0)  # fit's training pairs
+    start = float(learn.state_mse(strang.composed(it.splitting.TripleJump), X, T))
+    assert r2.train_loss <= start
+    assert float(np.max(np.asarray(tj.poisson_defect(Y)))) < 1e-13
+    with pytest.raises(TypeError, match="composition"):
+        learn.fit_splitting(system, data, it.splitting.Strang)
