@@ -84,7 +84,7 @@ _SLOW = pytest.mark.slow  # ~10 s each (heyoka + two compiled rollouts); one of 
 @pytest.mark.parametrize(
     "make, method, order",
     [
-        (generic_so4, it.splitting.Strang, 2),
+        pytest.param(generic_so4, it.splitting.Strang, 2, marks=_SLOW),  # so(4) Strang also in test_any_algebra.py
         (diamond_with_ridges, it.splitting.Strang, 2),
         (diamond_with_ridges, it.splitting.TripleJump, 4),
         pytest.param(generic_so4, it.splitting.TripleJump, 4, marks=_SLOW),

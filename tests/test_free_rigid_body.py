@@ -169,7 +169,7 @@ def perturbed_body():
     return lp.systems.LiePoissonSystem(lp.so3(), hamiltonian, name="perturbed_body"), pieces
 
 
-@pytest.mark.parametrize("method", [it.splitting.Strang, it.splitting.TripleJump])
+@pytest.mark.parametrize("method", [it.splitting.Strang, pytest.param(it.splitting.TripleJump, marks=pytest.mark.slow)])
 def test_elliptic_flow_as_a_splitting_sub_step_has_the_method_order(method):
     system, pieces = perturbed_body()
     y0 = np.array([0.8, -0.5, 1.1])

@@ -214,7 +214,9 @@ def test_fit_bad_inputs_name_the_argument(rb, pairs):
         learn.fit(learn.LPNet(rb, hidden=(4,), h=0.2), pairs, h=H, optimiser=adam)
 
 
-@pytest.mark.parametrize("method", ["bfgs", pytest.param("lbfgs", marks=pytest.mark.slow)])
+# 12 s each; BFGS G-LPNet fits run by default in tests/test_any_algebra.py and test_learn_warm_start.py.
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["bfgs", "lbfgs"])
 def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, method):
     g = learn.GLPNet(rb, n_modules=6, key=0)
     # the paper's G-LPNet training: quasi-Newton with the identity warm start on all pairs
