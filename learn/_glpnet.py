@@ -188,12 +188,12 @@ class GLPNet(AbstractLearnedMap):
         table $\gamma$ of an `integrators.splitting` composition (`TripleJump`, `Suzuki`,
         `McLachlan4`, `Yoshida6`; class or instance): the same map, to round-off, as one
         symmetric `GLPNet`. Adjacent flows of one module merge, and module $s$ run over
-        $\gamma h/2$ is module $s$ with $(a_s, b_s)$ scaled by $\gamma$, so $M$ modules become
+        $\gamma h/2$ is module $s$ with $(a_s, b_s, e_s)$ scaled by $\gamma$, so $M$ modules become
         $r(M-1)+1$ (`TripleJump`: $3M-2$).
 
         The data-driven splitting of higher order: fit a symmetric network (a Strang step, order
         2), compose it, and fit again from there (`learn.fit(..., optimiser=QuasiNewton(...,
-        warm_start=False))`); the refit moves the pieces from the modified Hamiltonian of the
+        warm_start=False))`), or both in one call with `learn.fit_splitting`; the refit moves the pieces from the modified Hamiltonian of the
         Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
         this lowers the loss 13x (so(4)) to 4000x (diamond) below the Strang fit's, where a
         `TripleJump`-shaped network trained from the identity warm start stays near a
