@@ -96,7 +96,8 @@ def test_compositions_of_the_learned_splitting_raise_the_order():
 
 @pytest.mark.parametrize(
     "method, n_modules",
-    [(it.splitting.TripleJump, 1), (it.splitting.TripleJump, 3), (it.splitting.Suzuki, 2), (it.splitting.Yoshida6, 2)],
+    [(it.splitting.TripleJump, 1), (it.splitting.TripleJump, 3), (it.splitting.Suzuki, 2),
+     pytest.param(it.splitting.Yoshida6, 2, marks=pytest.mark.slow)],
 )
 def test_composed_network_is_the_composition_of_its_strang_steps(method, n_modules):
     g = learn.GLPNet(lp.systems.RigidBody(), n_modules, key=3, h=0.1, symmetric=True, full_vectors=True)

@@ -28,6 +28,7 @@ def test_linear_to_activation_reproduces_linear_net(activation, full_vectors):
     assert errors[0] / errors[1] > 3.0 and errors[1] / errors[2] > 3.0
 
 
+@pytest.mark.slow  # 10 s; every default G-LPNet fit in the suite runs the warm start
 def test_warm_start_beats_cold_start_on_rigid_body():
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     rng = np.random.default_rng(6)

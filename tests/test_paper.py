@@ -14,11 +14,10 @@ from paper._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 EPS = np.finfo(np.float64).eps
 
 
-# The smoke runs of E1, E2, E4, E5 and E6 (10-25 s each) run under -m slow; E3 by default
-# (the CLI test runs E4 too).
-@pytest.mark.parametrize(
-    "exp_id", [e if e == "E3" else pytest.param(e, marks=pytest.mark.slow) for e in PAPER_EXPERIMENTS]
-)
+# The smoke runs of every experiment (10-25 s each) run under -m slow; by default the CLI test
+# runs E4's smoke profile end to end.
+@pytest.mark.slow
+@pytest.mark.parametrize("exp_id", PAPER_EXPERIMENTS)
 def test_experiment_smoke(exp_id, tmp_path):
     exp = EXPERIMENTS[exp_id]
     metrics = exp.execute(profile="smoke", progress=False, out_dir=tmp_path)
