@@ -43,10 +43,10 @@ def fit_splitting(
        `method` of its Strang steps ($3n-2$ modules for `TripleJump`), fitted again by BFGS
        from there. Both stages are exact Poisson maps for any weights.
 
-    Measured (`benchmarks/any_algebra.py`, h = 0.1, 2000 pairs): on so(4) the Strang stage
-    reaches loss 3.0e-12 (the paper's 2n one-sigmoid modules: 1.9e-8) and the TripleJump stage
-    2.4e-13, max energy error 9.9e-6 over 2000 steps (the classical Strang splitting of the exact
-    H: 2.4e-4). The other arguments are `learn.fit`'s.
+    Measured on so(4), h = 0.1, 2000 pairs (BENCHMARKS.md): the Strang stage reaches loss 3.0e-12
+    (`benchmarks/glpnet_ablation/`; the paper's 2n one-sigmoid modules: 1.9e-8) and the
+    TripleJump stage 2.4e-13, max energy error 9.9e-6 over 2000 steps (`benchmarks/any_algebra.py`;
+    the classical Strang splitting of the exact H: 2.4e-4). The other arguments are `learn.fit`'s.
     """
     if method is not None:
         composition_coefficients(method)  # a wrong method fails before the first fit

@@ -135,8 +135,8 @@ class GLPNet(AbstractLearnedMap):
 
     def module_flow(self, s: int, t: float, y: jax.Array) -> jax.Array:
         r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
-        with the rate $q_s = a_s\sigma(\langle\alpha_s, y\rangle) + b_s$ frozen (it is
-        conserved)."""
+        with the rate $q_s = a_s\sigma(\langle\alpha_s, y\rangle) + b_s$ (+ $e_s\langle\alpha_s,
+        y\rangle$ with `linear_term`) frozen (it is conserved)."""
         alpha = self.module_vectors()[s]
         x = jnp.dot(alpha, y)
         q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
@@ -193,8 +193,8 @@ class GLPNet(AbstractLearnedMap):
 
         The data-driven splitting of higher order: fit a symmetric network (a Strang step, order
         2), compose it, and fit again from there (`learn.fit(..., optimiser=QuasiNewton(...,
-        warm_start=False))`), or both in one call with `learn.fit_splitting`; the refit moves the pieces from the modified Hamiltonian of the
-        Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
+        warm_start=False))`), or both in one call with `learn.fit_splitting`; the refit moves
+        the pieces from the modified Hamiltonian of the Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
         this lowers the loss 13x (so(4)) to 4000x (diamond) below the Strang fit's, where a
         `TripleJump`-shaped network trained from the identity warm start stays near a
         Strang-like minimum."""
