@@ -1,9 +1,12 @@
 """The state loss of classical splittings of the exact H on the benchmark's training pairs: python benchmarks/glpnet_ablation/classical_loss.py SYSTEM."""
 import sys
+
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-import numpy as np
 import any_algebra as aa
+import numpy as np
+
 import integrators as it
+
 name = sys.argv[1]
 system = {"rigid_body": aa.rigid_body, **aa.SYSTEMS}[name]()
 n = system.dim

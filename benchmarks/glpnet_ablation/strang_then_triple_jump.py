@@ -1,10 +1,14 @@
 """Strang-stage fit, composed by TripleJump, refit: python benchmarks/glpnet_ablation/strang_then_triple_jump.py SYSTEM sigmoid ITERATIONS [lt]
 (lt: linear_term=True)."""
-import sys, time
+import sys
+import time
+
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-import numpy as np, jax, jax.numpy as jnp, equinox as eqx
 import any_algebra as aa
-import integrators as it, learn
+import numpy as np
+
+import integrators as it
+import learn
 
 name = sys.argv[1]; act = sys.argv[2]; LT = len(sys.argv) > 4; iters = int(sys.argv[3])
 system = {"rigid_body": aa.rigid_body, **aa.SYSTEMS}[name]()

@@ -1,9 +1,13 @@
 """One G-LPNet variant trained like benchmarks/any_algebra.py: python benchmarks/glpnet_ablation/variants.py SYSTEM VARIANT [ITERATIONS]."""
-import sys, time
+import sys
+import time
+
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-import numpy as np, jax
 import any_algebra as aa
-import integrators as it, learn
+import numpy as np
+
+import integrators as it
+import learn
 
 name = sys.argv[1]; variant = sys.argv[2]; iters = int(sys.argv[3]) if len(sys.argv) > 3 else 1000
 system = {"rigid_body": aa.rigid_body, **aa.SYSTEMS}[name]()
@@ -13,25 +17,25 @@ y_train = rng.uniform(-1, 1, size=(40, n)); y_test = rng.uniform(-1, 1, size=(10
 data = it.ground_truth(system, y_train, h=0.1, n_steps=50, seed=0, progress=False)
 kw = {}
 if variant == "default": pass
-elif variant == "sym": kw = dict(symmetric=True)
+elif variant == "sym": kw = {"symmetric": True}
 elif variant == "tj":  # palindrome representing a triple jump of Strang
     order = list(range(n)) + list(range(n - 2, -1, -1)) + list(range(1, n))
-    kw = dict(symmetric=True, n_modules=len(order), order=order)
+    kw = {"symmetric": True, "n_modules": len(order), "order": order}
 elif variant == "tj_full":
     order = list(range(n)) + list(range(n - 2, -1, -1)) + list(range(1, n))
-    kw = dict(symmetric=True, n_modules=len(order), order=order, full_vectors=True)
+    kw = {"symmetric": True, "n_modules": len(order), "order": order, "full_vectors": True}
 elif variant == "sym3":  # 3 sweeps
     order = list(range(n)) * 3
-    kw = dict(symmetric=True, n_modules=len(order), order=order)
+    kw = {"symmetric": True, "n_modules": len(order), "order": order}
 elif variant == "id":
-    kw = dict(activation="identity")
+    kw = {"activation": "identity"}
 elif variant == "idsym":
-    kw = dict(activation="identity", symmetric=True)
+    kw = {"activation": "identity", "symmetric": True}
 elif variant == "idtj":
     order = list(range(n)) + list(range(n - 2, -1, -1)) + list(range(1, n))
-    kw = dict(symmetric=True, n_modules=len(order), order=order, activation="identity")
+    kw = {"symmetric": True, "n_modules": len(order), "order": order, "activation": "identity"}
 elif variant == "def3":
-    kw = dict(n_modules=3 * n)
+    kw = {"n_modules": 3 * n}
 net = learn.GLPNet(system, key=0, **kw)
 t0 = time.perf_counter()
 fitted, rec = learn.fit(net, data, seed=0, progress=False, optimiser=learn.QuasiNewton(iters, "bfgs", warm_start=True))
