@@ -28,6 +28,8 @@ import optax
 import scipy.optimize
 from tqdm.auto import tqdm
 
+from liepoisson import common_path_first
+
 METHODS = ("bfgs", "lbfgsb", "lbfgs")
 
 _SCIPY = {"bfgs": "BFGS", "lbfgsb": "L-BFGS-B"}
@@ -44,16 +46,21 @@ _VALUE_AND_GRAD: dict[Any, Any] = {}
 
 
 def _value_and_grad(loss):
-    """`jax.jit(jax.value_and_grad(loss))`, one per `loss` (by equality: a loss object equal to
-    an earlier one reuses its compiled code)."""
+    """`jax.jit(jax.value_and_grad(loss))` (by `liepoisson.common_path_first`: a non-finite
+    value is computed again with every path of `expm_action`), one per `loss` (by equality: a
+    loss object equal to an earlier one reuses its compiled code)."""
+
+    def build():
+        return common_path_first(jax.value_and_grad(loss), lambda out: bool(np.isfinite(out[0])))
+
     try:
         if loss not in _VALUE_AND_GRAD:
             if len(_VALUE_AND_GRAD) >= 64:
                 _VALUE_AND_GRAD.clear()
-            _VALUE_AND_GRAD[loss] = jax.jit(jax.value_and_grad(loss))
+            _VALUE_AND_GRAD[loss] = build()
         return _VALUE_AND_GRAD[loss]
     except TypeError:  # unhashable
-        return jax.jit(jax.value_and_grad(loss))
+        return build()
 
 
 def minimiser(method: str, loss: Callable[[jax.Array, Any, Any], jax.Array], X: Any, Y: Any):

@@ -18,6 +18,7 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
+from liepoisson import common_path_first
 from liepoisson.systems import check_system_matches
 
 from . import _checkpoint
@@ -112,7 +113,6 @@ def train_adam(
     base_key = jax.random.PRNGKey(seed)
     chunk = min(CHUNK, epochs)
 
-    @jax.jit
     def run(carry, epoch_ids, X, T, Xv, Tv):
         def body(carry, epoch):
             p, s, bp, bl, be = carry
@@ -144,6 +144,12 @@ def train_adam(
             return (p, s, bp, bl, be), (lt, lv)
 
         return jax.lax.scan(body, carry, epoch_ids)
+
+    # A chunk whose losses are not all finite is run again from the same state with every path
+    # of `expm_action` (exact either way); if it is still not finite, the check below stops.
+    run = common_path_first(
+        run, lambda out: bool(np.all(np.isfinite(out[1][0])) and (not has_val or np.all(np.isfinite(out[1][1]))))
+    )
 
     @jax.jit
     def evaluate(p, X, T):

@@ -20,6 +20,7 @@ from ._coadjoint import (
     MatrixExponentialFlow as MatrixExponentialFlow,
     RodriguesFlow as RodriguesFlow,
     SE3Flow as SE3Flow,
+    common_path_first as common_path_first,
     expm_action as expm_action,
     rotate as rotate,
     rotation_coefficients as rotation_coefficients,

@@ -332,6 +332,31 @@ def test_expm_action_gradients_agree_across_paths():
     np.testing.assert_allclose(float(g_small[0][1, 2]), fd, rtol=1e-8)
 
 
+@pytest.mark.parametrize("scale", (1.0, 300.0))  # common path; beyond it (matrix path)
+def test_common_path_first_equals_value_and_grad_of_every_path(scale):
+    # The fast attempt must either be exact or be rejected (NaN) and repeated: the result is
+    # that of jax.value_and_grad through the full expm_action, on either side of the bound.
+    rng = np.random.default_rng(5)
+    A = jnp.asarray(rng.normal(size=(3, 4, 4)) * 0.02 * scale)
+    v = jnp.asarray(rng.normal(size=(3, 4)))
+
+    def loss(A):
+        return jnp.sum(jnp.sin(lp.vmap_samples(lp.expm_action)(A, v)))
+
+    calls = []
+
+    def ok(out):
+        calls.append(bool(np.isfinite(out[0])))
+        return calls[-1]
+
+    value, grad = lp.common_path_first(jax.value_and_grad(loss), ok)(A)
+    ref_value, ref_grad = jax.jit(jax.value_and_grad(loss))(A)
+    assert calls == [scale == 1.0]  # the first attempt was rejected exactly when beyond the bound
+    # the same arithmetic on the common path; beyond it, the same path as the reference
+    np.testing.assert_allclose(float(value), float(ref_value), rtol=0, atol=16 * EPS)
+    np.testing.assert_allclose(np.asarray(grad), np.asarray(ref_grad), rtol=0, atol=16 * EPS * scale)
+
+
 def test_casimir_drift_of_generic_flows_is_round_off_times_the_generator():
     """Issue 11's bound for large |alpha| on the generic path (compact algebra): the drift of a
     quadratic Casimir is at most 64 eps |t alpha| |mu|^2, on every path of `expm_action`
