@@ -262,20 +262,30 @@ def common_path_first(fun: Callable, ok: Callable[[Any], bool]) -> Callable:
     the straight-line common path, in the same compiled program). The first attempt is
     compiled with the common path alone, as straight-line code, and gives NaN wherever a
     batch is beyond its bound; when `ok(outputs)` (host values) is false, the call is
-    repeated with the full `expm_action` (compiled on first need). Either way the result is
+    repeated with the full `expm_action` (compiled on first need), and so are all later calls
+    (norms beyond the bound tend to stay: without this, a G-LPNet on sl(3) would compute every
+    gradient twice). Either way the result is
     that of `jax.jit(fun)`, so `fun` must be a pure function of its arguments, and `ok` must
     reject every output that went through a NaN (e.g. require a finite loss).
     """
     first = jax.jit(lambda *args: fun(*args))  # two function objects: two caches of traces
     every = jax.jit(lambda *args: fun(*args))
 
+    rejected = False
+
     def call(*args):
+        nonlocal rejected
+        if rejected:
+            return every(*args)
         token = _COMMON_PATH_ONLY.set(True)
         try:
             out = first(*args)
         finally:
             _COMMON_PATH_ONLY.reset(token)
-        return out if ok(out) else every(*args)
+        if ok(out):
+            return out
+        rejected = True
+        return every(*args)
 
     return call
 

@@ -349,9 +349,13 @@ def test_common_path_first_equals_value_and_grad_of_every_path(scale):
         calls.append(bool(np.isfinite(out[0])))
         return calls[-1]
 
-    value, grad = lp.common_path_first(jax.value_and_grad(loss), ok)(A)
+    fun = lp.common_path_first(jax.value_and_grad(loss), ok)
+    value, grad = fun(A)
     ref_value, ref_grad = jax.jit(jax.value_and_grad(loss))(A)
     assert calls == [scale == 1.0]  # the first attempt was rejected exactly when beyond the bound
+    again = fun(A)  # after a rejection the fast attempt is not tried again
+    assert calls == [scale == 1.0] * (1 if scale != 1.0 else 2)
+    np.testing.assert_array_equal(np.asarray(again[1]), np.asarray(grad))
     # the same arithmetic on the common path; beyond it, the same path as the reference
     np.testing.assert_allclose(float(value), float(ref_value), rtol=0, atol=16 * EPS)
     np.testing.assert_allclose(np.asarray(grad), np.asarray(ref_grad), rtol=0, atol=16 * EPS * scale)
