@@ -37,6 +37,12 @@ class AbstractLearnedMap(AbstractStepMap):
     def hyperparameters(self) -> dict[str, Any]:
         """The constructor's keyword arguments besides `system`, `key` and `h` (JSON values)."""
 
+    def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
+        """What the state loss compares with $y_1$ for the pair $(y_0, y_1)$ (one sample each):
+        `step(y0)`; a map with an implicit step returns an explicit residual form instead that
+        equals $y_1$ exactly when the step carries $y_0$ to $y_1$ (a reversible `LPNet`)."""
+        return self.step(y0)
+
     @property
     def n_parameters(self) -> int:
         """Number of trainable parameters (the floating-point array leaves)."""

@@ -140,8 +140,9 @@ def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
 
 def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Array:
     """Mean squared error of one learned step over pairs `(N, dim)`: the state loss of every
-    learned map (paper eqs. Loss_function, Loss_function_G_LPNets)."""
-    return jnp.mean((vmap_samples(model.step)(y0) - y1) ** 2)
+    learned map (paper eqs. Loss_function, Loss_function_G_LPNets), through
+    `training_prediction` (the explicit residual form of an implicit step)."""
+    return jnp.mean((vmap_samples(model.training_prediction)(y0, y1) - y1) ** 2)
 
 
 def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:
@@ -179,8 +180,9 @@ def fit(
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
       mini-batches and restarts).
     - `loss`: `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
-      LPNet through the exact flow) or, LPNet only, `"alpha"` (MSE between $\alpha(y_0)$ and
-      the pairs' parameters `parametrisation.params_from_pair(y0, y1, h)`).
+      LPNet through the exact flow, for a reversible LPNet through its explicit residual form
+      `training_prediction`) or, LPNet only, `"alpha"` (MSE between $\alpha(y_0)$ and the pairs'
+      parameters `parametrisation.params_from_pair(y0, y1, h)`; not for a reversible LPNet).
     - `normalise` (MLP-based maps): set the fixed input/output scalings from the training data
       first (inputs: mean/std of $y_0$; outputs: of the pairs' parameters for an LPNet, of
       $y_1 - y_0$ for the baseline). Default `False`: a plain MLP as in the paper. On E1
@@ -206,6 +208,11 @@ def fit(
         raise ValueError(f"loss must be one of {list(LOSSES)}; got {loss!r}")
     if loss == "alpha" and not isinstance(model, LPNet):
         raise ValueError(f"loss='alpha' trains an LPNet's parameters alpha; {type(model).__name__} has none")
+    if loss == "alpha" and model.reversing is not None:
+        raise ValueError(
+            "loss='alpha' fits alpha to the parameters of one test flow per pair; a reversible LPNet "
+            "(reversing=...) makes two per step, whose parameters no pair determines: use loss='state'"
+        )
     if normalise and isinstance(model, GLPNet):
         raise ValueError("normalise=True sets the scalings of an MLP; a GLPNet has none")
     if callback is not None and not callable(callback):
@@ -272,7 +279,7 @@ def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise:
         return model, (pairs.y0, targets), (pairs.y0_val, targets_val), alpha_mse
     if normalise:
         if isinstance(model, LPNet):
-            outputs = model.parametrisation.params_estimate(pairs.y0, pairs.y1, pairs.h)
+            outputs = model.alpha_estimate(pairs.y0, pairs.y1, pairs.h)
         elif isinstance(model, MLPBaseline):
             outputs = pairs.y1 - pairs.y0
         model = eqx.tree_at(lambda m: m.network, model, model.network.rescaled(pairs.y0, outputs))

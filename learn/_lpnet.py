@@ -9,15 +9,19 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+import numpy as np
+from numpy.typing import ArrayLike
 
-from integrators._step_map import check_state
-from liepoisson._validation import check_system, positive_float
-from liepoisson.systems import AbstractPoissonSystem
+from integrators._step_map import check_state, traced_h, xla_flops
+from liepoisson._validation import check_system, positive_float, positive_int
+from liepoisson.systems import AbstractPoissonSystem, check_reversing_symmetry, reversing_symmetry
 
 from ._base import AbstractLearnedMap
 from ._mlp import AffineMLP, Scaling, as_key, check_activation, check_hidden
 from ._parametrisation import (
     AbstractStepParametrisation,
+    TestFlowParametrisation,
     default_parametrisation,
     parametrisation_from_name,
 )
@@ -45,13 +49,36 @@ class LPNet(AbstractLearnedMap):
     the rigid body); `activation` (paper: sigmoid); `key` (int seed or PRNG key);
     `parametrisation` (an `AbstractStepParametrisation` or its class name; default
     `default_parametrisation(system)`); `h`, the time step (`None`: set by `learn.fit` from the
-    data); `input_scaling`, `output_scaling`: `(shift, scale)` pairs (default identity).
+    data); `input_scaling`, `output_scaling`: `(shift, scale)` pairs (default identity);
+    `reversing` (default `None`, the paper's LPNet): `"auto"` or a sign vector $r$ for the
+    reversible LPNet below; `fixed_point_iterations` (default 16) of its implicit half.
+
+    **Reversible LPNet** (`reversing`, not in the paper). Where the system has a reversing
+    symmetry $R = \mathrm{diag}(r)$ (`liepoisson.systems.reversing_symmetries`: anti-Poisson,
+    $H\circ R = H$, Casimirs kept; `"auto"` takes the first), the step is
+    $\Phi = R\,\mathbb B^{-1}R\circ\mathbb B$ with $\mathbb B(y) = \mathbb T(\alpha(y))\,y$:
+    $m = \mathbb T(\alpha(y))\,y$, then $y_{n+1} = w$ solving
+    $w = R\,\mathbb T(-\alpha(Rw))\,R\,m$ by fixed-point iteration from $2m - y$ ($m$ is
+    near the midpoint; on the so(3) rigid body at $h = 0.1$ each iteration gains a factor
+    20-50, and 10 reach round-off). Both halves are
+    test flows (the second conjugated by $R$, which maps each leaf to itself), so the Casimirs
+    are conserved exactly as before, and $R\Phi R = \Phi^{-1}$: the map is $R$-reversible like
+    the flow (to round-off, once the iteration has converged). It is still not a Poisson map,
+    but a reversible map has no secular energy drift near invariant tori (Hairer, Lubich,
+    Wanner, *Geometric Numerical Integration*, ch. XI). `learn.fit` trains it on the explicit
+    residual $R\,\mathbb T(-\alpha(Ry_1))\,R\,\mathbb T(\alpha(y_0))\,y_0 - y_1$, zero exactly
+    when the step carries $y_0$ to $y_1$ (`training_prediction`), so training costs two test
+    flows per pair, not an iteration. A step whose last iteration still moves the state by more
+    than $2^{10}\varepsilon$ (relative) returns NaN, which a rollout reports as divergence.
+    Measured (`benchmarks/lpnet_accuracy/`): BENCHMARKS.md, "LPNet accuracy".
     """
 
     network: AffineMLP
     parametrisation: AbstractStepParametrisation = eqx.field(static=True)
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float | None
+    reversing: tuple[float, ...] | None = eqx.field(static=True)
+    fixed_point_iterations: int = eqx.field(static=True)
 
     def __init__(
         self,
@@ -63,6 +90,8 @@ class LPNet(AbstractLearnedMap):
         h: float | None = None,
         input_scaling: Scaling | None = None,
         output_scaling: Scaling | None = None,
+        reversing: ArrayLike | str | None = None,
+        fixed_point_iterations: int = 16,
     ):
         self.system = check_system(system)
         if parametrisation is None:
@@ -82,21 +111,88 @@ class LPNet(AbstractLearnedMap):
             as_key(key), input_scaling, output_scaling,
         )
         self.h = None if h is None else positive_float(h, "h")
+        self.reversing = _reversing(system, parametrisation, reversing)
+        self.fixed_point_iterations = positive_int(fixed_point_iterations, "fixed_point_iterations")
 
     def alpha(self, y: jax.Array) -> jax.Array:
         """The step parameters $\\alpha(y)$ for one state `(dim,)`."""
         return self.network(y)
 
+    def _first_half(self, y: jax.Array) -> jax.Array:
+        """$\\mathbb T(\\alpha(y))\\,y$: the whole step of the paper's LPNet."""
+        return self.parametrisation.step(self.alpha(y), y, self.h)
+
+    def _second_half(self, w: jax.Array, m: jax.Array) -> jax.Array:
+        """$R\\,\\mathbb T(-\\alpha(Rw))\\,R\\,m$, whose fixed point $w$ ends a reversible step."""
+        r = jnp.asarray(self.reversing)
+        return r * self.parametrisation.step(-self.alpha(r * w), r * m, self.h)
+
     def step(self, y: jax.Array) -> jax.Array:
         y = check_state(y, self.system.dim)
-        return self.parametrisation.step(self.alpha(y), y, self.h)
+        m = self._first_half(y)
+        if self.reversing is None:
+            return m
+        w = jax.lax.fori_loop(0, self.fixed_point_iterations - 1, lambda _, w: self._second_half(w, m), 2.0 * m - y)
+        w_next = self._second_half(w, m)
+        moved = jnp.max(jnp.abs(w_next - w))
+        return jnp.where(moved <= _FIXED_POINT_RTOL * jnp.maximum(1.0, jnp.max(jnp.abs(w_next))), w_next, jnp.nan)
+
+    def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
+        """The step of $y_0$, or for a reversible LPNet the explicit residual form
+        $R\\,\\mathbb T(-\\alpha(Ry_1))\\,R\\,\\mathbb T(\\alpha(y_0))\\,y_0$ (equal to $y_1$
+        exactly when the step carries $y_0$ to $y_1$)."""
+        if self.reversing is None:
+            return self.step(y0)
+        return self._second_half(check_state(y1, self.system.dim), self._first_half(check_state(y0, self.system.dim)))
+
+    def alpha_estimate(self, y0: ArrayLike, y1: ArrayLike, h: float) -> np.ndarray:
+        """First-order estimate of $\\alpha$ from pairs (`params_estimate`; half of it for a
+        reversible LPNet, whose step is two test flows), used to normalise the outputs."""
+        estimate = self.parametrisation.params_estimate(y0, y1, h)
+        return estimate if self.reversing is None else 0.5 * estimate
 
     @property
     def exact_flows_per_step(self) -> int:
-        return self.parametrisation.exact_flows
+        per_flow = self.parametrisation.exact_flows
+        return per_flow if self.reversing is None else per_flow * (1 + self.fixed_point_iterations)
+
+    def step_flops(self) -> float:
+        """XLA's count, with the fixed-point iteration of a reversible LPNet counted
+        `fixed_point_iterations` times (XLA counts a loop body once)."""
+        if self.reversing is None:
+            return super().step_flops()
+        y = jnp.zeros(self.system.dim)
+        first = xla_flops(lambda m, y: m._first_half(y), traced_h(self), y)
+        return first + self.fixed_point_iterations * xla_flops(lambda m, y: m._second_half(y, y), traced_h(self), y)
 
     def hyperparameters(self) -> dict[str, Any]:
+        reversible = {} if self.reversing is None else {
+            "reversing": [int(r) for r in self.reversing], "fixed_point_iterations": self.fixed_point_iterations}
         return {
             **self.network.hyperparameters(),
             "parametrisation": type(self.parametrisation).__name__,
+            **reversible,
         }
+
+
+#: A reversible step whose last fixed-point iteration moved the state by more than this (relative
+#: to max(1, |y|_inf)) has not converged: 2^10 eps, a few hundred roundings of the test flow.
+_FIXED_POINT_RTOL = 2.0**10 * float(np.finfo(np.float64).eps)
+
+
+def _reversing(system, parametrisation, reversing) -> tuple[float, ...] | None:
+    """The sign vector of a reversible LPNet's symmetry, checked; None for the paper's LPNet."""
+    if reversing is None:
+        return None
+    if not isinstance(parametrisation, TestFlowParametrisation):
+        raise ValueError(  # noqa: TRY004 (a valid parametrisation that cannot be reversed)
+            "reversing needs the TestFlowParametrisation (one test flow per step, whose inverse is "
+            f"the flow of -alpha); got {type(parametrisation).__name__}"
+        )
+    if isinstance(reversing, str):
+        if reversing != "auto":
+            raise ValueError(f"reversing must be None, 'auto' or a vector of +1/-1 signs; got {reversing!r}")
+        signs = reversing_symmetry(system)
+    else:
+        signs = check_reversing_symmetry(system, reversing, "reversing")
+    return tuple(float(r) for r in signs)

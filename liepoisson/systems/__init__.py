@@ -25,4 +25,9 @@ from ._registry import (
     system_for_file as system_for_file,
 )
 from ._rigid_body import RigidBody as RigidBody
+from ._reversing import (
+    check_reversing_symmetry as check_reversing_symmetry,
+    reversing_symmetries as reversing_symmetries,
+    reversing_symmetry as reversing_symmetry,
+)
 from ._splitting_check import check_splitting as check_splitting

@@ -1,0 +1,120 @@
+r"""Reversing symmetries: sign flips $R = \mathrm{diag}(r)$, $r\in\{\pm1\}^n$, with
+
+- $\mathbb B(Ry) = -R\,\mathbb B(y)\,R$ (an anti-Poisson map),
+- $H(Ry) = H(y)$ and $C(Ry) = C(y)$ for every Casimir $C$ (it maps each symplectic leaf to
+  itself),
+
+so that the flow is $R$-reversible, $R\circ\varphi_t\circ R = \varphi_{-t}$. The free rigid
+body has three (flip one component of $\Pi$); $R = -\mathrm{id}$ is anti-Poisson for every
+Lie-Poisson bracket but maps a leaf of so(3)* to itself with no fixed point, which gives a
+reversible map no hold on its dynamics, so it is not one of them: the fixed set of $R$ must meet
+a generic leaf in half its dimension, i.e. $R$ flips exactly half the rank of $\mathbb B$.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import numpy as np
+
+from ._base import AbstractPoissonSystem
+
+_EPS = np.finfo(np.float64).eps
+_MAX_CANDIDATES = 20_000
+
+
+def _probes(system: AbstractPoissonSystem, n: int = 8) -> np.ndarray:
+    """`n` seeded random regular states of `system` (standard normal components)."""
+    y = np.random.default_rng(0).normal(size=(4 * n, system.dim))
+    bad = system.singular(y)
+    if bad is not None:
+        y = y[~np.asarray(bad)]
+    return y[:n]
+
+
+def _rank(system: AbstractPoissonSystem, y: np.ndarray) -> int:
+    """The generic rank of $\\mathbb B$: its largest numerical rank at the probe points."""
+    return int(max(np.linalg.matrix_rank(np.asarray(system.poisson_tensor(p))) for p in y))
+
+
+def _violations(system: AbstractPoissonSystem, signs: np.ndarray, y: np.ndarray) -> list[str]:
+    """What keeps each sign vector of `signs` `(k, dim)` from being a reversing symmetry at the
+    probe points `y`: one message per candidate, empty where it is one. Tolerances are
+    $10^3\\varepsilon$ relative to the sizes of the values: a sign flip changes only the order
+    of a few dozen roundings."""
+    n = len(signs)
+    Ry = signs[:, None, :] * y[None]  # (k, p, dim)
+    B, BR = np.asarray(system.poisson_tensor(y)), np.asarray(system.poisson_tensor(Ry))
+    flipped = signs[:, None, :, None] * B[None] * signs[:, None, None, :]
+    poisson = np.abs(BR + flipped).max(axis=(1, 2, 3)) <= 1e3 * _EPS * max(np.abs(B).max(), 1.0)
+    H, HR = np.asarray(system.hamiltonian(y)), np.asarray(system.hamiltonian(Ry))
+    energy = np.abs(HR - H[None]).max(axis=1) <= 1e3 * _EPS * max(np.abs(H).max(), 1.0)
+    C, CR = np.asarray(system.casimirs(y)), np.asarray(system.casimirs(Ry))
+    leaves = (np.abs(CR - C[None]).max(axis=(1, 2), initial=0.0)
+              <= 1e3 * _EPS * max(np.abs(C).max(initial=0.0), 1.0))
+    out = []
+    for i in range(n):
+        why = [text for ok, text in ((poisson[i], "it is not anti-Poisson, B(Ry) != -R B(y) R"),
+                                     (energy[i], "H(Ry) != H(y)"),
+                                     (leaves[i], "it changes a Casimir, C(Ry) != C(y)")) if not ok]
+        out.append("; ".join(why))
+    return out
+
+
+def reversing_symmetries(system: AbstractPoissonSystem) -> list[np.ndarray]:
+    r"""Every sign flip $R = \mathrm{diag}(r)$ that is a reversing symmetry of `system` (module
+    docstring), as sign vectors `r` of shape `(dim,)`, in lexicographic order of the flipped
+    components; checked at 8 seeded random states. Empty when there is none (e.g. a
+    Hamiltonian with a term odd in every admissible flip)."""
+    y = _probes(system)
+    k = _rank(system, y) // 2
+    if k == 0:
+        return []
+    if math.comb(system.dim, k) > _MAX_CANDIDATES:
+        raise ValueError(
+            f"{system!r} has {math.comb(system.dim, k)} candidate sign flips (dimension {system.dim}, "
+            f"{k} flipped components); too many to search: pass the signs yourself "
+            "(check_reversing_symmetry checks them)"
+        )
+    flips = list(itertools.combinations(range(system.dim), k))
+    signs = np.ones((len(flips), system.dim))
+    for i, f in enumerate(flips):
+        signs[i, list(f)] = -1.0
+    return [s for s, why in zip(signs, _violations(system, signs, y)) if not why]
+
+
+def reversing_symmetry(system: AbstractPoissonSystem) -> np.ndarray:
+    """The first of `reversing_symmetries(system)`; `ValueError` when there is none."""
+    found = reversing_symmetries(system)
+    if not found:
+        raise ValueError(
+            f"{system!r} has no reversing symmetry that flips signs of components (a sign flip R "
+            "with B(Ry) = -R B(y) R, H(Ry) = H(y), C(Ry) = C(y), flipping half the rank of B); "
+            "use a map without one (e.g. LPNet(system) without reversing)"
+        )
+    return found[0]
+
+
+def check_reversing_symmetry(system: AbstractPoissonSystem, signs: Any, name: str = "reversing") -> np.ndarray:
+    """`signs` as a float sign vector `(dim,)` if $R = \\mathrm{diag}$(`signs`) is a reversing
+    symmetry of `system` at 8 seeded random states (module docstring), else `ValueError`
+    saying which condition fails (`TypeError` for a non-numeric value)."""
+    try:
+        r = np.asarray(signs, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {signs!r}") from err
+    if r.shape != (system.dim,) or not np.all(np.abs(r) == 1.0):
+        raise ValueError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {np.asarray(signs).tolist()}")
+    y = _probes(system)
+    why = _violations(system, r[None], y)[0]
+    if why:
+        raise ValueError(f"{name} = {r.astype(int).tolist()} is not a reversing symmetry of {system!r}: {why}")
+    k, flipped = _rank(system, y) // 2, int(np.sum(r < 0))
+    if flipped != k:
+        raise ValueError(
+            f"{name} = {r.astype(int).tolist()} flips {flipped} components; a reversing symmetry whose "
+            f"fixed set meets a leaf in half its dimension flips {k} (half the rank of B) here"
+        )
+    return r
