@@ -35,11 +35,14 @@ class LPNet(AbstractLearnedMap):
     weights. The map is *not* exactly Poisson, because $\alpha$ depends on the point
     (DESIGN.md section 2): `poisson_defect` measures by how much. Its energy error therefore
     drifts: over $N$ steps it grows like $N$ times the one-step error, so long rollouts need a
-    small loss. Refine Adam with L-BFGS-B, `optimiser=(Adam(20_000), QuasiNewton(30_000))`:
-    on the so(3) rigid body (`benchmarks/lpnet_accuracy/`, seeds 0-2) that took the max
-    energy error over 2000 steps from 4e-2..2e-1 to 4e-4..1.2e-3. Where accuracy over long
-    times matters more than the paper's architecture, a G-LPNet (`learn.fit_splitting`) is
-    exactly Poisson.
+    small loss. Two things help: refining Adam with L-BFGS-B,
+    `optimiser=(Adam(20_000), QuasiNewton(30_000))`, and, where the system has a reversing
+    symmetry, the reversible LPNet below. On the so(3) rigid body (`benchmarks/lpnet_accuracy/`,
+    seeds 0-2, max energy error over 2000 steps) Adam alone gives 4e-2..2e-1; with L-BFGS-B
+    5000, 3.5e-3..5.2e-3, reversible 3e-4..2.5e-3; on the 6-dimensional so(4) body with
+    L-BFGS-B 30000, 1.9e-2, reversible 3.5e-3 (seed 0). Where accuracy over long times
+    matters more than the paper's architecture, a G-LPNet (`learn.fit_splitting`) is exactly
+    Poisson.
 
     The affine scalings $m, s$ are fixed (not trained): the identity unless `learn.fit` is
     called with `normalise=True`, which sets them from the training data (inputs: mean/std of

@@ -7,7 +7,7 @@ one recipe, several seeds, on the benchmark's data (40 ICs x 50 pairs at h = 0.1
 RECIPE: words joined by "_": adam (Adam 20000 only, the benchmark's), lbfgs (then L-BFGS-B
 5000 iterations; lbfgsN: N), norm (normalise=True), dense (10x the trajectories, 400 x 50 pairs), wN (hidden width N
 instead of 16), skip (a linear skip in the parameter network, alpha(y) = MLP(y) + L y, L
-trained from zero), e.g. adam_lbfgs30000_skip.
+trained from zero), rev (the reversible LPNet, reversing="auto"), e.g. adam_lbfgs30000_skip.
 Prints per seed: train / validation loss, the one-step RMS error at the held-out ICs' first
 steps, the max relative energy error over 2000 steps from the held-out ICs and from 10 of the
 training ICs.
@@ -57,8 +57,9 @@ for seed in seeds:
     if lbfgs:
         stages.append(learn.QuasiNewton(lbfgs, "lbfgsb"))
     t0 = time.perf_counter()
-    net, rec = learn.fit((SkipLPNet if "skip" in words else learn.LPNet)(system, hidden=(width,) * 3, key=seed), data, optimiser=stages, seed=seed,
-                         normalise="norm" in words, progress=False)
+    model = (SkipLPNet if "skip" in words else learn.LPNet)(
+        system, hidden=(width,) * 3, key=seed, reversing="auto" if "rev" in words else None)
+    net, rec = learn.fit(model, data, optimiser=stages, seed=seed, normalise="norm" in words, progress=False)
     seconds = time.perf_counter() - t0
     y = np.asarray(test.states)
     pred = np.asarray(net.rollout(y[:, 0], 1))[:, -1]
