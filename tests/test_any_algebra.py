@@ -34,9 +34,13 @@ def system_and_data(name: str):
 
 
 ALL = pytest.mark.parametrize("name", list(SYSTEMS))
-# Training on so(4) and sl(3) runs under -m slow (6-8 s of compilation per model); the default
-# run trains on the diamond and filiform algebras.
+# Training on filiform, so(4) and sl(3) runs under -m slow (6-8 s of compilation per model, 15-25 s
+# per test); the default run trains on the diamond algebra. The same for the splitting orders
+# of so(4) and sl(3).
 TRAINED = pytest.mark.parametrize(
+    "name", [n if n == "diamond" else pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
+)
+ORDERS = pytest.mark.parametrize(
     "name", [n if n in ("diamond", "filiform5") else pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
 )
 
@@ -58,7 +62,7 @@ def test_casimirs_fill_the_generic_corank_and_are_conserved(name):
     assert report.max_casimir_drift_relative < 1e-12
 
 
-@ALL
+@ORDERS
 def test_automatic_splitting_has_strang_order(name):
     system, data = system_and_data(name)
     study = it.convergence(lambda h: it.splitting.Strang(system, h=h), system, data.states[:2, 0],

@@ -225,7 +225,8 @@ def sequential_fits():
             for p in learn.grid_points(SWEEP_GRID)]
 
 
-@pytest.mark.parametrize("on_cluster", [False, True])
+# On the cluster under -m slow (about 50 s); in process, the same comparison, by default.
+@pytest.mark.parametrize("on_cluster", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_a_sweep_returns_the_numbers_of_sequential_fits_and_saves_every_point(
     sequential_fits, on_cluster, request, tmp_path
 ):

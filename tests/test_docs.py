@@ -38,6 +38,9 @@ def test_every_public_name_has_an_api_entry(package, page):
     assert documented - public == set(), f"not exported by {package}: {sorted(documented - public)}"
 
 
+# Under -m slow: it executes every tutorial (trainings included), 130-200 s of the default run
+# on a 2-core machine. `mkdocs build --strict` is the same check by hand.
+@pytest.mark.slow
 def test_mkdocs_build_strict(tmp_path):
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "MPLBACKEND": "Agg"}
     start = time.perf_counter()
