@@ -40,7 +40,7 @@ class LPNet(AbstractLearnedMap):
     symmetry, the reversible LPNet below. On the so(3) rigid body (`benchmarks/lpnet_accuracy/`,
     seeds 0-2, max energy error over 2000 steps) Adam alone gives 4e-2..2e-1; with L-BFGS-B
     5000, 3.5e-3..5.2e-3, reversible 3e-4..2.5e-3; on the 6-dimensional so(4) body with
-    L-BFGS-B 30000, 1.9e-2, reversible 3.5e-3 (seed 0). Where accuracy over long times
+    L-BFGS-B 30000, 1.9e-2, reversible 3.5e-3 and 4.3e-3 (seeds 0, 1). Where accuracy over long times
     matters more than the paper's architecture, a G-LPNet (`learn.fit_splitting`) is exactly
     Poisson.
 
