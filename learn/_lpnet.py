@@ -40,7 +40,7 @@ class LPNet(AbstractLearnedMap):
     symmetry, the reversible LPNet below. On the so(3) rigid body (`benchmarks/lpnet_accuracy/`,
     seeds 0-2, max energy error over 2000 steps) Adam alone gives 4e-2..2e-1; with L-BFGS-B
     5000, 3.5e-3..5.2e-3, reversible 3e-4..2.5e-3; on the 6-dimensional so(4) body with
-    L-BFGS-B 30000, 1.9e-2, reversible 3.5e-3 and 4.3e-3 (seeds 0, 1). Where accuracy over long times
+    L-BFGS-B 30000, 1.9e-2 (seed 0), reversible 2.0e-3..4.3e-3 (seeds 0-2). Where accuracy over long times
     matters more than the paper's architecture, a G-LPNet (`learn.fit_splitting`) is exactly
     Poisson.
 
@@ -62,8 +62,8 @@ class LPNet(AbstractLearnedMap):
     $\Phi = R\,\mathbb B^{-1}R\circ\mathbb B$ with $\mathbb B(y) = \mathbb T(\alpha(y))\,y$:
     $m = \mathbb T(\alpha(y))\,y$, then $y_{n+1} = w$ solving
     $w = R\,\mathbb T(-\alpha(Rw))\,R\,m$ by fixed-point iteration from $2m - y$ ($m$ is
-    near the midpoint; on the so(3) rigid body at $h = 0.1$ each iteration gains a factor
-    20-50, and 10 reach round-off). Both halves are
+    near the midpoint; on a partly trained so(3) rigid body at $h = 0.1$ each iteration gained
+    a factor 20-50, and 10 reached round-off). Both halves are
     test flows (the second conjugated by $R$, which maps each leaf to itself), so the Casimirs
     are conserved exactly as before, and $R\Phi R = \Phi^{-1}$: the map is $R$-reversible like
     the flow (to round-off, once the iteration has converged). It is still not a Poisson map,

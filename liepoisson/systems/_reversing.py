@@ -36,7 +36,7 @@ def _probes(system: AbstractPoissonSystem, n: int = 8) -> np.ndarray:
 
 def _rank(system: AbstractPoissonSystem, y: np.ndarray) -> int:
     """The generic rank of $\\mathbb B$: its largest numerical rank at the probe points."""
-    return int(max(np.linalg.matrix_rank(np.asarray(system.poisson_tensor(p))) for p in y))
+    return int(np.linalg.matrix_rank(np.asarray(system.poisson_tensor(y))).max())
 
 
 def _violations(system: AbstractPoissonSystem, signs: np.ndarray, y: np.ndarray) -> list[str]:
