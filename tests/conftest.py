@@ -1,4 +1,6 @@
 import os
+import shutil
+import tempfile
 
 import jax
 import numpy as np
@@ -18,3 +20,19 @@ settings.register_profile("dev", max_examples=100, deadline=None)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 EPS = np.finfo(np.float64).eps
+
+
+# One JAX compilation cache per test run, shared by the pytest-xdist workers (which inherit the
+# variable from the controlling process): the suite's many small fits compile the same programs
+# again and again, and a cache hit skips XLA. Removed when the run ends.
+_CACHE_VAR = "LIEPOISSON_TEST_JAX_CACHE"
+if os.environ.get("PYTEST_XDIST_WORKER") is None:
+    os.environ[_CACHE_VAR] = tempfile.mkdtemp(prefix="liepoisson-tests-jax-cache-")
+jax.config.update("jax_compilation_cache_dir", os.environ[_CACHE_VAR])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        shutil.rmtree(os.environ[_CACHE_VAR], ignore_errors=True)
