@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -22,7 +23,10 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, sy
     `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`. Energy and Casimir errors are
     relative to the time mean as in the paper (`(E(t) - E(0)) / <E>`); maxima are over all
     trajectories and times, means over both; `integrals` (name -> function of the state) are
-    reported as `<name>_rel_err_max` the same way. Returns the metrics, the rollout and the report.
+    reported as `<name>_rel_err_max` the same way. A rollout that stops being finite has every
+    error figure infinite (an error of the finite steps alone would pass for a good model), with
+    `diverged_at_step` and `energy_rel_err_max_finite_steps` saying what happened before.
+    Returns the metrics, the rollout and the report.
     """
     reference = np.asarray(reference)
     n_points = reference.shape[1]
@@ -52,7 +56,21 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, sy
     for name in integrals or {}:
         metrics[f"{name}_rel_err_max"] = report.max_integral_error(name)
     if report.diverged_at_step is not None:
-        metrics["diverged_at_step"] = report.diverged_at_step
+        # The trajectories that stayed finite keep their own figures over every step.
+        finite = np.all(np.isfinite(y), axis=(1, 2))
+        per_trajectory = np.full(len(y), math.inf)
+        if finite.any():
+            ok = it.diagnostics(y[finite], system, reference=reference[finite])
+            per_trajectory[finite] = np.max(np.abs(ok.energy_error_relative), axis=1)
+        metrics.update({
+            "diverged_at_step": report.diverged_at_step,
+            "energy_rel_err_max_finite_steps": metrics["energy_rel_err_max"],
+            "energy_rel_err_max": math.inf,
+            "energy_rel_err_mean": math.inf,
+            "energy_rel_err_max_per_trajectory": per_trajectory,
+            "traj_err_final": math.inf,
+            **{f"{name}_rel_err_max": math.inf for name in integrals or {}},
+        })
     return {"metrics": metrics, "rollout": y, "report": report}
 
 

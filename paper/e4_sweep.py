@@ -55,7 +55,15 @@ def _evaluate(model, point):
     m = measure_rollout(model, None, system, reference.states,
                         integrals={"integral": system.angular_integral})["metrics"]
     return {"energy_rel_err_max": m["energy_rel_err_max"], "integral_rel_err_max": m["integral_rel_err_max"],
-            "traj_err_final": m["traj_err_final"], "poisson_defect_max": m["poisson_defect_max"]}
+            "traj_err_final": m["traj_err_final"], "poisson_defect_max": m["poisson_defect_max"],
+            **({"diverged_at_step": m["diverged_at_step"]} if "diverged_at_step" in m else {})}
+
+
+def _trajectory_error(m: dict) -> str:
+    """The table's trajectory error, or the step at which the rollout stopped being finite (its
+    errors are then infinite: see `measure_rollout`)."""
+    step = m.get("diverged_at_step")
+    return fmt(m["traj_err_final"]) if step is None else f"diverged at step {int(step)}"
 
 
 def _data(point):
@@ -96,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         ok = f"{'yes' if m['energy_rel_err_max'] <= PAPER_ENERGY else 'no'} / " \
              f"{'yes' if m['integral_rel_err_max'] <= PAPER_INTEGRAL else 'no'}"
         lines.append(f"| {r.point['budget']} | {r.seed} | {fmt(m['train_loss'])} | {fmt(m['val_loss'])} | "
-                     f"{fmt(m['energy_rel_err_max'])} | {fmt(m['integral_rel_err_max'])} | {fmt(m['traj_err_final'])} | "
+                     f"{fmt(m['energy_rel_err_max'])} | {fmt(m['integral_rel_err_max'])} | {_trajectory_error(m)} | "
                      f"{ok} | {m['wall_time_s']:.0f} |")
         rows.append({"budget": r.point["budget"], "seed": r.seed, **m})
     reached = any(r["energy_rel_err_max"] <= PAPER_ENERGY and r["integral_rel_err_max"] <= PAPER_INTEGRAL for r in rows)

@@ -248,3 +248,42 @@ def test_markdown_rows_escape_pipes_inside_cells():
             rows = [ln for ln in block.splitlines() if ln.startswith("|")]
             widths = [len(re.split(r"(?<!\\)\|", ln)) for ln in rows]
             assert len(set(widths)) <= 1, (table.name, rows[widths.index(max(widths))])
+
+
+def test_a_rollout_that_diverges_has_infinite_errors_not_those_of_its_finite_steps():
+    """A map whose rollout turns NaN at step 3 must not look good: its figures over the finite
+    steps alone would pass the paper's thresholds (the reversible LPNet whose fixed-point
+    iteration failed at step 1 scored 0 energy error in E4's sweep before this)."""
+    import math
+
+    import integrators as it
+    import liepoisson as lp
+    from paper._evaluate import measure_rollout
+    from paper.e4_sweep import _trajectory_error
+
+    system = lp.systems.ChargedParticle()
+    reference = np.asarray(it.ground_truth(system, [[0.1, 1.0, -0.5, 0.8], [0.0, 1.1, -0.6, 0.9]], h=0.1,
+                                           n_steps=10, progress=False).states)
+    perturbed = reference * (1 + 1e-3 * np.arange(11) / 10)[None, :, None]  # an error growing with the step
+
+    class Diverging:  # the two methods measure_rollout calls
+        def rollout(self, y0, n_steps, nonfinite="raise"):
+            assert nonfinite == "return" and n_steps == 10
+            y = perturbed.copy()
+            y[0, 3:] = np.nan
+            return y
+
+        def poisson_defect(self, y):
+            return np.zeros(len(y))
+
+    m = measure_rollout(Diverging(), None, system, reference,
+                        integrals={"integral": system.angular_integral})["metrics"]
+    assert m["diverged_at_step"] == 3
+    assert m["energy_rel_err_max"] == m["traj_err_final"] == m["integral_rel_err_max"] == math.inf
+    # the trajectory that stayed finite keeps its own error over all 10 steps, which grows with
+    # the step: larger than the error of both over the 3 finite steps, both far above round-off
+    per_trajectory = m["energy_rel_err_max_per_trajectory"]
+    assert per_trajectory[0] == math.inf
+    assert 1e-6 < m["energy_rel_err_max_finite_steps"] < per_trajectory[1] < 1e-2
+    assert _trajectory_error(m) == "diverged at step 3"
+    assert _trajectory_error({"traj_err_final": 0.5}) == "0.5"
