@@ -119,6 +119,13 @@ class AbstractStepMap(eqx.Module):
         y = states(y, "y", dim)
         return _defect_compiled(traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
 
+    @property
+    def divergence_hint(self) -> str:
+        """What a `RolloutDivergedError` says may have gone wrong (maps with a failure mode of
+        their own say so)."""
+        return ("The map left the finite range (a learned map far outside its training data, or too "
+                "large a step)")
+
     def cost(self) -> StepCost:
         """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
         compiled step (`step_flops`)."""
@@ -162,8 +169,7 @@ def _check_finite(step_map: AbstractStepMap, out: jax.Array, save_every: int) ->
     raise RolloutDivergedError(
         f"{type(step_map).__name__} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
         f"{when}; its last finite state (step {(k - 1) * save_every}) is {np.round(last, 6).tolist()}. "
-        "The map left the finite range (a learned map far outside its training data, or too large a "
-        "step); pass nonfinite='return' to get the states with their non-finite tail",
+        f"{step_map.divergence_hint}; pass nonfinite='return' to get the states with their non-finite tail",
         trajectory=i, step=k * save_every, last_finite_step=(k - 1) * save_every, state=last, states=y,
     )
 

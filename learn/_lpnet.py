@@ -4,6 +4,7 @@ a network predicts the parameters $\alpha(y)$ of an exact Poisson step, $y_{n+1}
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -63,7 +64,10 @@ class LPNet(AbstractLearnedMap):
     $m = \mathbb T(\alpha(y))\,y$, then $y_{n+1} = w$ solving
     $w = R\,\mathbb T(-\alpha(Rw))\,R\,m$ by fixed-point iteration from $2m - y$ ($m$ is
     near the midpoint; on a partly trained so(3) rigid body at $h = 0.1$ each iteration gained
-    a factor 20-50, and 10 reached round-off). Both halves are
+    a factor 20-50, and 10 reached round-off; on E4's charged particle, with larger $\alpha$,
+    16 iterations do not converge and 64 do: `with_fixed_point_iterations(64)` gives the trained
+    network more). A step whose iteration has not converged is NaN, which a rollout reports as
+    a `RolloutDivergedError` saying so. Both halves are
     test flows (the second conjugated by $R$, which maps each leaf to itself), so the Casimirs
     are conserved exactly as before, and $R\Phi R = \Phi^{-1}$: the map is $R$-reversible like
     the flow (to round-off, once the iteration has converged). It is still not a Poisson map,
@@ -139,6 +143,25 @@ class LPNet(AbstractLearnedMap):
         w_next = self._second_half(w, m)
         moved = jnp.max(jnp.abs(w_next - w))
         return jnp.where(moved <= _FIXED_POINT_RTOL * jnp.maximum(1.0, jnp.max(jnp.abs(w_next))), w_next, jnp.nan)
+
+    @property
+    def divergence_hint(self) -> str:
+        hint = super().divergence_hint
+        if self.reversing is None:
+            return hint
+        return (f"{hint}, or its reversible step's fixed-point iteration did not converge in "
+                f"fixed_point_iterations={self.fixed_point_iterations}: try "
+                f"net.with_fixed_point_iterations({4 * self.fixed_point_iterations})")
+
+    def with_fixed_point_iterations(self, iterations: int) -> LPNet:
+        """The same trained reversible LPNet with another iteration count for the implicit half
+        of its step (a large step, or large $\alpha$, contracts slowly: E4's charged particle
+        needs about 64)."""
+        if self.reversing is None:
+            raise ValueError("with_fixed_point_iterations is for a reversible LPNet (reversing=...); this one is not")
+        new = copy.copy(self)
+        object.__setattr__(new, "fixed_point_iterations", positive_int(iterations, "iterations"))
+        return new
 
     def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
         """The step of $y_0$, or for a reversible LPNet the explicit residual form

@@ -122,8 +122,20 @@ def test_casimirs_over_a_long_rollout_and_not_a_poisson_map():
 def test_unconverged_iteration_is_a_divergence_not_a_wrong_state():
     net = reversible(0, fixed_point_iterations=1)
     assert np.all(np.isnan(np.asarray(jax.vmap(net.step)(jnp.asarray(Y)))))
-    with pytest.raises(it.RolloutDivergedError, match="step 1"):
+    with pytest.raises(it.RolloutDivergedError, match=r"step 1.*fixed_point_iterations=1.*with_fixed_point_iterations\(4\)"):
         net.rollout(Y, 5)
+    # the hint works: the same weights with more iterations converge, to the 16-iteration step
+    more = net.with_fixed_point_iterations(64)
+    assert more.fixed_point_iterations == 64 and net.fixed_point_iterations == 1
+    assert np.array_equal(np.asarray(more.alpha(Y[0])), np.asarray(net.alpha(Y[0])))
+    y64 = np.asarray(more.rollout(Y, 5))
+    y16 = np.asarray(net.with_fixed_point_iterations(16).rollout(Y, 5))
+    assert np.all(np.isfinite(y64))
+    np.testing.assert_allclose(y64, y16, rtol=0, atol=2**10 * EPS)  # both converged to the tolerance of the step
+    with pytest.raises(ValueError, match="iterations"):
+        net.with_fixed_point_iterations(0)
+    with pytest.raises(ValueError, match="not"):
+        learn.LPNet(RB, hidden=(8,), key=0).with_fixed_point_iterations(8)
 
 
 def test_cost_counts_every_flow_and_save_load_roundtrip(tmp_path):
