@@ -159,6 +159,8 @@ class LPNet(AbstractLearnedMap):
         needs about 64)."""
         if self.reversing is None:
             raise ValueError("with_fixed_point_iterations is for a reversible LPNet (reversing=...); this one is not")
+        # A static field (the loop bound is a Python int at trace time), which eqx.tree_at cannot
+        # replace; a shallow copy shares the weights, and the new count recompiles the step.
         new = copy.copy(self)
         object.__setattr__(new, "fixed_point_iterations", positive_int(iterations, "iterations"))
         return new
