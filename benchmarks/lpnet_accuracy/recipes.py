@@ -7,7 +7,9 @@ one recipe, several seeds, on the benchmark's data (40 ICs x 50 pairs at h = 0.1
 RECIPE: words joined by "_": adam (Adam 20000 only, the benchmark's), lbfgs (then L-BFGS-B
 5000 iterations; lbfgsN: N), norm (normalise=True), dense (10x the trajectories, 400 x 50 pairs), wN (hidden width N
 instead of 16), skip (a linear skip in the parameter network, alpha(y) = MLP(y) + L y, L
-trained from zero), rev (the reversible LPNet, reversing="auto"), e.g. adam_lbfgs30000_skip.
+trained from zero), rev (the reversible LPNet, reversing="auto"), eq (equivariant=True: alpha
+averaged over the system's sign symmetries), long (also the held-out ICs over 10000 steps), e.g.
+adam_lbfgs30000_skip or adam_lbfgs_rev_eq_long.
 Prints per seed: train / validation loss, the one-step RMS error at the held-out ICs' first
 steps, the max relative energy error over 2000 steps from the held-out ICs and from 10 of the
 training ICs.
@@ -58,7 +60,8 @@ for seed in seeds:
         stages.append(learn.QuasiNewton(lbfgs, "lbfgsb"))
     t0 = time.perf_counter()
     model = (SkipLPNet if "skip" in words else learn.LPNet)(
-        system, hidden=(width,) * 3, key=seed, reversing="auto" if "rev" in words else None)
+        system, hidden=(width,) * 3, key=seed, reversing="auto" if "rev" in words else None,
+        **({"equivariant": True} if "eq" in words else {}))
     net, rec = learn.fit(model, data, optimiser=stages, seed=seed, normalise="norm" in words, progress=False)
     seconds = time.perf_counter() - t0
     y = np.asarray(test.states)
@@ -68,6 +71,11 @@ for seed in seeds:
     for label, y0 in (("held-out", y_test), ("train", y_train[:10])):
         row = it.compare({"lpnet": net}, system, y0, t_final=200.0, n_outputs=200).rows[0]
         energy[label] = row.energy_error_max
+    if "long" in words:
+        row = it.compare({"lpnet": net}, system, y_test, t_final=1000.0, n_outputs=200).rows[0]
+        energy["held-out, 10000 steps"] = row.energy_error_max
     print(f"{name} {recipe} seed {seed}: loss {rec.train_loss:.2e} / val {rec.val_loss:.2e}, one-step RMS at "
           f"held-out ICs {rms:.2e}, max energy error held-out {energy['held-out']:.2e}, train ICs "
-          f"{energy['train']:.2e}, {seconds:.0f} s", flush=True)
+          f"{energy['train']:.2e}"
+          + (f", held-out over 10000 steps {energy['held-out, 10000 steps']:.2e}" if "long" in words else "")
+          + f", {seconds:.0f} s", flush=True)

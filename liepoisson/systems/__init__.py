@@ -29,5 +29,6 @@ from ._reversing import (
     check_reversing_symmetry as check_reversing_symmetry,
     reversing_symmetries as reversing_symmetries,
     reversing_symmetry as reversing_symmetry,
+    sign_symmetries as sign_symmetries,
 )
 from ._splitting_check import check_splitting as check_splitting

@@ -1,0 +1,143 @@
+"""Sign symmetries of the systems and the equivariant LPNet built on them: the symmetries found
+commute with the exact flow (heyoka), and the network's step commutes with them to round-off
+whatever its weights; a reversible equivariant step is reversible under every reversing
+symmetry of the system, not only the one it was built with."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import EPS, SYSTEM_FACTORIES
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import integrators as it
+import learn
+import liepoisson as lp
+from liepoisson.systems import reversing_symmetries, sign_symmetries
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+from any_algebra import SYSTEMS as NEW_ALGEBRAS  # the benchmark's, not copied
+
+RB = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+SO4 = NEW_ALGEBRAS["so4"]()
+Y = np.random.default_rng(1).uniform(-1.0, 1.0, size=(6, 3))
+
+
+def test_rigid_body_symmetries_are_the_half_turns():
+    found = [s.tolist() for s in sign_symmetries(RB)]
+    assert found == [[-1, -1, 1], [-1, 1, -1], [1, -1, -1]]
+    # the product of two reversing symmetries is a symmetry
+    for a in reversing_symmetries(SO4):
+        for b in reversing_symmetries(SO4):
+            if not np.array_equal(a, b):
+                assert any(np.array_equal(a * b, s) for s in sign_symmetries(SO4))
+
+
+def test_a_linear_term_on_every_axis_leaves_none():
+    tilted = lp.systems.LiePoissonSystem(
+        lp.so3(), lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 / 2 + m[2] ** 2 / 3) + 0.3 * (m[0] + m[1] + m[2]),
+        name="tilted body")
+    assert sign_symmetries(tilted) == []
+    with pytest.raises(ValueError, match="equivariant=True needs a sign flip.*use equivariant=False"):
+        learn.LPNet(tilted, equivariant=True)
+    with pytest.raises(TypeError, match="equivariant must be True or False"):
+        learn.LPNet(RB, equivariant="yes")
+
+
+@pytest.mark.parametrize(
+    "system", [RB, lp.systems.HeavyTop(), SYSTEM_FACTORIES["Kirchhoff"](), SO4, lp.systems.ChargedParticle()],
+    ids=["RigidBody", "HeavyTop", "Kirchhoff", "so4", "ChargedParticle"],
+)
+def test_every_symmetry_found_commutes_with_the_exact_flow(system):
+    # Independent of the search: heyoka at its tightest tolerance, phi_h(S y) = S phi_h(y).
+    found = sign_symmetries(system)
+    assert found, "each of these systems has a sign symmetry"
+    y0 = np.random.default_rng(2).uniform(-1.0, 1.0, size=(4, system.dim))
+    y1 = it.ground_truth(system, y0, h=0.3, n_steps=1, progress=False).states[:, -1]
+    for s in found:
+        moved = it.ground_truth(system, s * y0, h=0.3, n_steps=1, progress=False).states[:, -1]
+        # two integrations at tolerance eps, a few dozen Taylor steps each
+        assert np.allclose(moved, s * y1, rtol=0, atol=1e3 * EPS * max(1.0, np.abs(y1).max()))
+
+
+@eqx.filter_jit
+def steps(net, y):
+    """`net.step` over the states `y` (one compilation for every weight draw)."""
+    return jax.vmap(net.step)(y)
+
+
+@settings(max_examples=6, deadline=None)
+@given(key=st.integers(0, 2**16), scale=st.floats(0.1, 2.0), reversible=st.booleans())
+def test_step_commutes_with_every_symmetry_whatever_the_weights(key, scale, reversible):
+    net = learn.LPNet(RB, hidden=(8, 8), key=key, h=0.1, equivariant=True,
+                      reversing="auto" if reversible else None)
+    assert len(net.symmetries) == 4  # the identity and the three half-turns
+    y = jnp.asarray(scale * Y)
+    y1 = np.asarray(steps(net, y))
+    assert np.all(np.isfinite(y1))
+    size = max(1.0, float(jnp.abs(y).max()))
+    for s in np.asarray(net.symmetries):
+        # the same arithmetic on sign-flipped numbers, except the order of the group average's
+        # sum and, for the reversible step, an iteration converged to 2^10 eps
+        atol = (2**11 if reversible else 64) * EPS * size
+        np.testing.assert_allclose(np.asarray(steps(net, jnp.asarray(s) * y)), s * y1, rtol=0, atol=atol)
+
+
+def test_without_equivariance_the_step_does_not_commute():
+    # the property above is the symmetrisation's, not an accident of the architecture
+    net = learn.LPNet(RB, hidden=(8, 8), key=0, h=0.1)
+    s = sign_symmetries(RB)[0]
+    gap = np.abs(np.asarray(steps(net, jnp.asarray(s * Y))) - s * np.asarray(steps(net, jnp.asarray(Y)))).max()
+    assert gap > 1e-4
+
+
+@pytest.mark.parametrize("system", [RB, SO4], ids=["RigidBody", "so4"])
+def test_reversible_equivariant_step_is_reversible_under_every_reversing_symmetry(system):
+    net = learn.LPNet(system, hidden=(8, 8), key=3, h=0.1, reversing="auto", equivariant=True)
+    y = jnp.asarray(np.random.default_rng(4).uniform(-1.0, 1.0, size=(5, system.dim)))
+    y1 = steps(net, y)
+    for r in reversing_symmetries(system):
+        back = r * np.asarray(steps(net, jnp.asarray(r) * y1))
+        # R Phi R Phi = id for every R = R_0 S: two converged iterations (2^10 eps each)
+        np.testing.assert_allclose(back, np.asarray(y), rtol=0, atol=2**12 * EPS * max(1.0, float(jnp.abs(y).max())))
+    # without the symmetrisation only the chosen R reverses the step
+    plain = learn.LPNet(system, hidden=(8, 8), key=3, h=0.1, reversing="auto")
+    y1 = steps(plain, y)
+    other = reversing_symmetries(system)[1]
+    assert np.abs(other * np.asarray(steps(plain, jnp.asarray(other) * y1)) - np.asarray(y)).max() > 1e-6
+
+
+def test_casimirs_exact_and_save_load_roundtrip(tmp_path):
+    net = learn.LPNet(SO4, hidden=(8, 8), key=5, h=0.1, equivariant=True)
+    y = np.random.default_rng(6).uniform(-1.0, 1.0, size=(4, 6))
+    traj = np.asarray(net.rollout(y, 500))
+    C = np.asarray(SO4.casimirs(traj))
+    # round-off random walk: 500 steps of a few roundings each, quadratic Casimirs of |y| ~ 1
+    assert np.abs(C - C[:, :1]).max() < 500 * 64 * EPS
+    assert net.hyperparameters()["equivariant"] is True
+    net.save(tmp_path / "eq.h5")
+    back = learn.LPNet.load(tmp_path / "eq.h5")
+    assert back.symmetries == net.symmetries
+    assert np.array_equal(np.asarray(back.rollout(y, 3)), np.asarray(net.rollout(y, 3)))
+    # older files and the paper's LPNet have no such key
+    assert "equivariant" not in learn.LPNet(SO4, hidden=(8, 8), key=5).hyperparameters()
+
+
+def test_training_keeps_the_symmetry_and_fits():
+    data = it.ground_truth(RB, Y, h=0.1, n_steps=20, progress=False)
+    net = learn.LPNet(RB, hidden=(8, 8), key=0, equivariant=True)
+    fitted, record = learn.fit(net, data, epochs=1500, progress=False, validation_fraction=0.0)
+    y0 = jnp.asarray(data.states[:, :-1].reshape(-1, 3))
+    y1 = jnp.asarray(data.states[:, 1:].reshape(-1, 3))
+    assert record.train_loss < 1e-2 * float(learn.state_mse(net.with_h(0.1), y0, y1))
+    assert fitted.symmetries == net.symmetries
+    s = np.asarray(net.symmetries[0])
+    np.testing.assert_allclose(np.asarray(steps(fitted, jnp.asarray(s) * y0)), s * np.asarray(steps(fitted, y0)),
+                               rtol=0, atol=64 * EPS)
