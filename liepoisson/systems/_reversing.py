@@ -9,6 +9,13 @@ body has three (flip one component of $\Pi$); $R = -\mathrm{id}$ is anti-Poisson
 Lie-Poisson bracket but maps a leaf of so(3)* to itself with no fixed point, which gives a
 reversible map no hold on its dynamics, so it is not one of them: the fixed set of $R$ must meet
 a generic leaf in half its dimension, i.e. $R$ flips exactly half the rank of $\mathbb B$.
+
+Sign symmetries (`sign_symmetries`): sign flips $S$ that are Poisson maps with $H\circ S = H$,
+so that $S\circ\varphi_t = \varphi_t\circ S$; the product of two reversing symmetries is one.
+A reversible map has no secular energy drift on the orbits that meet the fixed set of its $R$;
+which orbits those are depends on $R$ (on the rigid body, an orbit circling the axis of the
+flipped component never meets it), and a map that also commutes with the sign symmetries is
+reversible under every $RS$ at once (`learn.LPNet(..., equivariant=True)`).
 """
 
 from __future__ import annotations
