@@ -19,6 +19,7 @@ from liepoisson._validation import check_system, positive_float, positive_int
 from liepoisson.systems import (
     AbstractPoissonSystem,
     check_reversing_symmetry,
+    check_sign_symmetry,
     reversing_symmetry,
     sign_symmetries,
 )
@@ -61,22 +62,28 @@ class LPNet(AbstractLearnedMap):
     data); `input_scaling`, `output_scaling`: `(shift, scale)` pairs (default identity);
     `reversing` (default `None`, the paper's LPNet): `"auto"` or a sign vector $r$ for the
     reversible LPNet below; `fixed_point_iterations` (default 16) of its implicit half;
-    `equivariant` (default `False`, the paper's LPNet): symmetrise $\alpha$, below.
+    `equivariant` (default `False`, the paper's LPNet): `True` (every sign symmetry of the
+    system) or a list of sign vectors, to symmetrise $\alpha$, below.
 
-    **Equivariant LPNet** (`equivariant=True`, not in the paper). The sign flips
-    $S = \mathrm{diag}(s)$ that are symmetries of the system (`liepoisson.systems.sign_symmetries`:
-    Poisson, $H\circ S = H$; the rigid body's half-turns) commute with its flow. They carry
-    test flows to test flows, $S\,\mathbb T(\alpha)\,S = \mathbb T(S\alpha)$ (checked at
-    construction), so with the group average
-    $\alpha(y) = \frac1{|G|}\sum_{S\in G} S\,\tilde\alpha(Sy)$ of the network
-    $\tilde\alpha$ every step commutes with them too: $\Phi(Sy) = S\,\Phi(y)$ for any
-    weights. A reversible step is then reversible under every $RS$, i.e. under all the
-    system's reversing symmetries at once, not only the one it was built with; this matters
-    because a reversible map has no energy drift only on orbits that meet the fixed set of its
-    $R$, and on the so(4) body each of the three $R$ misses some orbits. Each $\alpha$ costs
-    $|G|$ network evaluations (4 on so(3) and so(4)). Measured on the so(4) body, seed 0,
-    reversible, Adam 20000 + L-BFGS-B 5000: loss 8.3e-13 instead of 3.6e-10, max energy error
-    over 2000 steps 5.1e-5 instead of 5.3e-3 (BENCHMARKS.md, "LPNet accuracy").
+    **Equivariant LPNet** (`equivariant=True`, or a list of sign vectors; not in the paper).
+    The sign flips $S = \mathrm{diag}(s)$ that are symmetries of the system
+    (`liepoisson.systems.sign_symmetries`: Poisson, $H\circ S = H$; the rigid body's half-turns)
+    commute with its flow. They carry test flows to test flows,
+    $S\,\mathbb T(\alpha)\,S = \mathbb T(S\alpha)$ (checked at construction), so with the
+    average over the group $G$ they generate,
+    $\alpha(y) = \frac1{|G|}\sum_{S\in G} S\,\tilde\alpha(Sy)$ of the network $\tilde\alpha$,
+    every step commutes with them too: $\Phi(Sy) = S\,\Phi(y)$ for any weights. A reversible
+    step is then reversible under every $RS$, and in particular under every reversing
+    symmetry $R'$ of the system (since $RR'$ is a sign symmetry), not only the one it was
+    built with. This matters because reversibility guarantees no energy drift only near
+    invariant tori that $R$ maps to themselves, i.e. orbits that meet its fixed set, and which
+    orbits those are depends on $R$: on the so(4) body each of the three $R$ misses some of
+    the held-out orbits (`benchmarks/lpnet_accuracy/fixed_sets.py`). Each $\alpha$ costs $|G|$
+    network evaluations ($|G|$ = 4 on so(3), 8 on so(4) and se(3)), a reversible step
+    $|G|\,(1 + $ `fixed_point_iterations`$)$. Measured (BENCHMARKS.md, "LPNet accuracy"):
+    on the so(4) body, reversible, Adam 20000 + L-BFGS-B 5000, seed 0: loss 2.6e-13 instead of
+    3.2e-10, max energy error over 2000 steps 2.1e-5 instead of 6.4e-3, and the same over
+    10000 steps.
 
     **Reversible LPNet** (`reversing`, not in the paper). Where the system has a reversing
     symmetry $R = \mathrm{diag}(r)$ (`liepoisson.systems.reversing_symmetries`: anti-Poisson,
@@ -121,7 +128,7 @@ class LPNet(AbstractLearnedMap):
         output_scaling: Scaling | None = None,
         reversing: ArrayLike | str | None = None,
         fixed_point_iterations: int = 16,
-        equivariant: bool = False,
+        equivariant: bool | Sequence[ArrayLike] = False,
     ):
         self.system = check_system(system)
         if parametrisation is None:
@@ -143,9 +150,10 @@ class LPNet(AbstractLearnedMap):
         self.h = None if h is None else positive_float(h, "h")
         self.reversing = _reversing(system, parametrisation, reversing)
         self.fixed_point_iterations = positive_int(fixed_point_iterations, "fixed_point_iterations")
-        if not isinstance(equivariant, (bool, np.bool_)):
-            raise TypeError(f"equivariant must be True or False; got {equivariant!r}")
-        self.symmetries = _symmetry_group(system, parametrisation) if equivariant else None
+        if isinstance(equivariant, str) or not (isinstance(equivariant, (bool, np.bool_, Sequence, np.ndarray))):
+            raise TypeError(f"equivariant must be True, False or a list of sign vectors; got {equivariant!r}")
+        no = isinstance(equivariant, (bool, np.bool_)) and not equivariant
+        self.symmetries = None if no else _symmetry_group(system, parametrisation, equivariant)
 
     def alpha(self, y: jax.Array) -> jax.Array:
         """The step parameters $\\alpha(y)$ for one state `(dim,)`; for an equivariant LPNet
@@ -226,7 +234,9 @@ class LPNet(AbstractLearnedMap):
     def hyperparameters(self) -> dict[str, Any]:
         reversible = {} if self.reversing is None else {
             "reversing": [int(r) for r in self.reversing], "fixed_point_iterations": self.fixed_point_iterations}
-        equivariant = {} if self.symmetries is None else {"equivariant": True}
+        # the group itself, not True: a file keeps the function its weights were trained as
+        equivariant = {} if self.symmetries is None else {
+            "equivariant": [[int(v) for v in s] for s in self.symmetries if any(v < 0 for v in s)]}
         return {
             **self.network.hyperparameters(),
             "parametrisation": type(self.parametrisation).__name__,
@@ -240,51 +250,81 @@ class LPNet(AbstractLearnedMap):
 _FIXED_POINT_RTOL = 2.0**10 * float(np.finfo(np.float64).eps)
 
 
-def _symmetry_group(system, parametrisation) -> tuple[tuple[float, ...], ...]:
-    """The identity and every sign symmetry $S$ of `system` (`sign_symmetries`) under which
-    the parametrisation's step transforms as $S\\,\\mathbb T(\\alpha)\\,y = \\mathbb T(S\\alpha)\\,Sy$
-    at seeded random $\\alpha, y$ (true for every Lie-Poisson test flow, since $S$ is Poisson;
-    checked because a system's own test flows or a parametrisation's parameters may transform
-    otherwise), reduced to the largest subset closed under products: a group, so that the
-    average over it is equivariant."""
-    found = sign_symmetries(system)
-    if not found:
+def _symmetry_group(system, parametrisation, equivariant) -> tuple[tuple[float, ...], ...]:
+    """The group $G$ an equivariant LPNet averages over: the identity and the sign symmetries
+    `equivariant` (`True`: all of `sign_symmetries(system)`; else the sign vectors given,
+    checked by `check_sign_symmetry`), with their products. Each must carry test flows to test
+    flows, $S\\,\\mathbb T(\\alpha)\\,y = \\mathbb T(S\\alpha)\\,Sy$: true for every test flow
+    (the flow of $\\langle\\alpha, y\\rangle$) since $S$ is Poisson, and checked at seeded
+    random $\\alpha, y$ because a parametrisation's parameters may transform otherwise. Python
+    floats, sorted (a static field)."""
+    if parametrisation.n_params != system.dim:
         raise ValueError(
-            f"equivariant=True needs a sign flip S with B(Sy) = S B(y) S and H(Sy) = H(y); {system!r} "
-            "has none (liepoisson.systems.sign_symmetries): use equivariant=False"
+            "equivariant needs step parameters that transform like the state (n_params == dim = "
+            f"{system.dim}); {type(parametrisation).__name__} has n_params={parametrisation.n_params}"
         )
+    if isinstance(equivariant, (bool, np.bool_)):
+        given = False
+        found = sign_symmetries(system)
+        if not found:
+            raise ValueError(
+                f"equivariant=True needs a sign flip S with B(Sy) = S B(y) S and H(Sy) = H(y); {system!r} "
+                "has none (liepoisson.systems.sign_symmetries): use equivariant=False"
+            )
+    else:
+        given = True
+        try:
+            candidates = list(equivariant)
+        except TypeError as err:
+            raise TypeError(
+                f"equivariant must be True, False or a list of sign vectors; got {equivariant!r}") from err
+        found = [check_sign_symmetry(system, s, f"equivariant[{i}]") for i, s in enumerate(candidates)]
+    group = {(1.0,) * system.dim}
+    for s in found:
+        group.add(tuple(float(v) for v in s))
+    while True:  # close under products (a product of symmetries is one)
+        products = {tuple(a * b for a, b in zip(u, v)) for u in group for v in group} - group
+        if not products:
+            break
+        group |= products
     rng = np.random.default_rng(0)
-    alpha = rng.normal(scale=0.3, size=(4, parametrisation.n_params))
-    y = rng.normal(size=(4, system.dim))
+    y = rng.normal(size=(16, system.dim))
+    singular = system.singular(y)
+    if singular is not None:
+        y = y[~np.asarray(singular)]
+    y = y[:4]
+    alpha = 0.3 * rng.normal(size=y.shape)  # |h alpha| ~ 0.03-0.1, a training step's size
     h = 0.1
     step = jax.vmap(lambda a, y: parametrisation.step(a, y, h))
     base = np.asarray(step(jnp.asarray(alpha), jnp.asarray(y)))
+    if y.shape[0] == 0 or not np.all(np.isfinite(base)):
+        raise ValueError(f"equivariant: no regular probe state of {system!r} to check the test flows on")
     tol = _LAW_RTOL * max(1.0, float(np.abs(base).max()))
-    group = {(1.0,) * system.dim}  # Python floats: a static field may hold no numpy scalar
-    for s in found:
-        if parametrisation.n_params == system.dim:
-            moved = np.asarray(step(jnp.asarray(s * alpha), jnp.asarray(s * y)))
-            if np.all(np.isfinite(moved)) and np.abs(moved - s * base).max() <= tol:
-                group.add(tuple(float(v) for v in s))
-    closed = False
-    while not closed:  # drop elements whose products leave the set
-        closed = True
-        for a in sorted(group):
-            if any(tuple(x * y for x, y in zip(a, b)) not in group for b in group):
-                group.discard(a)
-                closed = False
-                break
-    if len(group) == 1:
+    kept = []
+    for s in sorted(group):
+        sv = np.asarray(s)
+        moved = np.asarray(step(jnp.asarray(sv * alpha), jnp.asarray(sv * y)))
+        if np.all(np.isfinite(moved)) and np.abs(moved - sv * base).max() <= tol:
+            kept.append(s)
+        elif given:
+            raise ValueError(
+                f"equivariant: the step of {type(parametrisation).__name__} does not transform under "
+                f"S = {sv.astype(int).tolist()} as S T(alpha) y = T(S alpha) S y; leave this one out"
+            )
+    if len(kept) < len(group):
+        # The law holds for products of elements it holds for, so a gap here is a parametrisation
+        # whose parameters do not transform like the state: no subgroup is safe to guess.
         raise ValueError(
-            f"equivariant=True: {type(parametrisation).__name__} on {system!r} does not carry test flows "
-            "to test flows under the system's sign symmetries (S T(alpha) y != T(S alpha) S y); use "
-            "equivariant=False"
+            f"equivariant=True: the step of {type(parametrisation).__name__} on {system!r} does not "
+            "transform under every sign symmetry as S T(alpha) y = T(S alpha) S y (those it does: "
+            f"{[list(map(int, s)) for s in kept if any(v < 0 for v in s)]}); pass those as equivariant=[...] "
+            "or use equivariant=False"
         )
-    return tuple(sorted(group))
+    return tuple(kept)
 
 
-#: $S\,\mathbb T(\alpha)\,y$ and $\mathbb T(S\alpha)\,Sy$ are the same computation up to the
-#: order of a few hundred roundings (an expm of a sign-flipped matrix): $10^4\varepsilon$.
+#: $S\,\mathbb T(\alpha)\,y$ and $\mathbb T(S\alpha)\,Sy$ are the same computation on sign-flipped
+#: numbers, up to the order of a few hundred roundings (an expm): $10^4\varepsilon$.
 _LAW_RTOL = 1e4 * float(np.finfo(np.float64).eps)
 
 

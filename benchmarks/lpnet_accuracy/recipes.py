@@ -44,6 +44,8 @@ name, recipe = sys.argv[1], sys.argv[2]
 words = recipe.split("_")
 width = next((int(w[1:]) for w in words if w[0] == "w" and w[1:].isdigit()), 16)
 seeds = [int(s) for s in sys.argv[3:]] or [0]
+if "skip" in words and "eq" in words:
+    sys.exit("skip overrides alpha, so it would drop the equivariant average: use one or the other")
 system = {"rigid_body": aa.rigid_body, **aa.SYSTEMS}[name]()
 n = system.dim
 for seed in seeds:

@@ -27,6 +27,7 @@ from ._registry import (
 from ._rigid_body import RigidBody as RigidBody
 from ._reversing import (
     check_reversing_symmetry as check_reversing_symmetry,
+    check_sign_symmetry as check_sign_symmetry,
     reversing_symmetries as reversing_symmetries,
     reversing_symmetry as reversing_symmetry,
     sign_symmetries as sign_symmetries,

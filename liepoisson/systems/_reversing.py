@@ -30,6 +30,7 @@ from ._base import AbstractPoissonSystem
 
 _EPS = np.finfo(np.float64).eps
 _MAX_CANDIDATES = 20_000
+_MAX_SIGN_DIM = 12  # 4095 candidate flips, probed at 8 states: arrays of a few MB
 
 
 def _probes(system: AbstractPoissonSystem, n: int = 8) -> np.ndarray:
@@ -104,12 +105,14 @@ def sign_symmetries(system: AbstractPoissonSystem) -> list[np.ndarray]:
     flow commutes with it, $S\circ\varphi_t = \varphi_t\circ S$ (checked at 8 seeded
     random states). With the identity they form a group; the product of two reversing
     symmetries is one of them. The free rigid body has three (the half-turns about its axes,
-    flipping two components of $\Pi$). Sign vectors `(dim,)` in lexicographic order of the
-    flipped components; empty when there is none."""
-    if 2**system.dim > _MAX_CANDIDATES:
+    flipping two components of $\Pi$). Sign vectors `(dim,)`, ordered by the number of
+    flipped components, then lexicographically; empty when there is none. All $2^n - 1$ flips
+    are tried, so `dim` is at most 12."""
+    if system.dim > _MAX_SIGN_DIM:
         raise ValueError(
-            f"{system!r} has 2^{system.dim} candidate sign flips; too many to search: pass the "
-            "symmetries yourself"
+            f"{system!r} has 2^{system.dim} candidate sign flips; too many to search (dimension at most "
+            f"{_MAX_SIGN_DIM}): pass the symmetries you know, e.g. learn.LPNet(..., equivariant=[s1, s2]), "
+            "which checks them (check_sign_symmetry)"
         )
     y = _probes(system)
     flips = [f for k in range(1, system.dim + 1) for f in itertools.combinations(range(system.dim), k)]
@@ -117,6 +120,22 @@ def sign_symmetries(system: AbstractPoissonSystem) -> list[np.ndarray]:
     for i, f in enumerate(flips):
         signs[i, list(f)] = -1.0
     return [s for s, why in zip(signs, _violations(system, signs, y, reversing=False)) if not why]
+
+
+def check_sign_symmetry(system: AbstractPoissonSystem, signs: Any, name: str = "symmetry") -> np.ndarray:
+    """`signs` as a float sign vector `(dim,)` if $S = \\mathrm{diag}$(`signs`) is a symmetry
+    of `system` (Poisson, $H\\circ S = H$; `sign_symmetries`) at 8 seeded random states, else
+    `ValueError` saying which condition fails (`TypeError` for a non-numeric value)."""
+    try:
+        r = np.asarray(signs, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {signs!r}") from err
+    if r.shape != (system.dim,) or not np.all(np.abs(r) == 1.0):
+        raise ValueError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {np.asarray(signs).tolist()}")
+    why = _violations(system, r[None], _probes(system), reversing=False)[0]
+    if why:
+        raise ValueError(f"{name} = {r.astype(int).tolist()} is not a symmetry of {system!r}: {why}")
+    return r
 
 
 def reversing_symmetry(system: AbstractPoissonSystem) -> np.ndarray:
