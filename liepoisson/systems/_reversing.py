@@ -122,16 +122,23 @@ def sign_symmetries(system: AbstractPoissonSystem) -> list[np.ndarray]:
     return [s for s, why in zip(signs, _violations(system, signs, y, reversing=False)) if not why]
 
 
-def check_sign_symmetry(system: AbstractPoissonSystem, signs: Any, name: str = "symmetry") -> np.ndarray:
-    """`signs` as a float sign vector `(dim,)` if $S = \\mathrm{diag}$(`signs`) is a symmetry
-    of `system` (Poisson, $H\\circ S = H$; `sign_symmetries`) at 8 seeded random states, else
-    `ValueError` saying which condition fails (`TypeError` for a non-numeric value)."""
+def _sign_vector(system: AbstractPoissonSystem, signs: Any, name: str) -> np.ndarray:
+    """`signs` as a float vector of +1/-1 of length `system.dim`, or `TypeError`/`ValueError`
+    naming `name`."""
     try:
         r = np.asarray(signs, dtype=np.float64)
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {signs!r}") from err
     if r.shape != (system.dim,) or not np.all(np.abs(r) == 1.0):
         raise ValueError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {np.asarray(signs).tolist()}")
+    return r
+
+
+def check_sign_symmetry(system: AbstractPoissonSystem, signs: Any, name: str = "symmetry") -> np.ndarray:
+    """`signs` as a float sign vector `(dim,)` if $S = \\mathrm{diag}$(`signs`) is a symmetry
+    of `system` (Poisson, $H\\circ S = H$; `sign_symmetries`) at 8 seeded random states, else
+    `ValueError` saying which condition fails (`TypeError` for a non-numeric value)."""
+    r = _sign_vector(system, signs, name)
     why = _violations(system, r[None], _probes(system), reversing=False)[0]
     if why:
         raise ValueError(f"{name} = {r.astype(int).tolist()} is not a symmetry of {system!r}: {why}")
@@ -154,12 +161,7 @@ def check_reversing_symmetry(system: AbstractPoissonSystem, signs: Any, name: st
     """`signs` as a float sign vector `(dim,)` if $R = \\mathrm{diag}$(`signs`) is a reversing
     symmetry of `system` at 8 seeded random states (module docstring), else `ValueError`
     saying which condition fails (`TypeError` for a non-numeric value)."""
-    try:
-        r = np.asarray(signs, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise TypeError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {signs!r}") from err
-    if r.shape != (system.dim,) or not np.all(np.abs(r) == 1.0):
-        raise ValueError(f"{name} must be a vector of +1/-1 of length {system.dim}; got {np.asarray(signs).tolist()}")
+    r = _sign_vector(system, signs, name)
     y = _probes(system)
     why = _violations(system, r[None], y)[0]
     if why:
