@@ -7,15 +7,19 @@ from ._compare import (
     Comparison as Comparison,
     ComparisonRow as ComparisonRow,
     Convergence as Convergence,
+    RolloutFigures as RolloutFigures,
     compare as compare,
     convergence as convergence,
+    rollout_figures as rollout_figures,
 )
 from ._diagnostics import (
     DiagnosticsReport as DiagnosticsReport,
+    Divergence as Divergence,
     diagnostics as diagnostics,
     error_growth_rate as error_growth_rate,
 )
 from ._exact import ExactFlow as ExactFlow
+from ._implicit import AbstractImplicitStepMap as AbstractImplicitStepMap
 from ._ground_truth import (
     ground_truth as ground_truth,
     save_ground_truth as save_ground_truth,
@@ -29,4 +33,5 @@ from ._step_map import (
     RolloutDivergedError as RolloutDivergedError,
     StepCost as StepCost,
 )
+from ._timing import StepTiming as StepTiming, step_timing as step_timing
 from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

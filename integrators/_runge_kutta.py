@@ -12,7 +12,8 @@ import jax.numpy as jnp
 from liepoisson._validation import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._step_map import AbstractStepMap, check_state, traced_h, xla_flops
+from ._implicit import AbstractImplicitStepMap
+from ._step_map import AbstractStepMap, check_state
 
 
 class RK4(AbstractStepMap):
@@ -44,47 +45,38 @@ class RK4(AbstractStepMap):
         return 0
 
 
-class ImplicitMidpoint(AbstractStepMap):
+class ImplicitMidpoint(AbstractImplicitStepMap):
     r"""The implicit midpoint rule $y_{n+1} = y_n + h f\big(\tfrac12(y_n + y_{n+1})\big)$,
     order 2, symmetric. It conserves every quadratic first integral exactly (Cooper 1987;
     Hairer, Lubich, Wanner, *Geometric Numerical Integration*, Thm. IV.2.2), so the quadratic
     Casimirs of so(3)* and se(3)* to round-off and, for a quadratic Hamiltonian, the energy;
     it is not a Poisson map of a Lie-Poisson bracket (its Poisson defect is $O(h^3)$).
 
-    The stage equation is solved by `newton_iterations` Newton steps from the explicit Euler
-    guess (a fixed count, so the step is differentiable and compiles to a loop; Newton
-    converges quadratically, and the default reaches round-off for $h\|f'\| \lesssim 1$).
+    The stage equation is solved by `iterations` Newton steps from the explicit Euler guess (a
+    fixed count, so the step is differentiable and compiles to a loop; Newton converges
+    quadratically, and the default reaches round-off for $h\|f'\| \lesssim 1$). A step whose
+    last Newton step still moves the solution is NaN (`integrators.AbstractImplicitStepMap`).
 
-    **Arguments:** `system`; `h` > 0; `newton_iterations` >= 1 (default 8).
+    **Arguments:** `system`; `h` > 0; `iterations` >= 1 (default 8).
     """
 
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float
-    newton_iterations: int = eqx.field(static=True)
+    iterations: int = eqx.field(static=True)
 
-    def __init__(self, system: AbstractPoissonSystem, h: float, newton_iterations: int = 8):
+    def __init__(self, system: AbstractPoissonSystem, h: float, iterations: int = 8):
         self.system = check_system(system)
         self.h = positive_float(h, "h")
-        self.newton_iterations = positive_int(newton_iterations, "newton_iterations")
+        self.iterations = positive_int(iterations, "iterations")
 
-    def _newton(self, y: jax.Array, z: jax.Array) -> jax.Array:
+    def start(self, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        return y, y + self.h * self.system.vector_field(y)  # explicit Euler
+
+    def iterate(self, y: jax.Array, z: jax.Array) -> jax.Array:
         """One Newton step on the stage equation $z - y - h f((y + z)/2) = 0$."""
         h, f = self.h, self.system.vector_field
         jac = jax.jacfwd(f)(0.5 * (y + z))
         return z - jnp.linalg.solve(jnp.eye(self.system.dim) - 0.5 * h * jac, z - y - h * f(0.5 * (y + z)))
-
-    def _guess(self, y: jax.Array) -> jax.Array:
-        return y + self.h * self.system.vector_field(y)  # explicit Euler
-
-    def step(self, y: jax.Array) -> jax.Array:
-        y = check_state(y, self.system.dim)
-        return jax.lax.fori_loop(0, self.newton_iterations, lambda _, z: self._newton(y, z), self._guess(y))
-
-    def step_flops(self) -> float:
-        """The Euler guess plus `newton_iterations` Newton steps (the loop body counts once)."""
-        y = jnp.zeros(self.system.dim)
-        guess = xla_flops(lambda m, y: m._guess(y), traced_h(self), y)
-        return guess + self.newton_iterations * xla_flops(lambda m, y: m._newton(y, y), traced_h(self), y)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -10,12 +10,12 @@ _jax.config.update("jax_enable_x64", True)
 
 from ._base import AbstractLearnedMap as AbstractLearnedMap
 from ._baseline import MLPBaseline as MLPBaseline
+from ._equivariant import GroupAveraged as GroupAveraged
 from ._fit import (
     Adam as Adam,
     Checkpoint as Checkpoint,
     Progress as Progress,
     QuasiNewton as QuasiNewton,
-    alpha_mse as alpha_mse,
     default_optimiser as default_optimiser,
     fit as fit,
     state_mse as state_mse,
@@ -23,13 +23,17 @@ from ._fit import (
 from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._fit_splitting import fit_splitting as fit_splitting
 from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
-from ._lpnet import LPNet as LPNet
+from ._learned_terms import RidgeTerms as RidgeTerms
+from ._lpnet import LPNet as LPNet, alpha_mse as alpha_mse
+from ._mlp import AffineMLP as AffineMLP
+from ._networks import AbstractNetwork as AbstractNetwork
 from ._parametrisation import (
     AbstractStepParametrisation as AbstractStepParametrisation,
     SE3RotationShear as SE3RotationShear,
     TestFlowParametrisation as TestFlowParametrisation,
     default_parametrisation as default_parametrisation,
 )
+from ._reversible import Reversible as Reversible
 from ._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
 from ._sweep import (
     Sweep as Sweep,

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import abc
 import os
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -18,6 +19,7 @@ from liepoisson._validation import check_system
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from . import _checkpoint
+from ._legacy import upgrade_attributes
 
 if TYPE_CHECKING:  # typing.Self needs Python 3.11
     from typing_extensions import Self
@@ -26,22 +28,75 @@ if TYPE_CHECKING:  # typing.Self needs Python 3.11
 class AbstractLearnedMap(AbstractStepMap):
     r"""A learned one-step map $y_{n+1} = \mathbb T(y_n)$ of a Poisson system: a pure pytree
     (architecture + weights). Train it with `learn.fit`, which returns a new map and a
-    `TrainingRecord`.
+    `TrainingRecord`; `fit` asks the map, never its class, for what differs between kinds:
+    `default_optimiser`, `loss_function` and `loss_targets` (the losses it supports),
+    `normalised` (its fixed scalings), `warm_start` and `conserves_casimirs`.
 
-    Final subclasses take `(system, *, key, h, **hyperparameters)` in their constructor and
-    return those keyword arguments (JSON-serialisable) from `hyperparameters()`, so that a map
-    is rebuilt from a file or re-initialised with a new key.
+    Final subclasses return their architecture as JSON values from `hyperparameters()` and
+    rebuild themselves from it in `from_hyperparameters`, so that a map is rebuilt from a file
+    or re-initialised with a new key.
     """
+
+    #: Whether every step moves on the Casimir leaf: `learn.fit` then refuses data pairs whose
+    #: Casimirs differ, which no such map can connect.
+    conserves_casimirs: ClassVar[bool] = True
+    #: The losses `learn.fit(loss=...)` can train this map on (see `loss_function`).
+    losses: ClassVar[tuple[str, ...]] = ("state",)
+    #: Whether `warm_start` gives a simpler map to fit first (`QuasiNewton(warm_start=True)`).
+    has_warm_start: ClassVar[bool] = False
 
     @abc.abstractmethod
     def hyperparameters(self) -> dict[str, Any]:
-        """The constructor's keyword arguments besides `system`, `key` and `h` (JSON values)."""
+        """The architecture as JSON values (what `from_hyperparameters` takes)."""
+
+    @classmethod
+    def from_hyperparameters(cls, system: AbstractPoissonSystem, hyperparameters: dict[str, Any], *,
+                             key: int | jax.Array = 0, h: float | None = None) -> Self:
+        """The map of this architecture on `system` with fresh weights from `key` (default: the
+        constructor's keyword arguments)."""
+        return cls(system, key=key, h=h, **hyperparameters)
 
     def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
         """What the state loss compares with $y_1$ for the pair $(y_0, y_1)$ (one sample each):
         `step(y0)`; a map with an implicit step returns an explicit residual form instead that
-        equals $y_1$ exactly when the step carries $y_0$ to $y_1$ (a reversible `LPNet`)."""
+        equals $y_1$ exactly when the step carries $y_0$ to $y_1$ (`learn.Reversible`)."""
         return self.step(y0)
+
+    def default_optimiser(self) -> tuple[Any, ...]:
+        """The optimiser stages `learn.fit` runs when given none: 100,000 epochs of Adam
+        (learning rate 1e-3), the paper's for its MLPs."""
+        from ._fit import Adam
+
+        return (Adam(),)
+
+    def loss_function(self, loss: str) -> Callable[[Any, jax.Array, jax.Array], jax.Array]:
+        """`loss_fn(model, inputs, targets)`, a mean over samples, for the loss named `loss`:
+        `"state"` is the MSE of `training_prediction` against $y_1$ (paper eqs. Loss_function,
+        Loss_function_G_LPNets)."""
+        self._check_loss(loss)
+        from ._fit import state_mse
+
+        return state_mse
+
+    def loss_targets(self, loss: str, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:
+        """What `loss_function(loss)` compares with for the pairs `(y0, y1)`: $y_1$ for the
+        state loss."""
+        self._check_loss(loss)
+        return y1
+
+    def _check_loss(self, loss: str) -> None:
+        if loss not in self.losses:
+            raise ValueError(f"a {type(self).__name__} trains on loss in {list(self.losses)}; got loss={loss!r}")
+
+    def normalised(self, y0: np.ndarray, y1: np.ndarray, h: float, targets: np.ndarray | None = None) -> Self:
+        """The map with its fixed input/output scalings set from training pairs (and the
+        loss's `targets` where they are not states). Maps without scalings refuse."""
+        raise ValueError(f"normalise=True sets the scalings of an MLP; a {type(self).__name__} has none")
+
+    def warm_start(self) -> tuple[AbstractLearnedMap, Callable[[AbstractLearnedMap, np.ndarray], Self]] | None:
+        """`(simpler, mapped)` for `QuasiNewton(warm_start=True)`: a simpler map to fit first
+        and `mapped(fitted_simpler, inputs)`, this map started from it; `None` if it has none."""
+        return None
 
     @property
     def n_parameters(self) -> int:
@@ -51,7 +106,7 @@ class AbstractLearnedMap(AbstractStepMap):
 
     def reinitialised(self, key: int | jax.Array) -> Self:
         """The same architecture, scalings and `h` with fresh random weights from `key`."""
-        return type(self)(self.system, key=key, h=self.h, **self.hyperparameters())
+        return type(self).from_hyperparameters(self.system, self.hyperparameters(), key=key, h=self.h)
 
     # -- files -------------------------------------------------------------------------------
     def file_attributes(self) -> dict[str, Any]:
@@ -75,12 +130,14 @@ class AbstractLearnedMap(AbstractStepMap):
         """Read a map written by `save` (or the best weights of an Adam checkpoint). The
         system is rebuilt from the file (catalogue systems and user `LiePoissonSystem`s) or,
         given `system`, checked to match it (same algebra, Hamiltonian values at the saved
-        probe points for a user system; same parameters otherwise)."""
+        probe points for a user system; same parameters otherwise). Files of format version 1
+        (before learned maps were composed) are read into today's classes."""
         attrs, groups = _checkpoint.read(path)
+        attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
         system = check_file_matches(path, attrs, cls.__name__, system)
         try:
             h = float(attrs["h"])
-            model = cls(system, key=0, h=None if np.isnan(h) else h, **attrs["hyperparameters"])
+            model = cls.from_hyperparameters(system, attrs["hyperparameters"], key=0, h=None if np.isnan(h) else h)
             weights = groups["best"] if "best" in groups else groups["weights"]
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(

@@ -14,20 +14,24 @@ from liepoisson._validation import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
-from ._mlp import AffineMLP, Scaling, as_key, check_activation, check_hidden
+from ._mlp import AffineMLP, Scaling
+from ._networks import AbstractNetwork, network_from_spec
 
 
 class MLPBaseline(AbstractLearnedMap):
     r"""$y \mapsto y + s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$,
     with fixed scalings (`learn.fit(normalise=True)` sets them from the data: inputs $y_0$,
-    outputs $y_1 - y_0$). Trained on the state MSE only.
+    outputs $y_1 - y_0$). Trained on the state MSE only; it conserves no Casimir, so `learn.fit`
+    takes any pairs for it.
 
-    **Arguments:** as `LPNet`, without a parametrisation.
+    **Arguments:** as `LPNet`'s default network (`hidden`, `activation`, `key`, scalings), or
+    `network`, any `learn.AbstractNetwork` from `dim` to `dim`; `h`.
     """
 
-    network: AffineMLP
+    network: AbstractNetwork
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float | None
+    conserves_casimirs = False
 
     def __init__(
         self,
@@ -38,12 +42,18 @@ class MLPBaseline(AbstractLearnedMap):
         h: float | None = None,
         input_scaling: Scaling | None = None,
         output_scaling: Scaling | None = None,
+        *,
+        network: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
-        self.network = AffineMLP(
-            system.dim, system.dim, check_hidden(hidden), check_activation(activation), as_key(key),
-            input_scaling, output_scaling,
-        )
+        if network is None:
+            network = AffineMLP(system.dim, system.dim, hidden, activation, key, input_scaling, output_scaling)
+        elif not isinstance(network, AbstractNetwork):
+            raise TypeError(f"network must be a learn.AbstractNetwork (e.g. learn.AffineMLP); got {network!r}")
+        if (network.in_size, network.out_size) != (system.dim, system.dim):
+            raise ValueError(f"network must map states to increments (dim {system.dim} to {system.dim}); got "
+                             f"in_size={network.in_size}, out_size={network.out_size}")
+        self.network = network
         self.h = None if h is None else positive_float(h, "h")
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -55,6 +65,12 @@ class MLPBaseline(AbstractLearnedMap):
         return 0
 
     def hyperparameters(self) -> dict[str, Any]:
-        return {
-            **self.network.hyperparameters(),
-        }
+        return {"network": self.network.spec()}
+
+    @classmethod
+    def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
+        return cls(system, h=h, network=network_from_spec(hyperparameters["network"], key))
+
+    def normalised(self, y0, y1, h, targets=None):
+        """Scalings from the data: inputs the mean/std of $y_0$, outputs those of $y_1 - y_0$."""
+        return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, y1 - y0))

@@ -16,7 +16,9 @@ import numpy as np
 from integrators._files import atomic_path, open_hdf5
 
 FORMAT = "learn-model"
-FORMAT_VERSION = 1
+#: 2: learned maps are composed (LPNet + network, Reversible, GLPNet + method); version 1
+#: files (flags) are read by `_legacy.upgrade_attributes`.
+FORMAT_VERSION = 2
 
 
 def array_leaves(tree: Any) -> list[np.ndarray]:
@@ -99,4 +101,53 @@ def read(path: Any) -> tuple[dict[str, Any], dict[str, Any]]:
         raise ValueError(f"path {path!r} is damaged (corrupt HDF5 data or attributes): {err}") from err
     except (OSError, KeyError, TypeError, AttributeError) as err:
         raise ValueError(f"path {path!r} is damaged (corrupt HDF5 data or attributes): {type(err).__name__}: {err}") from err
+    return attrs, groups
+
+
+# What `learn.fit` writes to a `Checkpoint` beside a model's `file_attributes()`.
+CHECKPOINT_ATTRIBUTES = {
+    "class": str, "system": str, "system_params": dict, "hyperparameters": dict, "fit_settings": dict,
+    "epoch": int, "best_epoch": int, "best_loss": float, "elapsed_s": float,
+}
+CHECKPOINT_GROUPS = {"weights": list, "best": list, "optimizer": list, "history": dict}
+HISTORY = ("epoch", "train_loss", "val_loss")
+
+
+def read_checkpoint(path: str, class_name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """`(attrs, groups)` of a training checkpoint written by `learn.fit` for a `class_name`;
+    `ValueError` naming the file and what is wrong: a model saved by `.save` (with how to
+    start from it), another class, or a missing or mistyped attribute or group."""
+    attrs, groups = read(path)
+    saved = attrs.get("class")
+    if set(groups) == {"weights"} and not {"fit_settings", "epoch"} & set(attrs) and isinstance(saved, str):
+        raise ValueError(
+            f"checkpoint {path!r} is a saved model (written by {saved}.save), not a training "
+            "checkpoint: it holds the weights but not the optimiser state, epoch and fit settings "
+            "that resume needs. To start training from it, load it and fit with a new checkpoint "
+            f"path: `model = learn.{saved}.load({path!r})`, then `learn.fit(model, data, ..., "
+            "checkpoint=learn.Checkpoint(new_path, resume=True))`"
+        )
+    if saved is not None and saved != class_name:
+        raise ValueError(f"checkpoint {path!r} holds a {saved}, not a {class_name}")
+    missing = [f"attribute {k!r}" for k in CHECKPOINT_ATTRIBUTES if k not in attrs]
+    missing += [f"group {k!r}" for k in CHECKPOINT_GROUPS if k not in groups]
+    if missing:
+        raise ValueError(
+            f"checkpoint {path!r} is not a complete training checkpoint (as learn.fit writes with "
+            f"learn.Checkpoint): missing {', '.join(missing)}"
+        )
+    for key, kind in CHECKPOINT_ATTRIBUTES.items():
+        value = attrs[key]
+        ok = isinstance(value, (int, float)) if kind is float else isinstance(value, kind)
+        if not ok or isinstance(value, bool):
+            raise ValueError(
+                f"checkpoint {path!r} is damaged: attribute {key!r} must be a {kind.__name__}; "
+                f"got {type(value).__name__} {value!r}"
+            )
+    for key, kind in CHECKPOINT_GROUPS.items():
+        if not isinstance(groups[key], kind):
+            raise ValueError(f"checkpoint {path!r} is damaged: group {key!r} must hold a {kind.__name__} of arrays")
+    absent = [k for k in HISTORY if k not in groups["history"]]
+    if absent:
+        raise ValueError(f"checkpoint {path!r} is damaged: group 'history' lacks {', '.join(map(repr, absent))}")
     return attrs, groups

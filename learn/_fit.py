@@ -24,16 +24,12 @@ from liepoisson._progress import show_progress
 from liepoisson._validation import positive_float, positive_int
 
 from ._base import AbstractLearnedMap
-from ._baseline import MLPBaseline
 from ._data import PairData, prepare
-from ._glpnet import GLPNet, linear_to_activation
-from ._lpnet import LPNet
 from ._quasi_newton import check_method, minimiser
 from ._record import StageRecord, TrainingRecord
 from ._training import train_adam
 
 _Map = TypeVar("_Map", bound=AbstractLearnedMap)
-LOSSES = ("state", "alpha")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,11 +127,17 @@ Callback = Callable[[Progress], None]
 
 
 def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
-    """BFGS with the identity warm start (3500 iterations, 4 starts) for a G-LPNet, as the
-    paper; 100,000 epochs of Adam (learning rate 1e-3) for the MLP-based maps."""
-    if isinstance(model, GLPNet):
-        return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
-    return (Adam(),)
+    """What `learn.fit` runs when given no optimiser: `model.default_optimiser()` (BFGS with
+    the identity warm start, 3500 iterations, 4 starts, for a G-LPNet, as the paper; 100,000
+    epochs of Adam, learning rate 1e-3, for the MLP-based maps)."""
+    return _learned_map(model).default_optimiser()
+
+
+def _learned_map(value: Any, name: str = "model") -> AbstractLearnedMap:
+    if not isinstance(value, AbstractLearnedMap):
+        raise TypeError(f"{name} must be a learned map (learn.LPNet, Reversible, GLPNet, MLPBaseline); "
+                        f"got {type(value).__name__}")
+    return value
 
 
 def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Array:
@@ -143,13 +145,6 @@ def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Ar
     learned map (paper eqs. Loss_function, Loss_function_G_LPNets), through
     `training_prediction` (the explicit residual form of an implicit step)."""
     return jnp.mean((vmap_samples(model.training_prediction)(y0, y1) - y1) ** 2)
-
-
-def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:
-    """MSE of an LPNet's $\\alpha(y_0)$ against the pairs' parameters, in units of the output
-    scale."""
-    scale = jnp.asarray(model.network.output_scale)
-    return jnp.mean(((jax.vmap(model.alpha)(y0) - alpha) / scale) ** 2)
 
 
 def fit(
@@ -171,7 +166,7 @@ def fit(
 
     **Arguments:**
 
-    - `model`: an `LPNet`, `GLPNet` or `MLPBaseline` (not modified).
+    - `model`: a learned map (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`; not modified).
     - `data`: an `integrators.Trajectories` (consecutive states are the pairs, `h` its step),
       or `(y0, y1)` arrays `(N, dim)` with `h=`.
     - `optimiser`: an `Adam` or `QuasiNewton`, or a sequence of them run one after the other
@@ -180,9 +175,9 @@ def fit(
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
       mini-batches and restarts).
     - `loss`: `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
-      LPNet through the exact flow, for a reversible LPNet through its explicit residual form
-      `training_prediction`) or, LPNet only, `"alpha"` (MSE between $\alpha(y_0)$ and the pairs'
-      parameters `parametrisation.params_from_pair(y0, y1, h)`; not for a reversible LPNet).
+      LPNet through the exact flow, for a `Reversible` through its explicit residual form
+      `training_prediction`) or another of `model.losses`: an LPNet's `"alpha"` (MSE between
+      $\alpha(y_0)$ and the pairs' parameters `parametrisation.params_from_pair(y0, y1, h)`).
     - `normalise` (MLP-based maps): set the fixed input/output scalings from the training data
       first (inputs: mean/std of $y_0$; outputs: of the pairs' parameters for an LPNet, of
       $y_1 - y_0$ for the baseline). Default `False`: a plain MLP as in the paper. On E1
@@ -192,40 +187,28 @@ def fit(
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal); `callback(learn.Progress)`: called as training
       goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
-    if not isinstance(model, AbstractLearnedMap):
-        raise TypeError(f"model must be a learn.LPNet, GLPNet or MLPBaseline; got {type(model).__name__}")
+    model = _learned_map(model)
     if epochs is not None:
         if optimiser is not None:
             raise ValueError("give either epochs (short for optimiser=learn.Adam(epochs)) or optimiser, not both")
         optimiser = Adam(positive_int(epochs, "epochs"))
-    stages = default_optimiser(model) if optimiser is None else optimiser
+    stages = model.default_optimiser() if optimiser is None else optimiser
     if isinstance(stages, (Adam, QuasiNewton)):
         stages = (stages,)
     stages = tuple(stages)
     if not stages or not all(isinstance(s, (Adam, QuasiNewton)) for s in stages):
         raise TypeError(f"optimiser must be a learn.Adam or learn.QuasiNewton, or a sequence of them; got {optimiser!r}")
-    if loss not in LOSSES:
-        raise ValueError(f"loss must be one of {list(LOSSES)}; got {loss!r}")
-    if loss == "alpha" and not isinstance(model, LPNet):
-        raise ValueError(f"loss='alpha' trains an LPNet's parameters alpha; {type(model).__name__} has none")
-    if loss == "alpha" and model.reversing is not None:
-        raise ValueError(
-            "loss='alpha' fits alpha to the parameters of one test flow per pair; a reversible LPNet "
-            "(reversing=...) makes two per step, whose parameters no pair determines: use loss='state'"
-        )
-    if normalise and isinstance(model, GLPNet):
-        raise ValueError("normalise=True sets the scalings of an MLP; a GLPNet has none")
+    loss_fn = model.loss_function(loss)  # ValueError for a loss this map cannot train on
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable as callback(learn.Progress); got {callback!r}")
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
         raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
     if checkpoint is not None and sum(isinstance(s, Adam) for s in stages) != 1:
         raise ValueError("checkpoint needs exactly one Adam stage in optimiser")
-    if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not isinstance(model, GLPNet):
-        raise ValueError("QuasiNewton(warm_start=True) is the G-LPNet's identity warm start; "
-                         f"use warm_start=False for a {type(model).__name__}")
-    pairs = prepare(data, model.system, h, validation_fraction, seed,
-                    conserves_casimirs=not isinstance(model, MLPBaseline))
+    if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not model.has_warm_start:
+        raise ValueError(f"QuasiNewton(warm_start=True): a {type(model).__name__} has no warm start (the G-LPNet's "
+                         "identity warm start); use warm_start=False")
+    pairs = prepare(data, model.system, h, validation_fraction, seed, conserves_casimirs=model.conserves_casimirs)
     if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
         raise ValueError(
             f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "
@@ -233,7 +216,7 @@ def fit(
         )
     model = eqx.tree_at(lambda m: m.h, model, pairs.h, is_leaf=lambda x: x is None)
     progress = show_progress(progress)
-    model, train, val, loss_fn = _objective(model, pairs, loss, normalise)
+    model, train, val = _objective(model, pairs, loss, normalise)
     X, T = (jnp.asarray(a) for a in train)
     Xv, Tv = (jnp.asarray(a) for a in val)
     settings = {
@@ -267,23 +250,14 @@ def _report(callback: Callback, stage: int, name: str, done: int, total: int, tr
 
 
 def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise: bool):
-    """`(model, (inputs, targets), (inputs_val, targets_val), loss_fn)`; the model's scalings
-    set from the data when `normalise`."""
-    if loss == "alpha":
-        p = model.parametrisation
-        targets = p.params_from_pair(pairs.y0, pairs.y1, pairs.h)
-        targets_val = (p.params_from_pair(pairs.y0_val, pairs.y1_val, pairs.h) if pairs.has_validation
-                       else np.zeros((0, p.n_params)))
-        if normalise:
-            model = eqx.tree_at(lambda m: m.network, model, model.network.rescaled(pairs.y0, targets))
-        return model, (pairs.y0, targets), (pairs.y0_val, targets_val), alpha_mse
+    """`(model, (inputs, targets), (inputs_val, targets_val))` for the loss named `loss`; the
+    model's scalings set from the training pairs when `normalise`."""
+    targets = model.loss_targets(loss, pairs.y0, pairs.y1, pairs.h)
+    targets_val = (model.loss_targets(loss, pairs.y0_val, pairs.y1_val, pairs.h) if pairs.has_validation
+                   else np.zeros((0, targets.shape[-1])))
     if normalise:
-        if isinstance(model, LPNet):
-            outputs = model.alpha_estimate(pairs.y0, pairs.y1, pairs.h)
-        elif isinstance(model, MLPBaseline):
-            outputs = pairs.y1 - pairs.y0
-        model = eqx.tree_at(lambda m: m.network, model, model.network.rescaled(pairs.y0, outputs))
-    return model, (pairs.y0, pairs.y1), (pairs.y0_val, pairs.y1_val), state_mse
+        model = model.normalised(pairs.y0, pairs.y1, pairs.h, None if loss == "state" else targets)
+    return model, (pairs.y0, targets), (pairs.y0_val, targets_val)
 
 
 def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress, report):
@@ -369,9 +343,9 @@ def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int,
     loss = _flat_loss(loss_fn, static, params)
     evaluate = _compiled(("evaluate", loss), lambda: jax.jit(loss))
     minimise = minimiser(stage.method, loss, Xh, T)  # compiled once, reused by every start
-    warm = stage.warm_start and model.activation != "identity"
-    if warm:
-        linear = eqx.tree_at(lambda m: m.activation, model, "identity")
+    warm = model.warm_start() if stage.warm_start else None
+    if warm is not None:
+        linear = warm[0]
         lin_params, lin_static = eqx.partition(linear, eqx.is_inexact_array)
         lin_unravel = ravel_pytree(lin_params)[1]  # same flat layout, other static activation
         minimise_linear = minimiser(stage.method, _flat_loss(loss_fn, lin_static, lin_params), Xh, T)
@@ -392,11 +366,12 @@ def _run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int,
         else:
             x0 = ravel_pytree(eqx.filter(model.reinitialised(jax.random.fold_in(base, r)), eqx.is_inexact_array))[0]
         desc = f"{name} start {r + 1}/{stage.restarts}" if stage.restarts > 1 else name
-        if warm:
+        if warm is not None:
             first = max(1, stage.iterations // 2)
             x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (identity)")
-            mapped = linear_to_activation(eqx.combine(unravel(x0), static),
-                                          eqx.combine(lin_unravel(x_lin), lin_static), X)
+            # mapped onto this start's own weights (a restart's random vectors and activation)
+            to_model = eqx.combine(unravel(x0), static).warm_start()[1]
+            mapped = to_model(eqx.combine(lin_unravel(x_lin), lin_static), X)
             x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
             x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} ({model.activation})")
             shift = h1["epoch"][-1] if len(h1["epoch"]) else 0

@@ -1,17 +1,16 @@
-r"""G-LPNets (paper section "G-LPNets: Derivation and test cases"): compositions of modules
-$\widetilde{\mathbb T}_s y = \exp\!\big(\tfrac hM\,q_s(y)\,\mathbb M(\alpha_s)\big)y$,
-$q_s = a_s\,\sigma(\langle\alpha_s, y\rangle) + b_s$ (eq. G_LPNets_moduli).
+r"""G-LPNets (paper section "G-LPNets: Derivation and test cases"): a classical splitting method
+applied to learnable collective terms, the data-driven splitting of a learned Hamiltonian
+$\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ (eqs. G_LPNets_moduli,
+Loss_function_G_LPNets).
 
-Each module is the exact flow of $\varphi_s(\langle\alpha_s, y\rangle)$ with
-$\varphi_s' = a_s\sigma + b_s$, because $\langle\alpha_s, y\rangle$ is conserved along the flow
-of a linear test Hamiltonian $\langle\alpha_s, y\rangle$: every module, hence the network, is an
-exact Poisson map.
+Each piece is solved exactly (`learn.RidgeTerms`) and its flow is a Poisson map, so the network
+is an exact Poisson map for any weights, whatever the method composing the pieces.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -20,73 +19,53 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators._splitting._strang import strang_compose
-from integrators._step_map import check_state
-from integrators.splitting import AbstractCompositionMethod
+from integrators._step_map import check_state, traced_h, xla_flops
+from integrators.splitting import AbstractSplittingMethod, LieTrotter
 from liepoisson import JAX
-from liepoisson._validation import as_state, check_system, positive_float, positive_int
+from liepoisson._validation import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
-from ._mlp import ACTIVATIONS, activation_antiderivative, as_key, check_activation
+from ._learned_terms import RidgeTerms, ridge_potential
+from ._mlp import ACTIVATIONS, activation_antiderivative
 
 
-def _check_order(order: Sequence[int] | None, n_modules: int, dim: int) -> tuple[int, ...]:
-    if order is None:
-        return tuple(s % dim for s in range(n_modules))
-    try:
-        order = tuple(order)
-    except TypeError as err:
-        raise TypeError(f"order must be a sequence of basis indices; got {order!r}") from err
-    if len(order) != n_modules:
-        raise ValueError(f"order must have n_modules = {n_modules} entries; got {len(order)}")
-    for s, k in enumerate(order):
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < dim:
-            raise ValueError(f"order[{s}] must be a basis index in [0, {dim}); got {k!r}")
-    return tuple(int(k) for k in order)
+def check_method(method: Any) -> type[AbstractSplittingMethod]:
+    """A splitting method class of `integrators.splitting` (an instance stands for its class)."""
+    cls = method if isinstance(method, type) else type(method)
+    if not issubclass(cls, AbstractSplittingMethod):
+        raise TypeError(
+            "method must be a splitting method of integrators.splitting (LieTrotter, Strang, TripleJump, "
+            f"Yoshida6, ...), class or instance; got {method!r}"
+        )
+    return cls
 
 
 class GLPNet(AbstractLearnedMap):
-    r"""Global Lie-Poisson network: $M$ modules $\widetilde{\mathbb T}_s$, each a rescaled exact
-    test flow over $h/M$ (paper eqs. G_LPNets_moduli, Loss_function_G_LPNets).
+    r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
+    $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
+    `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$ (paper eqs. G_LPNets_moduli,
+    Loss_function_G_LPNets).
 
-    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis ($e_1, e_2, e_3, e_1,
-    \ldots$, paper eq. Rot_sequence): three scalars $(a_s, c_s, b_s)$ per module, 18 parameters
-    for 6 modules. `full_vectors=True` learns $\alpha_s\in\mathbb R^n$. Exactly Poisson and
-    Casimir-conserving for any parameters. Trained by default with BFGS and the identity warm
-    start (`learn.fit(gnet, data)`, see `learn.QuasiNewton`).
+    `method` is any `integrators.splitting` method, run by the same code that runs it on a
+    known Hamiltonian's pieces: `LieTrotter` (default) is the paper's G-LPNet, each module over
+    $h/M$, i.e. $w = 1/M$, order 1; `Strang` applies modules $1..M-1$ over $h/2$, module $M$ over
+    $h$, then $M-1..1$ over $h/2$, symmetric and of order 2, with $w = 1$; `TripleJump`,
+    `Yoshida6`, ... compose Strang steps to order 4 and 6 ($w = 1$). The network IS
+    `method(net.learned_system(), h)`: a symmetric one runs at other step sizes (`with_h`).
+    Exactly Poisson and Casimir-conserving for any parameters; trained by default with BFGS
+    and the identity warm start (`learn.fit(gnet, data)`, see `learn.QuasiNewton`).
 
-    **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$:
-    each basis direction twice, the paper's 6 for so(3)); `order` of the basis vectors (default cycling);
-    `key`; `full_vectors`; `activation` $\sigma$ (paper: sigmoid); `h` (`None`: set by
-    `learn.fit`); `symmetric`: the data-driven Strang splitting below; `linear_term`: a fourth
-    scalar per module, $q_s = a_s\sigma(x) + e_s x + b_s$ with $x = \langle\alpha_s, y\rangle$,
-    so that a quadratic piece of $\widetilde H$ is exact and the sigmoid carries the rest. A
-    sigmoid alone is linear only in the limit $c_s \to 0$, and its cubic term,
-    $-a_sc_s^3x^3/48$, has the opposite sign to its linear term $a_sc_sx/4$: it cannot fit
-    $\Phi_s' = x/I - 0.1\sin x$.
-
-    **As a splitting method.** Module $s$ is the exact flow of the ridge Hamiltonian
-    $\Phi_s(\langle\alpha_s, y\rangle)$, $\Phi_s' = a_s\sigma + b_s$, so the network is a
-    splitting of the learned Hamiltonian $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$
-    (`hamiltonian`). The paper's network (default) applies each module over $h/M$: Lie-Trotter
-    for $\widetilde H$ with $w = 1/M$, order 1. `symmetric=True` applies modules $1..M-1$ over
-    $h/2$, module $M$ over $h$, then $M-1..1$ over $h/2$ ($2M - 1$ flows): Strang for
-    $\widetilde H$ with $w = 1$, symmetric and of order 2 in $h$, so it can be run at other step
-    sizes (`with_h`) and inside the compositions of `integrators.splitting` through
-    `learned_system()` (e.g. `it.splitting.Yoshida6(gnet.learned_system(), h)`).
+    **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$: each
+    basis direction twice, the paper's 6 for so(3)), `order`, `key`, `activation` (paper:
+    sigmoid), `full_vectors`, `linear_term`: the pieces, `learn.RidgeTerms`, or `terms`, such
+    pieces given whole (then none of those); `method` (class); `h` (`None`: set by
+    `learn.fit`).
     """
 
-    a: jax.Array
-    c: jax.Array
-    b: jax.Array
-    e: jax.Array | None
-    activation: str
+    terms: RidgeTerms
     system: AbstractPoissonSystem = eqx.field(static=True)
-    order: tuple[int, ...] = eqx.field(static=True)
-    full_vectors: bool = eqx.field(static=True)
-    symmetric: bool = eqx.field(static=True)
-    linear_term: bool = eqx.field(static=True)
+    method: type[AbstractSplittingMethod] = eqx.field(static=True)
     h: float | None
 
     def __init__(
@@ -96,163 +75,130 @@ class GLPNet(AbstractLearnedMap):
         order: Sequence[int] | None = None,
         key: int | jax.Array = 0,
         *,
-        full_vectors: bool = False,
-        activation: str = "sigmoid",
+        method: Any = LieTrotter,
         h: float | None = None,
-        symmetric: bool = False,
+        activation: str = "sigmoid",
+        full_vectors: bool = False,
         linear_term: bool = False,
+        terms: RidgeTerms | None = None,
     ):
         self.system = check_system(system)
-        # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
-        # algebra's G-LPNet can rotate about each axis on both sides of the others.
-        n_modules = 2 * system.dim if n_modules is None else positive_int(n_modules, "n_modules")
-        self.order = _check_order(order, n_modules, system.dim)
-        self.full_vectors = bool(full_vectors)
-        if not isinstance(symmetric, (bool, np.bool_)):
-            raise TypeError(f"symmetric must be True or False; got {symmetric!r}")
-        self.symmetric = bool(symmetric)
-        if not isinstance(linear_term, (bool, np.bool_)):
-            raise TypeError(f"linear_term must be True or False; got {linear_term!r}")
-        self.linear_term = bool(linear_term)
-        self.activation = check_activation(activation)
+        if terms is None:
+            # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
+            # algebra's G-LPNet can rotate about each axis on both sides of the others.
+            n_modules = 2 * system.dim if n_modules is None else n_modules
+            terms = RidgeTerms(system.dim, n_modules, order, key, activation=activation,
+                               full_vectors=full_vectors, linear_term=linear_term)
+        elif not isinstance(terms, RidgeTerms):
+            raise TypeError(f"terms must be a learn.RidgeTerms; got {type(terms).__name__}")
+        elif terms.dim != system.dim:
+            raise ValueError(f"terms are for states of dimension {terms.dim}; {system!r} has {system.dim}")
+        self.terms = terms
+        self.method = check_method(method)
+        self.method.check_terms(terms.n_modules, f"a GLPNet of {terms.n_modules} modules")
         self.h = None if h is None else positive_float(h, "h")
-        ka, kc, kb = jax.random.split(as_key(key), 3)
-        shape = (n_modules, system.dim) if self.full_vectors else (n_modules,)
-        self.a = jax.random.normal(ka, (n_modules,), jnp.float64)
-        self.c = jax.random.normal(kc, shape, jnp.float64)
-        self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64)
-        self.e = jnp.zeros(n_modules, jnp.float64) if self.linear_term else None
 
     @property
     def n_modules(self) -> int:
-        return len(self.order)
-
-    def module_vectors(self) -> jax.Array:
-        r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
-        if self.full_vectors:
-            return self.c
-        return self.c[:, None] * jnp.eye(self.system.dim)[jnp.asarray(self.order)]
-
-    def module_flow(self, s: int, t: float, y: jax.Array) -> jax.Array:
-        r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
-        with the rate $q_s = a_s\sigma(\langle\alpha_s, y\rangle) + b_s$ (+ $e_s\langle\alpha_s,
-        y\rangle$ with `linear_term`) frozen (it is conserved)."""
-        alpha = self.module_vectors()[s]
-        x = jnp.dot(alpha, y)
-        q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
-        if self.linear_term:
-            q = q + self.e[s] * x
-        return self.system.test_flow(q * alpha, t, y)
-
-    def step(self, y: jax.Array) -> jax.Array:
-        y = check_state(y, self.system.dim)
-        if self.symmetric:
-            flows = [functools.partial(self.module_flow, s) for s in range(self.n_modules)]
-            return strang_compose(flows, y, self.h)
-        dt = self.h / self.n_modules
-        for s in range(self.n_modules):
-            y = self.module_flow(s, dt, y)
-        return y
+        return self.terms.n_modules
 
     @property
-    def exact_flows_per_step(self) -> int:
-        return 2 * self.n_modules - 1 if self.symmetric else self.n_modules
+    def activation(self) -> str:
+        return self.terms.activation
+
+    @property
+    def _time_divisor(self) -> int:
+        # the paper's Lie-Trotter network runs each module over h/M (w = 1/M), written as a
+        # division of the time so that its arithmetic is the paper's
+        return self.n_modules if self.method is LieTrotter else 1
 
     @property
     def hamiltonian_weight(self) -> float:
-        r"""$w$ in $\widetilde H = w\sum_s\Phi_s$: 1 (symmetric, Strang) or $1/M$ (Lie-Trotter)."""
-        return 1.0 if self.symmetric else 1.0 / self.n_modules
+        r"""$w$ in $\widetilde H = w\sum_s\Phi_s$: $1/M$ (`LieTrotter`, the paper's) or 1."""
+        return 1.0 / self._time_divisor
+
+    def module_vectors(self) -> jax.Array:
+        r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
+        return self.terms.vectors()
+
+    def module_flow(self, s: int, t: Any, y: jax.Array) -> jax.Array:
+        r"""The exact flow of $w\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`."""
+        return self.terms.flow(self.system, s, t / self._time_divisor, y)
+
+    def flows(self) -> list[Callable[[Any, jax.Array], jax.Array]]:
+        """The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order."""
+        return [functools.partial(self.module_flow, s) for s in range(self.n_modules)]
+
+    def step(self, y: jax.Array) -> jax.Array:
+        return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return self.method.flows_per_step(self.n_modules)
+
+    def step_flops(self) -> float:
+        return self.method.stages()[1] * xla_flops(_stage_of, traced_h(self), jnp.zeros(self.system.dim))
 
     def hamiltonian(self, y: ArrayLike) -> jax.Array:
         r"""The learned Hamiltonian $\widetilde H(y) = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$
         (up to a constant), shape `(...)` for `y` of shape `(..., dim)`. Needs an activation
         with a closed-form antiderivative (`sigmoid`, `tanh`, `identity`)."""
         y = as_state(y, "y", self.system.dim)
-        antiderivative = activation_antiderivative(self.activation)
-        s = jnp.einsum("md,...d->...m", self.module_vectors(), y)
-        e = 0.0 if self.e is None else self.e
-        return self.hamiltonian_weight * jnp.sum(self.a * antiderivative(s, JAX) + 0.5 * e * s**2 + self.b * s, axis=-1)
+        t = self.terms
+        s = jnp.einsum("md,...d->...m", t.vectors(), y)
+        e = 0.0 if t.e is None else t.e
+        potential = ridge_potential(s, t.a, t.b, e, activation_antiderivative(t.activation), JAX)
+        return self.hamiltonian_weight * jnp.sum(potential, axis=-1)
 
     def learned_system(self):
         r"""The Poisson system $\dot y = \mathbb B(y)\nabla\widetilde H$ with this network's
-        learned Hamiltonian and the system's bracket, split into its ridge pieces (one
+        learned Hamiltonian and the system's bracket, split into its pieces (one
         `CollectiveTerm` per module): every method of `integrators.splitting` runs on it, and
-        `Strang(gnet.learned_system(), h)` is the symmetric network at step `h`."""
+        `self.method(gnet.learned_system(), h)` is this network at step `h`."""
         from ._learned_system import LearnedHamiltonian
 
         return LearnedHamiltonian(self)
 
-    def composed(self, method: Any) -> GLPNet:
-        r"""The symmetric network whose step is the composition `method` of this network's
-        Strang step, $S_{\gamma_r h}\circ\cdots\circ S_{\gamma_1 h}$ with the palindromic
-        table $\gamma$ of an `integrators.splitting` composition (`TripleJump`, `Suzuki`,
-        `McLachlan4`, `Yoshida6`; class or instance): the same map, to round-off, as one
-        symmetric `GLPNet`. Adjacent flows of one module merge, and module $s$ run over
-        $\gamma h/2$ is module $s$ with $(a_s, b_s, e_s)$ scaled by $\gamma$, so $M$ modules become
-        $r(M-1)+1$ (`TripleJump`: $3M-2$).
-
-        The data-driven splitting of higher order: fit a symmetric network (a Strang step, order
-        2), compose it, and fit again from there (`learn.fit(..., optimiser=QuasiNewton(...,
-        warm_start=False))`), or both in one call with `learn.fit_splitting`; the refit moves
-        the pieces from the modified Hamiltonian of the Strang fit to that of the composition. On the algebras of `benchmarks/any_algebra.py`
-        this lowers the loss 13x (so(4)) to 4000x (diamond) below the Strang fit's, where a
-        `TripleJump`-shaped network trained from the identity warm start stays near a
-        Strang-like minimum."""
-        gammas = composition_coefficients(method)
-        if not self.symmetric:
-            raise ValueError(
-                "composed needs a symmetric G-LPNet (its step is a Strang step); got symmetric=False: "
-                "train GLPNet(system, symmetric=True) and compose that"
-            )
-        modules, weights = _composed_palindrome(self.n_modules, gammas)
-        src = jnp.asarray(modules)
-        w = jnp.asarray(weights)
-        net = GLPNet(self.system, len(modules), [self.order[m] for m in modules], full_vectors=self.full_vectors,
-                     activation=self.activation, h=self.h, symmetric=True, linear_term=self.linear_term)
-        net = eqx.tree_at(lambda n: (n.a, n.c, n.b), net, (self.a[src] * w, self.c[src], self.b[src] * w))
-        return eqx.tree_at(lambda n: n.e, net, self.e[src] * w) if self.linear_term else net
-
     def hyperparameters(self) -> dict[str, Any]:
-        return {
-            "n_modules": self.n_modules,
-            "order": list(self.order),
-            "full_vectors": self.full_vectors,
-            "activation": self.activation,
-            "symmetric": self.symmetric,
-            "linear_term": self.linear_term,
-        }
+        return {**self.terms.spec(), "method": self.method.__name__}
+
+    @classmethod
+    def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
+        hp = dict(hyperparameters)
+        method = _method_from_name(hp.pop("method"))
+        return cls(system, key=key, h=h, method=method, **hp)
+
+    # -- what learn.fit asks -------------------------------------------------------------------
+    def default_optimiser(self):
+        """BFGS with the identity warm start (3500 iterations, 4 starts), as the paper."""
+        from ._fit import QuasiNewton
+
+        return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
+
+    has_warm_start = True
+
+    def warm_start(self):
+        """The same network with the identity activation (flows of quadratics, a smooth
+        problem), and `linear_to_activation` to map its fit onto this one; `None` if this one
+        already has the identity."""
+        if self.activation == "identity":
+            return None
+        linear = eqx.tree_at(lambda m: m.terms.activation, self, "identity")
+        return linear, functools.partial(linear_to_activation, self)
 
 
-def composition_coefficients(method: Any) -> np.ndarray:
-    r"""The table $\gamma$ of a composition of Strang steps (`integrators.splitting`
-    `TripleJump`, `Suzuki`, `McLachlan4`, `Yoshida6`; class or instance)."""
-    cls = method if isinstance(method, type) else type(method)
-    if not issubclass(cls, AbstractCompositionMethod):
-        raise TypeError(
-            "method must be a composition of Strang steps from integrators.splitting (TripleJump, "
-            f"Suzuki, McLachlan4, Yoshida6), class or instance; got {method!r}"
-        )
-    return np.asarray(cls.coefficients, dtype=np.float64)
+def _stage_of(net: GLPNet, y: jax.Array) -> jax.Array:
+    """One composition by the inner method of `net.method.stages()` (for the flop count)."""
+    return net.method.stages()[0].compose(net.flows(), y, net.h)
 
 
-def _composed_palindrome(n_modules: int, gammas: np.ndarray) -> tuple[list[int], list[float]]:
-    r"""Modules and weights of the symmetric network equal to $S_{\gamma_r h}\circ\cdots\circ
-    S_{\gamma_1 h}$ for a Strang step $S$ of `n_modules` modules: the flows $(s, \tau)$ (module,
-    time in units of $h$) of the composition, adjacent flows of one module merged, give a
-    palindrome whose first half (run over $h/2$: weight $2\tau$) and centre (run over $h$:
-    weight $\tau$) are the new modules."""
-    half = list(range(n_modules - 1))
-    flows: list[list] = []
-    for g in gammas:
-        for s, tau in [(s, 0.5 * g) for s in half] + [(n_modules - 1, g)] + [(s, 0.5 * g) for s in reversed(half)]:
-            if flows and flows[-1][0] == s:
-                flows[-1][1] += tau
-            else:
-                flows.append([s, tau])
-    centre = len(flows) // 2  # the merged list is an odd palindrome since gammas is
-    modules = [s for s, _ in flows[: centre + 1]]
-    weights = [2.0 * tau for _, tau in flows[:centre]] + [flows[centre][1]]
-    return modules, weights
+def _method_from_name(name: str) -> type[AbstractSplittingMethod]:
+    from integrators.splitting import METHODS
+
+    for cls in METHODS:
+        if cls.__name__ == name:
+            return cls
+    raise ValueError(f"unknown splitting method {name!r}; known: {[c.__name__ for c in METHODS]}")
 
 
 def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float = 0.05) -> GLPNet:
@@ -269,9 +215,11 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     With a linear term (`linear_term=True`) the map is exact: $e'_s = a_s + e_s$, $a'_s = 0$,
     $b'_s = b_s$, $\alpha'_s = \alpha_s$, and the sigmoid starts from zero.
     """
-    if net.linear_term:
-        zero = jnp.zeros_like(linear.a)
-        return eqx.tree_at(lambda n: (n.a, n.c, n.b, n.e), net, (zero, linear.c, linear.b, linear.a + linear.e))
+    if net.terms.linear_term:
+        lin = linear.terms
+        zero = jnp.zeros_like(lin.a)
+        return eqx.tree_at(lambda n: (n.terms.a, n.terms.c, n.terms.b, n.terms.e), net,
+                           (zero, lin.c, lin.b, lin.a + lin.e))
     act = ACTIVATIONS[net.activation]
     s0, s1 = float(act(0.0)), float(jax.grad(act)(0.0))
     if s1 == 0.0:
@@ -279,9 +227,9 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     vectors = linear.module_vectors()
     spread = jnp.max(jnp.abs(X @ vectors.T), axis=0)  # max |<alpha_s, y>| over the data
     eps = width / jnp.maximum(spread, 1e-300)
-    a = linear.a / (s1 * eps**2)
-    b = linear.b / eps - s0 * a
-    c = linear.c * (eps[:, None] if net.full_vectors else eps)
-    return eqx.tree_at(lambda n: (n.a, n.c, n.b), net, (a, c, b))
+    a = linear.terms.a / (s1 * eps**2)
+    b = linear.terms.b / eps - s0 * a
+    c = linear.terms.c * (eps[:, None] if net.terms.full_vectors else eps)
+    return eqx.tree_at(lambda n: (n.terms.a, n.terms.c, n.terms.b), net, (a, c, b))
 
 

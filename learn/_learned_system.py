@@ -11,6 +11,7 @@ import numpy as np
 from liepoisson import JAX as _JAX
 from liepoisson.systems import AbstractPoissonSystem, CollectiveTerm
 
+from ._learned_terms import ridge_potential
 from ._mlp import activation_antiderivative
 
 if TYPE_CHECKING:
@@ -21,8 +22,8 @@ class LearnedHamiltonian(AbstractPoissonSystem):
     r"""$\dot y = \mathbb B(y)\nabla\widetilde H(y)$ with the bracket, Casimirs and test flows of
     `net.system` and $\widetilde H$ the network's learned Hamiltonian (its parameters frozen,
     as numpy). `hamiltonian_splitting()` is one `CollectiveTerm` per module, in module order,
-    so `integrators.splitting.Strang(LearnedHamiltonian(net), h)` reproduces a symmetric
-    network's step and the higher-order compositions refine it. The heyoka right-hand side
+    so `net.method(LearnedHamiltonian(net), h)` reproduces the network's step and the other
+    methods of `integrators.splitting` run on the same learned Hamiltonian. The heyoka right-hand side
     works too (`ground_truth` of the learned dynamics).
 
     Built by `GLPNet.learned_system()`.
@@ -32,13 +33,14 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         self.base = net.system
         self.name = f"learned_{net.system.name}"
         self.dim = net.system.dim
-        self.activation = net.activation
-        self._antiderivative = activation_antiderivative(net.activation)
-        self.vectors = np.asarray(net.module_vectors(), dtype=np.float64)
+        terms = net.terms
+        self.activation = terms.activation
+        self._antiderivative = activation_antiderivative(terms.activation)
+        self.vectors = np.asarray(terms.vectors(), dtype=np.float64)
         self.weight = float(net.hamiltonian_weight)
-        self.a = self.weight * np.asarray(net.a, dtype=np.float64)
-        self.b = self.weight * np.asarray(net.b, dtype=np.float64)
-        self.e = self.weight * (np.zeros_like(self.a) if net.e is None else np.asarray(net.e, dtype=np.float64))
+        self.a = self.weight * np.asarray(terms.a, dtype=np.float64)
+        self.b = self.weight * np.asarray(terms.b, dtype=np.float64)
+        self.e = self.weight * (np.zeros_like(self.a) if terms.e is None else np.asarray(terms.e, dtype=np.float64))
 
     @property
     def params(self):
@@ -59,9 +61,7 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         total = 0.0
         for alpha, a, b, e in zip(self.vectors, self.a, self.b, self.e):
             s = sum(float(alpha[d]) * y[d] for d in range(self.dim) if alpha[d] != 0.0)
-            total = total + float(a) * self._antiderivative(s, xp) + float(b) * s
-            if e != 0.0:
-                total = total + 0.5 * float(e) * s * s
+            total = total + ridge_potential(s, float(a), float(b), float(e), self._antiderivative, xp)
         return total
 
     def poisson_tensor_components(self, y):
@@ -82,9 +82,8 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         return tuple(
             CollectiveTerm(
                 alpha,
-                lambda s, a=float(a), b=float(b), e=float(e): (
-                    a * self._antiderivative(s[0], _JAX) + b * s[0] + 0.5 * e * s[0] ** 2
-                ),
+                lambda s, a=float(a), b=float(b), e=float(e): ridge_potential(
+                    s[0], a, b, e, self._antiderivative, _JAX),
                 name=f"module{k + 1}",
             )
             for k, (alpha, a, b, e) in enumerate(zip(self.vectors, self.a, self.b, self.e))

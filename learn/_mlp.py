@@ -13,6 +13,8 @@ import numpy as np
 
 from liepoisson._validation import positive_int
 
+from ._networks import AbstractNetwork
+
 ACTIVATIONS = {
     "sigmoid": jax.nn.sigmoid,
     "tanh": jnp.tanh,
@@ -123,10 +125,14 @@ def _scaling(value: Scaling | None, size: int, name: str) -> Scaling:
     return shift, scale
 
 
-class AffineMLP(eqx.Module):
+class AffineMLP(AbstractNetwork):
     r"""$N(y) = s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$
     for one sample. The scalings are Python floats, not arrays: never trained, compiled in as
-    constants. `input_scaling`/`output_scaling` are `(shift, scale)` pairs (`None`: identity).
+    constants.
+
+    **Arguments:** `in_size`, `out_size`; `hidden` layer widths; `activation` (a name of
+    `ACTIVATIONS`); `key` (int seed or PRNG key); `input_scaling`/`output_scaling`:
+    `(shift, scale)` pairs (`None`: identity; `learn.fit(normalise=True)` sets them).
     """
 
     mlp: MLP
@@ -139,19 +145,31 @@ class AffineMLP(eqx.Module):
         self,
         in_size: int,
         out_size: int,
-        hidden: Sequence[int],
-        activation: str,
-        key: jax.Array,
+        hidden: Sequence[int] = (16, 16, 16),
+        activation: str = "sigmoid",
+        key: int | jax.Array = 0,
         input_scaling: Scaling | None = None,
         output_scaling: Scaling | None = None,
     ):
-        self.mlp = MLP(in_size, out_size, hidden, activation, key)
+        in_size, out_size = positive_int(in_size, "in_size"), positive_int(out_size, "out_size")
+        self.mlp = MLP(in_size, out_size, check_hidden(hidden), check_activation(activation), as_key(key))
         self.input_shift, self.input_scale = _scaling(input_scaling, in_size, "input_scaling")
         self.output_shift, self.output_scale = _scaling(output_scaling, out_size, "output_scaling")
 
     def __call__(self, y: jax.Array) -> jax.Array:
         x = (y - jnp.asarray(self.input_shift)) / jnp.asarray(self.input_scale)
         return jnp.asarray(self.output_shift) + jnp.asarray(self.output_scale) * self.mlp(x)
+
+    def output_scales(self) -> tuple[float, ...]:
+        return self.output_scale
+
+    @property
+    def in_size(self) -> int:
+        return self.mlp.layers[0].in_features
+
+    @property
+    def out_size(self) -> int:
+        return self.mlp.layers[-1].out_features
 
     @property
     def hidden(self) -> tuple[int, ...]:
@@ -161,10 +179,11 @@ class AffineMLP(eqx.Module):
     def activation(self) -> str:
         return self.mlp.activation
 
-    def hyperparameters(self) -> dict[str, Any]:
-        """`hidden`, `activation`, `input_scaling`, `output_scaling` as JSON values (the
-        constructor arguments of the maps built on this network)."""
+    def spec(self) -> dict[str, Any]:
         return {
+            "kind": "AffineMLP",
+            "in_size": self.in_size,
+            "out_size": self.out_size,
             "hidden": list(self.hidden),
             "activation": self.activation,
             "input_scaling": [list(self.input_shift), list(self.input_scale)],
@@ -172,7 +191,6 @@ class AffineMLP(eqx.Module):
         }
 
     def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> AffineMLP:
-        """The same weights with scalings set to the mean/std of sample `inputs`/`outputs`."""
         in_shift, in_scale = affine(inputs, len(self.input_shift))
         out_shift, out_scale = affine(outputs, len(self.output_shift))
         return eqx.tree_at(

@@ -1,20 +1,30 @@
 r"""The abstract splitting method: a step map $y_{n+1} = \Phi_h(y_n)$ composed of the exact
-flows $\varphi^{[k]}_t$ of the pieces $H = \sum_k H_k$ given by `system.hamiltonian_splitting()`."""
+flows $\varphi^{[k]}_t$ of the pieces $H = \sum_k H_k$ given by `system.hamiltonian_splitting()`.
+
+A method is its composition rule, `compose(flows, y, h)`, a class method on any sequence of
+flows: the classical methods apply it to the exact flows of a known Hamiltonian's pieces, a
+`learn.GLPNet` to the flows of its learned pieces. One engine for both."""
 
 from __future__ import annotations
 
+import abc
+import functools
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import ClassVar
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from liepoisson._validation import check_system, positive_float
 from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem, check_splitting
 
-from .._step_map import AbstractStepMap
+from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops
+
+#: A flow $\varphi_t(y)$ as `flow(t, y)` on one state.
+Flow = Callable[[float, jax.Array], jax.Array]
 
 
 class AbstractSplittingMethod(AbstractStepMap):
@@ -24,8 +34,8 @@ class AbstractSplittingMethod(AbstractStepMap):
     Every sub-flow is exact, Poisson and Casimir-preserving (a frozen-parameter test flow),
     so $\Phi_h$ is a Poisson map that conserves every Casimir to round-off, whatever its order.
 
-    Final subclasses give `order`, `step` (the composition of sub-flows on one state) and
-    `exact_flows_per_step`; `rollout`, `poisson_defect` and `cost` are shared.
+    Final subclasses give `order`, the composition rule `compose` and `flows_per_step`; `step`,
+    `rollout`, `poisson_defect` and `cost` are shared.
 
     **Arguments:** `system`, an `AbstractPoissonSystem` whose `hamiltonian_splitting()` gives
     the pieces; `h` > 0, the step size; `ordering`, a permutation of the pieces' indices (default
@@ -79,6 +89,53 @@ class AbstractSplittingMethod(AbstractStepMap):
     def flow(self, k: int, t: float, y: jax.Array) -> jax.Array:
         r"""Exact flow $\varphi^{[k]}_t(y)$ of the $k$-th piece."""
         return self.terms[k].flow(self.system, t, y)
+
+    @classmethod
+    @abc.abstractmethod
+    def compose(cls, flows: Sequence[Flow], y: jax.Array, h: float | jax.Array) -> jax.Array:
+        r"""$\Phi_h(y)$ composed of `flows[k](t, y)` $= \varphi^{[k+1]}_t(y)$, for one state:
+        the method's rule on any flows, exact pieces of a known $H$ or learned ones."""
+
+    @classmethod
+    @abc.abstractmethod
+    def flows_per_step(cls, n_terms: int) -> int:
+        """How many flows `compose` evaluates for `n_terms` pieces."""
+
+    @classmethod
+    def stages(cls) -> tuple[type[AbstractSplittingMethod], int]:
+        """`(inner, count)`: `compose` is `count` compositions by `inner` (itself, once, unless
+        it loops over an inner method, as a composition of Strang steps does). XLA counts a
+        loop body once, so `step_flops` counts `inner`'s and multiplies."""
+        return cls, 1
+
+    @classmethod
+    def check_terms(cls, n_terms: int, what: str) -> None:
+        """`ValueError` if the method cannot compose `n_terms` pieces (`what` names them)."""
+        if n_terms < 1:
+            raise ValueError(f"{cls.__name__} needs at least one piece; {what} has none")
+
+    def __check_init__(self):
+        type(self).check_terms(len(self.pieces), f"the splitting of {self.system!r}")
+
+    def step(self, y: jax.Array) -> jax.Array:
+        return type(self).compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return type(self).flows_per_step(len(self.terms))
+
+    def flows(self) -> list[Flow]:
+        r"""The exact flows $\varphi^{[k]}_t$ of the pieces in `ordering`, as `flow(t, y)`."""
+        return [functools.partial(self.flow, k) for k in range(len(self.terms))]
+
+    def step_flops(self) -> float:
+        inner, count = type(self).stages()
+        return count * xla_flops(_stage_of, traced_h(self), jnp.zeros(self.system.dim))
+
+
+def _stage_of(method: AbstractSplittingMethod, y: jax.Array) -> jax.Array:
+    """One composition by the inner method of `method.stages()` (for the flop count)."""
+    return type(method).stages()[0].compose(method.flows(), y, method.h)
 
 
 _TERMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -6,7 +6,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 # S. Blanes, P. C. Moan, "Practical symplectic partitioned Runge-Kutta and Runge-Kutta-Nystrom
@@ -33,21 +32,20 @@ class BlanesMoan4(AbstractSplittingMethod):
     a: ClassVar[np.ndarray] = _A_FULL
     b: ClassVar[np.ndarray] = _B_FULL
 
-    def __check_init__(self):
-        n = len(self.pieces)
-        if n != 2:
+    @classmethod
+    def check_terms(cls, n_terms: int, what: str) -> None:
+        if n_terms != 2:
             raise ValueError(
-                f"BlanesMoan4 needs a two-part splitting H = H_A + H_B; the splitting of "
-                f"{self.system!r} has {n} pieces"
+                f"BlanesMoan4 needs a two-part splitting H = H_A + H_B; {what} has {n_terms} pieces"
             )
 
-    def step(self, y):
-        y, h = check_state(y, self.system.dim), self.h
-        for k in range(len(self.b)):
-            y = self.flow(0, float(self.a[k]) * h, y)
-            y = self.flow(1, float(self.b[k]) * h, y)
-        return self.flow(0, float(self.a[-1]) * h, y)
+    @classmethod
+    def compose(cls, flows, y, h):
+        for k in range(len(cls.b)):
+            y = flows[0](float(cls.a[k]) * h, y)
+            y = flows[1](float(cls.b[k]) * h, y)
+        return flows[0](float(cls.a[-1]) * h, y)
 
-    @property
-    def exact_flows_per_step(self) -> int:
-        return len(self.a) + len(self.b)
+    @classmethod
+    def flows_per_step(cls, n_terms: int) -> int:
+        return len(cls.a) + len(cls.b)

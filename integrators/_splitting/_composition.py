@@ -11,9 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._step_map import check_state, traced_h, xla_flops
 from ._base import AbstractSplittingMethod, symmetric_coefficients
-from ._strang import strang_flows, strang_step
+from ._strang import Strang
 
 
 class AbstractCompositionMethod(AbstractSplittingMethod):
@@ -22,23 +21,23 @@ class AbstractCompositionMethod(AbstractSplittingMethod):
 
     coefficients: ClassVar[np.ndarray]
 
-    def step(self, y):
+    @classmethod
+    def compose(cls, flows, y, h):
         # A scan over the table, not a Python loop: one Strang step is traced and compiled
         # once (7x less code for Yoshida6, and for its Jacobian in `poisson_defect`).
         def body(y, gamma):
-            return strang_step(self, y, gamma * self.h), None
+            return Strang.compose(flows, y, gamma * h), None
 
-        y, _ = jax.lax.scan(body, check_state(y, self.system.dim), jnp.asarray(self.coefficients))
+        y, _ = jax.lax.scan(body, y, jnp.asarray(cls.coefficients))
         return y
 
-    @property
-    def exact_flows_per_step(self) -> int:
-        return len(self.coefficients) * strang_flows(self)
+    @classmethod
+    def flows_per_step(cls, n_terms: int) -> int:
+        return len(cls.coefficients) * Strang.flows_per_step(n_terms)
 
-    def step_flops(self) -> float:
-        """One Strang step's flops times the number of stages (the scan body counts once)."""
-        y = jnp.zeros(self.system.dim)
-        return len(self.coefficients) * xla_flops(lambda m, y: strang_step(m, y, m.h), traced_h(self), y)
+    @classmethod
+    def stages(cls):
+        return Strang, len(cls.coefficients)
 
 
 _CBRT2 = 2.0 ** (1.0 / 3.0)

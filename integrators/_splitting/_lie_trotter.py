@@ -2,7 +2,6 @@ r"""Lie-Trotter splitting (order 1)."""
 
 from __future__ import annotations
 
-from .._step_map import check_state
 from ._base import AbstractSplittingMethod
 
 
@@ -12,12 +11,12 @@ class LieTrotter(AbstractSplittingMethod):
 
     order = 1
 
-    def step(self, y):
-        y = check_state(y, self.system.dim)
-        for k in range(len(self.terms)):
-            y = self.flow(k, self.h, y)
+    @classmethod
+    def compose(cls, flows, y, h):
+        for flow in flows:
+            y = flow(h, y)
         return y
 
-    @property
-    def exact_flows_per_step(self) -> int:
-        return len(self.terms)
+    @classmethod
+    def flows_per_step(cls, n_terms: int) -> int:
+        return n_terms

@@ -1,0 +1,117 @@
+r"""Learnable collective terms: the pieces $\Phi_s(\langle\alpha_s, y\rangle)$ of a G-LPNet's
+learned Hamiltonian, with $\Phi_s' = a_s\sigma(x) + e_s x + b_s$ (paper eq. G_LPNets_moduli,
+with an optional linear term $e_s$).
+
+The flow of $\Phi_s(\langle\alpha_s, y\rangle)$ is the test flow with the frozen parameter
+$\Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$, because $\langle\alpha_s, y\rangle$ is conserved
+along the flow of the linear Hamiltonian $\langle\alpha_s, y\rangle$: every piece is solved
+exactly and its flow is a Poisson map."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liepoisson._validation import positive_int
+from liepoisson.systems import AbstractPoissonSystem
+
+from ._mlp import ACTIVATIONS, as_key, check_activation
+
+
+def ridge_potential(x: Any, a: Any, b: Any, e: Any, antiderivative: Any, xp: Any) -> Any:
+    r"""$\Phi(x) = a\,A(x) + \tfrac12 e x^2 + b x$ with $A' = \sigma$ (`antiderivative(x, xp)`),
+    on any math namespace `xp` (JAX arrays, or heyoka expressions with float coefficients; a
+    float `e` of exactly 0 adds no term): the one formula of a module's Hamiltonian."""
+    value = a * antiderivative(x, xp)
+    if not (isinstance(e, float) and e == 0.0):
+        value = value + 0.5 * e * x * x
+    return value + b * x
+
+
+def check_order(order: Sequence[int] | None, n_modules: int, dim: int) -> tuple[int, ...]:
+    if order is None:
+        return tuple(s % dim for s in range(n_modules))
+    try:
+        order = tuple(order)
+    except TypeError as err:
+        raise TypeError(f"order must be a sequence of basis indices; got {order!r}") from err
+    if len(order) != n_modules:
+        raise ValueError(f"order must have n_modules = {n_modules} entries; got {len(order)}")
+    for s, k in enumerate(order):
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < dim:
+            raise ValueError(f"order[{s}] must be a basis index in [0, {dim}); got {k!r}")
+    return tuple(int(k) for k in order)
+
+
+class RidgeTerms(eqx.Module):
+    r"""$M$ learnable pieces $\Phi_s(\langle\alpha_s, y\rangle)$, $\Phi_s' = a_s\sigma(x) + b_s$
+    (+ $e_s x$ with `linear_term`).
+
+    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis (paper eq.
+    Rot_sequence): three scalars $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
+    $\alpha_s\in\mathbb R^n$. A linear term makes a quadratic piece exact and leaves the rest to
+    $\sigma$: a sigmoid alone is linear only as $c_s \to 0$, and its cubic term
+    $-a_sc_s^3x^3/48$ has the opposite sign to its linear term $a_sc_sx/4$.
+
+    **Arguments:** `dim` of the state; `n_modules` $M$; `order` of the basis vectors (default
+    cycling); `key`; `activation` $\sigma$ (paper: sigmoid); `full_vectors`; `linear_term`.
+    """
+
+    a: jax.Array
+    c: jax.Array
+    b: jax.Array
+    e: jax.Array | None
+    activation: str
+    dim: int = eqx.field(static=True)
+    order: tuple[int, ...] = eqx.field(static=True)
+    full_vectors: bool = eqx.field(static=True)
+
+    def __init__(self, dim: int, n_modules: int, order: Sequence[int] | None = None, key: int | jax.Array = 0, *,
+                 activation: str = "sigmoid", full_vectors: bool = False, linear_term: bool = False):
+        self.dim = positive_int(dim, "dim")
+        n_modules = positive_int(n_modules, "n_modules")
+        self.order = check_order(order, n_modules, dim)
+        for name, value in (("full_vectors", full_vectors), ("linear_term", linear_term)):
+            if not isinstance(value, (bool, np.bool_)):
+                raise TypeError(f"{name} must be True or False; got {value!r}")
+        self.full_vectors = bool(full_vectors)
+        self.activation = check_activation(activation)
+        ka, kc, kb = jax.random.split(as_key(key), 3)
+        shape = (n_modules, dim) if self.full_vectors else (n_modules,)
+        self.a = jax.random.normal(ka, (n_modules,), jnp.float64)
+        self.c = jax.random.normal(kc, shape, jnp.float64)
+        self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64)
+        self.e = jnp.zeros(n_modules, jnp.float64) if linear_term else None
+
+    @property
+    def n_modules(self) -> int:
+        return len(self.order)
+
+    @property
+    def linear_term(self) -> bool:
+        return self.e is not None
+
+    def vectors(self) -> jax.Array:
+        r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
+        if self.full_vectors:
+            return self.c
+        return self.c[:, None] * jnp.eye(self.dim)[jnp.asarray(self.order)]
+
+    def flow(self, system: AbstractPoissonSystem, s: int, t: Any, y: jax.Array) -> jax.Array:
+        r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
+        with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
+        alpha = self.vectors()[s]
+        x = jnp.dot(alpha, y)
+        q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
+        if self.e is not None:
+            q = q + self.e[s] * x
+        return system.test_flow(q * alpha, t, y)
+
+    def spec(self) -> dict[str, Any]:
+        return {"n_modules": self.n_modules, "order": list(self.order), "full_vectors": self.full_vectors,
+                "activation": self.activation, "linear_term": self.linear_term}

@@ -1,0 +1,50 @@
+"""Model files and checkpoints of format version 1 (learned maps configured by flags) read as
+today's composed maps: the architecture is translated, the weights are the same arrays in the
+same order."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ._checkpoint import FORMAT_VERSION
+
+
+def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
+    """`attrs` of a model file or checkpoint (as `_checkpoint.read` returns them) in today's
+    form; `ValueError` naming the version for a file this code cannot read."""
+    version = attrs.get("format_version", 1)
+    if version == FORMAT_VERSION:
+        return attrs
+    if version != 1 or not isinstance(attrs.get("hyperparameters"), dict):
+        raise ValueError(
+            f"{where} has model format version {version!r}; this liepoisson reads versions 1 to {FORMAT_VERSION}: "
+            "write it again with the version that made it, or train the model anew"
+        )
+    hp = dict(attrs["hyperparameters"])
+    cls = attrs.get("class")
+    if cls == "LPNet":
+        cls, hp = _lpnet_v1(hp, attrs)
+    elif cls == "GLPNet":
+        symmetric = hp.pop("symmetric", False)
+        hp["method"] = "Strang" if symmetric else "LieTrotter"
+    elif cls == "MLPBaseline":
+        hp = {"network": _affine_mlp(hp, attrs)}
+    return {**attrs, "class": cls, "hyperparameters": hp, "format_version": FORMAT_VERSION}
+
+
+def _affine_mlp(hp: dict[str, Any], attrs: dict[str, Any], out_size: int | None = None) -> dict[str, Any]:
+    dim = len(hp["input_scaling"][0])
+    return {"kind": "AffineMLP", "in_size": dim, "out_size": out_size or len(hp["output_scaling"][0]),
+            "hidden": hp["hidden"], "activation": hp["activation"], "input_scaling": hp["input_scaling"],
+            "output_scaling": hp["output_scaling"]}
+
+
+def _lpnet_v1(hp: dict[str, Any], attrs: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    network = _affine_mlp(hp, attrs)
+    if hp.get("equivariant"):
+        network = {"kind": "GroupAveraged", "group": hp["equivariant"], "network": network}
+    lpnet = {"network": network, "parametrisation": hp.get("parametrisation", "TestFlowParametrisation")}
+    if hp.get("reversing") is None:
+        return "LPNet", lpnet
+    return "Reversible", {"lpnet": lpnet, "symmetry": hp["reversing"],
+                          "iterations": hp.get("fixed_point_iterations", 16)}

@@ -1,0 +1,61 @@
+r"""Networks: the learnable functions inside a learned map, $y \mapsto N(y)$ for one sample
+(an LPNet's $\alpha(y)$, the baseline's increment). A wrapper changes the function, never a
+flag (`learn.GroupAveraged` makes any network equivariant)."""
+
+from __future__ import annotations
+
+import abc
+from typing import Any
+
+import equinox as eqx
+import jax
+import numpy as np
+
+
+class AbstractNetwork(eqx.Module):
+    """A network $N: \\mathbb R^{n_\\text{in}} \\to \\mathbb R^{n_\\text{out}}$ on one sample;
+    batch with `jax.vmap`. Final kinds: `learn.AffineMLP` and the wrapper
+    `learn.GroupAveraged`."""
+
+    @property
+    @abc.abstractmethod
+    def in_size(self) -> int: ...
+
+    @property
+    @abc.abstractmethod
+    def out_size(self) -> int: ...
+
+    @abc.abstractmethod
+    def __call__(self, y: jax.Array) -> jax.Array:
+        """$N(y)$ for one sample `(in_size,)`; returns `(out_size,)`."""
+
+    @abc.abstractmethod
+    def spec(self) -> dict[str, Any]:
+        """The architecture as JSON values, with its `kind`: `network_from_spec(spec, key)`
+        rebuilds it with fresh weights (model files store this)."""
+
+    @abc.abstractmethod
+    def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> AbstractNetwork:
+        """The same weights with the fixed input/output scalings set to the mean/std of the
+        samples `inputs` `(N, in_size)` and `outputs` `(N, out_size)`."""
+
+
+    def output_scales(self) -> tuple[float, ...]:
+        """The fixed scales of the outputs (units of an output-space loss); ones by default."""
+        return (1.0,) * self.out_size
+
+
+def network_from_spec(spec: dict[str, Any], key: int | jax.Array) -> AbstractNetwork:
+    """The network `spec` describes (`AbstractNetwork.spec`), with fresh weights from `key`."""
+    from ._equivariant import GroupAveraged
+    from ._mlp import AffineMLP
+
+    if not isinstance(spec, dict):
+        raise TypeError(f"a network spec must be a dict with a 'kind'; got {spec!r}")
+    kind = spec.get("kind")
+    rest = {k: v for k, v in spec.items() if k != "kind"}
+    if kind == "AffineMLP":
+        return AffineMLP(key=key, **rest)
+    if kind == "GroupAveraged":
+        return GroupAveraged(network_from_spec(rest["network"], key), rest["group"])
+    raise ValueError(f"unknown network kind {kind!r}; known: 'AffineMLP', 'GroupAveraged'")
