@@ -83,9 +83,7 @@ def train_adam(
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
     if checkpoint is not None and resume and os.path.exists(checkpoint):
-        attrs, groups = _checkpoint.read(checkpoint)
-        if attrs.get("class") != type(model).__name__:
-            raise ValueError(f"checkpoint {checkpoint!r} holds a {attrs.get('class')}, not a {type(model).__name__}")
+        attrs, groups = _checkpoint.read_checkpoint(checkpoint, type(model).__name__)
         try:
             check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {checkpoint!r}")
         except ValueError as err:
