@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -42,6 +45,31 @@ def _split(y0, y1, validation_fraction, seed):
 CASIMIR_RTOL = 1e-8
 
 
+def _check_finite(states: Any, name: str, label: Callable[[tuple[int, ...]], str]) -> None:
+    """`ValueError` naming the first non-finite state of `states` `(..., dim)` by
+    `label(batch index)`; input that is not a float array is left to the shape and type checks
+    that follow."""
+    try:
+        arr = np.asarray(states)
+    except (TypeError, ValueError):
+        return
+    if arr.ndim < 1 or not np.issubdtype(arr.dtype, np.floating) or np.all(np.isfinite(arr)):
+        return
+    *index, component = (int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+    raise ValueError(
+        f"{name} must be finite; found {arr[(*index, component)]} in {label(tuple(index))} "
+        f"(component {component})"
+    )
+
+
+def _pair_name(index: tuple[int, ...]) -> str:
+    """Pair `index` of `(y0, y1)` arrays as the user indexes them."""
+    index = tuple(int(i) for i in index)
+    if not index:
+        return "the data pair"  # y0, y1 of shape (dim,)
+    return f"data pair {index[0] if len(index) == 1 else index}"
+
+
 def _check_casimirs(system: AbstractPoissonSystem, y0: np.ndarray, y1: np.ndarray, label) -> None:
     if system.n_casimirs:
         G = np.asarray(system.casimir_gradients(y0))
@@ -62,12 +90,15 @@ def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPo
         if h is None:
             raise ValueError("h (the time step between y0 and y1) is required when data is (y0, y1)")
         h = positive_float(h, "h")
+        for name, states in zip(("y0", "y1"), data):
+            _check_finite(states, name, _pair_name)
         y0, y1 = pairs(data[0], data[1], system.dim)
+        batch_shape = y0.shape[:-1]
         y0, y1 = y0.reshape(-1, system.dim), y1.reshape(-1, system.dim)
         if y0.shape[0] == 0:
             raise ValueError("data must contain at least one pair; got 0")
         if conserves_casimirs:
-            _check_casimirs(system, y0, y1, lambda i: f"data pair {i}")
+            _check_casimirs(system, y0, y1, lambda i: _pair_name(np.unravel_index(i, batch_shape)))
         train, val = _split(y0, y1, validation_fraction, seed)
         return PairData(train, val, h)
     if not isinstance(data, Trajectories):
@@ -83,6 +114,7 @@ def prepare(data: Trajectories | tuple[ArrayLike, ArrayLike], system: AbstractPo
             f"data is for {data.system!r} (dim {data.system.dim}); the model is for {system!r} "
             f"(dim {system.dim})"
         )
+    _check_finite(data.states, "data.states", lambda i: f"data trajectory {i[0]}, step {i[1]}")
     if conserves_casimirs:
         n_steps = data.states.shape[1] - 1
         _check_casimirs(system, *data.pairs(),
