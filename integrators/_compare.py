@@ -6,21 +6,147 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
-import jax
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import check_system, positive_float, states
+from liepoisson._validation import check_system, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._diagnostics import DiagnosticsReport, diagnostics
+from ._diagnostics import DiagnosticsReport, Divergence, diagnostics, first_divergence
 from ._ground_truth import ground_truth
 from ._plots import figure, series_styles, span_decades
 from ._step_map import AbstractStepMap
+from ._timing import step_timing
 from ._trajectories import Trajectories
+
+
+@dataclasses.dataclass(frozen=True)
+class RolloutFigures:
+    r"""The figures of one map's rollout, under the divergence policy: a rollout that stopped
+    being finite has every error figure infinite, never the figures of its finite steps alone
+    (those are in `report.before_divergence()`), and `divergence` says where it stopped.
+
+    - `error_final`: $\max_i \|y_i(T) - y_{\text{ref},i}(T)\|_2$ over the trajectories $i$ at the
+      last saved time; `error_max`: the same maximum over every saved time (both `None` without
+      a reference);
+    - `energy_error_max`, `energy_error_mean`: the maximum and the mean over trajectories and
+      saved times of $|E(t) - E(0)|/|\langle E\rangle|$ ($\langle\cdot\rangle$ the time mean of
+      each trajectory, as `diagnostics`); `energy_error_max_per_trajectory` `(n_traj,)`: the
+      maximum of each trajectory over all its saved times, infinite for those that diverged (a
+      trajectory that stayed finite keeps its own figure when another one diverged);
+    - `casimir_drift_max`: $\max |C(t) - C(0)|/|\langle C\rangle|$ over Casimirs, trajectories
+      and saved times (0 for a system without Casimirs);
+    - `integral_error_max`: name $\to$ the same maximum for each integral passed;
+    - `poisson_defect_max`: the largest `poisson_defect` of the map over the states sampled (see
+      `rollout_figures`; finite states only), or `None` if none were asked for;
+    - `divergence`: a `Divergence` in steps of the map (the first step at which a trajectory is
+      not finite, which one, its last finite state), or `None`;
+    - `report`: the `DiagnosticsReport` of the saved states (time series, for plots).
+    """
+
+    error_final: float | None
+    error_max: float | None
+    energy_error_max: float
+    energy_error_mean: float
+    energy_error_max_per_trajectory: np.ndarray
+    casimir_drift_max: float
+    integral_error_max: dict[str, float]
+    poisson_defect_max: float | None
+    divergence: Divergence | None
+    report: DiagnosticsReport
+
+    @property
+    def diverged_at_step(self) -> int | None:
+        """The first step of the map at which some trajectory is not finite, or `None`."""
+        return None if self.divergence is None else self.divergence.step
+
+
+def rollout_figures(
+    step_map: AbstractStepMap,
+    trajectory: ArrayLike,
+    reference: ArrayLike | Trajectories | None = None,
+    times: ArrayLike | None = None,
+    *,
+    save_every: int = 1,
+    integrals: Mapping[str, Callable[[np.ndarray], ArrayLike]] | None = None,
+    defect_points: int = 50,
+    defect_seed: int | None = None,
+) -> RolloutFigures:
+    r"""The figures of `trajectory`, a rollout of `step_map`, against `reference`: the one
+    evaluation path of `compare` and of the paper's experiments (see `RolloutFigures` for the
+    definitions and the divergence policy).
+
+    **Arguments:**
+
+    - `step_map`: the `AbstractStepMap` rolled out (its `system` gives $H$ and the Casimirs).
+    - `trajectory`: `step_map.rollout(y0s, n_steps, save_every=save_every, nonfinite="return")`,
+      `(n_traj, T, dim)` or `(T, dim)`, with its non-finite tail if it diverged.
+    - `reference`, `times`, `integrals`: as `diagnostics`.
+    - `save_every`: the spacing of the saved states in steps of the map. If the rollout diverged
+      between two saved states, the states in between are rolled out again from `trajectory`'s
+      initial states to find the first non-finite step and the last finite state.
+    - `defect_points`: how many finite saved states enter the Poisson defect (0: none);
+      `defect_seed`: `None` takes them equally spaced along the first trajectory; an integer
+      draws them at random, without replacement, from every trajectory
+      (`numpy.random.default_rng(defect_seed)`).
+
+    **Returns:** a `RolloutFigures`.
+    """
+    if not isinstance(step_map, AbstractStepMap):
+        raise TypeError(f"step_map must be an integrators.AbstractStepMap; got {type(step_map).__name__}")
+    system = step_map.system
+    save_every = positive_int(save_every, "save_every")
+    defect_points = positive_int(defect_points, "defect_points", minimum=0)
+    if defect_seed is not None and (isinstance(defect_seed, bool) or not isinstance(defect_seed, int)):
+        raise TypeError(f"defect_seed must be None or an integer; got {defect_seed!r}")
+    report = diagnostics(trajectory, system, reference, times, integrals=integrals)
+    y = np.asarray(trajectory.states if isinstance(trajectory, Trajectories) else trajectory, dtype=np.float64)
+    y = y.reshape(-1, *y.shape[-2:])
+    n_ok = y.shape[1] if report.divergence is None else report.divergence.step
+
+    energy = np.abs(report.energy_error_relative).reshape(len(y), -1)
+    per_trajectory = np.full(len(y), math.inf)
+    if report.divergence is None:
+        per_trajectory = energy.max(axis=1)
+    else:
+        stayed = np.isfinite(y).all(axis=(1, 2))
+        if stayed.any():
+            per_trajectory[stayed] = np.abs(diagnostics(y[stayed], system).energy_error_relative).max(axis=1)
+
+    divergence = report.divergence
+    if divergence is not None:
+        divergence = dataclasses.replace(divergence, step=divergence.step * save_every)
+        if save_every > 1:  # find the step between the two saved states
+            exact = first_divergence(np.asarray(step_map.rollout(y[:, 0], divergence.step, nonfinite="return")))
+            divergence = exact or divergence  # (a rerun that stays finite keeps the saved states' figure)
+
+    defect = None
+    if defect_points:
+        if defect_seed is None:
+            good = y[0, :n_ok]
+            pick = good[np.linspace(0, len(good) - 1, min(defect_points, len(good))).astype(int)]
+        else:
+            good = y[:, :n_ok].reshape(-1, y.shape[-1])
+            rng = np.random.default_rng(defect_seed)
+            pick = good[rng.choice(len(good), size=min(defect_points, len(good)), replace=False)]
+        defect = float(np.max(np.asarray(step_map.poisson_defect(pick))))
+
+    error = report.trajectory_error
+    return RolloutFigures(
+        error_final=None if error is None else (
+            math.inf if divergence is not None else float(np.max(error[..., -1]))),
+        error_max=report.max_trajectory_error,
+        energy_error_max=report.max_energy_error,
+        energy_error_mean=report.mean_energy_error,
+        energy_error_max_per_trajectory=per_trajectory,
+        casimir_drift_max=report.max_casimir_drift_relative,
+        integral_error_max={name: report.max_integral_error(name) for name in report.integral_error_relative},
+        poisson_defect_max=defect,
+        divergence=divergence,
+        report=report,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,9 +154,10 @@ class ComparisonRow:
     """One map's figures: `error_final` (max over trajectories of $|y(T) - y_\\text{ref}(T)|$),
     `error_max` (over all output times), `energy_error_max` (relative, as `diagnostics`),
     `casimir_drift_max` (relative), `poisson_defect_max` (over the first trajectory's outputs),
-    `seconds_per_step` (wall time of one step of one trajectory, measured on the compiled
-    rollout in this run), `flops_per_step` (XLA) and `diverged_at_step` (output index, or
-    None)."""
+    as `RolloutFigures` (the error figures of a map that diverged are infinite);
+    `seconds_per_step` (wall time of one step of one trajectory, `step_timing` in this run),
+    `flops_per_step` (XLA's count) and `divergence` (a `Divergence` in steps of the map: the
+    first non-finite step, the trajectory, its last finite state; or `None`)."""
 
     label: str
     h: float
@@ -42,7 +169,12 @@ class ComparisonRow:
     poisson_defect_max: float
     seconds_per_step: float
     flops_per_step: float
-    diverged_at_step: int | None
+    divergence: Divergence | None
+
+    @property
+    def diverged_at_step(self) -> int | None:
+        """The first step of the map at which some trajectory is not finite, or `None`."""
+        return None if self.divergence is None else self.divergence.step
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,23 +189,32 @@ class Comparison:
     reports: dict[str, DiagnosticsReport]
 
     def table(self) -> str:
-        """The rows as a Markdown table."""
+        """The rows as a Markdown table; a map that diverged has infinite errors, the step at
+        which it did in the last column and, below the table, its last finite state."""
         head = ("map", "h", "error at T", "max error", "max rel. energy error", "max rel. Casimir drift",
-                "max Poisson defect", "s / step", "flops / step")
+                "max Poisson defect", "s / step", "flops / step", "diverged at step")
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in self.rows:
             cells = (r.label, f"{r.h:g}", *(f"{v:.3g}" for v in (
                 r.error_final, r.error_max, r.energy_error_max, r.casimir_drift_max, r.poisson_defect_max,
-                r.seconds_per_step, r.flops_per_step)))
+                r.seconds_per_step, r.flops_per_step)), "—" if r.divergence is None else str(r.divergence.step))
             lines.append("| " + " | ".join(cells) + " |")
+        diverged = [r for r in self.rows if r.divergence is not None]
+        if diverged:
+            lines.append("")
+            lines += [f"{r.label} stopped being finite at {r.divergence}." for r in diverged]
         return "\n".join(lines) + "\n"
 
     def plot_work_precision(self, path: str | os.PathLike) -> None:
-        """Error at the final time against wall time per step (log-log), one point per map."""
+        """Error at the final time against wall time per step (log-log), one point per map (a
+        map that diverged has no point, only its legend entry saying where it diverged)."""
         fig = figure(figsize=(6, 4), layout="constrained")
         ax = fig.subplots()
         for r, style in zip(self.rows, series_styles(len(self.rows))):
             style.pop("ls")
+            if r.divergence is not None:
+                ax.loglog([], [], ls="none", label=f"{r.label} (diverged at step {r.divergence.step})", **style)
+                continue
             ax.loglog([r.seconds_per_step], [max(r.error_final, 1e-17)], ls="none", label=r.label, **style)
         span_decades(ax, "x")
         ax.set_xlabel("wall time per step and trajectory [s]")
@@ -82,11 +223,14 @@ class Comparison:
         fig.savefig(os.fspath(path))
 
     def plot_energy(self, path: str | os.PathLike) -> None:
-        """Relative energy error against time (log axis), the largest over trajectories."""
+        """Relative energy error against time (log axis), the largest over trajectories; a map
+        that diverged up to the last output before it did."""
         fig = figure(figsize=(7, 3.5), layout="constrained")
         ax = fig.subplots()
-        for (label, report), style in zip(self.reports.items(), series_styles(len(self.reports))):
+        for (label, report), row, style in zip(self.reports.items(), self.rows, series_styles(len(self.reports))):
             e = np.abs(report.energy_error_relative).reshape(-1, len(report.times)).max(axis=0)
+            if row.divergence is not None:
+                label = f"{label} (diverged at step {row.divergence.step})"
             ax.semilogy(report.times, np.maximum(e, 1e-17), lw=0.8, label=label, markevery=0.1, ms=3, **style)
         ax.set_xlabel("t")
         ax.set_ylabel("|E(t) - E(0)| / <E>")
@@ -114,6 +258,8 @@ def compare(
     n_outputs: int = 100,
     reference: Trajectories | None = None,
     defect_points: int = 50,
+    timing_seconds: float = 0.05,
+    timing_repeats: int = 5,
 ) -> Comparison:
     r"""Roll every map out from the same initial conditions to `t_final` and measure it against
     the heyoka reference at `n_outputs` equally spaced times.
@@ -162,25 +308,18 @@ def compare(
     for label, m in maps.items():
         per_output = plans[label]
         n_steps = per_output * n_outputs
-        jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output, nonfinite="return"))  # compile
-        start = time.perf_counter()
-        y = np.asarray(jax.block_until_ready(m.rollout(y0s, n_steps, save_every=per_output, nonfinite="return")))
-        seconds = (time.perf_counter() - start) / (n_steps * len(y0s))
-        report = diagnostics(y, system, reference=ref, times=times)
-        good = y[0, : len(report.times)]
-        pick = good[np.linspace(0, len(good) - 1, min(defect_points, len(good))).astype(int)]
+        y = np.asarray(m.rollout(y0s, n_steps, save_every=per_output, nonfinite="return"))
+        figures = rollout_figures(m, y, ref, times, save_every=per_output, defect_points=defect_points)
+        timing = step_timing(m, y0s, min_seconds=timing_seconds, repeats=timing_repeats, outputs=n_outputs)
         rows.append(ComparisonRow(
             label=label, h=float(m.h), n_steps=n_steps,
-            error_final=float(np.max(report.trajectory_error[..., -1])) if report.diverged_at_step is None
-            else math.inf,
-            error_max=float(np.max(report.trajectory_error)),
-            energy_error_max=report.max_energy_error,
-            casimir_drift_max=report.max_casimir_drift_relative,
-            poisson_defect_max=float(np.max(np.asarray(m.poisson_defect(pick)))),
-            seconds_per_step=seconds, flops_per_step=m.cost().flops,
-            diverged_at_step=report.diverged_at_step,
+            error_final=figures.error_final, error_max=figures.error_max,
+            energy_error_max=figures.energy_error_max, casimir_drift_max=figures.casimir_drift_max,
+            poisson_defect_max=figures.poisson_defect_max,
+            seconds_per_step=timing.seconds_per_step, flops_per_step=m.cost().flops,
+            divergence=figures.divergence,
         ))
-        reports[label] = report
+        reports[label] = figures.report
     return Comparison(tuple(rows), times, ref, reports)
 
 

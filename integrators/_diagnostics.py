@@ -4,6 +4,7 @@ reference, and a plot of them."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -24,6 +25,37 @@ def _safe_denominator(mean: np.ndarray) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
+class Divergence:
+    r"""Where a trajectory stopped being finite.
+
+    - `step`: the first step at which some trajectory is not finite (an index into the states
+      given to `diagnostics`; a step of the map in `rollout_figures` and `compare`);
+    - `trajectory`: which one (the lowest index among those not finite at `step`; 0 for a
+      single trajectory);
+    - `state`: its last finite state, the one at `step - 1`.
+    """
+
+    step: int
+    trajectory: int
+    state: np.ndarray
+
+    def __str__(self) -> str:
+        return (f"step {self.step} (trajectory {self.trajectory}; last finite state, at step {self.step - 1}: "
+                f"{np.round(self.state, 6).tolist()})")
+
+
+def first_divergence(y: np.ndarray) -> Divergence | None:
+    """The `Divergence` of states `y` `(n_traj, T, dim)`, or `None` if they are all finite."""
+    finite = np.isfinite(y).all(axis=-1)  # (n_traj, T)
+    if finite.all():
+        return None
+    first = np.where(finite.all(axis=1), y.shape[1], np.argmin(finite, axis=1))
+    i = int(np.argmin(first))  # ties: the lowest trajectory index
+    k = int(first[i])
+    return Divergence(step=k, trajectory=i, state=y[i, k - 1] if k else y[i, 0])
+
+
+@dataclasses.dataclass(frozen=True)
 class DiagnosticsReport:
     r"""Time series and summaries of a trajectory's conservation and accuracy.
 
@@ -39,8 +71,14 @@ class DiagnosticsReport:
     - `integrals`, `integral_error_relative`: name $\to I(t)$ and $(I(t) - I(0))/\langle I\rangle$
       for the extra conserved quantities passed to `diagnostics` (e.g. the charged particle's
       $I = x_1p_2 - x_2p_1 + r^3/3$).
-    - `diverged_at_step`: the first step at which some trajectory is not finite (everything
-      above covers the steps before it), or `None`.
+    - `divergence`: where the trajectory stopped being finite (a `Divergence`: the first step at
+      which some trajectory is not finite, which one, its last finite state), or `None`. The time
+      series above then cover the steps before it.
+
+    The divergence policy: the scalar figures of a trajectory that stopped being finite
+    (`max_energy_error`, `max_casimir_drift_relative`, `max_trajectory_error`, the means,
+    `max_integral_error`, `summary()`) are infinite, never those of its finite steps alone, which
+    would pass a diverged map for a good one; `before_divergence()` gives those on request.
     """
 
     times: np.ndarray
@@ -52,48 +90,64 @@ class DiagnosticsReport:
     trajectory_error: np.ndarray | None
     integrals: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     integral_error_relative: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
-    diverged_at_step: int | None = None
+    divergence: Divergence | None = None
+
+    @property
+    def diverged_at_step(self) -> int | None:
+        """The first step at which some trajectory is not finite (`divergence.step`), or `None`."""
+        return None if self.divergence is None else self.divergence.step
+
+    def before_divergence(self) -> DiagnosticsReport:
+        """The report of the steps before the divergence, as if they were the whole trajectory:
+        its figures are those of the finite steps alone (what happened before; never the
+        figures of the map). The report itself if the trajectory stayed finite."""
+        return dataclasses.replace(self, divergence=None)
+
+    def _figure(self, values: np.ndarray) -> float:
+        """`values` (finite) as a figure of the trajectory: infinite if it diverged."""
+        return math.inf if self.divergence is not None else float(values)
 
     @property
     def max_casimir_drift(self) -> float:
         """$\\max_t |C(t) - C(0)|$ over all Casimirs and trajectories (0 if there are none)."""
-        return float(np.max(np.abs(self.casimir_drift), initial=0.0))
+        return self._figure(np.max(np.abs(self.casimir_drift), initial=0.0))
 
     @property
     def mean_casimir_drift(self) -> float:
-        return float(np.mean(np.abs(self.casimir_drift))) if self.casimir_drift.size else 0.0
+        return self._figure(np.mean(np.abs(self.casimir_drift)) if self.casimir_drift.size else 0.0)
 
     @property
     def max_casimir_drift_relative(self) -> float:
-        return float(np.max(np.abs(self.casimir_drift_relative), initial=0.0))
+        """$\\max_t |C(t) - C(0)|/|\\langle C\\rangle|$ over all Casimirs and trajectories."""
+        return self._figure(np.max(np.abs(self.casimir_drift_relative), initial=0.0))
 
     @property
     def mean_casimir_drift_relative(self) -> float:
         a = self.casimir_drift_relative
-        return float(np.mean(np.abs(a))) if a.size else 0.0
+        return self._figure(np.mean(np.abs(a)) if a.size else 0.0)
 
     @property
     def max_energy_error(self) -> float:
-        """$\\max_t |E(t) - E(0)|/|\\langle E\\rangle|$."""
-        return float(np.max(np.abs(self.energy_error_relative)))
+        """$\\max_t |E(t) - E(0)|/|\\langle E\\rangle|$ over all trajectories."""
+        return self._figure(np.max(np.abs(self.energy_error_relative)))
 
     @property
     def mean_energy_error(self) -> float:
-        return float(np.mean(np.abs(self.energy_error_relative)))
+        return self._figure(np.mean(np.abs(self.energy_error_relative)))
 
     @property
     def max_trajectory_error(self) -> float | None:
-        return None if self.trajectory_error is None else float(np.max(self.trajectory_error))
+        return None if self.trajectory_error is None else self._figure(np.max(self.trajectory_error))
 
     @property
     def mean_trajectory_error(self) -> float | None:
-        return None if self.trajectory_error is None else float(np.mean(self.trajectory_error))
+        return None if self.trajectory_error is None else self._figure(np.mean(self.trajectory_error))
 
     def max_integral_error(self, name: str) -> float:
         r"""$\max_t |I(t) - I(0)|/|\langle I\rangle|$ of the integral `name`."""
         if name not in self.integral_error_relative:
             raise KeyError(f"no integral {name!r}; this report has {sorted(self.integral_error_relative)}")
-        return float(np.max(np.abs(self.integral_error_relative[name])))
+        return self._figure(np.max(np.abs(self.integral_error_relative[name])))
 
     def error_growth_rate(self, window: tuple[float, float]) -> float:
         """`error_growth_rate` of the largest trajectory error at each time over `window`."""
@@ -157,9 +211,10 @@ def diagnostics(
     - `integrals`: name $\to$ `f(y)`, further conserved quantities evaluated on states
       `(..., dim)` and reported like the energy.
 
-    A trajectory that stops being finite (a diverged rollout) is reported up to the step
-    before the first non-finite state of any trajectory (`diverged_at_step`); a non-finite
-    initial state or reference is a `ValueError`.
+    A trajectory that stops being finite (a diverged rollout) has its time series up to the
+    step before the first non-finite state of any trajectory and infinite figures (see
+    `DiagnosticsReport`: `divergence` says where); a non-finite initial state or reference is a
+    `ValueError`.
 
     **Returns:** a `DiagnosticsReport` (see there for the definitions).
     """
@@ -177,8 +232,8 @@ def diagnostics(
 
     if ref is not None and ref.shape != y.shape:
         raise ValueError(f"reference must have the trajectory's shape {y.shape}; got {ref.shape}")
-    finite = np.all(np.isfinite(y), axis=-1).reshape(-1, T).all(axis=0)  # (T,)
-    diverged = None if finite.all() else int(np.argmin(finite))
+    divergence = first_divergence(y.reshape(-1, T, system.dim))
+    diverged = None if divergence is None else divergence.step
     if diverged == 0:
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(y[..., 0, :]))[0])
         where = f"trajectory {bad[0]}, component {bad[1]}" if y.ndim == 3 else f"component {bad[0]}"
@@ -208,7 +263,7 @@ def diagnostics(
     error = None
     if ref is not None:
         error = np.linalg.norm(y - ref, axis=-1)
-    return DiagnosticsReport(times, C, dC, dC_rel, E, dE_rel, error, values, errors, diverged)
+    return DiagnosticsReport(times, C, dC, dC_rel, E, dE_rel, error, values, errors, divergence)
 
 
 def error_growth_rate(times: ArrayLike, error: ArrayLike, window: tuple[float, float]) -> float:

@@ -1,11 +1,15 @@
 """integrators.compare: learned and classical step maps measured side by side against heyoka."""
 
+import math
+
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import system
 
 import integrators as it
 import learn
+import liepoisson as lp
 
 EPS = np.finfo(np.float64).eps
 Y0S = np.array([[1 / np.sqrt(2), -1 / np.sqrt(2), 1.0], [0.5, 1.0, -0.2]])
@@ -38,6 +42,114 @@ def test_compare_measures_every_map_against_the_same_reference(tmp_path):
     c.plot_work_precision(tmp_path / "wp.png")
     c.plot_energy(tmp_path / "energy.png")
     assert (tmp_path / "wp.png").stat().st_size > 0 and (tmp_path / "energy.png").stat().st_size > 0
+
+
+class Expanding(it.AbstractStepMap):
+    r"""$y \mapsto (1 + h)\,y$, and NaN once $\max_i |y_i|$ exceeds `limit`: from $\max_i|y_{0,i}| = 1$
+    at $h = 0.1$ the first NaN is at step 33 ($1.1^{31} < 21 < 1.1^{32}$), from 1/2 at step 41."""
+
+    system: lp.systems.AbstractPoissonSystem
+    h: float
+    limit: float = 21.0
+
+    def step(self, y):
+        return jnp.where(jnp.max(jnp.abs(y)) > self.limit, jnp.nan, (1.0 + self.h) * y)
+
+    @property
+    def exact_flows_per_step(self):
+        return 0
+
+
+# Trajectory 0 stops being finite at step 33 (last finite state 1.1^32 y0), trajectory 1 at 41, 2 at 70.
+Y0_EXPANDING = np.array([[1 / np.sqrt(2), -1 / np.sqrt(2), 1.0], [0.5, 0.5, -0.2], [0.01, 0.02, 0.03]])
+
+
+def _expanded(y0, k):
+    """y0 after k steps of Expanding at h = 0.1, the same roundings."""
+    for _ in range(k):
+        y0 = 1.1 * y0
+    return y0
+
+
+def test_compare_reports_a_map_that_diverges_with_infinite_errors_and_its_step():
+    body = system("RigidBody")
+    maps = {"Strang": it.splitting.Strang(body, h=0.1), "expanding": Expanding(body, h=0.1)}
+    # Outputs every 5 steps: the rollout is first non-finite at output 7 (step 35), between them
+    c = it.compare(maps, body, Y0_EXPANDING, t_final=10.0, n_outputs=20, timing_seconds=0.01)
+    strang, expanding = c.rows
+    assert strang.divergence is None and strang.diverged_at_step is None and math.isfinite(strang.energy_error_max)
+    # Infinite, not the figures of its finite steps.
+    assert expanding.error_final == expanding.error_max == math.inf
+    assert expanding.energy_error_max == expanding.casimir_drift_max == math.inf
+    # The first non-finite step of the map, not of the outputs, and the state before it.
+    assert expanding.diverged_at_step == 33 and expanding.divergence.trajectory == 0
+    np.testing.assert_allclose(expanding.divergence.state, _expanded(Y0_EXPANDING[0], 32), rtol=4 * EPS)
+    assert np.isfinite(expanding.poisson_defect_max) and expanding.seconds_per_step > 0
+    # The reports keep the time series up to the last finite output (step 30).
+    assert c.reports["expanding"].times[-1] == pytest.approx(3.0)
+    table = c.table()
+    lines = table.splitlines()
+    assert lines[0].endswith("| diverged at step |")
+    row = next(line for line in lines if line.startswith("| expanding "))
+    assert row.count("| inf ") == 4 and row.endswith("| 33 |")
+    assert next(line for line in lines if line.startswith("| Strang ")).endswith("| — |")
+    note = next(line for line in lines if line.startswith("expanding stopped being finite"))
+    assert "step 33 (trajectory 0; last finite state, at step 32: [" in note
+
+
+def test_rollout_figures_of_a_finite_and_of_a_diverged_rollout():
+    body = system("RigidBody")
+    reference = it.ground_truth(body, Y0_EXPANDING, h=0.5, n_steps=7)
+    strang = it.splitting.Strang(body, h=0.1)
+    y = np.asarray(strang.rollout(Y0_EXPANDING, 35, save_every=5))
+    figures = it.rollout_figures(strang, y, reference, save_every=5, defect_points=4)
+    report = it.diagnostics(y, body, reference=reference)
+    assert figures.divergence is None and figures.report.divergence is None
+    assert figures.error_final == np.max(np.linalg.norm(y[:, -1] - reference.states[:, -1], axis=-1))
+    assert figures.error_max == report.max_trajectory_error
+    assert figures.energy_error_max == report.max_energy_error > 0
+    assert figures.energy_error_mean == report.mean_energy_error
+    assert figures.casimir_drift_max == report.max_casimir_drift_relative
+    np.testing.assert_array_equal(figures.energy_error_max_per_trajectory,
+                                  [it.diagnostics(z, body).max_energy_error for z in y])
+    # The defect: equally spaced outputs of trajectory 0, or a random draw from all of them.
+    assert figures.poisson_defect_max == np.max(np.asarray(strang.poisson_defect(y[0, [0, 2, 4, 7]])))
+    drawn = it.rollout_figures(strang, y, reference, save_every=5, defect_points=4, defect_seed=3)
+    pick = y.reshape(-1, 3)[np.random.default_rng(3).choice(24, size=4, replace=False)]
+    assert drawn.poisson_defect_max == np.max(np.asarray(strang.poisson_defect(pick)))
+    assert it.rollout_figures(strang, y, save_every=5, defect_points=0).poisson_defect_max is None
+
+    expanding = Expanding(body, h=0.1)
+    y = np.asarray(expanding.rollout(Y0_EXPANDING, 35, save_every=5, nonfinite="return"))
+    figures = it.rollout_figures(expanding, y, reference, save_every=5)
+    assert figures.diverged_at_step == 33 and figures.divergence.trajectory == 0
+    assert figures.error_final == figures.error_max == figures.energy_error_max == math.inf
+    assert figures.energy_error_mean == figures.casimir_drift_max == math.inf
+    # Trajectories 1 and 2 stayed finite over the 35 steps: each keeps its own figure.
+    per_trajectory = figures.energy_error_max_per_trajectory
+    assert per_trajectory[0] == math.inf
+    np.testing.assert_array_equal(per_trajectory[1:], [it.diagnostics(z, body).max_energy_error for z in y[1:]])
+    # What the 6 finite outputs alone would have said: finite, and never the map's figure.
+    assert 0 < figures.report.before_divergence().max_energy_error < math.inf
+    with pytest.raises(TypeError, match="step_map must be an integrators.AbstractStepMap"):
+        it.rollout_figures("Strang", y, reference)
+    with pytest.raises(ValueError, match="defect_points must be an integer >= 0"):
+        it.rollout_figures(expanding, y, defect_points=-1)
+
+
+def test_step_timing_is_the_fastest_of_runs_long_enough():
+    body = system("RigidBody")
+    strang = it.splitting.Strang(body, h=0.1)
+    timing = it.step_timing(strang, Y0S, min_seconds=0.01, repeats=3, outputs=4)
+    assert len(timing.run_seconds) == 3 and timing.n_trajectories == 2 and timing.n_steps % 4 == 0
+    assert min(timing.run_seconds) >= 0.01 * 0.5  # the calibrated length, whatever the load did since
+    assert timing.seconds_per_step == min(timing.run_seconds) / (timing.n_steps * 2)
+    with pytest.raises(ValueError, match="min_seconds"):
+        it.step_timing(strang, Y0S, min_seconds=0.0)
+    with pytest.raises(ValueError, match="repeats must be an integer >= 1"):
+        it.step_timing(strang, Y0S, repeats=0)
+    with pytest.raises(TypeError, match="step_map must be an integrators.AbstractStepMap"):
+        it.step_timing("Strang", Y0S)
 
 
 def test_compare_arguments():

@@ -166,7 +166,16 @@ def test_diverged_rollout_is_reported_up_to_the_first_non_finite_step(k):
                            integrals=integrals)
     assert report.diverged_at_step == k and report.summary()["diverged_at_step"] == k
     assert clean.diverged_at_step is None
-    assert report.summary() | {"diverged_at_step": None} == clean.summary()
+    # Where: the first non-finite step, the trajectory that got there first, its last finite state.
+    assert report.divergence.trajectory == 1
+    np.testing.assert_array_equal(report.divergence.state, clean_states[1, k - 1])
+    assert f"step {k} (trajectory 1; last finite state, at step {k - 1}: [" in str(report.divergence)
+    # The divergence policy: every figure is infinite, never that of the finite steps alone...
+    figures = {key: v for key, v in report.summary().items() if key != "diverged_at_step"}
+    assert figures and all(v == np.inf for v in figures.values()), figures
+    assert report.max_integral_error("I") == report.max_energy_error == np.inf
+    # ...which the report of the steps before the divergence still gives.
+    assert report.before_divergence().summary() == clean.summary()
     for field in ("times", "casimirs", "casimir_drift_relative", "energy", "energy_error_relative",
                   "trajectory_error"):
         np.testing.assert_array_equal(report[field], clean[field])
