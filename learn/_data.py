@@ -55,10 +55,9 @@ def _check_finite(states: Any, name: str, label: Callable[[tuple[int, ...]], str
         return
     if arr.ndim < 1 or not np.issubdtype(arr.dtype, np.floating) or np.all(np.isfinite(arr)):
         return
-    *index, component = (int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+    bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
     raise ValueError(
-        f"{name} must be finite; found {arr[(*index, component)]} in {label(tuple(index))} "
-        f"(component {component})"
+        f"{name} must be finite; found {arr[bad]} at index {bad}: {label(bad[:-1])}, component {bad[-1]}"
     )
 
 

@@ -81,7 +81,7 @@ def test_nan_in_trajectories_names_trajectory_and_step(system, data, trajectory,
     with pytest.raises(ValueError, match="finite") as err:
         learn.fit(_model(system), bad, epochs=2, validation_fraction=validation_fraction)
     assert f"data trajectory {trajectory}, step {step}" in str(err.value)
-    assert "component 2" in str(err.value)
+    assert "component 2" in str(err.value) and f"at index ({trajectory}, {step}, 2)" in str(err.value)
 
 
 def test_nan_in_trajectories_is_reported_before_casimir_mismatch(system, data):
