@@ -50,7 +50,7 @@ def main() -> None:
     for h in (0.1, 0.2):
         data = it.ground_truth(system, data_y0, h=h, n_steps=20, seed=0)
         t0 = time.perf_counter()
-        learn.fit(learn.GLPNet(system, n_modules=12, key=0, symmetric=True), data,
+        learn.fit(learn.GLPNet(system, n_modules=12, key=0, method=it.splitting.Strang), data,
                   optimiser=learn.QuasiNewton(100, "bfgs", warm_start=True), validation_fraction=0.0, progress=False)
         fits.append(time.perf_counter() - t0)
     print(f"| G-LPNet (sym., 12 modules) BFGS fit, 100 iterations | {fits[0]:.2f} | {fits[1]:.2f} |")

@@ -61,7 +61,7 @@ def main(argv=None) -> None:
         "LPNet 3x16": learn.LPNet(system, hidden=(16, 16, 16), key=0, h=h),
         "MLP baseline 3x16": learn.MLPBaseline(system, hidden=(16, 16, 16), key=0, h=h),
         "G-LPNet 6 modules": learn.GLPNet(system, n_modules=6, key=0, h=h),
-        "G-LPNet 6 sym.": learn.GLPNet(system, n_modules=6, key=0, h=h, symmetric=True),
+        "G-LPNet 6 sym.": learn.GLPNet(system, n_modules=6, key=0, h=h, method=it.splitting.Strang),
     }
     peak = machine_flop_rate()
     work = args.n_traj * args.n_steps

@@ -16,7 +16,6 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators._step_map import check_state, traced_h, xla_flops
@@ -126,7 +125,7 @@ class GLPNet(AbstractLearnedMap):
         return self.terms.flow(self.system, s, t / self._time_divisor, y)
 
     def flows(self) -> list[Callable[[Any, jax.Array], jax.Array]]:
-        """The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order."""
+        r"""The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order."""
         return [functools.partial(self.module_flow, s) for s in range(self.n_modules)]
 
     def step(self, y: jax.Array) -> jax.Array:

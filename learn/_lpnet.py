@@ -10,7 +10,6 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from integrators._step_map import check_state
 from liepoisson._validation import check_system, positive_float

@@ -113,7 +113,7 @@ class E4(AbstractExperiment):
             metrics["glpnet"] = glpnet_on_same_data(
                 system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
                 n_modules=P.glpnet_modules, full_vectors=True, integrals=integrals,
-                symmetric=P.glpnet_symmetric,
+                method=it.splitting.Strang if P.glpnet_symmetric else it.splitting.LieTrotter,
             )[1]
         n_train = round(0.8 * (P.n_points - 1))
         metrics["adam_steps"] = P.epochs * (n_train // P.batch_size if P.batch_size else 1)

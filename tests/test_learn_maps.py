@@ -32,8 +32,8 @@ def test_parameter_counts(rb):
     # the paper's count for the rigid body: (3 + 1) 16 + 2 (16 + 1) 16 + (16 + 1) 3
     assert net.n_parameters == 659
     g = learn.GLPNet(rb, n_modules=6)
-    assert g.a.size + g.c.size + g.b.size == g.n_parameters == 18
-    assert learn.GLPNet(rb, n_modules=6, full_vectors=True).c.shape == (6, 3)
+    assert g.terms.a.size + g.terms.c.size + g.terms.b.size == g.n_parameters == 18
+    assert learn.GLPNet(rb, n_modules=6, full_vectors=True).terms.c.shape == (6, 3)
 
 
 def test_lpnet_conserves_casimir_over_long_rollout(rb, lpnet):
@@ -72,9 +72,9 @@ def test_glpnet_full_vectors_is_poisson(rb):
 
 def test_glpnet_default_order_cycles(rb):
     g = learn.GLPNet(rb, n_modules=6)
-    assert g.order == (0, 1, 2, 0, 1, 2)
+    assert g.terms.order == (0, 1, 2, 0, 1, 2)
     V = np.asarray(g.module_vectors())
-    assert np.all(V[np.arange(6), [0, 1, 2, 0, 1, 2]] == np.asarray(g.c))
+    assert np.all(V[np.arange(6), [0, 1, 2, 0, 1, 2]] == np.asarray(g.terms.c))
 
 
 def test_rollout_shapes(lpnet, glpnet, rb):

@@ -319,7 +319,7 @@ ARG_CASES = [
     ("lpnet-system", lambda: learn.LPNet("RigidBody"), TypeError, r"system must be"),
     ("glpnet-modules", lambda: learn.GLPNet(BODY, n_modules=0), ValueError, r"n_modules must be an integer >= 1"),
     ("glpnet-activation", lambda: learn.GLPNet(BODY, activation="relu6"), ValueError, r"activation"),
-    ("glpnet-symmetric", lambda: learn.GLPNet(BODY, symmetric="yes"), TypeError, r"symmetric must be True or False"),
+    ("glpnet-method", lambda: learn.GLPNet(BODY, method="Strang"), TypeError, r"method must be a splitting method"),
     ("fit-data", lambda: learn.fit(learn.GLPNet(BODY), [1, 2, 3], progress=False), ValueError, r"data given as a tuple must be \(y0, y1\)"),
     ("fit-data-type", lambda: learn.fit(learn.GLPNet(BODY), "data.h5", progress=False), TypeError, r"data must be an integrators\.Trajectories"),
     ("fit-h-missing", lambda: learn.fit(learn.GLPNet(BODY), (Y0, Y0), progress=False), ValueError, r"h \(the time step between y0 and y1\) is required"),

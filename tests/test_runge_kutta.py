@@ -83,8 +83,8 @@ def test_runge_kutta_arguments(kwargs, error, words):
         assert all(w in str(info.value) for w in words)
     with pytest.raises(TypeError, match="system"):
         it.RK4("rigid body", h=0.1)
-    with pytest.raises(ValueError, match="newton_iterations"):
-        it.ImplicitMidpoint(system("RigidBody"), h=0.1, newton_iterations=0)
+    with pytest.raises(ValueError, match="iterations"):
+        it.ImplicitMidpoint(system("RigidBody"), h=0.1, iterations=0)
 
 
 @pytest.mark.parametrize("ordering, error", [((0, 1), ValueError), ((0, 1, 1), ValueError), ("abc", TypeError)])
