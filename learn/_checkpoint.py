@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -113,11 +114,16 @@ CHECKPOINT_GROUPS = {"weights": list, "best": list, "optimizer": list, "history"
 HISTORY = ("epoch", "train_loss", "val_loss")
 
 
-def read_checkpoint(path: str, class_name: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    """`(attrs, groups)` of a training checkpoint written by `learn.fit` for a `class_name`;
-    `ValueError` naming the file and what is wrong: a model saved by `.save` (with how to
-    start from it), another class, or a missing or mistyped attribute or group."""
+def read_checkpoint(
+    path: str, class_name: str, upgrade: Callable[[dict[str, Any], str], dict[str, Any]] | None = None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """`(attrs, groups)` of a training checkpoint written by `learn.fit` for a `class_name`,
+    the attributes passed through `upgrade(attrs, where)` (older format versions); `ValueError`
+    naming the file and what is wrong: a model saved by `.save` (with how to start from it),
+    another class, or a missing or mistyped attribute or group."""
     attrs, groups = read(path)
+    if upgrade is not None:
+        attrs = upgrade(attrs, f"checkpoint {path!r}")
     saved = attrs.get("class")
     if set(groups) == {"weights"} and not {"fit_settings", "epoch"} & set(attrs) and isinstance(saved, str):
         raise ValueError(

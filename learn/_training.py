@@ -22,6 +22,7 @@ from liepoisson import common_path_first
 from liepoisson.systems import check_system_matches
 
 from . import _checkpoint
+from ._legacy import upgrade_attributes
 
 CHUNK = 1000
 
@@ -83,7 +84,7 @@ def train_adam(
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
     if checkpoint is not None and resume and os.path.exists(checkpoint):
-        attrs, groups = _checkpoint.read_checkpoint(checkpoint, type(model).__name__)
+        attrs, groups = _checkpoint.read_checkpoint(checkpoint, type(model).__name__, upgrade_attributes)
         try:
             check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {checkpoint!r}")
         except ValueError as err:
