@@ -165,14 +165,12 @@ def nonzero_time(t: Any, name: str = "t") -> float:
 
 
 def check_system(system: Any):
-    """A `liepoisson.systems.AbstractPoissonSystem` (TypeError otherwise)."""
-    from .systems import AbstractPoissonSystem  # systems import this module
+    """Transitional: moved to `liepoisson.systems._base.check_system`, beside the class it
+    checks; this forwarder keeps the import cycle `_validation` -> `systems` until its callers
+    import it from there, and then goes."""
+    from .systems._base import check_system as check  # the cycle this forwarder keeps
 
-    if not isinstance(system, AbstractPoissonSystem):
-        raise TypeError(
-            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
-        )
-    return system
+    return check(system)
 
 
 def broadcast_batch(dim: int, **batches: tuple[int, ...]) -> tuple[int, ...]:

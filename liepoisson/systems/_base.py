@@ -241,6 +241,17 @@ class AbstractPoissonSystem(abc.ABC):
         return list(zip(ys, rhs))
 
 
+def check_system(system: Any) -> AbstractPoissonSystem:
+    """`system` if it is an `AbstractPoissonSystem`; `TypeError` naming what was given
+    otherwise (defined here, beside the class, so that `liepoisson._validation`, which the
+    systems import, does not import them back)."""
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(
+            f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
+        )
+    return system
+
+
 class AbstractExactTerm(abc.ABC):
     r"""A piece $H_k$ of a splitting $H = \sum_k H_k$ whose flow $\varphi^{[k]}_t$ is known
     exactly: `value(system, y)` $= H_k(y)$ and `flow(system, t, y)` $= \varphi^{[k]}_t(y)$,
