@@ -152,7 +152,7 @@ def read_checkpoint(
             )
     for key, kind in CHECKPOINT_GROUPS.items():
         if not isinstance(groups[key], kind):
-            raise ValueError(f"checkpoint {path!r} is damaged: group {key!r} must hold a {kind.__name__} of arrays")
+            raise ValueError(f"checkpoint {path!r} is damaged: group {key!r} must hold a {kind.__name__} of arrays")  # noqa: TRY004 (a damaged file)
     absent = [k for k in HISTORY if k not in groups["history"]]
     if absent:
         raise ValueError(f"checkpoint {path!r} is damaged: group 'history' lacks {', '.join(map(repr, absent))}")
