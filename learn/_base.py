@@ -146,6 +146,14 @@ class AbstractLearnedMap(AbstractStepMap):
         return _checkpoint.replace_array_leaves(model, weights, f"path {os.fspath(path)!r}")
 
 
+def check_learned_map(value: Any, name: str = "model") -> AbstractLearnedMap:
+    """`value` if it is a learned map, else `TypeError` naming `name`."""
+    if not isinstance(value, AbstractLearnedMap):
+        raise TypeError(f"{name} must be a learned map (learn.LPNet, Reversible, GLPNet, MLPBaseline); "
+                        f"got {type(value).__name__}")
+    return value
+
+
 def check_file_matches(
     path: str | os.PathLike, attrs: dict[str, Any], class_name: str, system: AbstractPoissonSystem | None
 ) -> AbstractPoissonSystem:

@@ -23,7 +23,7 @@ from liepoisson import vmap_samples
 from liepoisson._progress import show_progress
 from liepoisson._validation import positive_float, positive_int
 
-from ._base import AbstractLearnedMap
+from ._base import AbstractLearnedMap, check_learned_map
 from ._data import PairData, prepare
 from ._quasi_newton import check_method, minimiser
 from ._record import StageRecord, TrainingRecord
@@ -130,14 +130,9 @@ def default_optimiser(model: AbstractLearnedMap) -> tuple[Optimiser, ...]:
     """What `learn.fit` runs when given no optimiser: `model.default_optimiser()` (BFGS with
     the identity warm start, 3500 iterations, 4 starts, for a G-LPNet, as the paper; 100,000
     epochs of Adam, learning rate 1e-3, for the MLP-based maps)."""
-    return _learned_map(model).default_optimiser()
+    return check_learned_map(model).default_optimiser()
 
 
-def _learned_map(value: Any, name: str = "model") -> AbstractLearnedMap:
-    if not isinstance(value, AbstractLearnedMap):
-        raise TypeError(f"{name} must be a learned map (learn.LPNet, Reversible, GLPNet, MLPBaseline); "
-                        f"got {type(value).__name__}")
-    return value
 
 
 def state_mse(model: AbstractLearnedMap, y0: jax.Array, y1: jax.Array) -> jax.Array:
@@ -187,7 +182,7 @@ def fit(
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal); `callback(learn.Progress)`: called as training
       goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
-    model = _learned_map(model)
+    model = check_learned_map(model)
     if epochs is not None:
         if optimiser is not None:
             raise ValueError("give either epochs (short for optimiser=learn.Adam(epochs)) or optimiser, not both")

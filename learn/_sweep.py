@@ -20,16 +20,17 @@ from integrators._distributed import check_client, map_unordered
 from integrators._files import atomic_write_text
 from liepoisson._progress import progress_bar, show_progress
 
-from ._base import AbstractLearnedMap
+from ._base import AbstractLearnedMap, check_learned_map
 from ._baseline import MLPBaseline
 from ._fit import fit
 from ._glpnet import GLPNet
 from ._lpnet import LPNet
 from ._record import TrainingRecord
+from ._reversible import Reversible
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
 FIT_KEYS = ("seed", "epochs", "optimiser", "loss", "normalise", "validation_fraction")
-_MODELS = {cls.__name__: cls for cls in (LPNet, GLPNet, MLPBaseline)}
+_MODELS = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline)}
 _RESULT = "result.json"
 
 
@@ -153,9 +154,7 @@ def _read_result(folder: Path) -> SweepResult | None:
 
 def _train(make_model, data, fit_kwargs, evaluate, point):
     """On a worker: build, fit and evaluate one point. Returns `(model, record, metrics)`."""
-    model = make_model(point)
-    if not isinstance(model, AbstractLearnedMap):
-        raise TypeError(f"make_model({point!r}) must return a learn.LPNet, GLPNet or MLPBaseline; got {model!r}")
+    model = check_learned_map(make_model(point), f"make_model({point!r})")
     pairs = data(point) if callable(data) else data
     kwargs = {**fit_kwargs, **{k: point[k] for k in FIT_KEYS if k in point}, "progress": False}
     model, record = fit(model, pairs, **kwargs)
