@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
@@ -18,14 +17,18 @@ from ._cluster import map_trainings, on_cluster
 def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, system, reference: np.ndarray,
                     defect_points: int = 200, integrals: dict | None = None) -> dict[str, Any]:
     """Metrics of `model` (trained as `record` says; `None`: no losses reported) rolled out
-    from `reference[:, 0]` for as many steps as `reference` has.
+    from `reference[:, 0]` for as many steps as `reference` has: `integrators.rollout_figures`
+    of the rollout, under its names in metrics.json.
 
-    `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`. Energy and Casimir errors are
-    relative to the time mean as in the paper (`(E(t) - E(0)) / <E>`); maxima are over all
-    trajectories and times, means over both; `integrals` (name -> function of the state) are
-    reported as `<name>_rel_err_max` the same way. A rollout that stops being finite has every
-    error figure infinite (an error of the finite steps alone would pass for a good model), with
-    `diverged_at_step` and `energy_rel_err_max_finite_steps` saying what happened before.
+    `reference`: ground truth of shape `(n_traj, n_steps+1, dim)`; `system`: the model's (the
+    figures take $H$ and the Casimirs from `model.system`).
+    Energy and Casimir errors are relative to the time mean as in the paper (`(E(t) - E(0)) /
+    <E>`); maxima are over all trajectories and times, means over both; `integrals` (name ->
+    function of the state) are reported as `<name>_rel_err_max` the same way; the Poisson
+    defect is the largest at `defect_points` states drawn at random (seed 0) from the finite
+    steps of every trajectory. A rollout that stops being finite has every error figure
+    infinite (the library's divergence policy), with `diverged_at_step` and
+    `energy_rel_err_max_finite_steps` saying what happened before.
     Returns the metrics, the rollout and the report.
     """
     reference = np.asarray(reference)
@@ -33,45 +36,24 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, sy
     t0 = time.perf_counter()
     y = np.asarray(model.rollout(reference[:, 0], n_points - 1, nonfinite="return"))
     rollout_time = time.perf_counter() - t0
-    # An unstructured baseline may blow up: diagnostics measures it on the steps before the
-    # first non-finite state and says where it diverged.
-    report = it.diagnostics(y, system, reference=reference, integrals=integrals)
-    n_ok = n_points if report.diverged_at_step is None else report.diverged_at_step
-    energy = np.abs(report.energy_error_relative)
-    pick_from = y[:, :n_ok].reshape(-1, y.shape[-1])
-    rng = np.random.default_rng(0)
-    pick = pick_from[rng.choice(len(pick_from), size=min(defect_points, len(pick_from)), replace=False)]
+    figures = it.rollout_figures(model, y, reference, integrals=integrals, defect_points=defect_points, defect_seed=0)
     metrics = {
         "train_loss": None if record is None else record.train_loss,
         "val_loss": None if record is None else record.val_loss,
-        "energy_rel_err_max": float(np.max(energy)),
-        "energy_rel_err_mean": float(np.mean(energy)),
-        "energy_rel_err_max_per_trajectory": np.max(energy, axis=1),
-        "casimir_rel_drift_max": report.max_casimir_drift_relative if system.n_casimirs else None,
-        "traj_err_final": float(np.max(report.trajectory_error[:, -1])),
-        "poisson_defect_max": float(np.max(np.asarray(model.poisson_defect(pick)))),
+        "energy_rel_err_max": figures.energy_error_max,
+        "energy_rel_err_mean": figures.energy_error_mean,
+        "energy_rel_err_max_per_trajectory": figures.energy_error_max_per_trajectory,
+        "casimir_rel_drift_max": figures.casimir_drift_max if system.n_casimirs else None,
+        "traj_err_final": figures.error_final,
+        "poisson_defect_max": figures.poisson_defect_max,
         "wall_time_s": None if record is None else record.wall_time_s,
         "rollout_time_s": rollout_time,
+        **{f"{name}_rel_err_max": value for name, value in figures.integral_error_max.items()},
     }
-    for name in integrals or {}:
-        metrics[f"{name}_rel_err_max"] = report.max_integral_error(name)
-    if report.diverged_at_step is not None:
-        # The trajectories that stayed finite keep their own figures over every step.
-        finite = np.all(np.isfinite(y), axis=(1, 2))
-        per_trajectory = np.full(len(y), math.inf)
-        if finite.any():
-            ok = it.diagnostics(y[finite], system, reference=reference[finite])
-            per_trajectory[finite] = np.max(np.abs(ok.energy_error_relative), axis=1)
-        metrics.update({
-            "diverged_at_step": report.diverged_at_step,
-            "energy_rel_err_max_finite_steps": metrics["energy_rel_err_max"],
-            "energy_rel_err_max": math.inf,
-            "energy_rel_err_mean": math.inf,
-            "energy_rel_err_max_per_trajectory": per_trajectory,
-            "traj_err_final": math.inf,
-            **{f"{name}_rel_err_max": math.inf for name in integrals or {}},
-        })
-    return {"metrics": metrics, "rollout": y, "report": report}
+    if figures.divergence is not None:
+        metrics["diverged_at_step"] = figures.diverged_at_step
+        metrics["energy_rel_err_max_finite_steps"] = figures.report.before_divergence().max_energy_error
+    return {"metrics": metrics, "rollout": y, "report": figures.report}
 
 
 Trained = tuple[AbstractLearnedMap, TrainingRecord]

@@ -256,27 +256,31 @@ def test_a_rollout_that_diverges_has_infinite_errors_not_those_of_its_finite_ste
     iteration failed at step 1 scored 0 energy error in E4's sweep before this)."""
     import math
 
+    import jax.numpy as jnp
+
     import integrators as it
     import liepoisson as lp
     from paper._evaluate import measure_rollout
     from paper.e4_sweep import _trajectory_error
 
+    class Diverging(it.AbstractStepMap):
+        """y -> (1 + 2e-4) y (an energy error growing with the step), NaN once max|y| > 1.10033:
+        from max|y0| = 1.1 at step 3 (1.1 * 1.0002^2 > 1.10033), from 1.0 never in 10 steps."""
+
+        system: lp.systems.AbstractPoissonSystem
+        h: float
+
+        def step(self, y):
+            return jnp.where(jnp.max(jnp.abs(y)) > 1.10033, jnp.nan, (1.0 + 2e-4) * y)
+
+        @property
+        def exact_flows_per_step(self):
+            return 0
+
     system = lp.systems.ChargedParticle()
-    reference = np.asarray(it.ground_truth(system, [[0.1, 1.0, -0.5, 0.8], [0.0, 1.1, -0.6, 0.9]], h=0.1,
+    reference = np.asarray(it.ground_truth(system, [[0.0, 1.1, -0.6, 0.9], [0.1, 1.0, -0.5, 0.8]], h=0.1,
                                            n_steps=10, progress=False).states)
-    perturbed = reference * (1 + 1e-3 * np.arange(11) / 10)[None, :, None]  # an error growing with the step
-
-    class Diverging:  # the two methods measure_rollout calls
-        def rollout(self, y0, n_steps, nonfinite="raise"):
-            assert nonfinite == "return" and n_steps == 10
-            y = perturbed.copy()
-            y[0, 3:] = np.nan
-            return y
-
-        def poisson_defect(self, y):
-            return np.zeros(len(y))
-
-    m = measure_rollout(Diverging(), None, system, reference,
+    m = measure_rollout(Diverging(system, 0.1), None, system, reference,
                         integrals={"integral": system.angular_integral})["metrics"]
     assert m["diverged_at_step"] == 3
     assert m["energy_rel_err_max"] == m["traj_err_final"] == m["integral_rel_err_max"] == math.inf
@@ -287,3 +291,33 @@ def test_a_rollout_that_diverges_has_infinite_errors_not_those_of_its_finite_ste
     assert 1e-6 < m["energy_rel_err_max_finite_steps"] < per_trajectory[1] < 1e-2
     assert _trajectory_error(m) == "diverged at step 3"
     assert _trajectory_error({"traj_err_final": 0.5}) == "0.5"
+
+
+def test_measure_rollout_figures_are_the_paper_definitions():
+    """The figures metrics.json holds, against their definitions written out in numpy: relative
+    energy error and Casimir drift over each trajectory's time mean, maxima over trajectories
+    and times, the error at the last step, the Poisson defect at 200 states drawn with seed 0."""
+    import integrators as it
+    import liepoisson as lp
+    from paper._evaluate import measure_rollout
+
+    system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+    rk4 = it.RK4(system, h=0.4)  # neither energy nor Casimir kept to round-off: the figures are measurable
+    reference = np.asarray(it.ground_truth(system, [[1.0, 0.5, 0.2], [0.3, 1.0, -0.4], [0.5, -0.7, 0.9]],
+                                           h=0.4, n_steps=60, progress=False).states)
+    m = measure_rollout(rk4, None, system, reference)["metrics"]
+    y = np.asarray(rk4.rollout(reference[:, 0], 60))
+    E = 0.5 * np.sum(y**2 / np.array([1.0, 2.0, 3.0]), axis=-1)
+    energy = np.abs(E - E[:, :1]) / np.abs(E.mean(axis=1, keepdims=True))
+    C = np.sum(y**2, axis=-1)
+    drift = np.abs(C - C[:, :1]) / C.mean(axis=1, keepdims=True)
+    assert energy.max() > 1e-6 and drift.max() > 1e-8
+    # Differences of O(1) sums summed in another order: their roundings differ by ~eps / 1e-8.
+    assert m["energy_rel_err_max"] == pytest.approx(energy.max(), rel=1e-7)
+    assert m["energy_rel_err_mean"] == pytest.approx(energy.mean(), rel=1e-7)
+    np.testing.assert_allclose(m["energy_rel_err_max_per_trajectory"], energy.max(axis=1), rtol=1e-7)
+    assert m["casimir_rel_drift_max"] == pytest.approx(drift.max(), rel=1e-7)
+    assert m["traj_err_final"] == np.max(np.linalg.norm(y[:, -1] - reference[:, -1], axis=-1))
+    pick = y.reshape(-1, 3)[np.random.default_rng(0).choice(3 * 61, size=183, replace=False)]
+    assert m["poisson_defect_max"] == np.max(np.asarray(rk4.poisson_defect(pick)))
+    assert "diverged_at_step" not in m
