@@ -6,7 +6,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 
-from liepoisson._validation import check_system, positive_float
+from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._step_map import AbstractStepMap, check_state

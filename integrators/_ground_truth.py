@@ -17,8 +17,7 @@ import h5py
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._progress import progress_bar, show_progress
-from liepoisson._validation import positive_float, positive_int
+from liepoisson.internals import positive_float, positive_int, progress_bar, show_progress
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._distributed import check_client, map_unordered

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson._validation import positive_int
+from liepoisson.internals import positive_int
 
 from ._step_map import AbstractStepMap, check_state, traced_h, xla_flops
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import as_state, check_system, positive_float
+from liepoisson.internals import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._ground_truth import EPS, taylor_integrator

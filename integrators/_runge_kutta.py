@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from liepoisson._validation import check_system, positive_float, positive_int
+from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._implicit import AbstractImplicitStepMap

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from liepoisson import vmap_samples
-from liepoisson._validation import as_state, positive_float, positive_int, states
+from liepoisson.internals import as_state, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
 

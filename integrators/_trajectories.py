@@ -1,5 +1,5 @@
 r"""`Trajectories`: sampled solutions $y(t_n)$, $t_n = n h$, with their provenance, and the
-HDF5 format of DESIGN.md section 4."""
+HDF5 format of `docs/conventions.md` ("Numbers and files")."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 import liepoisson
-from liepoisson._validation import positive_float
+from liepoisson.internals import positive_float
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
@@ -51,7 +51,7 @@ def _check_seed(seed: Any) -> int | None:
 
 
 def write_attributes(f: Any, metadata: dict[str, Any]) -> None:
-    """Write `Trajectories.metadata` as the file's attributes (DESIGN.md section 4)."""
+    """Write `Trajectories.metadata` as the file's attributes (`docs/conventions.md`, "Numbers and files")."""
     f.attrs["system"] = metadata["system"]
     f.attrs["system_params"] = json.dumps(metadata["system_params"], sort_keys=True)
     f.attrs["h"] = metadata["h"]
@@ -275,7 +275,7 @@ class Trajectories:
 
     # -- HDF5 -------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
-        """Write to HDF5 (DESIGN.md section 4), atomically: a temporary file in the same
+        """Write to HDF5 (`docs/conventions.md`, "Numbers and files"), atomically: a temporary file in the same
         directory is renamed over `path` only once complete, so a failure never leaves a half
         file nor clobbers an existing one."""
         import h5py

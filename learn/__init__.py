@@ -11,20 +11,19 @@ _jax.config.update("jax_enable_x64", True)
 from ._base import AbstractLearnedMap as AbstractLearnedMap
 from ._baseline import MLPBaseline as MLPBaseline
 from ._equivariant import GroupAveraged as GroupAveraged
-from ._fit import (
+from ._fit import default_optimiser as default_optimiser, fit as fit
+from ._losses import alpha_mse as alpha_mse, state_mse as state_mse
+from ._optimisers import (
     Adam as Adam,
     Checkpoint as Checkpoint,
     Progress as Progress,
     QuasiNewton as QuasiNewton,
-    default_optimiser as default_optimiser,
-    fit as fit,
-    state_mse as state_mse,
 )
 from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._fit_splitting import fit_splitting as fit_splitting
 from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
 from ._learned_terms import RidgeTerms as RidgeTerms
-from ._lpnet import LPNet as LPNet, alpha_mse as alpha_mse
+from ._lpnet import LPNet as LPNet
 from ._mlp import AffineMLP as AffineMLP
 from ._networks import AbstractNetwork as AbstractNetwork
 from ._parametrisation import (

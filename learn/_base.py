@@ -15,11 +15,13 @@ import numpy as np
 
 import liepoisson as lp
 from integrators import AbstractStepMap
-from liepoisson._validation import check_system
+from liepoisson.internals import check_system
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from . import _checkpoint
 from ._legacy import upgrade_attributes
+from ._losses import state_mse
+from ._optimisers import Adam
 
 if TYPE_CHECKING:  # typing.Self needs Python 3.11
     from typing_extensions import Self
@@ -65,8 +67,6 @@ class AbstractLearnedMap(AbstractStepMap):
     def default_optimiser(self) -> tuple[Any, ...]:
         """The optimiser stages `learn.fit` runs when given none: 100,000 epochs of Adam
         (learning rate 1e-3), the paper's for its MLPs."""
-        from ._fit import Adam
-
         return (Adam(),)
 
     def loss_function(self, loss: str) -> Callable[[Any, jax.Array, jax.Array], jax.Array]:
@@ -74,8 +74,6 @@ class AbstractLearnedMap(AbstractStepMap):
         `"state"` is the MSE of `training_prediction` against $y_1$ (paper eqs. Loss_function,
         Loss_function_G_LPNets)."""
         self._check_loss(loss)
-        from ._fit import state_mse
-
         return state_mse
 
     def loss_targets(self, loss: str, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:

@@ -9,13 +9,14 @@ from typing import Any
 import equinox as eqx
 import jax
 
-from integrators._step_map import check_state
-from liepoisson._validation import check_system, positive_float
+from integrators.internals import check_state
+from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
 from ._mlp import AffineMLP, Scaling
-from ._networks import AbstractNetwork, network_from_spec
+from ._network_spec import network_from_spec
+from ._networks import AbstractNetwork
 
 
 class MLPBaseline(AbstractLearnedMap):

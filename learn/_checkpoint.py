@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from integrators._files import atomic_path, open_hdf5
+from integrators.internals import atomic_path, open_hdf5
 
 FORMAT = "learn-model"
 #: 2: learned maps are composed (LPNet + network, Reversible, GLPNet + method); version 1

@@ -9,8 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
-from liepoisson._inverse import check_casimirs_agree
-from liepoisson._validation import fraction, pairs, positive_float, positive_int
+from liepoisson.internals import check_casimirs_agree, fraction, pairs, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 

@@ -18,15 +18,16 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
-from integrators._step_map import check_state, traced_h, xla_flops
+from integrators.internals import check_state, traced_h, xla_flops
 from integrators.splitting import AbstractSplittingMethod, LieTrotter
 from liepoisson import JAX
-from liepoisson._validation import as_state, check_system, positive_float
+from liepoisson.internals import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
+from ._optimisers import QuasiNewton
 
 
 def check_method(method: Any) -> type[AbstractSplittingMethod]:
@@ -170,8 +171,6 @@ class GLPNet(AbstractLearnedMap):
     # -- what learn.fit asks -------------------------------------------------------------------
     def default_optimiser(self):
         """BFGS with the identity warm start (3500 iterations, 4 starts), as the paper."""
-        from ._fit import QuasiNewton
-
         return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
 
     has_warm_start = True

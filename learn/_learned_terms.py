@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson._validation import positive_int
+from liepoisson.internals import positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._mlp import ACTIVATIONS, as_key, check_activation

@@ -9,16 +9,17 @@ from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
-from integrators._step_map import check_state
-from liepoisson._validation import check_system, positive_float
+from integrators.internals import check_state
+from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
 from ._equivariant import GroupAveraged, check_group_law
+from ._losses import alpha_mse
 from ._mlp import AffineMLP, Scaling
-from ._networks import AbstractNetwork, network_from_spec
+from ._network_spec import network_from_spec
+from ._networks import AbstractNetwork
 from ._parametrisation import (
     AbstractStepParametrisation,
     default_parametrisation,
@@ -140,10 +141,3 @@ class LPNet(AbstractLearnedMap):
         per step passes its share)."""
         outputs = fraction * self.parametrisation.params_estimate(y0, y1, h) if targets is None else targets
         return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, outputs))
-
-
-def alpha_mse(model: LPNet, y0: jax.Array, alpha: jax.Array) -> jax.Array:
-    """MSE of an LPNet's $\alpha(y_0)$ against the pairs' parameters, in units of the output
-    scale of its network (1 for a network without scalings)."""
-    scale = jnp.asarray(model.network.output_scales())
-    return jnp.mean(((jax.vmap(model.alpha)(y0) - alpha) / scale) ** 2)

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson._validation import positive_int
+from liepoisson.internals import positive_int
 
 from ._networks import AbstractNetwork
 

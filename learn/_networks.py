@@ -43,19 +43,3 @@ class AbstractNetwork(eqx.Module):
     def output_scales(self) -> tuple[float, ...]:
         """The fixed scales of the outputs (units of an output-space loss); ones by default."""
         return (1.0,) * self.out_size
-
-
-def network_from_spec(spec: dict[str, Any], key: int | jax.Array) -> AbstractNetwork:
-    """The network `spec` describes (`AbstractNetwork.spec`), with fresh weights from `key`."""
-    from ._equivariant import GroupAveraged
-    from ._mlp import AffineMLP
-
-    if not isinstance(spec, dict):
-        raise TypeError(f"a network spec must be a dict with a 'kind'; got {spec!r}")
-    kind = spec.get("kind")
-    rest = {k: v for k, v in spec.items() if k != "kind"}
-    if kind == "AffineMLP":
-        return AffineMLP(key=key, **rest)
-    if kind == "GroupAveraged":
-        return GroupAveraged(network_from_spec(rest["network"], key), rest["group"])
-    raise ValueError(f"unknown network kind {kind!r}; known: 'AffineMLP', 'GroupAveraged'")

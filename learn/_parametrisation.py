@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 import liepoisson as lp
-from liepoisson._validation import check_system, pairs, positive_float
+from liepoisson.internals import check_system, pairs, positive_float
 from liepoisson.systems import AbstractLiePoissonSystem, AbstractPoissonSystem
 
 

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
 from integrators import AbstractImplicitStepMap
-from liepoisson._validation import positive_int
+from liepoisson.internals import positive_int
 from liepoisson.systems import AbstractPoissonSystem, check_reversing_symmetry, reversing_symmetry
 
 from ._base import AbstractLearnedMap

@@ -16,9 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from integrators import Trajectories
-from integrators._distributed import check_client, map_unordered
-from integrators._files import atomic_write_text
-from liepoisson._progress import progress_bar, show_progress
+from integrators.internals import atomic_write_text, check_client, map_unordered
+from liepoisson.internals import progress_bar, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
 from ._baseline import MLPBaseline

@@ -20,12 +20,11 @@ from ._coadjoint import (
     MatrixExponentialFlow as MatrixExponentialFlow,
     RodriguesFlow as RodriguesFlow,
     SE3Flow as SE3Flow,
-    common_path_first as common_path_first,
-    expm_action as expm_action,
     rotate as rotate,
     rotation_coefficients as rotation_coefficients,
-    vmap_samples as vmap_samples,
 )
+from ._expm import expm_action as expm_action
+from ._samples import common_path_first as common_path_first, vmap_samples as vmap_samples
 from ._casimirs import polynomial_casimirs as polynomial_casimirs
 from ._elliptic import ellipj as ellipj
 from ._inverse import gauss_newton_parameters as gauss_newton_parameters

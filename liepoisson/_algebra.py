@@ -1,6 +1,6 @@
 r"""Real Lie algebras from structure constants and their Lie-Poisson structure on g*.
 
-Conventions (DESIGN.md section 2): $[e_a, e_b] = C_{abd}\,e_d$;
+Conventions (`docs/conventions.md`): $[e_a, e_b] = C_{abd}\,e_d$;
 $\mathbb{B}(\mu)_{ab} = \mathrm{sign}\cdot C_{abd}\,\mu_d$ (body convention `sign = -1`);
 $\dot\mu = \mathbb{B}(\mu)\,\partial H/\partial\mu$.
 """

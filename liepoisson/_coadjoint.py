@@ -1,6 +1,6 @@
 r"""Exact coadjoint flows $\mu(t) = \exp(t\,\mathbb{M}(\alpha))\,\mu(0)$ of linear Hamiltonians.
 
-Every flow here follows the body convention of DESIGN.md (`sign = -1`):
+Every flow here follows the body convention of `docs/conventions.md` (`sign = -1`):
 $\mathbb{M}(\alpha)_{ad} = -C_{abd}\,\alpha_b$, so that $\dot\mu = \mathbb{B}(\mu)\,\alpha$.
 `LieAlgebra` converts other signs by reversing time. The generic path is the matrix
 exponential; `RodriguesFlow` (so(3)) and `SE3Flow` (se(3)) are closed-form fast paths with
@@ -12,8 +12,6 @@ otherwise.
 from __future__ import annotations
 
 import abc
-import contextvars
-from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -21,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._expm import expm_action
 from ._inverse import gauss_newton_parameters
 from ._validation import is_traced
 
@@ -150,190 +149,6 @@ class AbstractCoadjointFlow(abc.ABC):
 
     def __hash__(self):
         return hash(type(self)) if not vars(self) else id(self)
-
-
-# `jax.scipy.linalg.expm` is inaccurate for 1-norms above ~5 (its Pade-13 branch: errors of
-# 1e-9 at norm 10 for a rotation generator, jax-ml/jax#26802) and slow to compile and
-# differentiate. Scale to 1-norm <= 1/2, where the Taylor polynomial of degree 18 is exact to
-# 0.5^19/19! < 1e-22 and backward stable (all terms are bounded by e^{1/2}), then square back.
-# The squarings run in a loop of static length (masked), so jit and reverse mode work: 6
-# checkpointed groups of 8, so that reverse mode stores 6 + 8 iterates instead of 48 (and 48
-# masks). With 48 stored, a batch of 2000 6x6 matrices needed a 59 MB buffer: above glibc's
-# mmap threshold (32 MB), so it was mapped afresh at every call, and every gradient of a
-# program that merely contained this path (an untaken branch of `expm_action`) paid ~570 page
-# faults, +25% on an LPNet epoch.
-_EXPM_NORM = 0.5
-_TAYLOR_DEGREE = 18
-_SQUARING_GROUPS, _SQUARINGS_PER_GROUP = 6, 8
-_MAX_SQUARINGS = _SQUARING_GROUPS * _SQUARINGS_PER_GROUP
-
-
-def _squarings(E: jax.Array, s: jax.Array) -> jax.Array:
-    """`E` squared `s` times (`s` broadcast against `E`, at most `_MAX_SQUARINGS`)."""
-
-    @jax.checkpoint
-    def group(j, E):
-        def square_if(i, E):
-            return jnp.where(j * _SQUARINGS_PER_GROUP + i < s, E @ E, E)
-
-        return jax.lax.fori_loop(0, _SQUARINGS_PER_GROUP, square_if, E)
-
-    return jax.lax.fori_loop(0, _SQUARING_GROUPS, group, E)
-
-
-@jax.jit
-def _expm(A: jax.Array) -> jax.Array:
-    """Matrix exponential of a batch `(m, n, n)` of matrices by scaling and squaring."""
-    norm = jax.lax.stop_gradient(jnp.max(jnp.sum(jnp.abs(A), axis=-2), axis=-1))
-    s = jnp.clip(jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / _EXPM_NORM)), 0, _MAX_SQUARINGS)
-    X = A * jnp.exp2(-s)[:, None, None]
-    eye = jnp.broadcast_to(jnp.eye(A.shape[-1], dtype=A.dtype), A.shape)
-    E = eye
-    for k in range(_TAYLOR_DEGREE, 0, -1):  # Horner: I + X (I + X/2 (I + X/3 (...)))
-        E = eye + (X @ E) / k
-    return _squarings(E, s[:, None, None])
-
-
-# The library maps over samples (training pairs, trajectories) with `vmap_samples`, a `vmap`
-# whose axis carries this name. Code under it can take a maximum over the whole batch
-# (`lax.pmax`) and branch on it for real: a branch on a per-sample value under a plain `vmap`
-# evaluates every branch.
-SAMPLE_AXIS = "liepoisson_samples"
-
-
-def vmap_samples(fun):
-    """`jax.vmap(fun)` over the leading axis, named `SAMPLE_AXIS` (see `expm_action`)."""
-    return jax.vmap(fun, axis_name=SAMPLE_AXIS)
-
-
-def _sample_max(x: jax.Array) -> jax.Array | None:
-    """`max(x)` over the arrays' axes and the named sample axis (unbatched), or `None` when
-    not traced under `vmap_samples`."""
-    x = jax.lax.stop_gradient(jnp.max(x))
-    try:
-        return jax.lax.pmax(x, SAMPLE_AXIS)
-    except NameError:  # not under vmap_samples: the maximum would be per sample
-        return None
-
-
-# Paths of exp(A) v = exp(A/m)^m v by Taylor polynomials of degree d on vectors, tried in
-# turn for |A|_1 <= bound: (bound, m, d). With theta = |A/m|_1 the remainder of one sub-step
-# is at most theta^(d+1)/(d+1)! e^theta relative to |v|: 3e-18 (1/8, 10), 2e-17 (1, 18),
-# below round-off; every term is bounded by e^theta |v|. Beyond the last bound, the matrix
-# exponential by scaling and squaring. Few paths: each is compiled into every flow of a step
-# (a G-LPNet with 6 paths compiled 3x slower than with 3).
-# The first path is the common one in training (|h M(alpha)|_1 of 0.03 to 0.13 for an LPNet
-# at h = 0.1), unrolled and outside any checkpoint (see `expm_action`).
-_ACTION_PATHS = ((0.125, 1, 10), (1.0, 1, 18), (8.0, 8, 18))
-
-
-def _taylor_action(A: jax.Array, v: jax.Array, m: int, degree: int, unroll: bool = False) -> jax.Array:
-    """exp(A) v as m sub-steps of the Taylor polynomial of exp(A/m) of degree `degree`
-    (`unroll`: one sub-step as straight-line code)."""
-    B = A / m
-    if unroll and m == 1:
-        term = total = v
-        for k in range(1, degree + 1):
-            term = jnp.einsum("...ad,...d->...a", B, term) / k
-            total = total + term
-        return total
-
-    def add_term(k, carry):  # term_k = B term_{k-1} / k (loops, not unrolled: small programs)
-        term, total = carry
-        term = jnp.einsum("...ad,...d->...a", B, term) / k.astype(B.dtype)
-        return term, total + term
-
-    def substep(_, v):
-        return jax.lax.fori_loop(1, degree + 1, add_term, (v, v))[1]
-
-    return jax.lax.fori_loop(0, m, substep, v)
-
-
-# Set while `common_path_first` traces its first attempt (read at trace time by `expm_action`).
-_COMMON_PATH_ONLY: contextvars.ContextVar[bool] = contextvars.ContextVar("common_path_only", default=False)
-
-
-def common_path_first(fun: Callable, ok: Callable[[Any], bool]) -> Callable:
-    r"""`jax.jit(fun)` that runs `expm_action` on its common path only, and again with every
-    path where that was not enough.
-
-    Under `vmap_samples`, `expm_action` branches on the batch's largest $|A|_1$; reverse mode
-    through that branch carries the other paths along (an LPNet epoch on so(4) cost 1.3-1.6x
-    the straight-line common path, in the same compiled program). The first attempt is
-    compiled with the common path alone, as straight-line code, and gives NaN wherever a
-    batch is beyond its bound; when `ok(outputs)` (host values) is false, the call is
-    repeated with the full `expm_action` (compiled on first need), and so are all later calls
-    (norms beyond the bound tend to stay: without this, a G-LPNet on sl(3) would compute every
-    gradient twice). Either way the result is
-    that of `jax.jit(fun)`, so `fun` must be a pure function of its arguments, and `ok` must
-    reject every output that went through a NaN (e.g. require a finite loss).
-    """
-    first = jax.jit(lambda *args: fun(*args))  # two function objects: two caches of traces
-    every = jax.jit(lambda *args: fun(*args))
-
-    rejected = False
-
-    def call(*args):
-        nonlocal rejected
-        if rejected:
-            return every(*args)
-        token = _COMMON_PATH_ONLY.set(True)
-        try:
-            out = first(*args)
-        finally:
-            _COMMON_PATH_ONLY.reset(token)
-        if ok(out):
-            return out
-        rejected = True
-        return every(*args)
-
-    return call
-
-
-def expm_action(A: jax.Array, v: jax.Array) -> jax.Array:
-    r"""$\exp(A)\,v$ for `A` `(..., n, n)` and `v` `(..., n)`, exact to round-off for every
-    $A$ (jit, vmap, grad, jvp).
-
-    Under `vmap_samples` (the library's training loss, rollout and Poisson defect), the
-    largest $|A|_1$ over the batch picks the path for all samples: $\exp(A/m)^m v$ by
-    Taylor polynomials on vectors (matrix-vector products only; $m = 1$ with degree 10 up to
-    1/8, degree 18 up to 1, $m = 8$ up to 8), else the matrix exponential by scaling and
-    squaring. Elsewhere
-    (a single call, a plain `vmap`) the matrix exponential, whose cost does not depend on $A$.
-
-    Accuracy: on compact algebras ($A$ a rotation generator) a quadratic Casimir drifts by at
-    most $64\,\varepsilon\,|A|\,|v|^2$ per call on every path (measured $\le 18$ for
-    $|A|$ from 0.3 to $10^4$; tested); on non-compact ones the result grows like
-    $e^{|A|}$ and overflows to inf beyond $|A| \approx 700$, which rollouts report as a
-    divergence.
-    """
-    norm = jnp.max(jnp.sum(jnp.abs(jax.lax.stop_gradient(A)), axis=-2), axis=-1)
-    batch_norm = _sample_max(norm)
-
-    def matrix(A, v):
-        n = A.shape[-1]
-        E = _expm(A.reshape((-1, n, n))).reshape(A.shape)
-        return jnp.einsum("...ad,...d->...a", E, v)
-
-    if batch_norm is None:
-        return matrix(A, v)
-    # Reverse mode through a branch stores the residuals of every branch (zeros for those not
-    # taken). The common first path keeps its own (12 vectors per sample); the others are
-    # rematerialised, each and together, so that their residuals are only (A, v) once: a flat
-    # switch of checkpointed paths cost 17% more per gradient when the first path was taken,
-    # and the others without their own checkpoint 10x more (zeros for 8 x 18 vectors).
-    (bound, m, d), *rest = _ACTION_PATHS
-    if _COMMON_PATH_ONLY.get():  # under `common_path_first`: NaN makes it take every path
-        return jnp.where(batch_norm <= bound, _taylor_action(A, v, m, d, unroll=True), jnp.nan)
-    branches = [jax.checkpoint(lambda A, v, m=m, d=d: _taylor_action(A, v, m, d)) for _, m, d in rest]
-    branches.append(jax.checkpoint(matrix))
-    bounds = jnp.asarray([bound for bound, _, _ in rest], dtype=A.dtype)
-
-    @jax.checkpoint
-    def others(A, v):
-        return jax.lax.switch(jnp.searchsorted(bounds, batch_norm), branches, A, v)
-
-    return jax.lax.cond(batch_norm <= bound, lambda A, v: _taylor_action(A, v, m, d, unroll=True), others, A, v)
 
 
 class MatrixExponentialFlow(AbstractCoadjointFlow):

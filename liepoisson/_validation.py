@@ -164,15 +164,6 @@ def nonzero_time(t: Any, name: str = "t") -> float:
     return value
 
 
-def check_system(system: Any):
-    """Transitional: moved to `liepoisson.systems._base.check_system`, beside the class it
-    checks; this forwarder keeps the import cycle `_validation` -> `systems` until its callers
-    import it from there, and then goes."""
-    from .systems._base import check_system as check  # the cycle this forwarder keeps
-
-    return check(system)
-
-
 def broadcast_batch(dim: int, **batches: tuple[int, ...]) -> tuple[int, ...]:
     """The broadcast of the named batch shapes (e.g. `alpha=alpha.shape[:-1], mu=...,
     t=t.shape`); `ValueError` naming them all if they do not broadcast."""

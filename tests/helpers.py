@@ -107,7 +107,7 @@ def reference_poisson_tensor(C: np.ndarray, mu: np.ndarray, sign: int = -1) -> n
 
 
 def reference_coadjoint_flow(C, alpha, t, mu, sign=-1):
-    """scipy.linalg.expm of t M(alpha), M_ad = sign * C_abd alpha_b (DESIGN.md section 2).
+    """scipy.linalg.expm of t M(alpha), M_ad = sign * C_abd alpha_b (docs/conventions.md).
 
     scipy's expm alone errs by ~1e-13 at norm 30 (Pade-13 branch); scaling to norm <= 1/4
     and squaring back in extended precision keeps the reference at ~norm * eps."""

@@ -84,7 +84,7 @@ def test_bracket_ad_ad_star_consistency(name):
     # B(mu) = sign * (<mu, [e_a, e_b]>)_ab, and B(mu) alpha = sign * ad*_alpha... in body form
     B = np.asarray(g.poisson_tensor(mu))
     np.testing.assert_allclose(B, reference_poisson_tensor(C, mu, g.sign), atol=tol)
-    # {F, H} = -<mu, [dF, dH]> for linear F, H (DESIGN.md, body sign)
+    # {F, H} = -<mu, [dF, dH]> for linear F, H (docs/conventions.md, body sign)
     assert abs(xi @ B @ eta - g.sign * np.dot(mu, br)) < tol * 4
     # Jacobi identity of the bracket of the algebra: [x,[y,z]] + cyclic = 0
     z = rng.standard_normal(g.dim)

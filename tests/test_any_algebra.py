@@ -18,7 +18,7 @@ from helpers import EPS
 
 import integrators as it
 import learn
-from learn._fit import state_mse
+from learn import state_mse
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 from any_algebra import SYSTEMS, casimir_drift  # the benchmark's, not copied

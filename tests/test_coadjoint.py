@@ -162,7 +162,7 @@ def test_so3_rotation_is_the_literature_rodrigues():
 
 
 def test_se3_special_cases():
-    """H = b.p: dPi/dt = p x b, dp/dt = 0 (DESIGN.md); H = A.Pi rotates Pi and p together."""
+    """H = b.p: dPi/dt = p x b, dp/dt = 0 (docs/conventions.md); H = A.Pi rotates Pi and p together."""
     g = algebra("se3")
     Pi, p = np.array([0.4, -1.0, 2.0]), np.array([1.5, 0.2, -0.7])
     b, t = np.array([0.3, 0.9, -0.4]), 1.7

@@ -351,7 +351,7 @@ def test_rotation_shear_is_two_exact_flows(sign):
     )
     twice = g.coadjoint_flow(shear, T, g.coadjoint_flow(rotation, T, mu0))
     np.testing.assert_array_equal(mu1, np.asarray(twice))
-    # the shear alone, from DESIGN.md: H = b.p gives dPi/dt = p x b in the body convention
+    # the shear alone, from docs/conventions.md: H = b.p gives dPi/dt = p x b in the body convention
     # (sign -1); the spatial one reverses time
     sheared = np.asarray(lp.se3_rotation_shear(shear, T, mu0, sign=sign))
     expected = mu0[:, :3] + sign * T * np.cross(alpha[:, 3:], mu0[:, 3:])

@@ -281,7 +281,7 @@ def test_refinement_is_dropped_when_validation_gets_worse():
     """Training targets y = 2x, validation targets y = 0: minimising the training loss from
     w = 0 raises the validation loss, so the quasi-Newton stage must keep the starting
     weights."""
-    from learn._fit import _run_quasi_newton
+    from learn._quasi_newton import run_quasi_newton as _run_quasi_newton
 
     class Line(eqx.Module):
         w: jax.Array

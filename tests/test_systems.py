@@ -79,7 +79,7 @@ def test_vector_field_is_the_literature_equation(name):
 
 
 def test_rigid_body_reaches_the_papers_end_point():
-    """DESIGN.md: I = diag(1, 2, 3), Pi0 = (1/sqrt2, -1/sqrt2, 1) reaches (0.426, 1.332, -0.212)
+    """docs/conventions.md: I = diag(1, 2, 3), Pi0 = (1/sqrt2, -1/sqrt2, 1) reaches (0.426, 1.332, -0.212)
     at t = 99.9 (an independent check of the sign convention of Euler's equations)."""
     sys = system("RigidBody")
     f = jax.jit(sys.vector_field)

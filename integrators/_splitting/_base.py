@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson._validation import check_system, positive_float
+from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem, check_splitting
 
 from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops

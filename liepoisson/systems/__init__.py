@@ -1,11 +1,10 @@
 """Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle."""
 
 from ._base import (
-    AbstractExactTerm as AbstractExactTerm,
     AbstractLiePoissonSystem as AbstractLiePoissonSystem,
     AbstractPoissonSystem as AbstractPoissonSystem,
-    CollectiveTerm as CollectiveTerm,
 )
+from ._terms import AbstractExactTerm as AbstractExactTerm, CollectiveTerm as CollectiveTerm
 from ._charged_particle import (
     ChargedParticle as ChargedParticle,
     segment_field_integral as segment_field_integral,

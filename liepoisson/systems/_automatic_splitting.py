@@ -27,7 +27,8 @@ import numpy as np
 
 from .._namespace import JAX
 from .._symbolic import addends, evaluate, polynomial_degree, to_text
-from ._base import AbstractPoissonSystem, CollectiveTerm
+from ._base import AbstractPoissonSystem
+from ._terms import CollectiveTerm
 
 # Eigenvalues of A below this fraction of the largest are zero (their pieces are dropped), and
 # gradient directions below it are not part of an addend's span: a few hundred roundings.

@@ -8,7 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._validation import as_state, positive_float
-from ._base import AbstractPoissonSystem, CollectiveTerm
+from ._base import AbstractPoissonSystem
+from ._terms import CollectiveTerm
 
 # Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0;
 # the neglected term is O(|a| t^2) < 1e-100).

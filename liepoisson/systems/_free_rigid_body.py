@@ -42,7 +42,8 @@ from numpy.typing import ArrayLike
 
 from .._elliptic import ellipj
 from .._validation import as_scalar_time, as_state, positive_vector
-from ._base import AbstractExactTerm, AbstractPoissonSystem
+from ._base import AbstractPoissonSystem
+from ._terms import AbstractExactTerm
 
 _SWAP = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])  # in SO(3)
 

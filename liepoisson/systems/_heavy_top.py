@@ -6,8 +6,9 @@ import numpy as np
 
 from .._catalogue import se3
 from .._validation import finite_vector, positive_float, positive_vector
-from ._base import AbstractLiePoissonSystem, CollectiveTerm
+from ._base import AbstractLiePoissonSystem
 from ._rigid_body import _axis_term
+from ._terms import CollectiveTerm
 
 
 class HeavyTop(AbstractLiePoissonSystem):

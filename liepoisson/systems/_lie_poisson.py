@@ -20,9 +20,10 @@ from .._symbolic import (
     trace,
 )
 from ._automatic_splitting import automatic_splitting
-from ._base import AbstractExactTerm, AbstractLiePoissonSystem, CollectiveTerm
+from ._base import AbstractLiePoissonSystem
 from ._free_rigid_body import FreeRigidBodyTerm
 from ._splitting_check import check_splitting
+from ._terms import AbstractExactTerm, CollectiveTerm
 
 #: `params["kind"]` of a user Lie-Poisson system in files (`from_name` dispatches on it).
 KIND = "LiePoissonSystem"

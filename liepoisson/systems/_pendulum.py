@@ -7,7 +7,8 @@ import numpy as np
 
 from .._coadjoint import rotation_coefficients
 from .._polynomial import Polynomial
-from ._base import AbstractPoissonSystem, CollectiveTerm
+from ._base import AbstractPoissonSystem
+from ._terms import CollectiveTerm
 
 
 class ExtendedPendulum(AbstractPoissonSystem):

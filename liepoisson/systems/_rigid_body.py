@@ -8,8 +8,9 @@ from numpy.typing import ArrayLike
 
 from .._catalogue import so3
 from .._validation import positive_vector
-from ._base import AbstractLiePoissonSystem, CollectiveTerm
+from ._base import AbstractLiePoissonSystem
 from ._free_rigid_body import free_rigid_body_flow
+from ._terms import CollectiveTerm
 
 
 def _axis_term(axis: int, weight: float, dim: int, name: str) -> CollectiveTerm:

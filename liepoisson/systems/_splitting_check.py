@@ -8,7 +8,8 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from ._base import AbstractExactTerm, AbstractPoissonSystem, CollectiveTerm
+from ._base import AbstractPoissonSystem
+from ._terms import AbstractExactTerm, CollectiveTerm
 
 _EPS = np.finfo(np.float64).eps
 

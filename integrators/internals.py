@@ -1,0 +1,35 @@
+"""The plumbing `integrators` shares with the library's other packages (`learn`, `paper`,
+`benchmarks`): step-map helpers, atomic files, Dask helpers and figure styles. Not a user API:
+these names may change with the library.
+
+- `check_state(y, dim)`: one float64 state `(dim,)` (works on traced values).
+- `traced_h(step_map)`: the map with its step size as a traced array (one compiled program for
+  every h); `xla_flops(fn, *args)`: XLA's flop count of `fn` compiled.
+- `atomic_path(path)`, `atomic_write_text(path, text)`: write to a temporary file renamed into
+  place; `open_hdf5(path, expected)`: open for reading with an error that says what was expected.
+- `require_distributed()`, `check_client(client)`, `map_unordered(...)`: Dask helpers;
+  `integrate_chunk(...)`: one chunk of a ground-truth ensemble (the unit of work of
+  `save_ground_truth` on a cluster).
+- `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
+  library's style.
+"""
+
+from ._distributed import (
+    check_client as check_client,
+)
+from ._distributed import (
+    map_unordered as map_unordered,
+)
+from ._distributed import (
+    require_distributed as require_distributed,
+)
+from ._files import atomic_path as atomic_path
+from ._files import atomic_write_text as atomic_write_text
+from ._files import open_hdf5 as open_hdf5
+from ._ground_truth import integrate_chunk as integrate_chunk
+from ._plots import figure as figure
+from ._plots import series_styles as series_styles
+from ._plots import span_decades as span_decades
+from ._step_map import check_state as check_state
+from ._step_map import traced_h as traced_h
+from ._step_map import xla_flops as xla_flops

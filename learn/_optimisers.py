@@ -1,0 +1,114 @@
+"""The optimisers of `learn.fit` as plain settings (`Adam`, `QuasiNewton`), and what a fit
+reports and resumes from (`Progress`, `Checkpoint`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable
+from typing import Any
+
+from liepoisson.internals import positive_float, positive_int
+
+#: Quasi-Newton methods: SciPy BFGS (dense), SciPy L-BFGS-B, optax L-BFGS.
+QUASI_NEWTON_METHODS = ("bfgs", "lbfgsb", "lbfgs")
+
+
+def check_method(method: Any) -> str:
+    if method not in QUASI_NEWTON_METHODS:
+        raise ValueError(f"method must be one of {list(QUASI_NEWTON_METHODS)}; got {method!r}")
+    return method
+
+
+@dataclasses.dataclass(frozen=True)
+class Adam:
+    r"""Adam (optax) on the training loss, compiled in chunks of epochs; keeps the weights of
+    the lowest validation loss (training loss without a validation set).
+
+    `epochs`; `learning_rate`, and `final_learning_rate` for an exponential decay from one to
+    the other over all steps (constant if `None`); `batch_size` `None` for full batch, else
+    seeded shuffled mini-batches (remainder dropped per epoch); `log_every`: history resolution
+    in epochs (default `epochs // 1000`).
+    """
+
+    epochs: int = 100_000
+    learning_rate: float = 1e-3
+    final_learning_rate: float | None = None
+    batch_size: int | None = None
+    log_every: int | None = None
+
+    def __post_init__(self):
+        positive_int(self.epochs, "Adam.epochs")
+        positive_float(self.learning_rate, "Adam.learning_rate")
+        if self.final_learning_rate is not None:
+            positive_float(self.final_learning_rate, "Adam.final_learning_rate")
+        if self.batch_size is not None:
+            positive_int(self.batch_size, "Adam.batch_size")
+        if self.log_every is not None:
+            positive_int(self.log_every, "Adam.log_every")
+
+
+@dataclasses.dataclass(frozen=True)
+class QuasiNewton:
+    r"""Full-batch quasi-Newton minimisation with JAX gradients, for every learned map.
+
+    `iterations` per start; `method`: `"lbfgsb"` (SciPy L-BFGS-B, 50 correction pairs: thousands
+    of parameters, an MLP), `"bfgs"` (SciPy BFGS, dense: a few dozen parameters, the paper's
+    choice for G-LPNets) or `"lbfgs"` (optax, compiled in chunks); `restarts` starts in total,
+    the first from the current weights, the others from fresh random weights
+    (`model.reinitialised`, keys from the fit's `seed`); `warm_start` (G-LPNet only): each
+    start first fits the network with the identity activation (flows of quadratics, a smooth
+    problem) for half the iterations, maps it onto the linear regime of $\sigma$
+    (`linear_to_activation`) and finishes with $\sigma$ (on E6 from random sigmoid starts
+    BFGS stalls at MSE ~1e-6; the warm start reaches the paper's < 5e-10).
+
+    The best start by validation loss (training loss without a validation set) is kept, and
+    only if it beats the weights the stage started from.
+    """
+
+    iterations: int = 3500
+    method: str = "lbfgsb"
+    restarts: int = 1
+    warm_start: bool = False
+
+    def __post_init__(self):
+        positive_int(self.iterations, "QuasiNewton.iterations")
+        check_method(self.method)
+        positive_int(self.restarts, "QuasiNewton.restarts")
+
+
+Optimiser = Adam | QuasiNewton
+
+
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    """Write Adam's state to `path` (HDF5) every `every` epochs and at the end; with `resume`,
+    continue from the file if it exists (epoch, optimiser state, best weights: bit-identical to
+    an uninterrupted run). Checks that the file was written by the same model, data split and
+    Adam settings."""
+
+    path: str | os.PathLike
+    every: int = 10_000
+    resume: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.path, (str, os.PathLike)):
+            raise TypeError(f"Checkpoint.path must be a file path; got {type(self.path).__name__}")
+        positive_int(self.every, "Checkpoint.every")
+
+
+@dataclasses.dataclass(frozen=True)
+class Progress:
+    """What a `learn.fit` callback receives: the stage (index and optimiser name), how far it
+    is (`iteration` of `total` epochs or iterations; for `QuasiNewton` reported once per
+    start) and the latest losses (`val_loss` NaN where not measured)."""
+
+    stage: int
+    optimiser: str
+    iteration: int
+    total: int
+    train_loss: float
+    val_loss: float
+
+
+Callback = Callable[[Progress], None]

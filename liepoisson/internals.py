@@ -1,0 +1,35 @@
+"""The plumbing `liepoisson` shares with the library's other packages (`integrators`, `learn`,
+`paper`, `benchmarks`): argument checks that raise `ValueError`/`TypeError` naming the
+argument, and progress bars. Not a user API: these names may change with the library.
+
+- `as_state(y, name, dim)`, `states(y, name, dim)`, `pairs(y0, y1, dim)`: float64 arrays of
+  states `(..., dim)`, finite, checked.
+- `positive_float(x, name)`, `positive_int(n, name, minimum=1)`, `fraction(x, name)`: scalars.
+- `check_system(system)`: a `liepoisson.systems.AbstractPoissonSystem`.
+- `check_casimirs_agree(...)`: pairs whose Casimirs differ are named.
+- `show_progress(progress)`, `progress_bar(total, desc, unit, progress)`: tqdm bars, on by
+  default only when stderr is a terminal.
+"""
+
+from ._inverse import check_casimirs_agree as check_casimirs_agree
+from ._progress import progress_bar as progress_bar
+from ._progress import show_progress as show_progress
+from ._validation import (
+    as_state as as_state,
+)
+from ._validation import (
+    fraction as fraction,
+)
+from ._validation import (
+    pairs as pairs,
+)
+from ._validation import (
+    positive_float as positive_float,
+)
+from ._validation import (
+    positive_int as positive_int,
+)
+from ._validation import (
+    states as states,
+)
+from .systems._base import check_system as check_system
