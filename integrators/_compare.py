@@ -268,10 +268,17 @@ def compare(
     all of `system`, each with an $h$ that divides the output interval $t_\text{final} /
     n_\text{outputs}$; `y0s` `(n_traj, dim)` or `(dim,)`; `reference`: a `Trajectories` at the
     output times (default: `ground_truth` at tolerance eps); `defect_points`: how many output
-    states of the first trajectory enter the Poisson defect.
+    states of the first trajectory enter the Poisson defect; `timing_seconds`,
+    `timing_repeats`: `step_timing`'s `min_seconds` and `repeats`.
+
+    Every figure is `rollout_figures` of the map's rollout: a map that stops being finite has
+    infinite error figures, and its row names the first non-finite step and the last finite
+    state. The wall time per step is `step_timing` on the same initial conditions (the fastest
+    of several compiled rollouts, each long enough that dispatch is a small part of it), beside
+    XLA's flop count of a step.
 
     **Returns:** a `Comparison` (`.rows`, `.table()`, `.plot_work_precision(path)`,
-    `.plot_energy(path)`). Wall times come from a second, compiled run of each rollout.
+    `.plot_energy(path)`).
     """
     system = check_system(system)
     t_final = positive_float(t_final, "t_final")

@@ -162,6 +162,7 @@ class W1(AbstractExperiment):
                         "poisson_defect": r.poisson_defect_max,
                         "cost_vs_strang": r.seconds_per_step / strang.seconds_per_step,
                         "flops_per_step": r.flops_per_step,
+                        "diverged_at_step_t100": r.diverged_at_step,
                         **_long_run(maps[r.label], test_y0, P),
                     }
                     if r.label == "LPNet":
@@ -237,12 +238,18 @@ class W1(AbstractExperiment):
                   "|---|---|---|---|---|---|---|---|---|"]
         for r in metrics.get("rows", []):
             lines.append(
-                f"| {r['system']} | {r['h']:g} | {r['method']} | {fmt(r['error_t100'])} | "
-                f"{fmt(r['energy_error_long'])} | {fmt(r['casimir_drift_long'])} | "
+                f"| {r['system']} | {r['h']:g} | {r['method']} | {_diverged(r, 'error_t100', 'diverged_at_step_t100')} | "
+                f"{_diverged(r, 'energy_error_long', 'diverged_at_step_long')} | {fmt(r['casimir_drift_long'])} | "
                 f"{fmt(r['poisson_defect'])} | {r['cost_vs_strang']:.2f} | "
                 f"{r['flops_per_step'] / _strang(metrics['rows'], r)['flops_per_step']:.2f} |"
             )
         return "\n".join(lines) + "\n"
+
+
+def _diverged(row, key, step_key) -> str:
+    """The figure `row[key]`, or "inf (diverged at step k)" for a map that stopped being finite."""
+    step = row.get(step_key)
+    return fmt(row[key]) if step is None else f"{fmt(row[key])} (diverged at step {step})"
 
 
 def _strang(rows, r):
