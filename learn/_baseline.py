@@ -16,7 +16,7 @@ from liepoisson.systems import AbstractPoissonSystem
 from ._base import AbstractLearnedMap
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
-from ._networks import AbstractNetwork
+from ._networks import AbstractNetwork, check_network
 
 
 class MLPBaseline(AbstractLearnedMap):
@@ -49,12 +49,7 @@ class MLPBaseline(AbstractLearnedMap):
         self.system = check_system(system)
         if network is None:
             network = AffineMLP(system.dim, system.dim, hidden, activation, key, input_scaling, output_scaling)
-        elif not isinstance(network, AbstractNetwork):
-            raise TypeError(f"network must be a learn.AbstractNetwork (e.g. learn.AffineMLP); got {network!r}")
-        if (network.in_size, network.out_size) != (system.dim, system.dim):
-            raise ValueError(f"network must map states to increments (dim {system.dim} to {system.dim}); got "
-                             f"in_size={network.in_size}, out_size={network.out_size}")
-        self.network = network
+        self.network = check_network(network, system.dim, system.dim, "states to increments")
         self.h = None if h is None else positive_float(h, "h")
 
     def step(self, y: jax.Array) -> jax.Array:

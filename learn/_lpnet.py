@@ -19,7 +19,7 @@ from ._equivariant import GroupAveraged, check_group_law
 from ._losses import alpha_mse
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
-from ._networks import AbstractNetwork
+from ._networks import AbstractNetwork, check_network
 from ._parametrisation import (
     AbstractStepParametrisation,
     default_parametrisation,
@@ -85,16 +85,11 @@ class LPNet(AbstractLearnedMap):
         if network is None:
             network = AffineMLP(system.dim, parametrisation.n_params, hidden, activation, key, input_scaling,
                                 output_scaling)
-        elif not isinstance(network, AbstractNetwork):
-            raise TypeError(f"network must be a learn.AbstractNetwork (AffineMLP, GroupAveraged); got {network!r}")
         elif input_scaling is not None or output_scaling is not None:
             raise ValueError("input_scaling and output_scaling describe the default network; give them to the "
                              "network passed as network= instead")
-        if (network.in_size, network.out_size) != (system.dim, parametrisation.n_params):
-            raise ValueError(
-                f"network must map the state (dim {system.dim}) to the parameters of {type(parametrisation).__name__} "
-                f"({parametrisation.n_params}); got in_size={network.in_size}, out_size={network.out_size}"
-            )
+        network = check_network(network, system.dim, parametrisation.n_params,
+                                f"states to the parameters of {type(parametrisation).__name__}")
         if isinstance(network, GroupAveraged):
             check_group_law(system, parametrisation, network.group)
         self.network = network

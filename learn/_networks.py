@@ -43,3 +43,14 @@ class AbstractNetwork(eqx.Module):
     def output_scales(self) -> tuple[float, ...]:
         """The fixed scales of the outputs (units of an output-space loss); ones by default."""
         return (1.0,) * self.out_size
+
+
+def check_network(network: Any, in_size: int, out_size: int, what: str) -> AbstractNetwork:
+    """`network` if it is an `AbstractNetwork` from `in_size` to `out_size`; `TypeError` or
+    `ValueError` saying what it must map (`what`) otherwise."""
+    if not isinstance(network, AbstractNetwork):
+        raise TypeError(f"network must be a learn.AbstractNetwork (AffineMLP, GroupAveraged); got {network!r}")
+    if (network.in_size, network.out_size) != (in_size, out_size):
+        raise ValueError(f"network must map {what} ({in_size} to {out_size}); got in_size={network.in_size}, "
+                         f"out_size={network.out_size}")
+    return network

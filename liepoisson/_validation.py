@@ -77,16 +77,24 @@ def positive_float(x: Any, name: str) -> float:
     return value
 
 
-def positive_vector(x: Any, name: str, dim: int) -> np.ndarray:
-    """A finite vector with strictly positive entries (principal moments of inertia, masses)."""
+def _vector(x: Any, name: str, dim: int, what: str, broadcast: bool) -> np.ndarray:
+    """`x` as a float64 vector `(dim,)` (a scalar repeated if `broadcast`), not yet checked
+    for values; `what` says what its entries must be."""
     try:
         arr = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise TypeError(f"{name} must be {dim} positive numbers; got {x!r}") from err
-    if arr.shape == ():
+        raise TypeError(f"{name} must be {dim} {what}; got {x!r}") from err
+    if broadcast and arr.shape == ():
         arr = np.full(dim, float(arr))
     if arr.shape != (dim,):
         raise ValueError(f"{name} must have shape ({dim},); got shape {arr.shape}")
+    return arr
+
+
+def positive_vector(x: Any, name: str, dim: int) -> np.ndarray:
+    """A finite vector with strictly positive entries (principal moments of inertia, masses);
+    a scalar stands for `dim` equal entries."""
+    arr = _vector(x, name, dim, "positive numbers", broadcast=True)
     if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
         raise ValueError(f"{name} must be finite and > 0 componentwise; got {arr.tolist()}")
     return arr
@@ -94,12 +102,7 @@ def positive_vector(x: Any, name: str, dim: int) -> np.ndarray:
 
 def finite_vector(x: Any, name: str, dim: int) -> np.ndarray:
     """A finite real vector of a given length (fixed parameters of a system)."""
-    try:
-        arr = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise TypeError(f"{name} must be {dim} real numbers; got {x!r}") from err
-    if arr.shape != (dim,):
-        raise ValueError(f"{name} must have shape ({dim},); got shape {arr.shape}")
+    arr = _vector(x, name, dim, "real numbers", broadcast=False)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite; got {arr.tolist()}")
     return arr

@@ -194,3 +194,12 @@ class AbstractExperiment(abc.ABC):
         if notes:
             lines += ["", *[f"- {n}" for n in notes]]
         return "\n".join(lines) + "\n"
+
+
+#: The table of an experiment that trains LPNets over seeds (Adam, then L-BFGS-B) and a G-LPNet
+#: on the same data: the common rows with the medians over seeds beside them.
+SEEDED_LPNET_ROWS = AbstractExperiment.table_rows[:3] + (
+    ("energy_rel_err_max_median", "max |rel. energy error|, median over seeds"),
+) + AbstractExperiment.table_rows[3:] + ADAM_ROWS + (
+    ("adam_only_energy_median", "before L-BFGS-B (Adam only): max |rel. energy error|, median over seeds"),
+) + GLPNET_ROWS

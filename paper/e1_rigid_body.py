@@ -21,7 +21,7 @@ import learn
 import liepoisson as lp
 
 from ._evaluate import compare, glpnet_on_same_data, lpnet_seeds
-from ._experiment import ADAM_ROWS, GLPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,11 +54,7 @@ class E1(AbstractExperiment):
         PaperValue("casimir_rel_drift_max", 1e-15, "round-off", "roundoff"),
         PaperValue("traj_err_final", 0.5, "~0.5 at t=1000"),
     )
-    table_rows = AbstractExperiment.table_rows[:3] + (
-        ("energy_rel_err_max_median", "max |rel. energy error|, median over seeds"),
-    ) + AbstractExperiment.table_rows[3:] + ADAM_ROWS + (
-        ("adam_only_energy_median", "before L-BFGS-B (Adam only): max |rel. energy error|, median over seeds"),
-    ) + GLPNET_ROWS
+    table_rows = SEEDED_LPNET_ROWS
 
     def run(self, profile: str, out_dir: Path, progress: bool):
         P = PROFILES[profile]
