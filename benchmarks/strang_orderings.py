@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"largest / smallest cost: {spread:.3f} ({'within' if within else 'NOT within'} {TOLERANCE}x)")
 
     result = {
-        "command": "python -m benchmarks.strang_orderings " + " ".join(sys.argv[1:] if argv is None else argv),
+        "command": " ".join(["python -m benchmarks.strang_orderings", *(sys.argv[1:] if argv is None else argv)]),
         "system": "RigidBody(inertia=(1.0, 2.0, 3.0))",
         "h": args.h,
         "n_trajectories": args.n_traj,
