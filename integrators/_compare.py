@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import check_system, positive_float, positive_int, states
+from liepoisson.internals import check_system, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._diagnostics import DiagnosticsReport, Divergence, diagnostics, first_divergence

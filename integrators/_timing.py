@@ -10,7 +10,7 @@ import jax
 import numpy as np
 from numpy.typing import ArrayLike
 
-from liepoisson._validation import positive_float, positive_int, states
+from liepoisson.internals import positive_float, positive_int, states
 
 from ._step_map import AbstractStepMap
 

@@ -23,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-from integrators._files import atomic_write_text
+from integrators.internals import atomic_write_text
 
 from ._cluster import ENV, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row

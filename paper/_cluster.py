@@ -8,7 +8,7 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from integrators._distributed import map_unordered, require_distributed
+from integrators.internals import map_unordered, require_distributed
 
 #: Environment variable read when `--scheduler` is not given.
 ENV = "LIEPOISSON_SCHEDULER"

@@ -90,13 +90,13 @@ def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_s
 
 
 def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,
-                        full_vectors=False, integrals=None, symmetric=False):
-    """A G-LPNet (`n_modules` modules, exactly Poisson; palindromic if `symmetric`) trained on
+                        full_vectors=False, integrals=None, method=it.splitting.LieTrotter):
+    """A G-LPNet (`n_modules` modules composed by the splitting `method`, exactly Poisson) trained on
     the same pairs (all of them, as the paper trains G-LPNets) and rolled out from the same
     initial conditions: what an exact Poisson map makes of the same data. Returns
     `(model, metrics)`."""
     gnet, record = learn.fit(
-        learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors, symmetric=symmetric), data,
+        learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors, method=method), data,
         optimiser=learn.QuasiNewton(iterations, "bfgs", restarts=restarts, warm_start=True),
         validation_fraction=0.0, seed=0, progress=progress,
     )

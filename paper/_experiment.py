@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from integrators._files import atomic_write_text
+from integrators.internals import atomic_write_text
 
 # The committed results of `python -m paper run ... --full`, quoted by the README and
 # BENCHMARKS.md: read by `python -m paper table --reference`, never written by a run.

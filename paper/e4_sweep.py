@@ -22,7 +22,7 @@ from pathlib import Path
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators._files import atomic_write_text
+from integrators.internals import atomic_write_text
 
 from ._cluster import ENV, scheduler
 from ._evaluate import measure_rollout

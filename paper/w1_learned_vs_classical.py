@@ -24,7 +24,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators._plots import figure, series_styles, span_decades
+from integrators.internals import figure, series_styles, span_decades
 
 from ._cluster import map_trainings, on_cluster
 from ._experiment import AbstractExperiment, fmt
@@ -122,7 +122,7 @@ def _train(system, data, P: Profile, progress: bool):
         validation_fraction=0.2, seed=0, progress=progress,
     )
     gnet, grec = learn.fit(
-        learn.GLPNet(system, n_modules=2 * system.dim, key=0, symmetric=True), data,
+        learn.GLPNet(system, n_modules=2 * system.dim, key=0, method=it.splitting.Strang), data,
         optimiser=learn.QuasiNewton(P.glpnet_iterations, "bfgs", restarts=P.glpnet_restarts, warm_start=True),
         validation_fraction=0.0, seed=0, progress=progress,
     )
