@@ -1,10 +1,16 @@
-"""The G-LPNet as a data-driven splitting method: the symmetric network is the Strang splitting
-of its learned Hamiltonian, runs at other step sizes and inside higher-order compositions."""
+"""The G-LPNet as a data-driven splitting method: a splitting method composing learned pieces.
+A network with a given method is that method on its learned Hamiltonian (Strang: symmetric,
+order 2, runs at other step sizes); the same learned pieces composed by a higher-order method
+raise the order; files keep the method."""
+
+import json
 
 import equinox as eqx
+import h5py
 import jax
 import numpy as np
 import pytest
+from helpers import SYSTEM_FACTORIES
 
 import integrators as it
 import learn
@@ -12,20 +18,48 @@ import liepoisson as lp
 
 EPS = np.finfo(np.float64).eps
 Y = np.random.default_rng(0).normal(size=(6, 3))
+RB = lp.systems.RigidBody()
 
 
-def net(symmetric=True, activation="sigmoid", **kw):
-    return learn.GLPNet(lp.systems.RigidBody(), 6, key=3, h=0.1, symmetric=symmetric, activation=activation, **kw)
+def net(method=it.splitting.Strang, activation="sigmoid", **kw):
+    return learn.GLPNet(RB, 6, key=3, h=0.1, method=method, activation=activation, **kw)
 
 
 def with_linear_term(g, key=7):
     """`g` with random linear coefficients e_s (they start at zero)."""
-    return eqx.tree_at(lambda m: m.e, g, 0.5 * jax.random.normal(jax.random.PRNGKey(key), (g.n_modules,)))
+    return eqx.tree_at(lambda m: m.terms.e, g, 0.5 * jax.random.normal(jax.random.PRNGKey(key), (g.n_modules,)))
+
+
+@pytest.mark.parametrize("system_name", ["RigidBody", "Kirchhoff"])
+@pytest.mark.parametrize(
+    "method", [it.splitting.LieTrotter, it.splitting.Strang, it.splitting.TripleJump], ids=lambda m: m.__name__
+)
+def test_network_with_a_method_is_that_method_on_its_learned_system(method, system_name):
+    # The issue's requirement: a G-LPNet with a given composition and integrators.splitting's
+    # same method on its learned system give the same step. The classical side integrates the
+    # pieces of H~ (the learned system's CollectiveTerms: rates by autodiff of the potential
+    # w Phi_s, at time h), the network its own rates a_s sigma(x) + e_s x + b_s (at time h/M for
+    # LieTrotter): a wrong weight w, piece or order would differ by O(h).
+    system = SYSTEM_FACTORIES[system_name]()
+    g = with_linear_term(learn.GLPNet(system, key=3, h=0.1, method=method, linear_term=True))
+    assert g.n_modules == 2 * system.dim and g.activation == "sigmoid"
+    y = np.random.default_rng(1).normal(size=(6, system.dim))
+    ours = np.asarray(jax.vmap(g.step)(y))
+    theirs = np.asarray(method(g.learned_system(), 0.1).rollout(y, 1))[:, -1]
+    # The same flows in the same order; each flow's rate differs by a few roundings (sigmoid
+    # against the derivative of softplus, w q against q / M), which moves its output by a few
+    # eps |y|, and later flows carry that along (near-isometries at |h alpha| ~ 0.1): 8 eps |y|
+    # per flow of the step.
+    size = max(np.abs(y).max(), np.abs(ours).max())
+    tol = 8 * g.exact_flows_per_step * EPS * size
+    assert np.abs(ours - theirs).max() <= tol, (np.abs(ours - theirs).max(), tol)
+    assert np.abs(ours - y).max() > 1e4 * tol  # a real step, not the identity on both sides
+    assert g.exact_flows_per_step == method.flows_per_step(2 * system.dim)
 
 
 @pytest.mark.parametrize("linear_term", [False, True])
 @pytest.mark.parametrize("activation", ["sigmoid", "tanh", "identity"])
-def test_symmetric_network_is_strang_of_its_learned_hamiltonian(activation, linear_term):
+def test_every_activation_is_strang_of_its_learned_hamiltonian(activation, linear_term):
     g = net(activation=activation, linear_term=linear_term)
     if linear_term:
         g = with_linear_term(g)
@@ -35,26 +69,36 @@ def test_symmetric_network_is_strang_of_its_learned_hamiltonian(activation, line
     assert np.allclose(ours, strang, rtol=0, atol=16 * EPS * np.abs(Y).max())
     assert g.exact_flows_per_step == 11
     # And the paper's network is Lie-Trotter of H/M.
-    p = net(symmetric=False, activation=activation)
+    p = net(method=it.splitting.LieTrotter, activation=activation)
     lt = np.asarray(it.splitting.LieTrotter(p.learned_system(), 0.1).rollout(Y, 1))[:, -1]
     assert np.allclose(np.asarray(jax.vmap(p.step)(Y)), lt, rtol=0, atol=16 * EPS * np.abs(Y).max())
+    assert p.exact_flows_per_step == 6
 
 
+@pytest.mark.parametrize(
+    "method, weight",
+    [(it.splitting.LieTrotter, 1 / 6), (it.splitting.Strang, 1.0), (it.splitting.TripleJump, 1.0)],
+    ids=["LieTrotter", "Strang", "TripleJump"],
+)
 @pytest.mark.parametrize("linear_term", [False, True])
-def test_learned_hamiltonian_is_the_sum_of_the_module_potentials(linear_term):
-    g = net(full_vectors=True, linear_term=linear_term)
+def test_learned_hamiltonian_is_the_sum_of_the_module_potentials(linear_term, method, weight):
+    # w = 1/M for the paper's Lie-Trotter network (each module over h/M), 1 otherwise.
+    g = net(method=method, full_vectors=True, linear_term=linear_term)
     g = with_linear_term(g) if linear_term else g
+    assert g.hamiltonian_weight == weight
     # Independent: finite differences of H~ along the flow's generator. Each module flow is
     # the test flow with rate a_s sigma(x) + e_s x + b_s, x = <alpha_s, y>: d/dx of its potential.
     H = lambda y: np.asarray(g.hamiltonian(y))
     y = Y[0]
     grad_fd = np.array([(H(y + 1e-6 * e) - H(y - 1e-6 * e)) / 2e-6 for e in np.eye(3)])
+    t = g.terms
     vectors = np.asarray(g.module_vectors())
-    rates = np.asarray(g.a) * jax.nn.sigmoid(vectors @ y) + np.asarray(g.b)
+    assert np.array_equal(vectors, np.asarray(t.vectors()))
+    rates = np.asarray(t.a) * jax.nn.sigmoid(vectors @ y) + np.asarray(t.b)
     if linear_term:
-        rates = rates + np.asarray(g.e) * (vectors @ y)
+        rates = rates + np.asarray(t.e) * (vectors @ y)
     # Central differences: error O(1e-12 * H''') + round-off eps|H|/1e-6 ~ 1e-9.
-    assert np.allclose(grad_fd, vectors.T @ rates, rtol=0, atol=1e-8)
+    assert np.allclose(grad_fd, weight * vectors.T @ rates, rtol=0, atol=1e-8)
     assert np.allclose(np.asarray(g.learned_system().hamiltonian(Y)), H(Y), rtol=0, atol=8 * EPS * np.abs(H(Y)).max())
 
 
@@ -65,13 +109,19 @@ def test_symmetric_network_is_time_symmetric_and_poisson():
     # Phi_{-h} o Phi_h = id: the palindrome of exact flows.
     assert np.allclose(np.asarray(jax.vmap(back.step)(y1)), Y, rtol=0, atol=64 * EPS * np.abs(Y).max())
     assert float(np.max(np.asarray(g.poisson_defect(Y)))) < 1e-13
+    # the paper's Lie-Trotter network is Poisson but not symmetric
+    lt = net(method=it.splitting.LieTrotter)
+    lt_back = eqx.tree_at(lambda m: m.h, lt, -0.1)
+    assert np.abs(np.asarray(jax.vmap(lt_back.step)(jax.vmap(lt.step)(Y))) - Y).max() > 1e-6
+    assert float(np.max(np.asarray(lt.poisson_defect(Y)))) < 1e-13
 
 
-@pytest.mark.parametrize("symmetric, order", [(True, 2), (False, 1)])
-def test_order_against_heyoka_on_the_learned_hamiltonian(symmetric, order):
+@pytest.mark.parametrize("method, order", [(it.splitting.Strang, 2), (it.splitting.LieTrotter, 1)],
+                         ids=["Strang", "LieTrotter"])
+def test_order_against_heyoka_on_the_learned_hamiltonian(method, order):
     # The step map is a splitting of H~, so against H~'s exact flow (heyoka on the learned
     # system) it converges with the splitting's order as h -> 0.
-    g = net(symmetric=symmetric)
+    g = net(method=method)
     system = g.learned_system()
     y0, T = Y[0], 2.0
     ref = np.asarray(it.ground_truth(system, y0, h=T, n_steps=1, progress=False).states)[0, -1]
@@ -100,28 +150,41 @@ def test_compositions_of_the_learned_splitting_raise_the_order():
      pytest.param(it.splitting.Yoshida6, 2, marks=pytest.mark.slow)],
 )
 def test_composed_network_is_the_composition_of_its_strang_steps(method, n_modules):
-    g = learn.GLPNet(lp.systems.RigidBody(), n_modules, key=3, h=0.1, symmetric=True, full_vectors=True)
-    c = g.composed(method)
+    g = learn.GLPNet(RB, n_modules, key=3, h=0.1, method=it.splitting.Strang, full_vectors=True)
+    c = learn.GLPNet(RB, terms=g.terms, method=method, h=g.h)
     r = len(method.coefficients)
-    assert c.symmetric and c.n_modules == r * (n_modules - 1) + 1 and c.h == g.h
+    # the same learned pieces, composed by another method
+    assert c.terms is g.terms and c.method is method and c.h == g.h
+    assert c.exact_flows_per_step == r * (2 * n_modules - 1)
     # Independent: r Strang steps of g at gamma_j h in sequence (negative gammas included).
     expected = Y
     for gamma in method.coefficients:
         expected = jax.vmap(eqx.tree_at(lambda m: m.h, g, gamma * g.h).step)(expected)
-    # The same flows with adjacent ones merged: a few roundings per flow, r (2M - 1) flows.
+    # The same r (2M - 1) flows: a few roundings per flow.
     tol = 8 * r * (2 * n_modules - 1) * EPS * np.abs(Y).max()
     assert np.allclose(np.asarray(jax.vmap(c.step)(Y)), np.asarray(expected), rtol=0, atol=tol)
-    # A splitting of the same learned Hamiltonian: each module's weights sum to sum(gamma) = 1.
+    # A splitting of the same learned Hamiltonian (w = 1 for both).
     H = np.asarray(g.hamiltonian(Y))
-    assert np.allclose(np.asarray(c.hamiltonian(Y)), H, rtol=0, atol=64 * EPS * np.abs(H).max())
+    assert np.allclose(np.asarray(c.hamiltonian(Y)), H, rtol=0, atol=8 * EPS * np.abs(H).max())
     assert float(np.max(np.asarray(c.poisson_defect(Y)))) < 1e-13
+
+
+def test_lie_trotter_pieces_composed_by_another_method_drop_the_one_over_m():
+    # The paper's network runs each module over h/M: its Hamiltonian is (1/M) sum Phi_s. The same
+    # pieces composed by Strang or TripleJump run each over h (or its fractions): sum Phi_s.
+    lt = with_linear_term(net(method=it.splitting.LieTrotter, linear_term=True))
+    tj = learn.GLPNet(RB, terms=lt.terms, method=it.splitting.TripleJump, h=lt.h)
+    H6 = 6 * np.asarray(lt.hamiltonian(Y))
+    tol = 8 * EPS * np.abs(H6).max()  # a sum of six potentials, each a few roundings
+    assert np.allclose(np.asarray(tj.hamiltonian(Y)), H6, rtol=0, atol=tol)
+    assert np.allclose(np.asarray(tj.learned_system().hamiltonian(Y)), H6, rtol=0, atol=tol)
 
 
 def test_composed_network_has_the_composition_order_at_other_steps():
     # TripleJump of the learned Strang step is order 4 in h when run at other step sizes
     # (with_h), against the exact flow of the learned Hamiltonian (heyoka).
     g = net()
-    c = g.composed(it.splitting.TripleJump)
+    c = learn.GLPNet(RB, terms=g.terms, method=it.splitting.TripleJump, h=g.h)
     y0, T = Y[2], 2.0
     ref = np.asarray(it.ground_truth(g.learned_system(), y0, h=T, n_steps=1, progress=False).states)[0, -1]
     steps = np.array([10, 20, 40])
@@ -132,34 +195,68 @@ def test_composed_network_has_the_composition_order_at_other_steps():
 
 @pytest.mark.slow  # 40 s
 def test_refit_of_the_composed_network_beats_the_strang_fit():
-    # The recipe of `GLPNet.composed`: a symmetric fit, composed, refitted from there. On the
+    # The recipe: a Strang fit, its pieces composed by TripleJump, refitted from there. On the
     # rigid body the Strang fit is already good (H is two pieces up to a Casimir): 8x measured.
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     y0 = np.random.default_rng(1).uniform(-1.0, 1.0, size=(10, 3))
     data = it.ground_truth(system, y0, h=0.2, n_steps=10, progress=False)
-    strang, r1 = learn.fit(learn.GLPNet(system, 3, key=0, symmetric=True), data, progress=False,
+    strang, r1 = learn.fit(learn.GLPNet(system, 3, key=0, method=it.splitting.Strang), data, progress=False,
                            optimiser=learn.QuasiNewton(300, "bfgs", warm_start=True))
-    _, r2 = learn.fit(strang.composed(it.splitting.TripleJump), data, progress=False,
-                       optimiser=learn.QuasiNewton(300, "bfgs", warm_start=False))
+    composed = learn.GLPNet(system, terms=strang.terms, method=it.splitting.TripleJump, h=strang.h)
+    _, r2 = learn.fit(composed, data, progress=False, optimiser=learn.QuasiNewton(300, "bfgs", warm_start=False))
     assert r2.stages[0].kept and r2.train_loss < 0.2 * r1.train_loss, (r1.train_loss, r2.train_loss)
 
 
-def test_composed_arguments():
-    with pytest.raises(ValueError, match="symmetric"):
-        net(symmetric=False).composed(it.splitting.TripleJump)
-    with pytest.raises(TypeError, match="composition"):
-        net().composed(it.splitting.Strang)
-    with pytest.raises(TypeError, match="composition"):
-        net().composed("TripleJump")
+def test_method_and_terms_arguments():
+    with pytest.raises(TypeError, match="method must be a splitting method"):
+        net(method="TripleJump")
+    with pytest.raises(TypeError, match="method must be a splitting method"):
+        net(method=learn.GLPNet)
+    with pytest.raises(ValueError, match="BlanesMoan4 needs a two-part splitting.*6 modules"):
+        net(method=it.splitting.BlanesMoan4)
+    # an instance stands for its class
+    assert net(method=it.splitting.Strang(RB, 0.1)).method is it.splitting.Strang
+    with pytest.raises(TypeError, match="terms must be a learn.RidgeTerms"):
+        learn.GLPNet(RB, terms="pieces")
+    with pytest.raises(ValueError, match="terms are for states of dimension 3"):
+        learn.GLPNet(lp.systems.Kirchhoff(), terms=net().terms)
 
 
 @pytest.mark.parametrize("linear_term", [False, True])
-def test_symmetric_survives_save_and_load(tmp_path, linear_term):
-    g = net(linear_term=linear_term)
+@pytest.mark.parametrize("method", [it.splitting.Strang, it.splitting.TripleJump], ids=lambda m: m.__name__)
+def test_method_survives_save_and_load(tmp_path, linear_term, method):
+    g = net(method=method, linear_term=linear_term)
     g = with_linear_term(g) if linear_term else g
     g.save(tmp_path / "g.h5")
     back = learn.GLPNet.load(tmp_path / "g.h5", lp.systems.RigidBody())
-    assert back.symmetric and back.linear_term == linear_term
+    assert back.method is method and back.terms.linear_term == linear_term
+    assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(g.step)(Y)))
+
+
+@pytest.mark.parametrize("symmetric, method", [(True, it.splitting.Strang), (False, it.splitting.LieTrotter)])
+def test_version_1_file_of_a_glpnet_loads_with_its_method(tmp_path, symmetric, method):
+    # Written by hand as format version 1 stored a GLPNet: the flag symmetric, the arrays a, c,
+    # b, e of the network in field order.
+    g = with_linear_term(net(method=method, linear_term=True))
+    t = g.terms
+    with h5py.File(tmp_path / "v1.h5", "w") as f:
+        f.attrs["format"] = "learn-model"
+        f.attrs["format_version"] = 1
+        f.attrs["class"] = "GLPNet"
+        f.attrs["system"] = RB.name
+        f.attrs["system_params_json"] = json.dumps(RB.params)
+        f.attrs["hyperparameters_json"] = json.dumps({
+            "n_modules": 6, "order": list(t.order), "full_vectors": False, "activation": "sigmoid",
+            "symmetric": symmetric, "linear_term": True})
+        f.attrs["h"] = 0.1
+        f.attrs["liepoisson_version"] = lp.__version__
+        weights = f.create_group("weights")
+        weights.attrs["kind"] = "list"
+        weights.attrs["count"] = 4
+        for i, array in enumerate((t.a, t.c, t.b, t.e)):
+            weights.create_dataset(f"{i:04d}", data=np.asarray(array))
+    back = learn.GLPNet.load(tmp_path / "v1.h5")
+    assert back.method is method and back.h == 0.1 and back.terms.linear_term
     assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(g.step)(Y)))
 
 
@@ -167,11 +264,15 @@ def test_warm_start_of_a_linear_term_network_is_exact():
     # The identity-activation fit maps onto the sigmoid network with a_s = 0, e_s = a_s + e_s:
     # the same rates, so the same step up to rounding.
     g = with_linear_term(net(linear_term=True))
-    lin = eqx.tree_at(lambda m: m.activation, g, "identity")
+    lin = eqx.tree_at(lambda m: m.terms.activation, g, "identity")
     mapped = learn.linear_to_activation(g, lin, Y)
+    assert mapped.activation == "sigmoid" and mapped.method is g.method
     assert np.allclose(np.asarray(jax.vmap(mapped.step)(Y)), np.asarray(jax.vmap(lin.step)(Y)),
                        rtol=0, atol=64 * EPS * np.abs(Y).max())
     assert not np.allclose(np.asarray(jax.vmap(g.step)(Y)), np.asarray(jax.vmap(lin.step)(Y)))
+    # the warm start learn.fit asks the network for is that identity-activation network
+    simpler, _ = g.warm_start()
+    assert simpler.activation == "identity" and simpler.method is g.method and simpler.terms.a is g.terms.a
 
 
 @pytest.mark.slow  # 28 s
@@ -188,17 +289,17 @@ def test_linear_term_fits_a_quadratic_plus_cosine_piece_a_sigmoid_cannot():
     data = it.ground_truth(system, y0, h=0.1, n_steps=10, progress=False)
     losses = {}
     for linear_term in (False, True):
-        _, rec = learn.fit(learn.GLPNet(system, 3, key=0, symmetric=True, linear_term=linear_term), data,
-                           progress=False, optimiser=learn.QuasiNewton(300, "bfgs", warm_start=True))
+        _, rec = learn.fit(learn.GLPNet(system, 3, key=0, method=it.splitting.Strang, linear_term=linear_term),
+                           data, progress=False, optimiser=learn.QuasiNewton(300, "bfgs", warm_start=True))
         losses[linear_term] = rec.train_loss
     assert losses[True] < 0.01 * losses[False], losses
 
 
 def test_arguments():
-    with pytest.raises(TypeError, match="symmetric"):
-        net(symmetric="yes")
     with pytest.raises(TypeError, match="linear_term"):
         net(linear_term=1)
+    with pytest.raises(TypeError, match="full_vectors"):
+        net(full_vectors="yes")
     with pytest.raises(ValueError, match="antiderivative"):
         net(activation="relu").hamiltonian(Y)
     with pytest.raises(ValueError, match="h"):
@@ -209,7 +310,6 @@ def test_arguments():
 def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
     """Quasi-Newton losses are compiled once per model structure with h as an argument: a fit
     at h = 0.2 after one at h = 0.1 (cache warm) equals a fit at h = 0.2 from a cold cache."""
-    import learn._fit as fit_module
     import learn._quasi_newton as qn_module
 
     body = lp.systems.RigidBody()
@@ -218,17 +318,17 @@ def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
 
     def fitted(h):
         data = it.ground_truth(body, y0, h=h, n_steps=5, seed=0)
-        model, _ = learn.fit(learn.GLPNet(body, key=0, symmetric=True), data, optimiser=opt,
+        model, _ = learn.fit(learn.GLPNet(body, key=0, method=it.splitting.Strang), data, optimiser=opt,
                              validation_fraction=0.0, progress=False)
         return model
 
     fitted(0.1)
     warm = fitted(0.2)
-    fit_module._CACHE.clear()
+    qn_module._CACHE.clear()
     qn_module._VALUE_AND_GRAD.clear()
     cold = fitted(0.2)
     for name in ("a", "b", "c"):
-        np.testing.assert_array_equal(np.asarray(getattr(warm, name)), np.asarray(getattr(cold, name)))
+        np.testing.assert_array_equal(np.asarray(getattr(warm.terms, name)), np.asarray(getattr(cold.terms, name)))
     assert warm.h == cold.h == 0.2
 
 
@@ -238,13 +338,15 @@ def test_fit_splitting_recipe():
     y0 = np.random.default_rng(3).uniform(-1.0, 1.0, size=(6, 3))
     data = it.ground_truth(system, y0, h=0.2, n_steps=10, progress=False)
     strang, (r1,) = learn.fit_splitting(system, data, None, iterations=60, progress=False)
-    assert strang.symmetric and strang.linear_term and strang.n_modules == 3 and strang.h == 0.2
+    assert strang.method is it.splitting.Strang and strang.terms.linear_term
+    assert strang.n_modules == 3 and strang.h == 0.2
     tj, (r1b, r2) = learn.fit_splitting(system, data, iterations=60, progress=False)
-    assert tj.n_modules == 7 and r1b.train_loss == r1.train_loss  # same seed, same first stage
-    # The refit starts at TripleJump of the Strang fit and keeps only an improvement.
+    assert tj.method is it.splitting.TripleJump and tj.n_modules == 3
+    assert r1b.train_loss == r1.train_loss  # same seed, same first stage
+    # The refit starts at TripleJump of the Strang fit's pieces and keeps only an improvement.
     (X, T), _ = data.split(0.2, 0)  # fit's training pairs
-    start = float(learn.state_mse(strang.composed(it.splitting.TripleJump), X, T))
-    assert r2.train_loss <= start
+    start = learn.GLPNet(system, terms=strang.terms, method=it.splitting.TripleJump, h=strang.h)
+    assert r2.train_loss <= float(learn.state_mse(start, X, T))
     assert float(np.max(np.asarray(tj.poisson_defect(Y)))) < 1e-13
-    with pytest.raises(TypeError, match="composition"):
-        learn.fit_splitting(system, data, it.splitting.Strang)
+    with pytest.raises(TypeError, match="method must be a splitting method"):
+        learn.fit_splitting(system, data, "TripleJump")

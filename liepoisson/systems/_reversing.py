@@ -15,7 +15,7 @@ so that $S\circ\varphi_t = \varphi_t\circ S$; the product of two reversing symme
 A reversible map has no secular energy drift on the orbits that meet the fixed set of its $R$;
 which orbits those are depends on $R$ (on the rigid body, an orbit circling the axis of the
 flipped component never meets it), and a map that also commutes with the sign symmetries is
-reversible under every $RS$ at once (`learn.LPNet(..., equivariant=True)`).
+reversible under every $RS$ at once (an LPNet with a `learn.GroupAveraged` network).
 """
 
 from __future__ import annotations
@@ -111,8 +111,8 @@ def sign_symmetries(system: AbstractPoissonSystem) -> list[np.ndarray]:
     if system.dim > _MAX_SIGN_DIM:
         raise ValueError(
             f"{system!r} has 2^{system.dim} candidate sign flips; too many to search (dimension at most "
-            f"{_MAX_SIGN_DIM}): pass the symmetries you know, e.g. learn.LPNet(..., equivariant=[s1, s2]), "
-            "which checks them (check_sign_symmetry)"
+            f"{_MAX_SIGN_DIM}): pass the symmetries you know, e.g. learn.GroupAveraged(network, [s1, s2]) in an "
+            "LPNet, which checks them (check_sign_symmetry)"
         )
     y = _probes(system)
     flips = [f for k in range(1, system.dim + 1) for f in itertools.combinations(range(system.dim), k)]
@@ -152,7 +152,7 @@ def reversing_symmetry(system: AbstractPoissonSystem) -> np.ndarray:
         raise ValueError(
             f"{system!r} has no reversing symmetry that flips signs of components (a sign flip R "
             "with B(Ry) = -R B(y) R, H(Ry) = H(y), C(Ry) = C(y), flipping half the rank of B); "
-            "use a map without one (e.g. LPNet(system) without reversing)"
+            "use a map without one (e.g. learn.LPNet(system), not wrapped in learn.Reversible)"
         )
     return found[0]
 
