@@ -1,0 +1,79 @@
+"""The JSON file every benchmark writes: what was run (command, options, commit, machine) and
+what it measured."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Where the benchmarks write by default; BENCHMARKS.md quotes the files committed here.
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def jsonable(value: Any) -> Any:
+    """`value` as JSON values: numpy scalars and arrays as numbers and lists, tuples as lists,
+    paths as strings, and a non-finite float as the string "inf", "-inf" or "nan" (strict JSON
+    has no such numbers; a diverged rollout has infinite errors)."""
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    return value
+
+
+def _commit() -> str | None:
+    """`git describe --always --dirty` of the repository (None outside a git checkout)."""
+    try:
+        out = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=RESULTS.parent, capture_output=True,
+                             text=True, check=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def default_out(name: str) -> Path:
+    """`benchmarks/results/<name>.json`."""
+    return RESULTS / f"{name}.json"
+
+
+def write_json(out: str | os.PathLike, options: Any, results: Any) -> Path:
+    """Write `results` with the command line, the parsed `options` (an `argparse.Namespace`
+    or a dict), the commit and the machine to `out` (its folder created); returns the path."""
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    options = vars(options) if not isinstance(options, Mapping) else options
+    payload = {
+        "command": shlex.join(["python", *getattr(sys, "orig_argv", sys.argv)[1:]]),
+        "options": {k: v for k, v in options.items() if k != "out"},
+        "commit": _commit(),
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()},
+        "results": results,
+    }
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(jsonable(payload), indent=1) + "\n")
+    tmp.replace(path)
+    print(f"wrote {path}")
+    return path
