@@ -1,24 +1,27 @@
 """Ground truth: heyoka Taylor (ours) against SciPy DOP853 and SciPy BDF (the paper's ground
 truth), rtol 1e-13 / atol 1e-14, on the same rigid-body initial conditions, in one run.
 
-    python -m benchmarks.ground_truth [--n-traj 1000] [--scipy-subset 20]
+    python -m benchmarks.ground_truth [--n-traj 1000] [--scipy-subset 20] [--t-final 100] [--h 0.1]
+                                      [--out benchmarks/results/ground_truth.json]
 
 The SciPy integrators get the fastest right-hand side we can give them: heyoka `cfunc`s
 compiled from the same symbolic ODE (`system.heyoka_system()`), and BDF the analytic Jacobian
 (`hy.diff` of that right-hand side), so they are not slowed down by Python arithmetic or finite
 differences. SciPy is run on the first `--scipy-subset` initial conditions and its time scaled
-per trajectory to `--n-traj` (printed as such).
+per trajectory to `--n-traj` (printed as such). Writes the figures to `--out` (JSON).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 import integrators as it
 import liepoisson as lp
+from benchmarks._report import default_out, write_json
 
 
 def scipy_rhs(system):
@@ -53,13 +56,14 @@ def casimir_drift(system, states):
     return float(np.max(np.abs(C - C[:, :1]) / np.abs(C[:, :1])))
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.ground_truth", description=__doc__.splitlines()[0])
     parser.add_argument("--n-traj", type=int, default=1000)
     parser.add_argument("--scipy-subset", type=int, default=20)
     parser.add_argument("--t-final", type=float, default=100.0)
     parser.add_argument("--h", type=float, default=0.1)
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=default_out("ground_truth"), help="JSON file written")
+    args = parser.parse_args(argv)
 
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     y0s = np.random.default_rng(0).uniform(-2.0, 2.0, size=(args.n_traj, 3))
@@ -99,11 +103,14 @@ def main():
           f"({t_ensemble / t_ours:.1f}x the loop)")
 
     results = {}
+    scipy_runs = {}
     for method in ("DOP853", "BDF"):
         states, t = run_scipy(method, system, y0s[:n_sub], t_eval, rtol, atol)
         t_scaled = t * args.n_traj / n_sub
         err = float(np.max(np.abs(states - ours.states[:n_sub])))
         results[method] = (t_scaled, casimir_drift(system, states))
+        scipy_runs[method] = {"seconds_subset": t, "seconds_scaled": t_scaled, "max_abs_diff_heyoka": err,
+                              "casimir_drift": results[method][1]}
         print(f"SciPy {method} (rtol {rtol}, atol {atol}"
               f"{', analytic Jacobian' if method == 'BDF' else ''}): {t:.2f} s for {n_sub} "
               f"trajectories, scaled per trajectory to {args.n_traj}: {t_scaled:.1f} s; "
@@ -124,6 +131,12 @@ def main():
     verdict = "PASS" if speed >= 1000 and better >= 1000 else "FAIL"
     print(f"\nours vs BDF: {speed:.0f}x faster (including compilation), {better:.0f}x smaller "
           f"Casimir drift (ours over all {args.n_traj}) -> {verdict} (need >= 1000x both)")
+    write_json(args.out, args, {
+        "heyoka": {"seconds": t_ours, "compile_seconds": t_compile, "ensemble_seconds": t_ensemble,
+                   "casimir_drift": drift_ours, "casimir_drift_scipy_subset": drift_ours_sub},
+        "scipy": scipy_runs, "rtol": rtol, "atol": atol, "scipy_subset": n_sub,
+        "speedup_vs_bdf_incl_compile": speed, "drift_ratio_bdf": better, "verdict": verdict,
+    })
 
 
 if __name__ == "__main__":

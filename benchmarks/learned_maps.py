@@ -1,18 +1,21 @@
 """Rollout throughput of every step map, learned and classical, measured in one run.
 
-    python benchmarks/learned_maps.py [--n-traj 1000] [--n-steps 10000]
+    python -m benchmarks.learned_maps [--n-traj 1000] [--n-steps 10000] [--repeats 3]
+                                      [--out benchmarks/results/learned_maps.json]
 
 Prints, for the rigid body I = diag(1, 2, 3) at h = 0.1 and `n_traj` trajectories x `n_steps`
 steps: wall time, trajectory-steps per second, the cost of a step relative to one Strang step,
 XLA's flop count of one step, the achieved flop rate, and that rate as a fraction of the
 machine's float64 matmul rate (a 2000 x 2000 numpy matmul, measured in the same run). The
-networks are untrained: the cost of a step does not depend on the weights.
+networks are untrained: the cost of a step does not depend on the weights. Writes the table
+to `--out` (JSON).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -20,6 +23,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
+from benchmarks._report import default_out, write_json
 
 
 def _timed(fn, repeats: int = 3) -> float:
@@ -40,9 +44,11 @@ def machine_flop_rate(n: int = 2000, repeats: int = 5) -> float:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser()
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.learned_maps", description=__doc__.splitlines()[0])
     parser.add_argument("--n-traj", type=int, default=1000)
     parser.add_argument("--n-steps", type=int, default=10_000)
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per map after a warm-up (the best counts)")
+    parser.add_argument("--out", type=Path, default=default_out("learned_maps"), help="JSON file written")
     args = parser.parse_args(argv)
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     h = 0.1
@@ -65,16 +71,23 @@ def main(argv=None) -> None:
     }
     peak = machine_flop_rate()
     work = args.n_traj * args.n_steps
-    times = {name: _timed(lambda m=m: m.rollout(y0, args.n_steps, save_every=args.n_steps)) for name, m in maps.items()}
+    times = {name: _timed(lambda m=m: m.rollout(y0, args.n_steps, save_every=args.n_steps), args.repeats)
+             for name, m in maps.items()}
     print(f"rigid body, {args.n_traj} trajectories x {args.n_steps} steps, jitted lax.scan + vmap, float64; "
           f"machine: {peak / 1e9:.1f} GFLOP/s (2000x2000 numpy matmul, same run)")
     print(f"{'method':20s} {'wall [s]':>9s} {'traj-steps/s':>13s} {'cost/Strang':>12s} "
           f"{'flops/step':>11s} {'GFLOP/s':>8s} {'% of matmul':>12s} {'exact flows':>12s}")
+    rows = []
     for name, m in maps.items():
         t, cost = times[name], m.cost()
         rate = cost.flops * work / t
         print(f"{name:20s} {t:9.3f} {work / t:13.3e} {t / times['Strang']:12.2f} {cost.flops:11.0f} "
               f"{rate / 1e9:8.3f} {100 * rate / peak:11.2f}% {cost.exact_flows:12d}")
+        rows.append({"method": name, "wall_s": t, "trajectory_steps_per_s": work / t,
+                     "cost_per_strang": t / times["Strang"], "flops_per_step": cost.flops, "gflops_per_s": rate / 1e9,
+                     "fraction_of_matmul": rate / peak, "exact_flows": cost.exact_flows})
+    write_json(args.out, args, {"system": "RigidBody(inertia=(1, 2, 3))", "h": h, "matmul_gflops_per_s": peak / 1e9,
+                                "rows": rows})
 
 
 if __name__ == "__main__":
