@@ -2,11 +2,14 @@
 (client peak memory, wall time, projection to N workers), and a sweep of trainings sequential
 vs on a 2-worker LocalCluster.
 
-    python -m benchmarks.dask_scaleout ground-truth [--n-traj 100000] [--outputs 1001]
+    python -m benchmarks.dask_scaleout ground-truth [--n-traj 100000] [--outputs 1001] [--chunk-size 2000]
+                                                    [--out benchmarks/results/dask_scaleout_ground_truth.json]
     python -m benchmarks.dask_scaleout sweep [--points 8] [--model lpnet|glpnet] [--epochs N]
+                                             [--out benchmarks/results/dask_scaleout_sweep_MODEL.json]
 
 Each configuration runs in a fresh subprocess, so that the client's peak resident memory
-(`ru_maxrss`, imports included) is that run's alone.
+(`ru_maxrss`, imports included) is that run's alone. Writes every configuration's figures to
+`--out` (JSON).
 """
 
 from __future__ import annotations
@@ -19,8 +22,11 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
+
+from benchmarks._report import default_out, write_json
 
 H = 0.01  # 1001 outputs: t = 0 .. 10
 
@@ -76,13 +82,11 @@ def child_ground_truth(workers: int, n_traj: int, outputs: int, chunk: int, path
     check = it.Trajectories.load(path, select=[0, n_traj - 1])
     ref = it.ground_truth(body, y0[[0, n_traj - 1]], H, outputs - 1)
     peak = _peak_rss_mib()
-    # The two parts of the projection: one chunk's integration (on a worker), and the client's
+    # The two parts of the projection: one chunk's integration (on a worker: a ground truth of
+    # that chunk in this process, the same compiled integrator and loop), and the client's
     # serial work per chunk (writing it into the HDF5 file, as save_ground_truth does).
-    from integrators._ground_truth import integrate_chunk
-
-    grid = H * np.arange(outputs)
     start = time.perf_counter()
-    block = integrate_chunk(body, 0, y0[:chunk], grid, it._ground_truth.EPS, 0)
+    block = it.ground_truth(body, y0[:chunk], H, outputs - 1, progress=False).states
     compute = time.perf_counter() - start
     import h5py
 
@@ -137,20 +141,22 @@ def _child(args: list[str]) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.dask_scaleout", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="what", required=True)
     gt = sub.add_parser("ground-truth")
     gt.add_argument("--n-traj", type=int, default=100_000)
     gt.add_argument("--outputs", type=int, default=1001)
     gt.add_argument("--chunk-size", type=int, default=2000)
+    gt.add_argument("--out", type=Path, default=default_out("dask_scaleout_ground_truth"), help="JSON file written")
     sw = sub.add_parser("sweep")
     sw.add_argument("--points", type=int, default=8)
     sw.add_argument("--model", choices=("lpnet", "glpnet"), default="lpnet")
     sw.add_argument("--epochs", type=int, default=3000, help="Adam epochs (lpnet), BFGS iterations (glpnet)")
+    sw.add_argument("--out", type=Path, help="JSON file written (default benchmarks/results/dask_scaleout_sweep_MODEL.json)")
     child = sub.add_parser("_child")
     child.add_argument("spec")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     if args.what == "_child":
         spec = json.loads(args.spec)
@@ -179,11 +185,15 @@ def main() -> None:
                   f"serial work (receive from a worker + write to HDF5) {serial:.3f} s")
             print("projected wall time on N workers with cores of their own = n_chunks x max(integration / N, "
                   "client serial):")
+            projected = {}
             for n in (1, 2, 4, 8, 16, 64):
                 measured = {1: t1, 2: t2}.get(n)
-                print(f"  N = {n}: {n_chunks * max(compute / n, serial):.1f} s"
+                projected[n] = n_chunks * max(compute / n, serial)
+                print(f"  N = {n}: {projected[n]:.1f} s"
                       + (f" (measured here {measured:.1f} s, workers sharing {os.cpu_count()} cores with the client "
                          "and scheduler)" if measured else ""))
+            write_json(args.out, args, {"runs": runs, "ratio_1_over_2_workers": t1 / t2, "chunk_compute_s": compute,
+                                        "chunk_client_serial_s": serial, "projected_wall_s_on_n_workers": projected})
         else:
             runs = []
             for workers in (0, 2):
@@ -196,8 +206,12 @@ def main() -> None:
                     f"{args.epochs} BFGS iterations (G-LPNet, 6 modules)"
                 print(f"{where}: {r['wall_s']:.1f} s for {args.points} trainings of {what} "
                       f"(each fit {np.median(r['fit_s']):.1f} s median)")
+            same = runs[0]["val_loss"] == runs[1]["val_loss"]
             print(f"ratio sequential / 2 workers: {runs[0]['wall_s'] / runs[1]['wall_s']:.2f}; "
-                  f"same validation losses: {runs[0]['val_loss'] == runs[1]['val_loss']}")
+                  f"same validation losses: {same}")
+            out = args.out or default_out(f"dask_scaleout_sweep_{args.model}")
+            write_json(out, args, {"runs": runs, "ratio_sequential_over_2_workers": runs[0]["wall_s"] / runs[1]["wall_s"],
+                                   "same_validation_losses": same})
 
 
 if __name__ == "__main__":
