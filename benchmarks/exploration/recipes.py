@@ -2,82 +2,134 @@
 one recipe, several seeds, on the benchmark's data (40 ICs x 50 pairs at h = 0.1, uniform in
 [-1, 1]^dim; 10 held-out ICs).
 
-    python benchmarks/lpnet_accuracy/recipes.py SYSTEM RECIPE [SEED ...]
+    python -m benchmarks.exploration.recipes --system SYSTEM [--seeds 0 1 2] [--adam 20000] [--lbfgs N]
+        [--width 16] [--skip] [--reversible] [--equivariant] [--long] [--out FILE]
 
-RECIPE: words joined by "_": adam (Adam 20000 only, the benchmark's), lbfgs (then L-BFGS-B
-5000 iterations; lbfgsN: N), norm (normalise=True), dense (10x the trajectories, 400 x 50 pairs), wN (hidden width N
-instead of 16), skip (a linear skip in the parameter network, alpha(y) = MLP(y) + L y, L
-trained from zero), rev (the reversible LPNet, reversing="auto"), eq (equivariant=True: alpha
-averaged over the system's sign symmetries), long (also the held-out ICs over 10000 steps), e.g.
-adam_lbfgs30000_skip or adam_lbfgs_rev_eq_long.
-Prints per seed: train / validation loss, the one-step RMS error at the held-out ICs' first
-steps, the max relative energy error over 2000 steps from the held-out ICs and from 10 of the
-training ICs.
+The recipe: Adam `--adam` epochs, then L-BFGS-B `--lbfgs` iterations (0: none); hidden width
+`--width`; `--skip`: a linear skip in the parameter network, alpha(y) = MLP(y) + L y, L trained
+from zero (`LinearSkip` below); `--equivariant`: the network averaged over the system's sign
+symmetries (`learn.GroupAveraged`); `--reversible`: `learn.Reversible(lpnet, "auto")`; `--long`:
+also the held-out ICs over 10000 steps. Prints per seed, under the recipe's name of the first
+runs (e.g. `adam_lbfgs30000_skip`, `adam_lbfgs_rev_eq_long`): train / validation loss, the
+one-step RMS error at the held-out ICs' first steps, the max relative energy error over 2000
+steps from the held-out ICs and from 10 of the training ICs. Writes them to `--out` (default
+`benchmarks/results/exploration/recipes_SYSTEM_RECIPE.json`).
 """
-import sys
-import time
 
-sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-import any_algebra as aa
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import integrators as it
 import learn
+from benchmarks._report import write_json
+from benchmarks.exploration.common import (
+    SYSTEMS,
+    add_out_option,
+    add_system_option,
+    initial_conditions,
+    lpnet,
+    out_path,
+    training_data,
+)
 
 
-class SkipLPNet(learn.LPNet):
-    """alpha(y) = MLP(y) + L y (exploration only: not saved, not in the library)."""
+class LinearSkip(learn.AbstractNetwork):
+    """alpha(y) = N(y) + L y with L trained from zero: a wrapper of any network whose input and
+    output have the same size (exploration only; its files cannot be read back)."""
 
+    network: learn.AbstractNetwork
     skip: jax.Array
 
-    def __init__(self, system, **kw):
-        super().__init__(system, **kw)
-        self.skip = jnp.zeros((self.parametrisation.n_params, system.dim))
+    def __init__(self, network: learn.AbstractNetwork):
+        self.network = network
+        self.skip = jnp.zeros((network.out_size, network.in_size))
 
-    def alpha(self, y):
+    @property
+    def in_size(self) -> int:
+        return self.network.in_size
+
+    @property
+    def out_size(self) -> int:
+        return self.network.out_size
+
+    def __call__(self, y: jax.Array) -> jax.Array:
         return self.network(y) + self.skip @ y
 
+    def spec(self) -> dict[str, Any]:
+        return {"kind": "LinearSkip", "network": self.network.spec()}
 
-name, recipe = sys.argv[1], sys.argv[2]
-words = recipe.split("_")
-width = next((int(w[1:]) for w in words if w[0] == "w" and w[1:].isdigit()), 16)
-seeds = [int(s) for s in sys.argv[3:]] or [0]
-if "skip" in words and "eq" in words:
-    sys.exit("skip overrides alpha, so it would drop the equivariant average: use one or the other")
-system = {"rigid_body": aa.rigid_body, **aa.SYSTEMS}[name]()
-n = system.dim
-for seed in seeds:
-    rng = np.random.default_rng(seed)
-    y_train = rng.uniform(-1, 1, size=(40, n))
-    y_test = rng.uniform(-1, 1, size=(10, n))
-    if "dense" in words:
-        y_train = np.concatenate([y_train, rng.uniform(-1, 1, size=(360, n))])
-    data = it.ground_truth(system, y_train, h=0.1, n_steps=50, seed=seed, progress=False)
-    test = it.ground_truth(system, y_test, h=0.1, n_steps=50, seed=seed, progress=False)
-    stages = [learn.Adam(20_000)]
-    lbfgs = next((int(w[5:] or 5000) for w in words if w.startswith("lbfgs")), 0)
-    if lbfgs:
-        stages.append(learn.QuasiNewton(lbfgs, "lbfgsb"))
-    t0 = time.perf_counter()
-    model = (SkipLPNet if "skip" in words else learn.LPNet)(
-        system, hidden=(width,) * 3, key=seed, reversing="auto" if "rev" in words else None,
-        **({"equivariant": True} if "eq" in words else {}))
-    net, rec = learn.fit(model, data, optimiser=stages, seed=seed, normalise="norm" in words, progress=False)
-    seconds = time.perf_counter() - t0
-    y = np.asarray(test.states)
-    pred = np.asarray(net.rollout(y[:, 0], 1))[:, -1]
-    rms = float(np.sqrt(np.mean((pred - y[:, 1]) ** 2)))
-    energy = {}
-    for label, y0 in (("held-out", y_test), ("train", y_train[:10])):
-        row = it.compare({"lpnet": net}, system, y0, t_final=200.0, n_outputs=200).rows[0]
-        energy[label] = row.energy_error_max
-    if "long" in words:
-        row = it.compare({"lpnet": net}, system, y_test, t_final=1000.0, n_outputs=200).rows[0]
-        energy["held-out, 10000 steps"] = row.energy_error_max
-    print(f"{name} {recipe} seed {seed}: loss {rec.train_loss:.2e} / val {rec.val_loss:.2e}, one-step RMS at "
-          f"held-out ICs {rms:.2e}, max energy error held-out {energy['held-out']:.2e}, train ICs "
-          f"{energy['train']:.2e}"
-          + (f", held-out over 10000 steps {energy['held-out, 10000 steps']:.2e}" if "long" in words else "")
-          + f", {seconds:.0f} s", flush=True)
+    def output_scales(self) -> tuple[float, ...]:
+        return self.network.output_scales()
+
+    def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> LinearSkip:
+        return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(inputs, outputs))
+
+
+def recipe_name(args: argparse.Namespace) -> str:
+    """The name the first runs gave the recipe (BENCHMARKS.md quotes their lines)."""
+    words = ["adam" if args.adam == 20_000 else f"adam{args.adam}"]
+    if args.lbfgs:
+        words.append("lbfgs" if args.lbfgs == 5000 else f"lbfgs{args.lbfgs}")
+    if args.width != 16:
+        words.append(f"w{args.width}")
+    words += [w for w, on in (("skip", args.skip), ("rev", args.reversible), ("eq", args.equivariant),
+                              ("long", args.long)) if on]
+    return "_".join(words)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.exploration.recipes",
+                                     description=__doc__.splitlines()[0])
+    add_system_option(parser)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--adam", type=int, default=20_000, help="Adam epochs")
+    parser.add_argument("--lbfgs", type=int, default=0, help="L-BFGS-B iterations after Adam (0: none)")
+    parser.add_argument("--width", type=int, default=16, help="hidden width (3 layers)")
+    parser.add_argument("--skip", action="store_true", help="alpha(y) = MLP(y) + L y")
+    parser.add_argument("--reversible", action="store_true", help="learn.Reversible(lpnet, 'auto')")
+    parser.add_argument("--equivariant", action="store_true", help="the network averaged over the sign symmetries")
+    parser.add_argument("--long", action="store_true", help="also the held-out ICs over 10000 steps")
+    add_out_option(parser)
+    args = parser.parse_args(argv)
+    recipe = recipe_name(args)
+    system = SYSTEMS[args.system]()
+    rows = []
+    for seed in args.seeds:
+        y_train, y_test = initial_conditions(system.dim, seed)
+        data = training_data(system, y_train, seed)
+        test = training_data(system, y_test, seed)
+        stages = [learn.Adam(args.adam)] + ([learn.QuasiNewton(args.lbfgs, "lbfgsb")] if args.lbfgs else [])
+        model = lpnet(system, width=args.width, key=seed, symmetry="auto" if args.reversible else None,
+                      equivariant=args.equivariant, network_wrapper=LinearSkip if args.skip else None)
+        t0 = time.perf_counter()
+        net, rec = learn.fit(model, data, optimiser=stages, seed=seed, progress=False)
+        seconds = time.perf_counter() - t0
+        y = np.asarray(test.states)
+        pred = np.asarray(net.rollout(y[:, 0], 1))[:, -1]
+        rms = float(np.sqrt(np.mean((pred - y[:, 1]) ** 2)))
+        energy = {}
+        for label, y0 in (("held-out", y_test), ("train", y_train[:10])):
+            energy[label] = it.compare({"lpnet": net}, system, y0, t_final=200.0, n_outputs=200).rows[0].energy_error_max
+        if args.long:
+            energy["held-out, 10000 steps"] = it.compare({"lpnet": net}, system, y_test, t_final=1000.0,
+                                                         n_outputs=200).rows[0].energy_error_max
+        print(f"{args.system} {recipe} seed {seed}: loss {rec.train_loss:.2e} / val {rec.val_loss:.2e}, one-step RMS "
+              f"at held-out ICs {rms:.2e}, max energy error held-out {energy['held-out']:.2e}, train ICs "
+              f"{energy['train']:.2e}"
+              + (f", held-out over 10000 steps {energy['held-out, 10000 steps']:.2e}" if args.long else "")
+              + f", {seconds:.0f} s", flush=True)
+        rows.append({"seed": seed, "train_loss": rec.train_loss, "val_loss": rec.val_loss, "one_step_rms_held_out": rms,
+                     "energy_error_max": energy, "fit_s": seconds})
+    write_json(out_path(args, f"recipes_{args.system}_{recipe}"), args, {"recipe": recipe, "seeds": rows})
+
+
+if __name__ == "__main__":
+    main()
