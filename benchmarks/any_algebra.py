@@ -139,9 +139,13 @@ def _timed_fit_splitting(system, data, bfgs, seed):
     return fitted, records[-1], time.perf_counter() - t0
 
 
+MODELS = ("lpnet", "reversible_equivariant", "glpnet", "fit_splitting", "mlp")
+
+
 def study(system: LiePoissonSystem, epochs: int, bfgs: int, seed: int, h: float = H_STEP,
-          lbfgs: int = 5000) -> list[dict]:
-    """The rows of one system's table (dicts; `table_line` prints one)."""
+          lbfgs: int = 5000, models: tuple[str, ...] = MODELS) -> list[dict]:
+    """The rows of one system's table (dicts; `table_line` prints one), for the learned maps
+    named in `models` (of `MODELS`) and the classical Strang splitting of the exact H."""
     rng = np.random.default_rng(seed)
     y_train = rng.uniform(-1.0, 1.0, size=(40, system.dim))
     y_test = rng.uniform(-1.0, 1.0, size=(10, system.dim))
@@ -152,18 +156,22 @@ def study(system: LiePoissonSystem, epochs: int, bfgs: int, seed: int, h: float 
         for name, method in (("Strang", it.splitting.Strang), ("TripleJump", it.splitting.TripleJump))
     }
     data = it.ground_truth(system, y_train, h=h, n_steps=50, seed=seed, progress=False)
-    models = {}
-    models["LPNet 3x16"] = _timed_fit(learn.LPNet(system, hidden=(16, 16, 16), key=seed), data,
-                                      epochs=epochs, seed=seed)
-    if reversing_symmetries(system) and sign_symmetries(system):
+    chosen, models = set(models), {}
+    if "lpnet" in chosen:
+        models["LPNet 3x16"] = _timed_fit(learn.LPNet(system, hidden=(16, 16, 16), key=seed), data,
+                                          epochs=epochs, seed=seed)
+    if "reversible_equivariant" in chosen and reversing_symmetries(system) and sign_symmetries(system):
         models[f"LPNet 3x16 rev. equiv., + L-BFGS-B {lbfgs}"] = _timed_fit(
             reversible_equivariant_lpnet(system, key=seed), data,
             seed=seed, optimiser=[learn.Adam(epochs), learn.QuasiNewton(lbfgs, "lbfgsb")])
-    models["G-LPNet"] = _timed_fit(learn.GLPNet(system, key=seed), data, seed=seed,
-                                   optimiser=learn.QuasiNewton(bfgs, "bfgs", warm_start=True))
-    models["G-LPNet TripleJump"] = _timed_fit_splitting(system, data, bfgs, seed)
-    models["MLP 3x16"] = _timed_fit(learn.MLPBaseline(system, hidden=(16, 16, 16), key=seed), data,
-                                    epochs=epochs, seed=seed)
+    if "glpnet" in chosen:
+        models["G-LPNet"] = _timed_fit(learn.GLPNet(system, key=seed), data, seed=seed,
+                                       optimiser=learn.QuasiNewton(bfgs, "bfgs", warm_start=True))
+    if "fit_splitting" in chosen:
+        models["G-LPNet TripleJump"] = _timed_fit_splitting(system, data, bfgs, seed)
+    if "mlp" in chosen:
+        models["MLP 3x16"] = _timed_fit(learn.MLPBaseline(system, hidden=(16, 16, 16), key=seed), data,
+                                        epochs=epochs, seed=seed)
     # The classical Strang splitting of the exact H at the same h: what a learned map is up against.
     maps = {**{k: v[0] for k, v in models.items()}, "Strang (exact H)": it.splitting.Strang(system, h)}
     cmp = it.compare(maps, system, y_test, t_final=2000 * h, n_outputs=200)
@@ -192,8 +200,9 @@ def table_line(row: dict) -> str:
             f"| {'—' if seconds is None else f'{seconds:.0f}'} |")
 
 
-def _study_by_name(name: str, epochs: int, bfgs: int, seed: int, h: float, lbfgs: int) -> list[dict]:
-    return study({"rigid_body": rigid_body, **SYSTEMS}[name](), epochs, bfgs, seed, h, lbfgs)
+def _study_by_name(name: str, epochs: int, bfgs: int, seed: int, h: float, lbfgs: int,
+                   models: tuple[str, ...] = MODELS) -> list[dict]:
+    return study({"rigid_body": rigid_body, **SYSTEMS}[name](), epochs, bfgs, seed, h, lbfgs, models)
 
 
 def per_epoch_seconds(system, n_traj: int = 40, hidden=(16, 16, 16), short: int = 1000, long: int = 11_000) -> float:
@@ -226,6 +235,8 @@ def main(argv=None) -> None:
     parser.add_argument("--h", type=float, default=H_STEP, help="time step of the data and the maps")
     parser.add_argument("--only", nargs="+", choices=["rigid_body", *SYSTEMS, "epoch_cost"],
                         help="run only these rows (default: all, then the per-epoch cost)")
+    parser.add_argument("--models", nargs="+", choices=MODELS, default=list(MODELS),
+                        help="train only these learned maps (default: all)")
     parser.add_argument("--epoch-cost-epochs", type=int, nargs=2, default=(1000, 11_000), metavar=("SHORT", "LONG"),
                         help="the two fits whose difference is the per-epoch cost")
     parser.add_argument("--out", type=Path, default=default_out("any_algebra"), help="JSON file written")
@@ -246,7 +257,7 @@ def main(argv=None) -> None:
         for name in ("rigid_body", *SYSTEMS):
             if name in only:
                 for row in pool.submit(_study_by_name, name, args.epochs, args.bfgs, args.seed, args.h,
-                                       args.lbfgs).result():
+                                       args.lbfgs, tuple(args.models)).result():
                     print(table_line(row), flush=True)
                     results["rows"].append(row)
     if "epoch_cost" in only:

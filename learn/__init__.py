@@ -22,6 +22,7 @@ from ._optimisers import (
 from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._fit_splitting import fit_splitting as fit_splitting
 from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
+from ._load import load as load
 from ._learned_terms import RidgeTerms as RidgeTerms
 from ._lpnet import LPNet as LPNet
 from ._mlp import AffineMLP as AffineMLP

@@ -120,8 +120,19 @@ class AbstractLearnedMap(AbstractStepMap):
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the map to an HDF5 file (hyperparameters as attributes, weights as datasets),
-        atomically."""
-        _checkpoint.write(path, self.file_attributes(), {"weights": _checkpoint.array_leaves(self)})
+        atomically. A map whose parts the library cannot rebuild from a file (a network kind or
+        splitting method of your own) is refused before anything is written."""
+        attrs = self.file_attributes()
+        try:
+            type(self).from_hyperparameters(self.system, _checkpoint.jsonable(attrs["hyperparameters"]), key=0,
+                                            h=self.h)
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(
+                f"this {type(self).__name__} cannot be saved: a file records the architecture by name, and "
+                f"{type(err).__name__}: {err}. Save its weights yourself (eqx.tree_serialise_leaves) or build it "
+                "from the library's networks and splitting methods"
+            ) from err
+        _checkpoint.write(path, attrs, {"weights": _checkpoint.array_leaves(self)})
 
     @classmethod
     def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -> Self:
@@ -132,6 +143,12 @@ class AbstractLearnedMap(AbstractStepMap):
         (before learned maps were composed) are read into today's classes."""
         attrs, groups = _checkpoint.read(path)
         attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
+        if attrs.get("upgraded_from") is not None and attrs["upgraded_from"] != attrs.get("class") \
+                and attrs["upgraded_from"] == cls.__name__:
+            raise ValueError(
+                f"path {os.fspath(path)!r} holds a version-1 {attrs['upgraded_from']} with flags that are now "
+                f"the wrapper learn.{attrs['class']}: read it with learn.{attrs['class']}.load (or learn.load)"
+            )
         system = check_file_matches(path, attrs, cls.__name__, system)
         try:
             h = float(attrs["h"])
@@ -144,10 +161,11 @@ class AbstractLearnedMap(AbstractStepMap):
         return _checkpoint.replace_array_leaves(model, weights, f"path {os.fspath(path)!r}")
 
 
-def check_learned_map(value: Any, name: str = "model") -> AbstractLearnedMap:
-    """`value` if it is a learned map, else `TypeError` naming `name`."""
+def check_learned_map(value: Any, name: str = "model must be") -> AbstractLearnedMap:
+    """`value` if it is a learned map, else `TypeError` saying what `name` (e.g. "model must
+    be") should have been."""
     if not isinstance(value, AbstractLearnedMap):
-        raise TypeError(f"{name} must be a learned map (learn.LPNet, Reversible, GLPNet, MLPBaseline); "
+        raise TypeError(f"{name} a learned map (learn.LPNet, Reversible, GLPNet, MLPBaseline); "
                         f"got {type(value).__name__}")
     return value
 

@@ -3,6 +3,7 @@ an LPNet on the state, to show what the Lie-Poisson structure buys (it conserves
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -16,7 +17,7 @@ from liepoisson.systems import AbstractPoissonSystem
 from ._base import AbstractLearnedMap
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
-from ._networks import AbstractNetwork, check_network
+from ._networks import AbstractNetwork, check_network, network_or_default
 
 
 class MLPBaseline(AbstractLearnedMap):
@@ -37,9 +38,9 @@ class MLPBaseline(AbstractLearnedMap):
     def __init__(
         self,
         system: AbstractPoissonSystem,
-        hidden: Sequence[int] = (16, 16, 16),
-        activation: str = "sigmoid",
-        key: int | jax.Array = 0,
+        hidden: Sequence[int] | None = None,
+        activation: str | None = None,
+        key: int | jax.Array | None = None,
         h: float | None = None,
         input_scaling: Scaling | None = None,
         output_scaling: Scaling | None = None,
@@ -47,8 +48,9 @@ class MLPBaseline(AbstractLearnedMap):
         network: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
-        if network is None:
-            network = AffineMLP(system.dim, system.dim, hidden, activation, key, input_scaling, output_scaling)
+        network = network_or_default(
+            network, functools.partial(AffineMLP, system.dim, system.dim), hidden=hidden, activation=activation,
+            key=key, input_scaling=input_scaling, output_scaling=output_scaling)
         self.network = check_network(network, system.dim, system.dim, "states to increments")
         self.h = None if h is None else positive_float(h, "h")
 
@@ -62,6 +64,9 @@ class MLPBaseline(AbstractLearnedMap):
 
     def hyperparameters(self) -> dict[str, Any]:
         return {"network": self.network.spec()}
+
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))
 
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):

@@ -90,8 +90,18 @@ class GroupAveraged(AbstractNetwork):
     def output_scales(self) -> tuple[float, ...]:
         return self.network.output_scales()
 
+    def reinitialised(self, key: int | jax.Array) -> GroupAveraged:
+        return GroupAveraged(self.network.reinitialised(key), self.group)
+
+    def sign_groups(self) -> tuple[tuple[tuple[float, ...], ...], ...]:
+        return (self.group, *self.network.sign_groups())
+
     def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> GroupAveraged:
-        return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(inputs, outputs))
+        r"""The inner network's scalings from the group orbits $\{Sy\}$ and $\{S\alpha\}$ of the
+        samples: what it is evaluated on and what it must produce."""
+        group = np.asarray(self.group)
+        orbit = lambda x: (group[:, None, :] * np.asarray(x).reshape(1, -1, group.shape[1])).reshape(-1, group.shape[1])
+        return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(orbit(inputs), orbit(outputs)))
 
 
 #: $S\,\mathbb T(\alpha)\,y$ and $\mathbb T(S\alpha)\,Sy$ are the same computation on sign-flipped

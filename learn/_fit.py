@@ -88,6 +88,8 @@ def fit(
     stages = tuple(stages)
     if not stages or not all(isinstance(s, (Adam, QuasiNewton)) for s in stages):
         raise TypeError(f"optimiser must be a learn.Adam or learn.QuasiNewton, or a sequence of them; got {optimiser!r}")
+    if not isinstance(normalise, (bool, np.bool_)):
+        raise TypeError(f"normalise must be True or False; got {normalise!r}")
     loss_fn = model.loss_function(loss)  # ValueError for a loss this map cannot train on
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable as callback(learn.Progress); got {callback!r}")

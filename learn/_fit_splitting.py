@@ -11,7 +11,7 @@ import jax
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
-from integrators.splitting import Strang, TripleJump
+from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._fit import QuasiNewton, fit
@@ -45,8 +45,12 @@ def fit_splitting(
 
     The other arguments are `learn.fit`'s.
     """
-    if method is not None:
-        method = check_method(method)  # a wrong method fails before the first fit
+    if method is not None:  # a wrong method fails before the first fit
+        method = check_method(method)
+        if method is LieTrotter:
+            raise ValueError("method=LieTrotter would not continue from the Strang fit: the paper's Lie-Trotter "
+                             "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
+        method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
     net = GLPNet(system, system.dim, key=key, method=Strang, linear_term=True)
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
     strang, first = fit(net, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=True), **common)

@@ -27,17 +27,22 @@ from liepoisson.systems import AbstractPoissonSystem
 from ._base import AbstractLearnedMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
+from ._networks import network_or_default
 from ._optimisers import QuasiNewton
 
 
 def check_method(method: Any) -> type[AbstractSplittingMethod]:
-    """A splitting method class of `integrators.splitting` (an instance stands for its class)."""
+    """A splitting method class of `integrators.splitting`; an instance stands for its class
+    when it composes its pieces in their own order (its `h` is not used)."""
     cls = method if isinstance(method, type) else type(method)
     if not issubclass(cls, AbstractSplittingMethod):
         raise TypeError(
             "method must be a splitting method of integrators.splitting (LieTrotter, Strang, TripleJump, "
             f"Yoshida6, ...), class or instance; got {method!r}"
         )
+    if not isinstance(method, type) and method.ordering != tuple(range(len(method.ordering))):
+        raise ValueError(f"method: a G-LPNet composes its modules in their order; got {cls.__name__} with "
+                         f"ordering={method.ordering} (pass the class, and order the modules with order=)")
     return cls
 
 
@@ -73,25 +78,24 @@ class GLPNet(AbstractLearnedMap):
         system: AbstractPoissonSystem,
         n_modules: int | None = None,
         order: Sequence[int] | None = None,
-        key: int | jax.Array = 0,
+        key: int | jax.Array | None = None,
         *,
         method: Any = LieTrotter,
         h: float | None = None,
-        activation: str = "sigmoid",
-        full_vectors: bool = False,
-        linear_term: bool = False,
+        activation: str | None = None,
+        full_vectors: bool | None = None,
+        linear_term: bool | None = None,
         terms: RidgeTerms | None = None,
     ):
         self.system = check_system(system)
-        if terms is None:
-            # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
-            # algebra's G-LPNet can rotate about each axis on both sides of the others.
-            n_modules = 2 * system.dim if n_modules is None else n_modules
-            terms = RidgeTerms(system.dim, n_modules, order, key, activation=activation,
-                               full_vectors=full_vectors, linear_term=linear_term)
-        elif not isinstance(terms, RidgeTerms):
+        # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
+        # algebra's G-LPNet can rotate about each axis on both sides of the others.
+        terms = network_or_default(
+            terms, functools.partial(_default_terms, system.dim), "terms", n_modules=n_modules, order=order, key=key,
+            activation=activation, full_vectors=full_vectors, linear_term=linear_term)
+        if not isinstance(terms, RidgeTerms):
             raise TypeError(f"terms must be a learn.RidgeTerms; got {type(terms).__name__}")
-        elif terms.dim != system.dim:
+        if terms.dim != system.dim:
             raise ValueError(f"terms are for states of dimension {terms.dim}; {system!r} has {system.dim}")
         self.terms = terms
         self.method = check_method(method)
@@ -162,6 +166,9 @@ class GLPNet(AbstractLearnedMap):
     def hyperparameters(self) -> dict[str, Any]:
         return {**self.terms.spec(), "method": self.method.__name__}
 
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.terms, self, self.terms.reinitialised(key))
+
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
         hp = dict(hyperparameters)
@@ -181,8 +188,12 @@ class GLPNet(AbstractLearnedMap):
         already has the identity."""
         if self.activation == "identity":
             return None
-        linear = eqx.tree_at(lambda m: m.terms.activation, self, "identity")
+        linear = eqx.tree_at(lambda m: m.terms, self, self.terms.with_activation("identity"))
         return linear, functools.partial(linear_to_activation, self)
+
+
+def _default_terms(dim: int, n_modules: int | None = None, **kwargs: Any) -> RidgeTerms:
+    return RidgeTerms(dim, 2 * dim if n_modules is None else n_modules, **kwargs)
 
 
 def _stage_of(net: GLPNet, y: jax.Array) -> jax.Array:

@@ -9,6 +9,7 @@ exactly and its flow is a Poisson map."""
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -66,7 +67,7 @@ class RidgeTerms(eqx.Module):
     c: jax.Array
     b: jax.Array
     e: jax.Array | None
-    activation: str
+    activation: str = eqx.field(static=True)
     dim: int = eqx.field(static=True)
     order: tuple[int, ...] = eqx.field(static=True)
     full_vectors: bool = eqx.field(static=True)
@@ -102,10 +103,27 @@ class RidgeTerms(eqx.Module):
             return self.c
         return self.c[:, None] * jnp.eye(self.dim)[jnp.asarray(self.order)]
 
+    def vector(self, s: int) -> jax.Array:
+        r"""$\alpha_s$ alone (a module's flow needs only its own vector)."""
+        if self.full_vectors:
+            return self.c[s]
+        return jnp.zeros(self.dim, self.c.dtype).at[self.order[s]].set(self.c[s])
+
+    def reinitialised(self, key: int | jax.Array) -> RidgeTerms:
+        """The same family of pieces with fresh parameters from `key`."""
+        return RidgeTerms(self.dim, self.n_modules, self.order, key, activation=self.activation,
+                          full_vectors=self.full_vectors, linear_term=self.linear_term)
+
+    def with_activation(self, activation: str) -> RidgeTerms:
+        r"""The same pieces with another activation $\sigma$ (a static field: a copy)."""
+        new = copy.copy(self)
+        object.__setattr__(new, "activation", check_activation(activation))
+        return new
+
     def flow(self, system: AbstractPoissonSystem, s: int, t: Any, y: jax.Array) -> jax.Array:
         r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
-        alpha = self.vectors()[s]
+        alpha = self.vector(s)
         x = jnp.dot(alpha, y)
         q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
         if self.e is not None:

@@ -15,32 +15,41 @@ def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
     version = attrs.get("format_version", 1)
     if version == FORMAT_VERSION:
         return attrs
-    if version != 1 or not isinstance(attrs.get("hyperparameters"), dict):
+    if version != 1:
         raise ValueError(
             f"{where} has model format version {version!r}; this liepoisson reads versions 1 to {FORMAT_VERSION}: "
             "write it again with the version that made it, or train the model anew"
         )
+    if not isinstance(attrs.get("hyperparameters"), dict):
+        raise ValueError(f"{where} is a version-1 file without the hyperparameters of a learned map (damaged, or "
+                         "not a model file)")
     hp = dict(attrs["hyperparameters"])
-    cls = attrs.get("class")
-    if cls == "LPNet":
-        cls, hp = _lpnet_v1(hp, attrs)
-    elif cls == "GLPNet":
-        symmetric = hp.pop("symmetric", False)
-        hp["method"] = "Strang" if symmetric else "LieTrotter"
-    elif cls == "MLPBaseline":
-        hp = {"network": _affine_mlp(hp, attrs)}
-    return {**attrs, "class": cls, "hyperparameters": hp, "format_version": FORMAT_VERSION}
+    old = cls = attrs.get("class")
+    try:
+        if cls == "LPNet":
+            cls, hp = _lpnet_v1(hp)
+        elif cls == "GLPNet":
+            symmetric = hp.pop("symmetric", False)
+            hp["method"] = "Strang" if symmetric else "LieTrotter"
+        elif cls == "MLPBaseline":
+            hp = {"network": _affine_mlp(hp)}
+    except (KeyError, TypeError, IndexError) as err:
+        raise ValueError(
+            f"{where} is a version-1 {old} file whose hyperparameters this liepoisson cannot read "
+            f"({type(err).__name__}: {err}); train the model anew"
+        ) from err
+    return {**attrs, "class": cls, "hyperparameters": hp, "format_version": FORMAT_VERSION, "upgraded_from": old}
 
 
-def _affine_mlp(hp: dict[str, Any], attrs: dict[str, Any], out_size: int | None = None) -> dict[str, Any]:
+def _affine_mlp(hp: dict[str, Any]) -> dict[str, Any]:
     dim = len(hp["input_scaling"][0])
-    return {"kind": "AffineMLP", "in_size": dim, "out_size": out_size or len(hp["output_scaling"][0]),
+    return {"kind": "AffineMLP", "in_size": dim, "out_size": len(hp["output_scaling"][0]),
             "hidden": hp["hidden"], "activation": hp["activation"], "input_scaling": hp["input_scaling"],
             "output_scaling": hp["output_scaling"]}
 
 
-def _lpnet_v1(hp: dict[str, Any], attrs: dict[str, Any]) -> tuple[str, dict[str, Any]]:
-    network = _affine_mlp(hp, attrs)
+def _lpnet_v1(hp: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    network = _affine_mlp(hp)
     if hp.get("equivariant"):
         network = {"kind": "GroupAveraged", "group": hp["equivariant"], "network": network}
     lpnet = {"network": network, "parametrisation": hp.get("parametrisation", "TestFlowParametrisation")}

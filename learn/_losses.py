@@ -19,7 +19,7 @@ def state_mse(model: Any, y0: jax.Array, y1: jax.Array) -> jax.Array:
 
 
 def alpha_mse(model: Any, y0: jax.Array, alpha: jax.Array) -> jax.Array:
-    """MSE of an LPNet's $\alpha(y_0)$ against the pairs' parameters, in units of the output
+    r"""MSE of an LPNet's $\alpha(y_0)$ against the pairs' parameters, in units of the output
     scale of its network (1 for a network without scalings)."""
     scale = jnp.asarray(model.network.output_scales())
     return jnp.mean(((jax.vmap(model.alpha)(y0) - alpha) / scale) ** 2)

@@ -4,6 +4,7 @@ a network predicts the parameters $\alpha(y)$ of an exact Poisson step, $y_{n+1}
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,11 +16,11 @@ from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
-from ._equivariant import GroupAveraged, check_group_law
+from ._equivariant import check_group_law
 from ._losses import alpha_mse
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
-from ._networks import AbstractNetwork, check_network
+from ._networks import AbstractNetwork, check_network, network_or_default
 from ._parametrisation import (
     AbstractStepParametrisation,
     default_parametrisation,
@@ -59,9 +60,9 @@ class LPNet(AbstractLearnedMap):
     def __init__(
         self,
         system: AbstractPoissonSystem,
-        hidden: Sequence[int] = (16, 16, 16),
-        activation: str = "sigmoid",
-        key: int | jax.Array = 0,
+        hidden: Sequence[int] | None = None,
+        activation: str | None = None,
+        key: int | jax.Array | None = None,
         parametrisation: AbstractStepParametrisation | str | None = None,
         h: float | None = None,
         input_scaling: Scaling | None = None,
@@ -82,21 +83,18 @@ class LPNet(AbstractLearnedMap):
         if parametrisation.system is not system:
             raise ValueError("parametrisation must be built for the same system object as the LPNet")
         self.parametrisation = parametrisation
-        if network is None:
-            network = AffineMLP(system.dim, parametrisation.n_params, hidden, activation, key, input_scaling,
-                                output_scaling)
-        elif input_scaling is not None or output_scaling is not None:
-            raise ValueError("input_scaling and output_scaling describe the default network; give them to the "
-                             "network passed as network= instead")
+        network = network_or_default(
+            network, functools.partial(AffineMLP, system.dim, parametrisation.n_params), hidden=hidden,
+            activation=activation, key=key, input_scaling=input_scaling, output_scaling=output_scaling)
         network = check_network(network, system.dim, parametrisation.n_params,
                                 f"states to the parameters of {type(parametrisation).__name__}")
-        if isinstance(network, GroupAveraged):
-            check_group_law(system, parametrisation, network.group)
+        for group in network.sign_groups():  # every GroupAveraged, at any depth
+            check_group_law(system, parametrisation, group)
         self.network = network
         self.h = None if h is None else positive_float(h, "h")
 
     def alpha(self, y: jax.Array) -> jax.Array:
-        """The step parameters $\alpha(y)$ for one state `(dim,)`."""
+        r"""The step parameters $\alpha(y)$ for one state `(dim,)`."""
         return self.network(y)
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -109,6 +107,9 @@ class LPNet(AbstractLearnedMap):
 
     def hyperparameters(self) -> dict[str, Any]:
         return {"network": self.network.spec(), "parametrisation": type(self.parametrisation).__name__}
+
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))
 
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
@@ -131,7 +132,7 @@ class LPNet(AbstractLearnedMap):
 
     def normalised(self, y0, y1, h, targets=None, *, fraction: float = 1.0):
         r"""Scalings from the data: inputs the mean/std of $y_0$, outputs those of `targets`
-        (the alpha loss's parameters) or else of the first-order estimate of $lpha$
+        (the alpha loss's parameters) or else of the first-order estimate of $\alpha$
         (`params_estimate`) times `fraction` (a map that takes several steps of this LPNet
         per step passes its share)."""
         outputs = fraction * self.parametrisation.params_estimate(y0, y1, h) if targets is None else targets

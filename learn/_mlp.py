@@ -163,6 +163,10 @@ class AffineMLP(AbstractNetwork):
     def output_scales(self) -> tuple[float, ...]:
         return self.output_scale
 
+    def reinitialised(self, key: int | jax.Array) -> AffineMLP:
+        return AffineMLP(self.in_size, self.out_size, self.hidden, self.activation, key,
+                         (self.input_shift, self.input_scale), (self.output_shift, self.output_scale))
+
     @property
     def in_size(self) -> int:
         return self.mlp.layers[0].in_features

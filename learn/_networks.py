@@ -40,9 +40,32 @@ class AbstractNetwork(eqx.Module):
         samples `inputs` `(N, in_size)` and `outputs` `(N, out_size)`."""
 
 
+    @abc.abstractmethod
+    def reinitialised(self, key: int | jax.Array) -> AbstractNetwork:
+        """The same architecture and fixed scalings with fresh weights from `key`."""
+
+    def sign_groups(self) -> tuple[tuple[tuple[float, ...], ...], ...]:
+        """The groups of sign flips this network is averaged over (by `learn.GroupAveraged`
+        wrappers at any depth), which a map built on it must check; none by default."""
+        return ()
+
     def output_scales(self) -> tuple[float, ...]:
         """The fixed scales of the outputs (units of an output-space loss); ones by default."""
         return (1.0,) * self.out_size
+
+
+def network_or_default(network: Any, default: Any, name: str = "network", **arguments: Any) -> Any:
+    """`network` if given, and then none of `arguments` (the default part's: hidden layers,
+    activation, key, scalings) may be; else `default(**arguments)` with the unset ones left to
+    its defaults. A combination that would ignore an argument is refused (`name` is the
+    argument that gives the part whole: `network`, `terms`)."""
+    given = {k: v for k, v in arguments.items() if v is not None}
+    if network is None:
+        return default(**given)
+    if given:
+        raise ValueError(f"{', '.join(sorted(given))}: these describe the default {name}; with {name}= given, "
+                         f"set them on that {name} instead")
+    return network
 
 
 def check_network(network: Any, in_size: int, out_size: int, what: str) -> AbstractNetwork:

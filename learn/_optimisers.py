@@ -8,6 +8,8 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from liepoisson.internals import positive_float, positive_int
 
 #: Quasi-Newton methods: SciPy BFGS (dense), SciPy L-BFGS-B, optax L-BFGS.
@@ -56,11 +58,11 @@ class QuasiNewton:
     of parameters, an MLP), `"bfgs"` (SciPy BFGS, dense: a few dozen parameters, the paper's
     choice for G-LPNets) or `"lbfgs"` (optax, compiled in chunks); `restarts` starts in total,
     the first from the current weights, the others from fresh random weights
-    (`model.reinitialised`, keys from the fit's `seed`); `warm_start` (G-LPNet only): each
-    start first fits the network with the identity activation (flows of quadratics, a smooth
-    problem) for half the iterations, maps it onto the linear regime of $\sigma$
-    (`linear_to_activation`) and finishes with $\sigma$ (on E6 from random sigmoid starts
-    BFGS stalls at MSE ~1e-6; the warm start reaches the paper's < 5e-10).
+    (`model.reinitialised`, keys from the fit's `seed`); `warm_start` (maps whose
+    `warm_start()` offers one: a G-LPNet): each start first fits a simpler map for half the
+    iterations (for a G-LPNet the identity activation: flows of quadratics, a smooth problem),
+    maps it onto the model (`linear_to_activation`: the linear regime of $\sigma$) and finishes
+    there (what it does on E6 is in BENCHMARKS.md).
 
     The best start by validation loss (training loss without a validation set) is kept, and
     only if it beats the weights the stage started from.
@@ -74,6 +76,8 @@ class QuasiNewton:
     def __post_init__(self):
         positive_int(self.iterations, "QuasiNewton.iterations")
         check_method(self.method)
+        if not isinstance(self.warm_start, (bool, np.bool_)):
+            raise TypeError(f"QuasiNewton.warm_start must be True or False; got {self.warm_start!r}")
         positive_int(self.restarts, "QuasiNewton.restarts")
 
 

@@ -242,12 +242,12 @@ def run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, 
         desc = f"{name} start {r + 1}/{stage.restarts}" if stage.restarts > 1 else name
         if warm is not None:
             first = max(1, stage.iterations // 2)
-            x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (identity)")
+            x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (warm start)")
             # mapped onto this start's own weights (a restart's random vectors and activation)
             to_model = eqx.combine(unravel(x0), static).warm_start()[1]
             mapped = to_model(eqx.combine(lin_unravel(x_lin), lin_static), X)
             x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
-            x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} ({model.activation})")
+            x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} (from the warm start)")
             shift = h1["epoch"][-1] if len(h1["epoch"]) else 0
             hist = {"epoch": np.concatenate([h1["epoch"], h2["epoch"] + shift]),
                     "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]])}

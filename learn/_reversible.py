@@ -85,6 +85,14 @@ class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
         r = jnp.asarray(self.symmetry)
         return r * self.lpnet.parametrisation.step(-self.lpnet.alpha(r * w), r * m, self.h)
 
+    def _check_loss(self, loss):
+        if loss == "alpha":
+            raise ValueError(
+                "loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two per "
+                "step, whose parameters no pair determines: use loss='state'"
+            )
+        super()._check_loss(loss)
+
     def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
         return self.iterate(self.lpnet.step(y0), y1)
 
@@ -95,6 +103,9 @@ class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
     def hyperparameters(self) -> dict[str, Any]:
         return {"lpnet": self.lpnet.hyperparameters(), "symmetry": [int(r) for r in self.symmetry],
                 "iterations": self.iterations}
+
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.lpnet, self, self.lpnet.reinitialised(key))
 
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):

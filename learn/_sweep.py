@@ -20,16 +20,12 @@ from integrators.internals import atomic_write_text, check_client, map_unordered
 from liepoisson.internals import progress_bar, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
-from ._baseline import MLPBaseline
 from ._fit import fit
-from ._glpnet import GLPNet
-from ._lpnet import LPNet
+from ._load import load
 from ._record import TrainingRecord
-from ._reversible import Reversible
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
 FIT_KEYS = ("seed", "epochs", "optimiser", "loss", "normalise", "validation_fraction")
-_MODELS = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline)}
 _RESULT = "result.json"
 
 
@@ -78,7 +74,7 @@ class SweepResult:
 
     def model(self, system: Any = None) -> AbstractLearnedMap:
         """The trained map, read from `path` (`system` as in `LPNet.load`)."""
-        return _MODELS[self.model_class].load(os.path.join(self.path, "model.h5"), system)
+        return load(os.path.join(self.path, "model.h5"), system)
 
     def record(self) -> TrainingRecord:
         """The `TrainingRecord` of the fit."""
@@ -153,7 +149,7 @@ def _read_result(folder: Path) -> SweepResult | None:
 
 def _train(make_model, data, fit_kwargs, evaluate, point):
     """On a worker: build, fit and evaluate one point. Returns `(model, record, metrics)`."""
-    model = check_learned_map(make_model(point), f"make_model({point!r})")
+    model = check_learned_map(make_model(point), f"make_model({point!r}) must return")
     pairs = data(point) if callable(data) else data
     kwargs = {**fit_kwargs, **{k: point[k] for k in FIT_KEYS if k in point}, "progress": False}
     model, record = fit(model, pairs, **kwargs)

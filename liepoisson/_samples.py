@@ -43,8 +43,8 @@ def common_path_first(fun: Callable, ok: Callable[[Any], bool]) -> Callable:
     path where that was not enough.
 
     Under `vmap_samples`, `expm_action` branches on the batch's largest $|A|_1$; reverse mode
-    through that branch carries the other paths along (an LPNet epoch on so(4) cost 1.3-1.6x
-    the straight-line common path, in the same compiled program). The first attempt is
+    through that branch carries the other paths along, in the same compiled program, and costs
+    more than the straight-line common path (BENCHMARKS.md). The first attempt is
     compiled with the common path alone, as straight-line code, and gives NaN wherever a
     batch is beyond its bound; when `ok(outputs)` (host values) is false, the call is
     repeated with the full `expm_action` (compiled on first need), and so are all later calls

@@ -279,7 +279,7 @@ def test_bad_sweep_arguments_are_refused(tmp_path):
         learn.sweep(_make_glpnet, {"seed": [0]}, SWEEP_DATA, out=tmp_path, optimizer=SWEEP_OPTIMISER)
     with pytest.raises(ValueError, match="repeated points"):
         learn.sweep(_make_glpnet, [{"seed": 0}, {"seed": 0}], SWEEP_DATA, out=tmp_path)
-    with pytest.raises(TypeError, match="must return a learn.LPNet"):
+    with pytest.raises(TypeError, match="must return a learned map"):
         learn.sweep(lambda p: None, {"seed": [0]}, SWEEP_DATA, out=tmp_path)
     (tmp_path / "file").write_text("x")
     with pytest.raises(NotADirectoryError, match="is a file"):

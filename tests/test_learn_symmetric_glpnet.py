@@ -264,7 +264,7 @@ def test_warm_start_of_a_linear_term_network_is_exact():
     # The identity-activation fit maps onto the sigmoid network with a_s = 0, e_s = a_s + e_s:
     # the same rates, so the same step up to rounding.
     g = with_linear_term(net(linear_term=True))
-    lin = eqx.tree_at(lambda m: m.terms.activation, g, "identity")
+    lin = eqx.tree_at(lambda m: m.terms, g, g.terms.with_activation("identity"))
     mapped = learn.linear_to_activation(g, lin, Y)
     assert mapped.activation == "sigmoid" and mapped.method is g.method
     assert np.allclose(np.asarray(jax.vmap(mapped.step)(Y)), np.asarray(jax.vmap(lin.step)(Y)),

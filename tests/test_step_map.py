@@ -233,7 +233,7 @@ def test_cost_counts_the_exact_sub_flows(name, monkeypatch):
 
 
 def test_one_rollout_in_the_library():
-    """`grep -rn "def rollout"` over the packages finds the one shared definition."""
+    """`grep -rn "def rollout("` over the packages finds the one shared definition."""
     hits = []
     for package in ("liepoisson", "integrators", "learn", "paper"):
         for path in sorted((ROOT / package).rglob("*")):
@@ -244,6 +244,6 @@ def test_one_rollout_in_the_library():
             except UnicodeDecodeError:  # data files
                 continue
             for number, line in enumerate(text.splitlines(), 1):
-                if "def rollout" in line:
+                if "def rollout(" in line:
                     hits.append(f"{path.relative_to(ROOT)}:{number}")
     assert len(hits) == 1 and re.fullmatch(r"integrators/_step_map\.py:\d+", hits[0]), hits
