@@ -40,13 +40,14 @@ class LPNet(AbstractLearnedMap):
     reversible one is `learn.Reversible(lpnet)`; a G-LPNet (`learn.GLPNet`) is exactly
     Poisson.
 
-    **Arguments:** `system`; `hidden` layer widths (paper: (16, 16, 16), 659 parameters for
-    the rigid body), `activation` (paper: sigmoid), `key` (int seed or PRNG key),
-    `input_scaling`, `output_scaling` (`(shift, scale)` pairs, default identity; `learn.fit`
-    with `normalise=True` sets them from the data): the default network, an `AffineMLP`
+    **Arguments:** `system`; `hidden` layer widths (default and paper: (16, 16, 16), 659
+    parameters for the rigid body), `activation` (default and paper: sigmoid), `key` (int seed
+    or PRNG key, default 0), `input_scaling`, `output_scaling` (`(shift, scale)` pairs, default
+    identity; `learn.fit` with `normalise=True` sets them from the data): the default network,
+    an `AffineMLP`
     $\alpha(y) = s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$;
-    or `network`, any `learn.AbstractNetwork` from `dim` to `n_params` instead (then give
-    none of those); `parametrisation` (an `AbstractStepParametrisation` or its class name;
+    or `network`, any `learn.AbstractNetwork` from `dim` to `n_params` instead (then none of
+    those may be given); `parametrisation` (an `AbstractStepParametrisation` or its class name;
     default `default_parametrisation(system)`); `h`, the time step (`None`: set by `learn.fit`
     from the data).
     """
