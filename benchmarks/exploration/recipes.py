@@ -72,6 +72,9 @@ class LinearSkip(learn.AbstractNetwork):
     def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> LinearSkip:
         return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(inputs, outputs))
 
+    def reinitialised(self, key) -> LinearSkip:
+        return LinearSkip(self.network.reinitialised(key))
+
 
 def recipe_name(args: argparse.Namespace) -> str:
     """The name the first runs gave the recipe (BENCHMARKS.md quotes their lines)."""
