@@ -23,7 +23,7 @@ def test_compare_measures_every_map_against_the_same_reference(tmp_path):
         "RK4": it.RK4(body, h=0.1),
         "G-LPNet": learn.GLPNet(body, n_modules=3, h=0.1),
     }
-    c = it.compare(maps, body, Y0S, t_final=10.0, n_outputs=20)
+    c = it.compare(maps, body, Y0S, t_final=10.0, n_outputs=20, timing_seconds=0.01)  # timing: see test_step_timing
     rows = {r.label: r for r in c.rows}
     assert [r.label for r in c.rows] == list(maps)
     assert rows["Strang h/2"].n_steps == 200 and rows["Strang h"].n_steps == 100

@@ -45,7 +45,9 @@ def test_saved_model_as_checkpoint_says_how_to_start_from_it(system, data, tmp_p
     assert "learn.LPNet.load(" in message and "learn.fit(model" in message
 
 
-@pytest.mark.parametrize("missing", ["fit_settings_json", "epoch", "best_loss", "elapsed_s", "hyperparameters_json"])
+# One code path reads every attribute: two of them in the default run, the rest under -m slow.
+@pytest.mark.parametrize("missing", ["fit_settings_json", "epoch", *(
+    pytest.param(m, marks=pytest.mark.slow) for m in ("best_loss", "elapsed_s", "hyperparameters_json"))])
 def test_checkpoint_missing_attribute_is_named(system, data, tmp_path, missing):
     path = tmp_path / "checkpoint.h5"
     learn.fit(_model(system), data, epochs=2, checkpoint=learn.Checkpoint(path))
@@ -58,7 +60,7 @@ def test_checkpoint_missing_attribute_is_named(system, data, tmp_path, missing):
     assert missing.removesuffix("_json") in message
 
 
-@pytest.mark.parametrize("missing", ["optimizer", "best", "history"])
+@pytest.mark.parametrize("missing", ["optimizer", *(pytest.param(m, marks=pytest.mark.slow) for m in ("best", "history"))])
 def test_checkpoint_missing_group_is_named(system, data, tmp_path, missing):
     path = tmp_path / "checkpoint.h5"
     learn.fit(_model(system), data, epochs=2, checkpoint=learn.Checkpoint(path))

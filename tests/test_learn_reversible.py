@@ -161,7 +161,7 @@ def test_unconverged_iteration_is_a_divergence_not_a_wrong_state():
         net.with_iterations(0)
 
 
-@pytest.mark.parametrize("h", [1.0, 2.0])
+@pytest.mark.parametrize("h", [1.0, pytest.param(2.0, marks=pytest.mark.slow)])
 def test_unconverged_implicit_midpoint_is_a_divergence_not_its_last_newton_iterate(h):
     # The same policy for the classical implicit map. Two Newton steps from the explicit Euler
     # guess at h |f'| ~ 1-2 still move the stage by far more than round-off (measured: 3 are

@@ -30,7 +30,8 @@ def with_linear_term(g, key=7):
     return eqx.tree_at(lambda m: m.terms.e, g, 0.5 * jax.random.normal(jax.random.PRNGKey(key), (g.n_modules,)))
 
 
-@pytest.mark.parametrize("system_name", ["RigidBody", "Kirchhoff"])
+# Kirchhoff (12 modules, ~19 s of compilation for the three methods) under -m slow.
+@pytest.mark.parametrize("system_name", ["RigidBody", pytest.param("Kirchhoff", marks=pytest.mark.slow)])
 @pytest.mark.parametrize(
     "method", [it.splitting.LieTrotter, it.splitting.Strang, it.splitting.TripleJump], ids=lambda m: m.__name__
 )
