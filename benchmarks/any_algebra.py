@@ -18,8 +18,8 @@ units of the size of the Casimir's terms, `casimir_drift`), Poisson defect, trai
 the per-epoch cost of the LPNet on a generic algebra (so(4), matrix exponential path) against
 the so(3) closed form at equal data and width. Writes the rows to `--out` (JSON).
 
-`tests/` import `SYSTEMS` and `casimir_drift` from this file as the top-level module
-`any_algebra`; the exploration scripts (`benchmarks.exploration`) take the systems from here.
+`tests/` import `SYSTEMS` and `casimir_drift` from this module; the exploration scripts
+(`benchmarks.exploration`) take the systems from here.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
+from benchmarks._report import default_out, write_json
 from liepoisson.systems import LiePoissonSystem, RigidBody, reversing_symmetries, sign_symmetries
 
 H_STEP = 0.1
@@ -223,9 +224,6 @@ def per_epoch_seconds(system, n_traj: int = 40, hidden=(16, 16, 16), short: int 
 
 
 def main(argv=None) -> None:
-    # imported here: tests import this file as the top-level module `any_algebra`
-    from benchmarks._report import default_out, write_json
-
     parser = argparse.ArgumentParser(prog="python -m benchmarks.any_algebra", description=__doc__.splitlines()[0])
     parser.add_argument("--epochs", type=int, default=20_000, help="Adam epochs of LPNet and MLP")
     parser.add_argument("--bfgs", type=int, default=1000, help="BFGS iterations of the G-LPNet")

@@ -8,8 +8,6 @@ rolled out with their structure intact."""
 from __future__ import annotations
 
 import functools
-import sys
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -18,10 +16,8 @@ from helpers import EPS
 
 import integrators as it
 import learn
+from benchmarks.any_algebra import SYSTEMS, casimir_drift  # the benchmark's, not copied
 from learn import state_mse
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from any_algebra import SYSTEMS, casimir_drift  # the benchmark's, not copied
 
 EXPECTED_DEGREES = {"diamond": [1, 2], "filiform5": [1, 2, 3], "so4": [2, 2], "sl3": [2, 3]}
 

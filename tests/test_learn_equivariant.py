@@ -6,9 +6,6 @@ of the system, not only the one it was built with."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -21,10 +18,8 @@ from hypothesis import strategies as st
 import integrators as it
 import learn
 import liepoisson as lp
+from benchmarks.any_algebra import SYSTEMS as NEW_ALGEBRAS  # the benchmark's, not copied
 from liepoisson.systems import reversing_symmetries, sign_symmetries
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from any_algebra import SYSTEMS as NEW_ALGEBRAS  # the benchmark's, not copied
 
 RB = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
 SO4 = NEW_ALGEBRAS["so4"]()

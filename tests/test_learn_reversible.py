@@ -7,8 +7,6 @@ training on the explicit residual trains the step, and version-1 files still loa
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
 import equinox as eqx
 import h5py
@@ -23,15 +21,13 @@ from hypothesis import strategies as st
 import integrators as it
 import learn
 import liepoisson as lp
+from benchmarks.any_algebra import SYSTEMS as NEW_ALGEBRAS  # the benchmark's, not copied
 from liepoisson.systems import (
     check_reversing_symmetry,
     reversing_symmetries,
     reversing_symmetry,
     sign_symmetries,
 )
-
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from any_algebra import SYSTEMS as NEW_ALGEBRAS  # the benchmark's, not copied
 
 RB = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
 Y = np.random.default_rng(1).uniform(-1.0, 1.0, size=(6, 3))
