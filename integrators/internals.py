@@ -3,6 +3,7 @@
 these names may change with the library.
 
 - `check_state(y, dim)`: one float64 state `(dim,)` (works on traced values).
+- `composition_flops(step_map, method)`: XLA's flops of a step composed by a splitting method.
 - `traced_h(step_map)`: the map with its step size as a traced array (one compiled program for
   every h); `xla_flops(fn, *args)`: XLA's flop count of `fn` compiled.
 - `atomic_path(path)`, `atomic_write_text(path, text)`: write to a temporary file renamed into
@@ -30,6 +31,7 @@ from ._ground_truth import integrate_chunk as integrate_chunk
 from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
+from ._splitting._base import composition_flops as composition_flops
 from ._step_map import check_state as check_state
 from ._step_map import traced_h as traced_h
 from ._step_map import xla_flops as xla_flops

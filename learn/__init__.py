@@ -26,8 +26,9 @@ from ._load import load as load
 from ._learned_terms import RidgeTerms as RidgeTerms
 from ._lpnet import LPNet as LPNet
 from ._mlp import AffineMLP as AffineMLP
-from ._networks import AbstractNetwork as AbstractNetwork
+from ._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
 from ._parametrisation import (
+    AbstractInvertibleParametrisation as AbstractInvertibleParametrisation,
     AbstractStepParametrisation as AbstractStepParametrisation,
     SE3RotationShear as SE3RotationShear,
     TestFlowParametrisation as TestFlowParametrisation,

@@ -142,7 +142,13 @@ class AbstractLearnedMap(AbstractStepMap):
         probe points for a user system; same parameters otherwise). Files of format version 1
         (before learned maps were composed) are read into today's classes."""
         attrs, groups = _checkpoint.read(path)
-        attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
+        return cls.from_file(path, upgrade_attributes(attrs, f"path {os.fspath(path)!r}"), groups, system)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, attrs: dict[str, Any], groups: dict[str, Any],
+                  system: AbstractPoissonSystem | None = None) -> Self:
+        """The map of a file already read (`attrs` upgraded to today's format, `groups`): what
+        `load` does after reading, for a caller that read the file to find its class."""
         if attrs.get("upgraded_from") is not None and attrs["upgraded_from"] != attrs.get("class") \
                 and attrs["upgraded_from"] == cls.__name__:
             raise ValueError(

@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_state, traced_h, xla_flops
+from integrators.internals import check_state, composition_flops
 from integrators.splitting import AbstractSplittingMethod, LieTrotter
 from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float
@@ -141,7 +141,7 @@ class GLPNet(AbstractLearnedMap):
         return self.method.flows_per_step(self.n_modules)
 
     def step_flops(self) -> float:
-        return self.method.stages()[1] * xla_flops(_stage_of, traced_h(self), jnp.zeros(self.system.dim))
+        return composition_flops(self, self.method)
 
     def hamiltonian(self, y: ArrayLike) -> jax.Array:
         r"""The learned Hamiltonian $\widetilde H(y) = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$
@@ -194,11 +194,6 @@ class GLPNet(AbstractLearnedMap):
 
 def _default_terms(dim: int, n_modules: int | None = None, **kwargs: Any) -> RidgeTerms:
     return RidgeTerms(dim, 2 * dim if n_modules is None else n_modules, **kwargs)
-
-
-def _stage_of(net: GLPNet, y: jax.Array) -> jax.Array:
-    """One composition by the inner method of `net.method.stages()` (for the flop count)."""
-    return net.method.stages()[0].compose(net.flows(), y, net.h)
 
 
 def _method_from_name(name: str) -> type[AbstractSplittingMethod]:

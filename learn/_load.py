@@ -20,8 +20,9 @@ def load(path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -
     whatever its class (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`), from the class the
     file names; `system` as in `AbstractLearnedMap.load`."""
     classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline)}
-    attrs, _ = _checkpoint.read(path)
-    name = upgrade_attributes(attrs, f"path {os.fspath(path)!r}").get("class")
+    attrs, groups = _checkpoint.read(path)  # read once: the class is in the file
+    attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
+    name = attrs.get("class")
     if name not in classes:
         raise ValueError(f"path {os.fspath(path)!r} holds a {name!r}, not a learned map ({', '.join(classes)})")
-    return classes[name].load(path, system)
+    return classes[name].from_file(path, attrs, groups, system)

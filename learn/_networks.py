@@ -54,6 +54,31 @@ class AbstractNetwork(eqx.Module):
         return (1.0,) * self.out_size
 
 
+class AbstractWrappedNetwork(AbstractNetwork):
+    """A network that wraps another, `network`, and changes its function (as diffrax's
+    wrapped solvers do): sizes, output scales, rescaling and the sign groups to check are
+    delegated to it; a final wrapper defines `__call__`, `spec` and `reinitialised`."""
+
+    network: eqx.AbstractVar[AbstractNetwork]
+
+    @property
+    def in_size(self) -> int:
+        return self.network.in_size
+
+    @property
+    def out_size(self) -> int:
+        return self.network.out_size
+
+    def output_scales(self) -> tuple[float, ...]:
+        return self.network.output_scales()
+
+    def sign_groups(self) -> tuple[tuple[tuple[float, ...], ...], ...]:
+        return self.network.sign_groups()
+
+    def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> AbstractWrappedNetwork:
+        return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(inputs, outputs))
+
+
 def network_or_default(network: Any, default: Any, name: str = "network", **arguments: Any) -> Any:
     """`network` if given, and then none of `arguments` (the default part's: hidden layers,
     activation, key, scalings) may be; else `default(**arguments)` with the unset ones left to

@@ -72,7 +72,17 @@ class AbstractStepParametrisation(abc.ABC):
         return hash((type(self), id(self.system), self.rtol))
 
 
-class TestFlowParametrisation(AbstractStepParametrisation):
+class AbstractInvertibleParametrisation(AbstractStepParametrisation):
+    r"""A parametrisation whose steps have a closed-form inverse, $\mathbb T(\alpha)^{-1}$ =
+    `inverse_step(alpha, ., h)`: what a reversible step ($R\,\mathbb B^{-1}R\circ\mathbb B$,
+    `learn.Reversible`) needs."""
+
+    @abc.abstractmethod
+    def inverse_step(self, params: jax.Array, y: jax.Array, h: float) -> jax.Array:
+        r"""$\mathbb T(\alpha)^{-1}\,y$ for one sample."""
+
+
+class TestFlowParametrisation(AbstractInvertibleParametrisation):
     r"""Any system with exact test flows (Lie-Poisson on any algebra, or the affine/canonical
     systems of the paper): one step is $y \mapsto \mathbb T(h, \alpha)\,y$ =
     `system.test_flow(alpha, h, y)`, $\alpha\in\mathbb R^n$.
@@ -101,6 +111,10 @@ class TestFlowParametrisation(AbstractStepParametrisation):
 
     def step(self, params, y, h):
         return self.system.test_flow(params, h, y)
+
+    def inverse_step(self, params, y, h):
+        r"""The test flow of $-\alpha$: the flow of a linear Hamiltonian run backwards."""
+        return self.step(-params, y, h)
 
     def params_from_pair(self, y0, y1, h):
         return self.system.test_flow_parameters(y0, y1, positive_float(h, "h"), rtol=self.rtol)

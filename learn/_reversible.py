@@ -16,7 +16,7 @@ from liepoisson.systems import AbstractPoissonSystem, check_reversing_symmetry, 
 
 from ._base import AbstractLearnedMap
 from ._lpnet import LPNet
-from ._parametrisation import TestFlowParametrisation
+from ._parametrisation import AbstractInvertibleParametrisation
 
 
 class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
@@ -40,8 +40,9 @@ class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
     \mathbb T(\alpha(y_0))\,y_0 - y_1$, zero exactly when the step carries $y_0$ to $y_1$
     (`training_prediction`): two test flows per pair, no iteration.
 
-    **Arguments:** `lpnet`, an `LPNet` whose steps are single test flows
-    (`TestFlowParametrisation`: $\mathbb T(\alpha)^{-1} = \mathbb T(-\alpha)$); `symmetry`:
+    **Arguments:** `lpnet`, an `LPNet` whose parametrisation has a closed-form inverse
+    (`learn.AbstractInvertibleParametrisation`; `TestFlowParametrisation`:
+    $\mathbb T(\alpha)^{-1} = \mathbb T(-\alpha)$); `symmetry`:
     `"auto"` (the first of `reversing_symmetries`) or a sign vector $r$; `iterations` of the
     fixed point (default 16).
     """
@@ -53,10 +54,11 @@ class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
     def __init__(self, lpnet: LPNet, symmetry: ArrayLike | str = "auto", iterations: int = 16):
         if not isinstance(lpnet, LPNet):
             raise TypeError(f"lpnet must be a learn.LPNet; got {type(lpnet).__name__}")
-        if not isinstance(lpnet.parametrisation, TestFlowParametrisation):
+        if not isinstance(lpnet.parametrisation, AbstractInvertibleParametrisation):
             raise ValueError(  # noqa: TRY004 (a valid LPNet whose step cannot be inverted in closed form)
-                "Reversible needs an LPNet with the TestFlowParametrisation (one test flow per step, whose "
-                f"inverse is the flow of -alpha); got {type(lpnet.parametrisation).__name__}"
+                "Reversible needs an LPNet whose parametrisation has a closed-form inverse "
+                "(a learn.AbstractInvertibleParametrisation, e.g. the TestFlowParametrisation: one test flow per "
+                f"step, whose inverse is the flow of -alpha); got {type(lpnet.parametrisation).__name__}"
             )
         if isinstance(symmetry, str):
             if symmetry != "auto":
@@ -83,7 +85,7 @@ class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
     def iterate(self, m: jax.Array, w: jax.Array) -> jax.Array:
         r"""$R\,\mathbb T(-\alpha(Rw))\,R\,m$, whose fixed point $w$ ends the step."""
         r = jnp.asarray(self.symmetry)
-        return r * self.lpnet.parametrisation.step(-self.lpnet.alpha(r * w), r * m, self.h)
+        return r * self.lpnet.parametrisation.inverse_step(self.lpnet.alpha(r * w), r * m, self.h)
 
     def _check_loss(self, loss):
         if loss == "alpha":

@@ -256,7 +256,7 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match=r"symmetry = \[-1, -1, 1\] is not a reversing symmetry.*not anti-Poisson"):
         learn.Reversible(learn.LPNet(RB), symmetry=[-1, -1, 1])
     with pytest.raises(ValueError,
-                       match="Reversible needs an LPNet with the TestFlowParametrisation.*got SE3RotationShear"):
+                       match="Reversible needs an LPNet whose parametrisation has a closed-form inverse.*got SE3RotationShear"):
         learn.Reversible(learn.LPNet(lp.systems.Kirchhoff(), parametrisation="SE3RotationShear"))
     with pytest.raises(ValueError, match="iterations must be an integer >= 1; got 0"):
         learn.Reversible(learn.LPNet(RB), iterations=0)

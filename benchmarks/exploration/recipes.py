@@ -22,7 +22,6 @@ import argparse
 import time
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -41,7 +40,7 @@ from benchmarks.exploration.common import (
 )
 
 
-class LinearSkip(learn.AbstractNetwork):
+class LinearSkip(learn.AbstractWrappedNetwork):
     """alpha(y) = N(y) + L y with L trained from zero: a wrapper of any network whose input and
     output have the same size (exploration only; its files cannot be read back)."""
 
@@ -52,25 +51,11 @@ class LinearSkip(learn.AbstractNetwork):
         self.network = network
         self.skip = jnp.zeros((network.out_size, network.in_size))
 
-    @property
-    def in_size(self) -> int:
-        return self.network.in_size
-
-    @property
-    def out_size(self) -> int:
-        return self.network.out_size
-
     def __call__(self, y: jax.Array) -> jax.Array:
         return self.network(y) + self.skip @ y
 
     def spec(self) -> dict[str, Any]:
         return {"kind": "LinearSkip", "network": self.network.spec()}
-
-    def output_scales(self) -> tuple[float, ...]:
-        return self.network.output_scales()
-
-    def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> LinearSkip:
-        return eqx.tree_at(lambda n: n.network, self, self.network.rescaled(inputs, outputs))
 
     def reinitialised(self, key) -> LinearSkip:
         return LinearSkip(self.network.reinitialised(key))

@@ -129,13 +129,19 @@ class AbstractSplittingMethod(AbstractStepMap):
         return [functools.partial(self.flow, k) for k in range(len(self.terms))]
 
     def step_flops(self) -> float:
-        inner, count = type(self).stages()
-        return count * xla_flops(_stage_of, traced_h(self), jnp.zeros(self.system.dim))
+        return composition_flops(self, type(self))
 
 
-def _stage_of(method: AbstractSplittingMethod, y: jax.Array) -> jax.Array:
-    """One composition by the inner method of `method.stages()` (for the flop count)."""
-    return type(method).stages()[0].compose(method.flows(), y, method.h)
+def composition_flops(step_map: AbstractStepMap, method: type[AbstractSplittingMethod]) -> float:
+    """XLA's flop count of one step of `step_map` = `method.compose(step_map.flows(), y, h)`:
+    the inner composition of `method.stages()` counted once and multiplied (XLA counts a loop
+    body once). `step_map` needs `flows()` and `h` (a classical method, or a `learn.GLPNet`)."""
+    inner, count = method.stages()
+    return count * xla_flops(_inner_composition, traced_h(step_map), jnp.zeros(step_map.system.dim), inner)
+
+
+def _inner_composition(step_map: AbstractStepMap, y: jax.Array, inner: type[AbstractSplittingMethod]) -> jax.Array:
+    return inner.compose(step_map.flows(), y, step_map.h)
 
 
 _TERMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
