@@ -17,16 +17,18 @@ from typing import Any
 
 from integrators import Trajectories
 from integrators.internals import atomic_write_text, check_client, map_unordered
-from liepoisson.internals import progress_bar, show_progress
+from liepoisson.internals import positive_int, progress_bar, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
 from ._fit import fit
 from ._load import load
+from ._optimisers import Adam, Checkpoint, QuasiNewton
 from ._record import TrainingRecord
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
 FIT_KEYS = ("seed", "epochs", "optimiser", "loss", "normalise", "validation_fraction")
 _RESULT = "result.json"
+_CHECKPOINT = "adam-checkpoint.h5"
 
 
 def grid_points(grid: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -147,11 +149,14 @@ def _read_result(folder: Path) -> SweepResult | None:
         return None
 
 
-def _train(make_model, data, fit_kwargs, evaluate, point):
-    """On a worker: build, fit and evaluate one point. Returns `(model, record, metrics)`."""
+def _train(make_model, data, fit_kwargs, evaluate, point, checkpoint=None):
+    """On a worker: build, fit and evaluate one point. Returns `(model, record, metrics)`.
+    `checkpoint`: the `Checkpoint` of the point's Adam stage, or None."""
     model = check_learned_map(make_model(point), f"make_model({point!r}) must return")
     pairs = data(point) if callable(data) else data
     kwargs = {**fit_kwargs, **{k: point[k] for k in FIT_KEYS if k in point}, "progress": False}
+    if checkpoint is not None:
+        kwargs["checkpoint"] = checkpoint
     model, record = fit(model, pairs, **kwargs)
     metrics = {"train_loss": record.train_loss, "val_loss": record.val_loss, "wall_time_s": record.wall_time_s}
     if evaluate is not None:
@@ -171,6 +176,7 @@ def sweep(
     client: Any = None,
     evaluate: Callable[[AbstractLearnedMap, dict[str, Any]], Mapping[str, float]] | None = None,
     progress: bool | None = None,
+    checkpoint_every: int | None = None,
     **fit_kwargs: Any,
 ) -> Sweep:
     r"""Train one model per point of `grid` with `learn.fit`, here or on a Dask cluster.
@@ -193,6 +199,12 @@ def sweep(
       same either way.
     - `evaluate(model, point) -> {name: number}`: extra metrics, computed where it trained.
     - `progress`: a bar over the points (`None`: on a terminal).
+    - `checkpoint_every`: for long points, write each point's Adam state to
+      `out/points/<key>/adam-checkpoint.h5` every so many epochs and resume from it when the
+      sweep is rerun (a `learn.Checkpoint(..., resume=True)`; bit-identical to an
+      uninterrupted point; removed when the point is done). Points whose optimiser has no
+      single Adam stage (or `epochs=`) train without one. With a `client`, `out` must be on a file system the
+      workers share.
     - `fit_kwargs`: the arguments of `learn.fit` common to all points (e.g. `optimiser=`,
       `h=`); a point's own setting of the same name wins.
 
@@ -212,7 +224,10 @@ def sweep(
     if unknown:
         raise TypeError(f"unknown keyword argument(s) {unknown} of learn.sweep; learn.fit takes {sorted(allowed)}")
     if "checkpoint" in fit_kwargs:
-        raise ValueError("checkpoint= is per training; a sweep saves every finished point instead")
+        raise ValueError("checkpoint= is per training; give learn.sweep checkpoint_every=N instead (each point "
+                         "then has its own checkpoint file in its folder)")
+    if checkpoint_every is not None:
+        positive_int(checkpoint_every, "checkpoint_every")
     show_progress(progress)
     client = check_client(client)
     if not isinstance(out, (str, os.PathLike)):
@@ -235,14 +250,30 @@ def sweep(
         if done is not None:
             results[key] = done
         else:
-            todo.append((key, (point,)))
+            todo.append((key, (point, _checkpoint(out / "points" / key, point, fit_kwargs, checkpoint_every))))
     shared = (make_model, data, fit_kwargs, evaluate)
     by_key = dict(zip(keys, points))
     with progress_bar(len(points), "sweep", "fit", progress, initial=len(results)) as bar:
         for key, (model, record, metrics) in map_unordered(_train, iter(todo), client=client, shared=shared):
             results[key] = _save(out / "points" / key, by_key[key], model, record, metrics)
+            (out / "points" / key / _CHECKPOINT).unlink(missing_ok=True)
             bar.update(1)
     return Sweep(out, [results[k] for k in keys])
+
+
+def _checkpoint(folder: Path, point, fit_kwargs, every: int | None) -> Checkpoint | None:
+    """The point's resumable Adam checkpoint (in its folder), if `every` is set and its
+    optimiser has exactly one Adam stage."""
+    if every is None:
+        return None
+    stages = point.get("optimiser", fit_kwargs.get("optimiser"))
+    if stages is None and point.get("epochs", fit_kwargs.get("epochs")) is not None:
+        stages = Adam(1)
+    stages = (stages,) if isinstance(stages, (Adam, QuasiNewton)) else tuple(stages or ())
+    if sum(isinstance(s, Adam) for s in stages) != 1:
+        return None
+    folder.mkdir(parents=True, exist_ok=True)
+    return Checkpoint(folder / _CHECKPOINT, every=every, resume=True)
 
 
 def _save(folder: Path, point, model, record, metrics) -> SweepResult:

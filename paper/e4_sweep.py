@@ -1,11 +1,17 @@
 r"""E4's LPNet over seeds and training budgets: does the paper's model (MLP 3x32 sigmoid, 2404
 parameters) reach the paper's 1-2% energy and 3-4% integral error over 2000 steps?
 
-    python -m paper.e4_sweep [--out DIR] [--seeds 3] [--scheduler [ADDRESS]]
+    python -m paper.e4_sweep [--out DIR] [--model lpnet] [--budgets ...] [--seeds 3] [--scheduler [ADDRESS]]
 
 A `learn.sweep` over seed x budget on E4's data (one heyoka trajectory of 20000 points, 80/20
 split): Adam with mini-batches of 1000 pairs for 45,000 and 90,000 steps (the committed E4 run is
-seed 0 at 90,000), and 90,000 Adam steps refined by 1000 iterations of full-batch L-BFGS-B.
+seed 0 at 90,000), 90,000 Adam steps refined by 1000 iterations of full-batch L-BFGS-B, and the
+paper's budget `paper2e5`: 2e5 full-batch Adam steps (about half an hour a seed on 2 cores;
+checkpointed every 10,000 steps, so an interrupted sweep resumes where it stopped).
+`--model` picks the paper's LPNet (`lpnet`), the reversible LPNet (`reversible`) or the
+reversible LPNet whose network is averaged over the sign symmetry -I (`reversible_equivariant`),
+same MLP; the reversible ones are rolled out with 64 fixed-point iterations (16 do not converge
+on E4: BENCHMARKS.md).
 Every point is rolled out for 2000 steps from the data's last point against heyoka (as E4), and
 the table `sweep.md` (and `e4-sweep.json`) lists the losses, the max relative energy and
 integral errors, and whether they reach the paper's figures. Points are saved as they finish; a rerun skips them.
@@ -37,19 +43,31 @@ BUDGETS = {  # name -> optimiser stages
     "adam90k+lbfgsb1k": (learn.Adam(6000, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=1000),
                          learn.QuasiNewton(1000, "lbfgsb")),
 }
+BUDGETS["paper2e5"] = (learn.Adam(200_000, learning_rate=1e-3, final_learning_rate=1e-5),)  # full batch
+MODELS = ("lpnet", "reversible", "reversible_equivariant")
+ROLLOUT_ITERATIONS = 64  # fixed-point iterations of a reversible step in the rollout
+CHECKPOINT_EVERY = 10_000  # Adam epochs between checkpoints of a point
 SMOKE = {"smoke": (learn.Adam(3, batch_size=1000),)}  # the pipeline in seconds (tests); not a default
 PAPER_ENERGY, PAPER_INTEGRAL = 2e-2, 4e-2
 
 
 def _make(point):
     system = lp.systems.ChargedParticle()
-    return learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=point["seed"],
-                       parametrisation=learn.TestFlowParametrisation(system))
+    parametrisation = learn.TestFlowParametrisation(system)
+    model = point.get("model", "lpnet")
+    if model == "reversible_equivariant":
+        network = learn.GroupAveraged(learn.AffineMLP(system.dim, system.dim, HIDDEN, activation="sigmoid",
+                                                      key=point["seed"]), lp.systems.sign_symmetries(system))
+        return learn.Reversible(learn.LPNet(system, parametrisation=parametrisation, network=network))
+    net = learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=point["seed"], parametrisation=parametrisation)
+    return learn.Reversible(net) if model == "reversible" else net
 
 
 def _evaluate(model, point):
     """The rollout metrics of E4: 2000 steps from the data's last point against heyoka."""
     system = model.system
+    if isinstance(model, learn.Reversible):
+        model = model.with_iterations(ROLLOUT_ITERATIONS)
     data = it.ground_truth(system, Y0, h=H, n_steps=N_POINTS - 1)
     reference = it.ground_truth(system, data.states[0, -1], h=H, n_steps=PREDICTION_STEPS)
     m = measure_rollout(model, None, system, reference.states,
@@ -73,29 +91,32 @@ def _data(point):
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m paper.e4_sweep", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("paper-results") / "E4-sweep")
+    parser.add_argument("--model", choices=MODELS, default="lpnet")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--budgets", nargs="+", choices=[*BUDGETS, *SMOKE], default=list(BUDGETS))
     parser.add_argument("--scheduler", nargs="?", const="local", default=os.environ.get(ENV), metavar="ADDRESS")
     args = parser.parse_args(argv)
-    grid = [{"budget": b, "seed": s} for b in args.budgets for s in range(args.seeds)]
+    # The paper's LPNet's points carry no "model" key (their folders predate the others).
+    model = {} if args.model == "lpnet" else {"model": args.model}
+    grid = [{"budget": b, "seed": s, **model} for b in args.budgets for s in range(args.seeds)]
     data = _data(None)
     with scheduler(args.scheduler) as where:
         if where:
             print(f"trainings on the {where}")
         learn.sweep(
             _make, [dict(p, optimiser={**BUDGETS, **SMOKE}[p["budget"]]) for p in grid], data, out=args.out,
-            evaluate=_evaluate, validation_fraction=0.2,
+            evaluate=_evaluate, validation_fraction=0.2, checkpoint_every=CHECKPOINT_EVERY,
         )
     lines = [
-        "# E4 sweep: the paper's LPNet (MLP 3x32, 2404 parameters) over seeds and budgets",
+        "# E4 sweep: the paper's LPNet (MLP 3x32, 2404 parameters) and its reversible variants over seeds and budgets",
         "",
         "Produced by `python -m paper.e4_sweep " + " ".join(argv if argv is not None else sys.argv[1:]) + "`. "
         "Energy and integral errors: max relative over 2000 steps from the data's last point (as E4). "
         "The paper: energy 1-2%, integral 3-4%, losses < 1e-5.",
         "",
-        ("| budget | seed | train loss | val loss | max energy error | max integral error | trajectory error (t=200) "
+        ("| model | budget | seed | train loss | val loss | max energy error | max integral error | trajectory error (t=200) "
          "| reaches the paper's energy / integral | fit time [s] |"),
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     rows = []
     # The table lists every point finished in --out, also those of earlier (larger) grids.
@@ -103,10 +124,10 @@ def main(argv: list[str] | None = None) -> int:
         m = r.metrics
         ok = f"{'yes' if m['energy_rel_err_max'] <= PAPER_ENERGY else 'no'} / " \
              f"{'yes' if m['integral_rel_err_max'] <= PAPER_INTEGRAL else 'no'}"
-        lines.append(f"| {r.point['budget']} | {r.seed} | {fmt(m['train_loss'])} | {fmt(m['val_loss'])} | "
+        lines.append(f"| {r.point.get('model', 'lpnet')} | {r.point['budget']} | {r.seed} | {fmt(m['train_loss'])} | {fmt(m['val_loss'])} | "
                      f"{fmt(m['energy_rel_err_max'])} | {fmt(m['integral_rel_err_max'])} | {_trajectory_error(m)} | "
                      f"{ok} | {m['wall_time_s']:.0f} |")
-        rows.append({"budget": r.point["budget"], "seed": r.seed, **m})
+        rows.append({"model": r.point.get("model", "lpnet"), "budget": r.point["budget"], "seed": r.seed, **m})
     reached = any(r["energy_rel_err_max"] <= PAPER_ENERGY and r["integral_rel_err_max"] <= PAPER_INTEGRAL for r in rows)
     lines += [
         "",

@@ -254,7 +254,7 @@ def test_a_rerun_sweep_trains_only_the_points_not_done(tmp_path, monkeypatch):
 
     trained = []
     original = _sweep._train
-    monkeypatch.setattr(_sweep, "_train", lambda *a: trained.append(a[-1]) or original(*a))
+    monkeypatch.setattr(_sweep, "_train", lambda *a: trained.append(a[4]) or original(*a))  # a[4]: the point
     out = tmp_path / "sweep"
     grid = {"n_modules": [2], "seed": [0, 1, 2, 3]}
     learn.sweep(_make_glpnet, [{"n_modules": 2, "seed": 0}, {"n_modules": 2, "seed": 2}], SWEEP_DATA, out=out,
@@ -268,6 +268,43 @@ def test_a_rerun_sweep_trains_only_the_points_not_done(tmp_path, monkeypatch):
     small = learn.sweep(_make_glpnet, {"n_modules": [2], "seed": [3]}, SWEEP_DATA, out=out, optimiser=SWEEP_OPTIMISER)
     assert trained == [] and [r.seed for r in small] == [3]
     assert sorted(r.seed for r in learn.Sweep.load(out)) == [0, 1, 2, 3]
+
+
+def _make_lpnet(point):
+    return learn.LPNet(BODY, hidden=(4,), key=point["seed"])
+
+
+def test_an_interrupted_sweep_point_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    import learn._checkpoint as ckpt
+    import learn._training as training
+
+    monkeypatch.setattr(training, "CHUNK", 10)
+    adam = learn.Adam(30, learning_rate=1e-2)
+    grid = [{"seed": 0}]
+    straight = learn.sweep(_make_lpnet, grid, SWEEP_DATA, out=tmp_path / "a", optimiser=adam)[0]
+    write, calls = ckpt.write, []
+
+    def interrupted(*args, **kw):  # the process dies right after the first checkpoint (epoch 10)
+        write(*args, **kw)
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ckpt, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        learn.sweep(_make_lpnet, grid, SWEEP_DATA, out=tmp_path / "b", optimiser=adam, checkpoint_every=10)
+    monkeypatch.setattr(ckpt, "write", write)
+    (folder,) = (tmp_path / "b" / "points").iterdir()
+    assert calls == [1] and (folder / "adam-checkpoint.h5").exists() and not (folder / "result.json").exists()
+    resumed = learn.sweep(_make_lpnet, grid, SWEEP_DATA, out=tmp_path / "b", optimiser=adam, checkpoint_every=10)[0]
+    assert not (folder / "adam-checkpoint.h5").exists()  # removed once the point is saved
+    assert resumed.metrics["val_loss"] == straight.metrics["val_loss"]
+    for a, b in zip(jax.tree_util.tree_leaves(resumed.model()), jax.tree_util.tree_leaves(straight.model())):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    with pytest.raises(ValueError, match="checkpoint_every"):
+        learn.sweep(_make_lpnet, grid, SWEEP_DATA, out=tmp_path / "c", optimiser=adam,
+                    checkpoint=learn.Checkpoint(tmp_path / "x.h5"))
+    with pytest.raises((TypeError, ValueError), match="checkpoint_every"):
+        learn.sweep(_make_lpnet, grid, SWEEP_DATA, out=tmp_path / "c", optimiser=adam, checkpoint_every=0)
 
 
 def test_bad_sweep_arguments_are_refused(tmp_path):

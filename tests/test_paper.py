@@ -231,6 +231,11 @@ def test_e4_sweep_pipeline_writes_its_table_and_skips_done_points_on_rerun(tmp_p
     assert len(before) == 2
     assert e4_sweep.main(argv) == 0  # nothing retrained
     assert {str(p): p.stat().st_mtime_ns for p in (tmp_path / "points").glob("*/model.h5")} == before
+    # the reversible equivariant LPNet in the same folder: a third row, the first two kept
+    assert e4_sweep.main([*argv[:2], "--seeds", "1", "--budgets", "smoke", "--model", "reversible_equivariant"]) == 0
+    rows = json.loads((tmp_path / "e4-sweep.json").read_text())
+    assert [(r["model"], r["seed"]) for r in rows] == [("lpnet", 0), ("lpnet", 1), ("reversible_equivariant", 0)]
+    assert np.isfinite(rows[-1]["energy_rel_err_max"])
 
 
 def test_markdown_rows_escape_pipes_inside_cells():
