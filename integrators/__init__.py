@@ -25,6 +25,11 @@ from ._ground_truth import (
     save_ground_truth as save_ground_truth,
     taylor_integrator as taylor_integrator,
 )
+from ._observations import (
+    Observations as Observations,
+    observe as observe,
+    uneven_times as uneven_times,
+)
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics

@@ -25,6 +25,8 @@ from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
 from ._load import load as load
 from ._learned_terms import RidgeTerms as RidgeTerms
 from ._lpnet import LPNet as LPNet
+from ._observed import TrajectoryLoss as TrajectoryLoss
+from ._parametric import ParametricHamiltonian as ParametricHamiltonian
 from ._mlp import AffineMLP as AffineMLP
 from ._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
 from ._parametrisation import (

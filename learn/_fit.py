@@ -16,11 +16,12 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators import Trajectories
+from integrators import Observations, Trajectories
 from liepoisson.internals import positive_int, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
 from ._data import PairData, prepare
+from ._observed import TrajectoryLoss, observed_objective
 from ._optimisers import Adam, Callback, Checkpoint, Optimiser, Progress, QuasiNewton
 from ._quasi_newton import run_quasi_newton
 from ._record import StageRecord, TrainingRecord
@@ -47,7 +48,7 @@ def fit(
     h: float | None = None,
     validation_fraction: float = 0.2,
     seed: int = 0,
-    loss: str = "state",
+    loss: str | TrajectoryLoss | None = None,
     normalise: bool = False,
     checkpoint: Checkpoint | None = None,
     progress: bool | None = None,
@@ -90,7 +91,6 @@ def fit(
         raise TypeError(f"optimiser must be a learn.Adam or learn.QuasiNewton, or a sequence of them; got {optimiser!r}")
     if not isinstance(normalise, (bool, np.bool_)):
         raise TypeError(f"normalise must be True or False; got {normalise!r}")
-    loss_fn = model.loss_function(loss)  # ValueError for a loss this map cannot train on
     if callback is not None and not callable(callback):
         raise TypeError(f"callback must be callable as callback(learn.Progress); got {callback!r}")
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
@@ -100,21 +100,51 @@ def fit(
     if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not model.has_warm_start:
         raise ValueError(f"QuasiNewton(warm_start=True): a {type(model).__name__} has no warm start (the G-LPNet's "
                          "identity warm start); use warm_start=False")
-    pairs = prepare(data, model.system, h, validation_fraction, seed, conserves_casimirs=model.conserves_casimirs)
-    if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
-        raise ValueError(
-            f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "
-            "with h=None (or the data's h), or data sampled at the model's step"
-        )
-    model = eqx.tree_at(lambda m: m.h, model, pairs.h, is_leaf=lambda x: x is None)
     progress = show_progress(progress)
-    model, train, val = _objective(model, pairs, loss, normalise)
+    if isinstance(data, Observations):
+        fitted, train, val, loss_fn, settings = observed_objective(model, data, loss, h, validation_fraction, seed)
+        if checkpoint is not None:
+            raise ValueError("checkpoint= is not supported for observations yet; fit without it")
+        if normalise:
+            raise ValueError("normalise=True sets an MLP's scalings from pairs at one step; with observations, "
+                             "build the map with its scalings (input_scaling=, output_scaling=) instead")
+        fitted, records, history = _run_stages(stages, fitted, train, val, loss_fn, settings, None, progress,
+                                                callback, type(model).__name__)
+        model = fitted.model
+        loss_name = f"observations: {settings['loss']}"
+    else:
+        loss = "state" if loss is None else loss
+        loss_fn = model.loss_function(loss)
+        pairs = prepare(data, model.system, h, validation_fraction, seed, conserves_casimirs=model.conserves_casimirs)
+        if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
+            raise ValueError(
+                f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "
+                "with h=None (or the data's h), or data sampled at the model's step"
+            )
+        model = eqx.tree_at(lambda m: m.h, model, pairs.h, is_leaf=lambda x: x is None)
+        model, train, val = _objective(model, pairs, loss, normalise)
+        settings = {
+            "validation_fraction": float(validation_fraction), "seed": int(seed), "loss": loss,
+            "normalise": bool(normalise), "h": pairs.h, "n_train": int(train[0].shape[0]),
+            "n_val": int(val[0].shape[0]),
+        }
+        model, records, history = _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progress,
+                                              callback, type(model).__name__)
+        loss_name = loss
+    record = TrainingRecord(
+        model=type(model).__name__, h=float(model.h), seed=int(seed), validation_fraction=float(validation_fraction),
+        loss=loss_name, normalise=bool(normalise), n_train=settings["n_train"], n_val=settings["n_val"],
+        stages=tuple(records), history=history, train_loss=records[-1].train_loss,
+        val_loss=records[-1].val_loss, wall_time_s=float(sum(r.wall_time_s for r in records)),
+    )
+    return model, record
+
+
+def _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progress, callback, desc):
+    """Run the optimiser stages one after the other; `(model, stage records, history)`."""
     X, T = (jnp.asarray(a) for a in train)
     Xv, Tv = (jnp.asarray(a) for a in val)
-    settings = {
-        "validation_fraction": float(validation_fraction), "seed": int(seed), "loss": loss,
-        "normalise": bool(normalise), "h": pairs.h, "n_train": int(X.shape[0]), "n_val": int(Xv.shape[0]),
-    }
+    seed = settings["seed"]
     history = {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)}
     records = []
     for index, stage in enumerate(stages):
@@ -122,19 +152,13 @@ def fit(
         report = None if callback is None else functools.partial(_report, callback, index, type(stage).__name__)
         if isinstance(stage, Adam):
             model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress,
-                                         report)
+                                         report, desc)
         else:
             model, rec, hist = run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
         hist = dict(hist, epoch=hist["epoch"] + offset)
         history = {k: np.concatenate([history[k], hist[k]]) for k in history}
         records.append(rec)
-    record = TrainingRecord(
-        model=type(model).__name__, h=pairs.h, seed=int(seed), validation_fraction=float(validation_fraction),
-        loss=loss, normalise=bool(normalise), n_train=settings["n_train"], n_val=settings["n_val"],
-        stages=tuple(records), history=history, train_loss=records[-1].train_loss,
-        val_loss=records[-1].val_loss, wall_time_s=float(sum(r.wall_time_s for r in records)),
-    )
-    return model, record
+    return model, records, history
 
 
 def _report(callback: Callback, stage: int, name: str, done: int, total: int, train: float, val: float) -> None:
@@ -152,7 +176,7 @@ def _objective(model: AbstractLearnedMap, pairs: PairData, loss: str, normalise:
     return model, (pairs.y0, targets), (pairs.y0_val, targets_val)
 
 
-def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress, report):
+def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, progress, report, desc):
     log_every = stage.log_every if stage.log_every is not None else max(1, stage.epochs // 1000)
     best, info = train_adam(
         model, train, val, loss_fn,
@@ -161,7 +185,7 @@ def _run_adam(stage: Adam, model, train, val, loss_fn, settings, checkpoint, pro
         checkpoint=None if checkpoint is None else os.fspath(checkpoint.path),
         checkpoint_every=10_000 if checkpoint is None else checkpoint.every,
         resume=checkpoint is not None and checkpoint.resume,
-        settings={**settings, **dataclasses.asdict(stage), "log_every": log_every}, desc=type(model).__name__,
+        settings={**settings, **dataclasses.asdict(stage), "log_every": log_every}, desc=desc,
         on_chunk=None if report is None else lambda done, lt, lv: report(done, stage.epochs, lt, lv),
     )
     rec = StageRecord(

@@ -1,0 +1,409 @@
+r"""Observed trajectories: states measured at their own (uneven) times, with noise, of a system
+known by its Poisson structure; and `observe`, which makes such data from heyoka ground truth
+for studies (noise of a given size and law, uneven sampling, dropped samples, all seeded)."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+import liepoisson
+from liepoisson.internals import fraction, positive_float, positive_int
+from liepoisson.systems import AbstractPoissonSystem, system_for_file
+
+from ._files import atomic_path, open_hdf5
+from ._ground_truth import taylor_integrator
+
+FORMAT = "liepoisson-observations"
+FORMAT_VERSION = 1
+#: The noise laws of `observe`, each scaled to the standard deviation asked for.
+LAWS = ("gaussian", "uniform", "laplace")
+
+
+def _per_trajectory(value: Any, name: str, n: int | None) -> list[np.ndarray]:
+    """`value` as a list of float64 arrays, one per trajectory: a sequence of arrays, or an
+    array whose first axis runs over trajectories (`n`, if known, trajectories)."""
+    if isinstance(value, np.ndarray) or not isinstance(value, Sequence) or isinstance(value, (str, bytes)):
+        try:
+            arr = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"{name} must be a real array or a list of arrays; got {type(value).__name__}") from err
+        return list(arr) if arr.ndim >= 1 else [arr]
+    out = []
+    for j, item in enumerate(value):
+        try:
+            out.append(np.array(item, dtype=np.float64))
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"{name}[{j}] must be a real array; got {type(item).__name__}") from err
+    return out
+
+
+def check_times(t: np.ndarray, name: str) -> np.ndarray:
+    """`t` 1-D, finite and strictly increasing, or a `ValueError` naming the first entry that
+    is not."""
+    if t.ndim != 1:
+        raise ValueError(f"{name} must be 1-D (one time per observation); got shape {t.shape}")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise ValueError(f"{name} must be finite; {name}[{bad[0]}] = {t[bad[0]]}")
+    steps = np.diff(t)
+    bad = np.flatnonzero(steps <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        what = "repeated" if steps[k - 1] == 0 else "unsorted"
+        raise ValueError(
+            f"{name} must be strictly increasing; {name}[{k}] = {t[k]} {'=' if what == 'repeated' else '<'} "
+            f"{name}[{k - 1}] = {t[k - 1]} ({what} time: sort the observations by time and merge repeated ones)"
+        )
+    return t
+
+
+class Observations:
+    r"""Trajectories observed at their own times: trajectory $j$ is the states
+    $y_j(t_{j,0}), \dots, y_j(t_{j,n_j-1})$ at strictly increasing times, uneven and different
+    per trajectory, as measured (with noise: observations need not lie on one Casimir leaf).
+
+    Only the Poisson structure of `system` is used by learning (its bracket and Casimirs); its
+    Hamiltonian may be unknown (a `liepoisson.LiePoissonSystem` of an algebra with any
+    Hamiltonian, or a catalogue system whose Hamiltonian is not used).
+
+    **Arguments:**
+
+    - `system`: an `AbstractPoissonSystem`.
+    - `times`: one array of times per trajectory (a list of 1-D arrays, or an `(n_traj, n)`
+      array); a single 1-D array is shared by every trajectory.
+    - `states`: one `(n_j, dim)` array per trajectory (a list, or an `(n_traj, n, dim)` array).
+    - `metadata`: JSON values kept with the data and in its file (how it was made).
+
+    Missing values are refused, not masked: drop the observation (its time with it).
+    """
+
+    def __init__(self, system: AbstractPoissonSystem, times: Any, states: Any, *,
+                 metadata: dict[str, Any] | None = None):
+        if not isinstance(system, AbstractPoissonSystem):
+            raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+        dim = system.dim
+        ys = _per_trajectory(states, "states", None)
+        if not ys:
+            raise ValueError("states must hold at least one trajectory; got none")
+        if all(np.ndim(y) == 1 for y in ys) and np.ndim(states) == 2:
+            ys = [np.asarray(states, dtype=np.float64)]  # one trajectory (n, dim)
+        ts = _per_trajectory(times, "times", len(ys))
+        if len(ts) and np.ndim(ts[0]) == 0:  # one 1-D array shared by every trajectory
+            ts = [np.asarray(ts, dtype=np.float64)] * len(ys)
+        if len(ts) != len(ys):
+            raise ValueError(f"times has {len(ts)} trajectories and states {len(ys)}; give one time array per "
+                             "trajectory (or one 1-D array shared by all)")
+        for j, (t, y) in enumerate(zip(ts, ys)):
+            if y.ndim != 2 or y.shape[1] != dim:
+                raise ValueError(f"states[{j}] must have shape (n_observations, {dim}) for {system!r}; "
+                                 f"got shape {y.shape}")
+            if y.shape[0] < 2:
+                raise ValueError(f"trajectory {j} has {y.shape[0]} observation(s); a trajectory needs at least two "
+                                 "(a motion between two times): drop it or add observations")
+            bad = np.argwhere(~np.isfinite(y))
+            if bad.size:
+                k, i = (int(v) for v in bad[0])
+                raise ValueError(
+                    f"states[{j}] must be finite; observation {k} (t = {t[k] if t.ndim == 1 and k < t.size else '?'}), "
+                    f"component {i} is {y[k, i]}. Missing values are not masked: drop that observation and its time"
+                )
+            check_times(t, f"times[{j}]")
+            if t.shape[0] != y.shape[0]:
+                raise ValueError(f"times[{j}] has {t.shape[0]} entries and states[{j}] {y.shape[0]} observations; "
+                                 "give one time per observation")
+        self.system = system
+        self.times: tuple[np.ndarray, ...] = tuple(t.copy() for t in ts)
+        self.states: tuple[np.ndarray, ...] = tuple(y.copy() for y in ys)
+        try:
+            self.metadata: dict[str, Any] = json.loads(json.dumps(dict(metadata or {})))
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"metadata must be a dict of JSON values; got {metadata!r}") from err
+
+    # -- shape -----------------------------------------------------------------------------
+    @property
+    def n_trajectories(self) -> int:
+        return len(self.states)
+
+    def __len__(self) -> int:
+        return len(self.states)
+
+    @property
+    def dim(self) -> int:
+        return self.system.dim
+
+    @property
+    def n_observations(self) -> int:
+        """All observations of all trajectories."""
+        return int(sum(y.shape[0] for y in self.states))
+
+    def __repr__(self) -> str:
+        steps = np.concatenate([np.diff(t) for t in self.times])
+        return (f"Observations({self.system!r}, {self.n_trajectories} trajectories, {self.n_observations} "
+                f"observations, steps {steps.min():.3g}..{steps.max():.3g})")
+
+    def intervals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""Every pair of consecutive observations: `(y0, y1, dt)`, arrays `(N, dim)`, `(N, dim)`,
+        `(N,)` with $y_1$ observed $dt$ after $y_0$ on the same trajectory."""
+        y0 = np.concatenate([y[:-1] for y in self.states])
+        y1 = np.concatenate([y[1:] for y in self.states])
+        dt = np.concatenate([np.diff(t) for t in self.times])
+        return y0, y1, dt
+
+    def is_regular(self, rtol: float = 1e-9) -> bool:
+        """Whether every step between observations is the same (to `rtol`)."""
+        dt = self.intervals()[2]
+        return bool(np.all(np.abs(dt - dt[0]) <= rtol * dt[0]))
+
+    def rms_size(self) -> float:
+        r"""$\sqrt{\operatorname{mean}_k |y_k|^2}$ over every observation: the size noise is
+        measured against."""
+        return float(np.sqrt(np.mean(np.concatenate([np.sum(y**2, axis=1) for y in self.states]))))
+
+    def select(self, indices: int | Sequence[int] | np.ndarray) -> Observations:
+        """The trajectories `indices` (an int or a sequence of ints)."""
+        idx = np.atleast_1d(np.asarray(indices))
+        if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+            raise TypeError(f"indices must be an int or a non-empty sequence of ints; got {indices!r}")
+        if np.any((idx < -len(self)) | (idx >= len(self))):
+            raise IndexError(f"indices {idx.tolist()} out of range for {len(self)} trajectories")
+        return Observations(self.system, [self.times[i] for i in idx], [self.states[i] for i in idx],
+                            metadata=self.metadata)
+
+    def split(self, validation_fraction: float, seed: int = 0) -> tuple[Observations, Observations | None]:
+        """`(training, validation)` by whole trajectories (random, seeded): a held-out
+        trajectory shares no observation with the training ones. `None` for no validation."""
+        validation_fraction = fraction(validation_fraction, "validation_fraction")
+        n_val = round(validation_fraction * len(self))
+        if n_val == 0:
+            return self, None
+        if n_val >= len(self):
+            raise ValueError(f"validation_fraction={validation_fraction} leaves no training trajectory out of "
+                             f"{len(self)}")
+        perm = np.random.default_rng(positive_int(seed, "seed", minimum=0)).permutation(len(self))
+        return self.select(np.sort(perm[n_val:])), self.select(np.sort(perm[:n_val]))
+
+    # -- files -----------------------------------------------------------------------------
+    def _long(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        index = np.concatenate([np.full(y.shape[0], j) for j, y in enumerate(self.states)])
+        return index, np.concatenate(self.times), np.concatenate(self.states)
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write to HDF5, atomically (a temporary file renamed into place): datasets
+        `trajectory` (index of each observation's trajectory), `t`, `states` `(N, dim)`; the
+        system and metadata as attributes."""
+        import h5py
+
+        index, t, y = self._long()
+        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+            f.create_dataset("trajectory", data=index)
+            f.create_dataset("t", data=t)
+            f.create_dataset("states", data=y)
+            f.attrs["format"] = FORMAT
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["system"] = self.system.name
+            f.attrs["system_params"] = json.dumps(self.system.params)
+            f.attrs["metadata"] = json.dumps(self.metadata)
+            f.attrs["liepoisson_version"] = liepoisson.__version__
+
+    @classmethod
+    def from_columns(cls, system: AbstractPoissonSystem, trajectory: ArrayLike, t: ArrayLike, states: ArrayLike,
+                     *, metadata: dict[str, Any] | None = None, source: str = "the data") -> Observations:
+        """From the long format (one row per observation): the trajectory label of each row
+        (any integers), its time and its state `(N, dim)`; rows in any order (sorted by time
+        within each trajectory; repeated times are refused)."""
+        label = np.asarray(trajectory)
+        t = np.asarray(t, dtype=np.float64)
+        y = np.asarray(states, dtype=np.float64)
+        if y.ndim != 2 or label.shape != (y.shape[0],) or t.shape != (y.shape[0],):
+            raise ValueError(f"{source}: trajectory, t and states must have N, N and (N, dim) entries; got shapes "
+                             f"{label.shape}, {t.shape}, {y.shape}")
+        if label.size and not np.all(label == np.round(label.astype(np.float64))):
+            raise ValueError(f"{source}: trajectory labels must be integers; got {label[:5].tolist()}...")
+        times, states = [], []
+        for value in np.unique(label):
+            rows = np.flatnonzero(label == value)
+            rows = rows[np.argsort(t[rows], kind="stable")]
+            times.append(t[rows])
+            states.append(y[rows])
+        try:
+            return cls(system, times, states, metadata=metadata)
+        except ValueError as err:
+            raise ValueError(f"{source}: {err}") from None
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -> Observations:
+        """Read observations from a file:
+
+        - HDF5 (`.h5`, `.hdf5`) written by `save`: the system is rebuilt from the file, or given
+          `system`, checked against it;
+        - NumPy `.npz` with arrays `trajectory`, `t`, `states` `(N, dim)`, or CSV with the header
+          `trajectory,t,y0,...,y{dim-1}` (one row per observation, rows in any order): the
+          file holds no system, so `system` (its Poisson structure) is required.
+
+        A file of another kind, damaged or missing a field raises `ValueError` naming it."""
+        path = os.fspath(path)
+        suffix = os.path.splitext(path)[1].lower()
+        if suffix in (".npz", ".csv"):
+            if system is None:
+                raise ValueError(f"{path!r} holds no system: pass system= (the Poisson structure the states live in)")
+            if not isinstance(system, AbstractPoissonSystem):
+                raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+            if suffix == ".npz":
+                return cls.from_columns(system, *_read_npz(path), source=repr(path))
+            return cls.from_columns(system, *_read_csv(path, system.dim), source=repr(path))
+        f = open_hdf5(path, "liepoisson observations (written by Observations.save), or a .npz/.csv file")
+        try:
+            with f:
+                if f.attrs.get("format") != FORMAT:
+                    raise ValueError(f"{path!r} is not a liepoisson observations file (attribute format is "
+                                     f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
+                version = int(f.attrs["format_version"])
+                if version != FORMAT_VERSION:
+                    raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads "
+                                     f"{FORMAT_VERSION}")
+                columns = (f["trajectory"][...], f["t"][...], f["states"][...])
+                name, params = str(f.attrs["system"]), json.loads(str(f.attrs["system_params"]))
+                metadata = json.loads(str(f.attrs.get("metadata", "{}")))
+        except ValueError:
+            raise
+        except (OSError, KeyError, TypeError) as err:
+            raise ValueError(f"{path!r} is damaged or lacks a field of an observations file: {err}") from err
+        system = system_for_file(name, params, system, f"the file {path!r}")
+        return cls.from_columns(system, *columns, metadata=metadata, source=repr(path))
+
+
+def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    import zipfile
+
+    try:
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
+            missing = [k for k in ("trajectory", "t", "states") if k not in z]
+            if missing:
+                raise ValueError(f"{path!r} lacks the array(s) {missing}; an observations .npz holds trajectory, t "
+                                 "and states (N, dim)")
+            return z["trajectory"], z["t"], z["states"]
+    except ValueError as err:
+        if str(err).startswith(repr(path)):
+            raise
+        raise ValueError(f"{path!r} is not a readable .npz file: {err}") from err
+    except (OSError, EOFError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{path!r} is not a readable .npz file: {err}") from err
+
+
+def _read_csv(path: str, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    expected = ["trajectory", "t", *(f"y{i}" for i in range(dim))]
+    try:
+        with open(path, encoding="utf-8") as f:
+            header = [h.strip() for h in f.readline().split(",")]
+            if header != expected:
+                raise ValueError(f"{path!r} has the header {','.join(header)!r}; expected {','.join(expected)!r}")
+            body = f.read()
+            rows = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2) if body.strip() else np.zeros((0, dim + 2))
+    except (OSError, UnicodeDecodeError) as err:
+        raise ValueError(f"{path!r} is not a readable CSV file: {err}") from err
+    except ValueError as err:
+        if "header" in str(err):
+            raise
+        raise ValueError(f"{path!r}: a row is not {dim + 2} numbers: {err}") from err
+    if rows.size == 0:
+        raise ValueError(f"{path!r} has a header and no observation")
+    if rows.shape[1] != dim + 2:
+        raise ValueError(f"{path!r}: rows have {rows.shape[1]} columns; expected {dim + 2}")
+    return rows[:, 0], rows[:, 1], rows[:, 2:]
+
+
+def uneven_times(n_trajectories: int, n_observations: int, steps: tuple[float, float] = (0.05, 0.3), *,
+                 seed: int = 0) -> np.ndarray:
+    """Observation times `(n_trajectories, n_observations)` from 0, each step drawn uniformly
+    from `steps = (low, high)` (0 < low <= high), seeded."""
+    n_trajectories = positive_int(n_trajectories, "n_trajectories")
+    n_observations = positive_int(n_observations, "n_observations", minimum=2)
+    if not (isinstance(steps, (Sequence, np.ndarray)) and len(steps) == 2):
+        raise TypeError(f"steps must be (low, high); got {steps!r}")
+    low, high = positive_float(steps[0], "steps[0]"), positive_float(steps[1], "steps[1]")
+    if high < low:
+        raise ValueError(f"steps must be (low, high) with low <= high; got {steps}")
+    dt = np.random.default_rng(positive_int(seed, "seed", minimum=0)).uniform(low, high,
+                                                                             (n_trajectories, n_observations - 1))
+    return np.concatenate([np.zeros((n_trajectories, 1)), np.cumsum(dt, axis=1)], axis=1)
+
+
+def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: float = 0.0, law: str = "gaussian",
+            drop: float = 0.0, seed: int = 0, tol: float | None = None) -> Observations:
+    r"""Observations of heyoka ground truth, for studies: trajectory $j$ starts from `y0[j]` at
+    its first time and is observed at `times[j]`, with noise and dropped samples.
+
+    **Arguments:**
+
+    - `y0`: `(n_traj, dim)` (or `(dim,)`); `times`: as `Observations` (shared 1-D, per
+      trajectory, or `uneven_times(...)`).
+    - `noise`: standard deviation of the noise on each component, relative to the RMS size
+      $\sqrt{\operatorname{mean}|y|^2}$ of the clean observations (>= 0).
+    - `law`: `"gaussian"`, `"uniform"` or `"laplace"`, each with that standard deviation.
+    - `drop`: the probability that an observation is dropped (the first and last of each
+      trajectory are kept).
+    - `seed`: the drops and the noise are drawn from two independent streams of this seed, so
+      the same call with `noise=0` gives the clean states at the same times.
+    - `tol`: heyoka's tolerance (default machine epsilon).
+
+    The metadata records these settings and the absolute noise level `noise_std`.
+    """
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
+    y0 = np.array(system.check_regular(y0, "y0"), dtype=np.float64).reshape(-1, system.dim)
+    try:
+        noise = float(noise)
+    except (TypeError, ValueError):
+        raise TypeError(f"noise must be a number >= 0 (relative to the states' RMS size); got {noise!r}") from None
+    if not np.isfinite(noise) or noise < 0:
+        raise ValueError(f"noise must be a finite number >= 0 (relative to the states' RMS size); got {noise}")
+    if law not in LAWS:
+        raise ValueError(f"law must be one of {LAWS}; got {law!r}")
+    drop = fraction(drop, "drop")
+    seed = positive_int(seed, "seed", minimum=0)
+    ts = _per_trajectory(times, "times", y0.shape[0])
+    if len(ts) and np.ndim(ts[0]) == 0:
+        ts = [np.asarray(ts, dtype=np.float64)] * y0.shape[0]
+    if len(ts) != y0.shape[0]:
+        raise ValueError(f"times has {len(ts)} trajectories and y0 {y0.shape[0]} initial states")
+    for j, t in enumerate(ts):
+        check_times(t, f"times[{j}]")
+        if t.size < 2:
+            raise ValueError(f"times[{j}] has {t.size} time(s); a trajectory needs at least two observations")
+    drops, noises = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    keep = []
+    for t in ts:
+        k = drops.random(t.size) >= drop
+        k[0] = k[-1] = True
+        keep.append(k)
+    import heyoka as hy
+
+    ta = taylor_integrator(system, tol)
+    clean = []
+    for j, (y, t) in enumerate(zip(y0, ts)):
+        ta.time, ta.state[:] = float(t[0]), y
+        outcome, *_, states = ta.propagate_grid(t)
+        if outcome != hy.taylor_outcome.time_limit:
+            raise RuntimeError(f"heyoka stopped trajectory {j} (y0={y.tolist()}) at t={ta.time}: {outcome}")
+        clean.append(np.array(states[keep[j]]))
+    size = float(np.sqrt(np.mean(np.concatenate([np.sum(y**2, axis=1) for y in clean]))))
+    std = noise * size
+    observed = []
+    for y in clean:
+        if law == "gaussian":
+            e = noises.standard_normal(y.shape)
+        elif law == "uniform":
+            e = noises.uniform(-np.sqrt(3.0), np.sqrt(3.0), y.shape)
+        else:
+            e = noises.laplace(0.0, 1.0 / np.sqrt(2.0), y.shape)
+        observed.append(y + std * e)
+    metadata = {"source": "integrators.observe", "noise": noise, "noise_std": std, "law": law, "drop": drop,
+                "seed": seed, "tolerance": tol}
+    return Observations(system, [t[k] for t, k in zip(ts, keep)], observed, metadata=metadata)
