@@ -2,10 +2,8 @@
 long-format .npz and .csv), `observe` (heyoka ground truth with seeded noise and drops) and
 `uneven_times`."""
 
-import gc
 import os
 import re
-import warnings
 
 import h5py
 import numpy as np
