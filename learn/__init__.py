@@ -24,6 +24,7 @@ from ._fit_splitting import fit_splitting as fit_splitting
 from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
 from ._load import load as load
 from ._learned_terms import RidgeTerms as RidgeTerms
+from ._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
 from ._lpnet import LPNet as LPNet
 from ._observed import TrajectoryLoss as TrajectoryLoss
 from ._parametric import ParametricHamiltonian as ParametricHamiltonian

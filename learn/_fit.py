@@ -102,14 +102,13 @@ def fit(
                          "identity warm start); use warm_start=False")
     progress = show_progress(progress)
     if isinstance(data, Observations):
-        fitted, train, val, loss_fn, settings = observed_objective(model, data, loss, h, validation_fraction, seed)
         if checkpoint is not None:
             raise ValueError("checkpoint= is not supported for observations yet; fit without it")
         if normalise:
             raise ValueError("normalise=True sets an MLP's scalings from pairs at one step; with observations, "
                              "build the map with its scalings (input_scaling=, output_scaling=) instead")
-        fitted, records, history = _run_stages(stages, fitted, train, val, loss_fn, settings, None, progress,
-                                                callback, type(model).__name__)
+        fitted, records, history, settings, _ = fit_observations(model, data, stages, loss, h, validation_fraction,
+                                                                 seed, progress, callback)
         model = fitted.model
         loss_name = f"observations: {settings['loss']}"
     else:
@@ -131,13 +130,27 @@ def fit(
         model, records, history = _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progress,
                                               callback, type(model).__name__)
         loss_name = loss
-    record = TrainingRecord(
-        model=type(model).__name__, h=float(model.h), seed=int(seed), validation_fraction=float(validation_fraction),
-        loss=loss_name, normalise=bool(normalise), n_train=settings["n_train"], n_val=settings["n_val"],
+    return model, training_record(model, settings, records, history, loss_name)
+
+
+def training_record(model, settings, records, history, loss_name: str) -> TrainingRecord:
+    """The `TrainingRecord` of a fit from its settings and stage records."""
+    return TrainingRecord(
+        model=type(model).__name__, h=float(model.h), seed=int(settings["seed"]),
+        validation_fraction=float(settings["validation_fraction"]), loss=loss_name,
+        normalise=bool(settings.get("normalise", False)), n_train=settings["n_train"], n_val=settings["n_val"],
         stages=tuple(records), history=history, train_loss=records[-1].train_loss,
         val_loss=records[-1].val_loss, wall_time_s=float(sum(r.wall_time_s for r in records)),
     )
-    return model, record
+
+
+def fit_observations(model, data, stages, loss, h, validation_fraction, seed, progress, callback):
+    """`learn.fit` on `integrators.Observations`: `(fitted, stage records, history, settings,
+    (loss_fn, (inputs, targets)))`, `fitted` a `Fitted` (the map and its fitted starts)."""
+    fitted, train, val, loss_fn, settings = observed_objective(model, data, loss, h, validation_fraction, seed)
+    fitted, records, history = _run_stages(stages, fitted, train, val, loss_fn, settings, None, progress, callback,
+                                           type(model).__name__)
+    return fitted, records, history, settings, (loss_fn, train)
 
 
 def _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progress, callback, desc):

@@ -10,21 +10,24 @@ from typing import Any
 import jax
 from numpy.typing import ArrayLike
 
-from integrators import Trajectories
+from integrators import Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._fit import QuasiNewton, fit
 from ._glpnet import GLPNet, check_method
+from ._observed import TrajectoryLoss
 from ._record import TrainingRecord
 
 
 def fit_splitting(
     system: AbstractPoissonSystem,
-    data: Trajectories | tuple[ArrayLike, ArrayLike],
+    data: Trajectories | Observations | tuple[ArrayLike, ArrayLike],
     method: Any = TripleJump,
     *,
     iterations: int = 1000,
+    loss: TrajectoryLoss | None = None,
+    activation: str | None = None,
     key: int | jax.Array = 0,
     h: float | None = None,
     validation_fraction: float = 0.2,
@@ -43,7 +46,19 @@ def fit_splitting(
        the pieces move from the modified Hamiltonian of the Strang fit to that of the method.
        Both stages are exact Poisson maps for any weights.
 
-    The other arguments are `learn.fit`'s.
+    With `integrators.Observations` (noisy states at uneven times) the G-LPNet is composed by
+    `method` from the start and fitted by BFGS with `loss` (default `learn.TrajectoryLoss()`:
+    whole trajectories rolled out at their own intervals, initial states fitted with the map).
+    Without `activation`, three nested families of $\widetilde H$ are fitted, each from the
+    last: quadratic and even ($\Phi_k' = a_k x$), quadratic ($+ b_k$), and general (sigmoid,
+    linear term and bias); the one with the lowest Bayesian information criterion
+    (`information_criterion`) is returned: with noisy data, parameters the data do not need
+    cost accuracy (docs/conventions.md, "Observations"). The records are those of every
+    family fitted, the chosen one last; each last stage's `details` hold its criterion.
+
+    `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
+    trajectories; `"identity"`: a quadratic $\widetilde H$). The other arguments are
+    `learn.fit`'s.
     """
     if method is not None:  # a wrong method fails before the first fit
         method = check_method(method)
@@ -51,11 +66,82 @@ def fit_splitting(
             raise ValueError("method=LieTrotter would not continue from the Strang fit: the paper's Lie-Trotter "
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
-    net = GLPNet(system, system.dim, key=key, method=Strang, linear_term=True)
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
+    if isinstance(data, Observations):
+        method = Strang if method is None else method
+        return _fit_observed(system, data, method, loss, activation, iterations, key, common)
+    if loss is not None:
+        raise ValueError("loss= is for observations (integrators.Observations); pairs and Trajectories are fitted on "
+                         "the one-step state loss")
+    net = GLPNet(system, system.dim, key=key, method=Strang, linear_term=True,
+                 activation="sigmoid" if activation is None else activation)
     strang, first = fit(net, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=True), **common)
     if method is None:
         return strang, (first,)
     refit = GLPNet(system, terms=strang.terms, method=method, h=strang.h)
     fitted, second = fit(refit, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=False), **common)
     return fitted, (first, second)
+
+
+#: The nested families of learned Hamiltonians `fit_splitting` chooses from on observations:
+#: name -> RidgeTerms settings (one module per basis direction).
+FAMILIES = {
+    "quadratic, even": {"activation": "identity", "linear_term": False, "bias": False},
+    "quadratic": {"activation": "identity", "linear_term": False, "bias": True},
+    "general": {"activation": "sigmoid", "linear_term": True, "bias": True},
+}
+
+
+def _fit_observed(system, data, method, loss, activation, iterations, key, common):
+    """Fit each family (or the one of `activation`) to the observations; the lowest BIC wins."""
+    import dataclasses
+
+    from ._fit import fit_observations, training_record
+    from ._learned_terms import RidgeTerms
+    from ._observed import information_criterion
+
+    families = FAMILIES if activation is None else {
+        activation: {"activation": activation, "linear_term": activation != "identity", "bias": True}}
+    fits, previous = [], None
+    for name, settings in families.items():
+        terms = RidgeTerms(system.dim, system.dim, key=key, **settings)
+        net = GLPNet(system, terms=terms, method=method)
+        if previous is not None:  # start from the last family's fit, which this one contains
+            net = _contain(net, previous)
+        warm = previous is None and settings["activation"] != "identity"
+        if previous is None:  # the one-step loss first: a nearly convex start for the rollouts
+            first, *_ = fit_observations(net, data, (QuasiNewton(iterations, "bfgs", warm_start=warm),),
+                                         TrajectoryLoss(window=1, latent=False), common["h"],
+                                         common["validation_fraction"], common["seed"], common["progress"], None)
+            net, warm = first.model, False
+        fitted, records, history, fit_settings, (loss_fn, train) = fit_observations(
+            net, data, (QuasiNewton(iterations, "bfgs", warm_start=warm),), loss, common["h"],
+            common["validation_fraction"], common["seed"], common["progress"], None)
+        criterion = information_criterion(fitted, loss_fn, *train)
+        records[-1] = dataclasses.replace(records[-1], details={**records[-1].details, **criterion, "family": name})
+        record = training_record(fitted.model, fit_settings, records, history, f"observations: {fit_settings['loss']}")
+        fits.append((criterion["bic"], len(fits), fitted.model, record))
+        previous = fitted.model
+    best = min(fits, key=lambda f: (f[0], f[1]))
+    return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
+
+
+def _contain(net: GLPNet, previous: GLPNet) -> GLPNet:
+    r"""`net` with the Hamiltonian of `previous`, a quadratic family it contains:
+    $\Phi' = (a + e)x + b$ of the identity pieces carried over (to $a$ for identity pieces,
+    to the linear term $e$ with $a = 0$ for sigmoid ones)."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    p, t = previous.terms, net.terms
+    slope = p.a + (0.0 if p.e is None else p.e)
+    zero = jnp.zeros_like(p.a)
+    a, e = (slope, zero) if t.activation == "identity" else (zero, slope)
+    net = eqx.tree_at(lambda n: (n.terms.a, n.terms.c), net, (a, p.c))
+    if t.e is not None:
+        net = eqx.tree_at(lambda n: n.terms.e, net, e)
+    elif t.activation != "identity":
+        raise ValueError("a sigmoid family without a linear term cannot start from a quadratic one")
+    if t.b is not None:
+        net = eqx.tree_at(lambda n: n.terms.b, net, p.bias_values())
+    return net

@@ -151,7 +151,7 @@ class GLPNet(AbstractLearnedMap):
         t = self.terms
         s = jnp.einsum("md,...d->...m", t.vectors(), y)
         e = 0.0 if t.e is None else t.e
-        potential = ridge_potential(s, t.a, t.b, e, activation_antiderivative(t.activation), JAX)
+        potential = ridge_potential(s, t.a, t.bias_values(), e, activation_antiderivative(t.activation), JAX)
         return self.hamiltonian_weight * jnp.sum(potential, axis=-1)
 
     def learned_system(self):
@@ -222,8 +222,8 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     if net.terms.linear_term:
         lin = linear.terms
         zero = jnp.zeros_like(lin.a)
-        return eqx.tree_at(lambda n: (n.terms.a, n.terms.c, n.terms.b, n.terms.e), net,
-                           (zero, lin.c, lin.b, lin.a + lin.e))
+        net = eqx.tree_at(lambda n: (n.terms.a, n.terms.c, n.terms.e), net, (zero, lin.c, lin.a + lin.e))
+        return net if lin.b is None else eqx.tree_at(lambda n: n.terms.b, net, lin.b)
     act = ACTIVATIONS[net.activation]
     s0, s1 = float(act(0.0)), float(jax.grad(act)(0.0))
     if s1 == 0.0:
@@ -232,8 +232,11 @@ def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float
     spread = jnp.max(jnp.abs(X @ vectors.T), axis=0)  # max |<alpha_s, y>| over the data
     eps = width / jnp.maximum(spread, 1e-300)
     a = linear.terms.a / (s1 * eps**2)
-    b = linear.terms.b / eps - s0 * a
     c = linear.terms.c * (eps[:, None] if net.terms.full_vectors else eps)
+    if not net.terms.bias:
+        raise ValueError("the warm start of a sigmoid piece without a linear term needs the bias b_s (it cancels "
+                         "sigma(0)): build the terms with bias=True or linear_term=True")
+    b = linear.terms.b / eps - s0 * a
     return eqx.tree_at(lambda n: (n.terms.a, n.terms.c, n.terms.b), net, (a, c, b))
 
 

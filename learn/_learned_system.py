@@ -39,7 +39,7 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         self.vectors = np.asarray(terms.vectors(), dtype=np.float64)
         self.weight = float(net.hamiltonian_weight)
         self.a = self.weight * np.asarray(terms.a, dtype=np.float64)
-        self.b = self.weight * np.asarray(terms.b, dtype=np.float64)
+        self.b = self.weight * np.asarray(terms.bias_values(), dtype=np.float64)
         self.e = self.weight * (np.zeros_like(self.a) if terms.e is None else np.asarray(terms.e, dtype=np.float64))
 
     @property

@@ -51,7 +51,8 @@ def check_order(order: Sequence[int] | None, n_modules: int, dim: int) -> tuple[
 
 class RidgeTerms(eqx.Module):
     r"""$M$ learnable pieces $\Phi_s(\langle\alpha_s, y\rangle)$, $\Phi_s' = a_s\sigma(x) + b_s$
-    (+ $e_s x$ with `linear_term`).
+    (+ $e_s x$ with `linear_term`; without `bias`, $b_s = 0$: no linear part of
+    $\widetilde H$ from the constants, e.g. for a quadratic $\widetilde H$ without linear terms).
 
     By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis (paper eq.
     Rot_sequence): three scalars $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
@@ -60,12 +61,13 @@ class RidgeTerms(eqx.Module):
     $-a_sc_s^3x^3/48$ has the opposite sign to its linear term $a_sc_sx/4$.
 
     **Arguments:** `dim` of the state; `n_modules` $M$; `order` of the basis vectors (default
-    cycling); `key`; `activation` $\sigma$ (paper: sigmoid); `full_vectors`; `linear_term`.
+    cycling); `key`; `activation` $\sigma$ (paper: sigmoid); `full_vectors`; `linear_term`;
+    `bias` (default, and the paper: True).
     """
 
     a: jax.Array
     c: jax.Array
-    b: jax.Array
+    b: jax.Array | None
     e: jax.Array | None
     activation: str = eqx.field(static=True)
     dim: int = eqx.field(static=True)
@@ -73,11 +75,12 @@ class RidgeTerms(eqx.Module):
     full_vectors: bool = eqx.field(static=True)
 
     def __init__(self, dim: int, n_modules: int, order: Sequence[int] | None = None, key: int | jax.Array = 0, *,
-                 activation: str = "sigmoid", full_vectors: bool = False, linear_term: bool = False):
+                 activation: str = "sigmoid", full_vectors: bool = False, linear_term: bool = False,
+                 bias: bool = True):
         self.dim = positive_int(dim, "dim")
         n_modules = positive_int(n_modules, "n_modules")
         self.order = check_order(order, n_modules, dim)
-        for name, value in (("full_vectors", full_vectors), ("linear_term", linear_term)):
+        for name, value in (("full_vectors", full_vectors), ("linear_term", linear_term), ("bias", bias)):
             if not isinstance(value, (bool, np.bool_)):
                 raise TypeError(f"{name} must be True or False; got {value!r}")
         self.full_vectors = bool(full_vectors)
@@ -86,7 +89,7 @@ class RidgeTerms(eqx.Module):
         shape = (n_modules, dim) if self.full_vectors else (n_modules,)
         self.a = jax.random.normal(ka, (n_modules,), jnp.float64)
         self.c = jax.random.normal(kc, shape, jnp.float64)
-        self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64)
+        self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64) if bias else None
         self.e = jnp.zeros(n_modules, jnp.float64) if linear_term else None
 
     @property
@@ -96,6 +99,14 @@ class RidgeTerms(eqx.Module):
     @property
     def linear_term(self) -> bool:
         return self.e is not None
+
+    @property
+    def bias(self) -> bool:
+        return self.b is not None
+
+    def bias_values(self) -> jax.Array:
+        """$b_s$, zeros without a bias."""
+        return jnp.zeros_like(self.a) if self.b is None else self.b
 
     def vectors(self) -> jax.Array:
         r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
@@ -112,7 +123,7 @@ class RidgeTerms(eqx.Module):
     def reinitialised(self, key: int | jax.Array) -> RidgeTerms:
         """The same family of pieces with fresh parameters from `key`."""
         return RidgeTerms(self.dim, self.n_modules, self.order, key, activation=self.activation,
-                          full_vectors=self.full_vectors, linear_term=self.linear_term)
+                          full_vectors=self.full_vectors, linear_term=self.linear_term, bias=self.bias)
 
     def with_activation(self, activation: str) -> RidgeTerms:
         r"""The same pieces with another activation $\sigma$ (a static field: a copy)."""
@@ -125,11 +136,14 @@ class RidgeTerms(eqx.Module):
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
         alpha = self.vector(s)
         x = jnp.dot(alpha, y)
-        q = self.a[s] * ACTIVATIONS[self.activation](x) + self.b[s]
+        q = self.a[s] * ACTIVATIONS[self.activation](x)
+        if self.b is not None:
+            q = q + self.b[s]
         if self.e is not None:
             q = q + self.e[s] * x
         return system.test_flow(q * alpha, t, y)
 
     def spec(self) -> dict[str, Any]:
         return {"n_modules": self.n_modules, "order": list(self.order), "full_vectors": self.full_vectors,
-                "activation": self.activation, "linear_term": self.linear_term}
+                "activation": self.activation, "linear_term": self.linear_term,
+                **({} if self.bias else {"bias": False})}  # files before `bias` have one

@@ -10,6 +10,8 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 from integrators.internals import check_state
 from liepoisson.internals import check_system, positive_float
@@ -87,16 +89,43 @@ class LPNet(AbstractLearnedMap):
         network = network_or_default(
             network, functools.partial(AffineMLP, system.dim, parametrisation.n_params), hidden=hidden,
             activation=activation, key=key, input_scaling=input_scaling, output_scaling=output_scaling)
-        network = check_network(network, system.dim, parametrisation.n_params,
-                                f"states to the parameters of {type(parametrisation).__name__}")
+        in_size = system.dim + 1 if isinstance(network, AbstractNetwork) and network.in_size == system.dim + 1 \
+            else system.dim
+        network = check_network(network, in_size, parametrisation.n_params,
+                                f"states (or states and the step, dim + 1) to the parameters of "
+                                f"{type(parametrisation).__name__}")
         for group in network.sign_groups():  # every GroupAveraged, at any depth
             check_group_law(system, parametrisation, group)
         self.network = network
         self.h = None if h is None else positive_float(h, "h")
 
+    @property
+    def takes_step(self) -> bool:
+        """Whether the network sees the step size: $\alpha(y, h)$ (a network of `dim + 1`
+        inputs)."""
+        return self.network.in_size == self.system.dim + 1
+
+    def network_inputs(self, y: jax.Array) -> jax.Array:
+        """What the network sees: the state `(..., dim)`, and the step as a last input if
+        `takes_step`."""
+        if not self.takes_step:
+            return y
+        h = jnp.broadcast_to(jnp.asarray(self._check_h(), dtype=y.dtype), (*y.shape[:-1], 1))
+        return jnp.concatenate([y, h], axis=-1)
+
     def alpha(self, y: jax.Array) -> jax.Array:
-        r"""The step parameters $\alpha(y)$ for one state `(dim,)`."""
-        return self.network(y)
+        r"""The step parameters $\alpha(y)$ for one state `(dim,)`; $\alpha(y, h)$ for a
+        network that takes the step (`dim + 1` inputs).
+
+        Why the step enters $\alpha$, and how: the step is the test flow of
+        $\langle\alpha, y\rangle$ for time $h$, $y_1 = \exp(h\,\alpha^\sharp)\cdot y$, so a
+        network trained at one $h$ learns $\alpha = \nabla H + O(h)$, the $O(h)$ part (the
+        modified parameter of this first-order flow) depending on that $h$. At another $h$ the
+        fixed network is first-order accurate at best; with $h$ as an input, the network fits
+        the parameter as a function of the step, and a map trained on uneven steps rolls out
+        at any step in its range. The time of the flow stays $h$, so $h \to 0$ is the
+        identity whatever the network."""
+        return self.network(self.network_inputs(y))
 
     def step(self, y: jax.Array) -> jax.Array:
         y = check_state(y, self.system.dim)
@@ -137,4 +166,5 @@ class LPNet(AbstractLearnedMap):
         (`params_estimate`) times `fraction` (a map that takes several steps of this LPNet
         per step passes its share)."""
         outputs = fraction * self.parametrisation.params_estimate(y0, y1, h) if targets is None else targets
-        return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, outputs))
+        inputs = y0 if not self.takes_step else np.concatenate([y0, np.full((y0.shape[0], 1), h)], axis=1)
+        return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(inputs, outputs))

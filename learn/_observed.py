@@ -20,6 +20,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
@@ -192,6 +193,15 @@ class ObservationLoss:
     substeps: int
 
     def __call__(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> jax.Array:
+        squared, mask = self.squared(fitted, inputs, targets)
+        return jnp.sum(squared) / (jnp.sum(mask) * targets.shape[-1])
+
+    def residuals(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> jax.Array:
+        """Predicted minus observed states, every component of every segment `(S, L, dim)`,
+        zero where no observation is."""
+        return self.squared(fitted, inputs, targets, residuals=True)
+
+    def squared(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array, residuals: bool = False):
         length = targets.shape[1]
         index = inputs[:, 0].astype(jnp.int32)
         dt = inputs[:, 1:length]
@@ -202,8 +212,10 @@ class ObservationLoss:
             start = jnp.where((index >= 0)[:, None], fitted.starts[jnp.clip(index, 0)], targets[:, 0])
         predicted = jax.vmap(segment_predictions, in_axes=(None, 0, 0, 0, None))(
             fitted.model, start, dt, mask, self.substeps)
-        squared = jnp.sum((predicted - targets) ** 2, axis=-1) * mask
-        return jnp.sum(squared) / (jnp.sum(mask) * targets.shape[-1])
+        difference = (predicted - targets) * mask[..., None]
+        if residuals:
+            return difference
+        return jnp.sum(difference**2, axis=-1), mask
 
 
 def pack(seg: Segments) -> tuple[np.ndarray, np.ndarray]:
@@ -256,3 +268,29 @@ def observed_objective(model: Any, observations: Observations, loss: Any, h: flo
         "n_train": int(train.n_observations), "n_val": 0 if val is None else int(val.n_observations),
     }
     return fitted, (inputs, targets), (val_inputs, val_targets), ObservationLoss(substeps), settings
+
+
+def information_criterion(fitted: Fitted, loss_fn: ObservationLoss, inputs: np.ndarray, targets: np.ndarray
+                          ) -> dict[str, float]:
+    r"""The Bayesian information criterion of a map fitted to observations,
+    $n\log(\mathrm{SSR}/n) + k\log n$: $n$ observed components, SSR the sum of squared
+    residuals, $k$ the map's effective parameters (the numerical rank of the residuals'
+    Jacobian with respect to its weights: redundant weights count once; the fitted starts,
+    common to the maps compared, are left out). Lower is better."""
+    inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)
+    params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+
+    def residuals(x):
+        model = eqx.combine(unravel(x), static)
+        return loss_fn.residuals(Fitted(model, fitted.starts), inputs, targets).reshape(-1)
+
+    r = residuals(flat)
+    J = np.asarray(jax.jacfwd(residuals)(flat))
+    n = int(np.sum(np.asarray(inputs[:, targets.shape[1] : 2 * targets.shape[1]]))) * targets.shape[-1]
+    ssr = float(jnp.sum(r**2))
+    singular = np.linalg.svd(J, compute_uv=False)
+    # A direction of the weights that moves the residuals 1e8 times less than the best
+    # determined one is not fitted by the data (redundant weights give 0 to round-off).
+    k = int(np.sum(singular > 1e-8 * singular[0])) if singular.size else 0
+    return {"bic": n * math.log(ssr / n) + k * math.log(n), "n": n, "ssr": ssr, "effective_parameters": k}
