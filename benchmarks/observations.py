@@ -20,14 +20,17 @@ error (true H) over the rollout, Casimir drift (max |C(t) - C(0)| over |grad C| 
 
 Models, all fitted to the same observations:
 
-- `glpnet`: `learn.fit_observations`'s recipe (a TripleJump G-LPNet, one module per basis
-  direction with a linear term, errors-in-variables trajectory loss).
+- `glpnet`: `learn.fit_splitting(system, observations)`: a TripleJump G-LPNet, one module
+  per basis direction, fitted by trajectory least squares with the initial states (errors in
+  variables); the family of its learned Hamiltonian (quadratic even, quadratic, general)
+  chosen by the Bayesian information criterion.
 - `limit`: the true model family (`learn.ParametricHamiltonian`: the diagonal quadratic
   Hamiltonian with unknown coefficients, RK4 with 10 sub-steps) fitted by trajectory least
   squares with the initial states: what the data allow at best.
 - `sindy`: SINDy (pysindy, extra `peers`: polynomial library of degree 2, STLSQ with its
-  defaults), derivatives by pysindy's finite differences on the observation times, simulated
-  by `SINDy.simulate` (LSODA, tolerance 1e-12).
+  defaults), derivatives by pysindy's smoothed finite differences on the observation times
+  (plain finite differences do 12x worse at noise 1e-3: BENCHMARKS.md), its ODE integrated
+  by LSODA (tolerance 1e-12, as `SINDy.simulate`).
 """
 
 from __future__ import annotations
@@ -123,9 +126,15 @@ GLPNET: dict[str, Any] = {}  # fit_splitting's settings (--activation, --window,
 
 
 def fit_glpnet(protocol: Protocol, data: it.Observations, seed: int) -> tuple[Any, dict[str, Any]]:
-    model, (record,) = learn.fit_splitting(protocol.system, data, key=seed, seed=seed, validation_fraction=0.0,
-                                           progress=False, **GLPNET)
-    return model, {"train_loss": record.train_loss}
+    model, records = learn.fit_splitting(protocol.system, data, key=seed, seed=seed, validation_fraction=0.0,
+                                         progress=False, **GLPNET)
+    chosen = records[-1].stages[-1].details
+    extra = {"train_loss": records[-1].train_loss, "family": chosen.get("family", GLPNET.get("activation")),
+             "bic": {r.stages[-1].details.get("family"): r.stages[-1].details.get("bic") for r in records}}
+    if protocol.system.name == "RigidBody":  # the identified 1/I_i - 1/I_j
+        quadratic = learn.quadratic_part(model.hamiltonian, protocol.system, np.concatenate(data.states))
+        extra["difference_error"] = np.abs(quadratic.diagonal_differences() - differences(protocol.true_theta))
+    return model, extra
 
 
 def fit_limit(protocol: Protocol, data: it.Observations, seed: int) -> tuple[Any, dict[str, Any]]:
@@ -167,7 +176,8 @@ class _Sindy:
 def fit_sindy(protocol: Protocol, data: it.Observations, seed: int) -> tuple[Any, dict[str, Any]]:
     import pysindy as ps
 
-    model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ())
+    model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
+                     differentiation_method=ps.SmoothedFiniteDifference())
     model.fit(list(data.states), t=list(data.times))
     return _Sindy(model), {}
 
@@ -199,6 +209,8 @@ def line(row: dict) -> str:
     extra = ""
     if "difference_error" in row:
         extra = f", |diff error| max {np.max(row['difference_error']):.1e}"
+    if "family" in row:
+        extra += f", family {row['family']}"
     return (f"{row['system']:10s} noise {row['noise']:<6g} {row['sampling']:7s} {row['model']:7s}: state error "
             f"(t=100) {row['state_error']:.3e}, energy {row['energy_error']:.2e}, Casimir "
             f"{row.get('casimir_drift', float('nan')):.1e}, fit {row['fit_s']:.1f} s{extra}")
@@ -212,7 +224,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--models", nargs="+", choices=list(FITS), default=list(FITS))
     parser.add_argument("--data-seed", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--activation", default="sigmoid")
+    parser.add_argument("--activation", default=None, help="fix the G-LPNet's family (default: chosen by BIC)")
     parser.add_argument("--window", type=int, default=None)
     parser.add_argument("--observed-starts", action="store_true", help="no errors in variables")
     parser.add_argument("--iterations", type=int, default=1000)

@@ -64,6 +64,10 @@ class QuasiNewton:
     maps it onto the model (`linear_to_activation`: the linear regime of $\sigma$) and finishes
     there (what it does on E6 is in BENCHMARKS.md).
 
+    `rtol` (SciPy methods): stop a start once the loss has fallen by less than `rtol` of its
+    value over the last 20 iterations (0, the default: run every iteration; a fit to noisy
+    data reaches its noise floor long before, e.g. `rtol=1e-9`).
+
     The best start by validation loss (training loss without a validation set) is kept, and
     only if it beats the weights the stage started from.
     """
@@ -72,8 +76,11 @@ class QuasiNewton:
     method: str = "lbfgsb"
     restarts: int = 1
     warm_start: bool = False
+    rtol: float = 0.0
 
     def __post_init__(self):
+        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
+            raise ValueError(f"QuasiNewton.rtol must be a number in [0, 1); got {self.rtol!r}")
         positive_int(self.iterations, "QuasiNewton.iterations")
         check_method(self.method)
         if not isinstance(self.warm_start, (bool, np.bool_)):

@@ -70,14 +70,18 @@ def minimiser(method: str, loss: Callable[[jax.Array, Any, Any], jax.Array], X: 
     if method in _SCIPY:
         value_and_grad = _value_and_grad(loss)
 
-        def minimise(x0, max_iter, progress, desc):
-            return _scipy(_SCIPY[method], value_and_grad, x0, X, Y, max_iter, progress, desc)
+        def minimise(x0, max_iter, progress, desc, rtol=0.0):
+            return _scipy(_SCIPY[method], value_and_grad, x0, X, Y, max_iter, progress, desc, rtol)
 
         return minimise
     return _optax_lbfgs(loss, X, Y)
 
 
-def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc):
+#: `QuasiNewton(rtol=...)` compares the loss with its value this many iterations earlier.
+RTOL_WINDOW = 20
+
+
+def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc, rtol=0.0):
     def fun(x):
         v, g = value_and_grad(jnp.asarray(x), X, Y)
         return float(v), np.asarray(g, dtype=np.float64)
@@ -90,6 +94,10 @@ def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc):
         bar.update(1)
         if len(losses) % 50 == 0:
             bar.set_postfix(loss=f"{losses[-1]:.3g}")
+        if rtol > 0 and len(losses) > RTOL_WINDOW:
+            before = losses[-1 - RTOL_WINDOW]
+            if before - losses[-1] <= rtol * abs(before):
+                raise StopIteration  # SciPy >= 1.11 ends the run and returns this iterate
 
     if method == "BFGS":
         options: dict[str, Any] = {"maxiter": max_iter, "gtol": 0.0}
@@ -125,7 +133,7 @@ def _optax_lbfgs(loss, X, Y):
 
         return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
 
-    def minimise(x0, max_iter, progress, desc):
+    def minimise(x0, max_iter, progress, desc, rtol=0.0):  # rtol: SciPy methods only
         x, state = x0, opt.init(x0)
         losses: list[np.ndarray] = []
         bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
@@ -247,12 +255,13 @@ def run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, 
             to_model = eqx.combine(unravel(x0), static).warm_start()[1]
             mapped = to_model(eqx.combine(lin_unravel(x_lin), lin_static), X)
             x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
-            x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} (from the warm start)")
+            x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} (from the warm start)",
+                             stage.rtol)
             shift = h1["epoch"][-1] if len(h1["epoch"]) else 0
             hist = {"epoch": np.concatenate([h1["epoch"], h2["epoch"] + shift]),
                     "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]])}
         else:
-            x, hist = minimise(x0, stage.iterations, progress, desc)
+            x, hist = minimise(x0, stage.iterations, progress, desc, stage.rtol)
         results.append((*losses(x), r, x, hist))
         if report is not None:
             report((r + 1) * stage.iterations, stage.restarts * stage.iterations, results[-1][1], results[-1][2])
