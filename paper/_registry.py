@@ -7,9 +7,11 @@ from .e4_charged_particle import EXPERIMENT as _E4
 from .e5_kirchhoff import EXPERIMENT as _E5
 from .e6_glpnet_rigid_body import EXPERIMENT as _E6
 from .w1_learned_vs_classical import EXPERIMENT as _W1
+from .w2_observations import EXPERIMENT as _W2
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2)}
 
 #: What `python -m paper` runs without a subcommand: the paper's six experiments. The studies
-#: beyond the paper (W1, an hour-scale sweep) run on request: `python -m paper run W1`.
+#: beyond the paper (W1, an hour-scale sweep; W2, learning from observations) run on request:
+#: `python -m paper run W1 W2`.
 PAPER_EXPERIMENTS = tuple(i for i in EXPERIMENTS if i.startswith("E"))
