@@ -37,21 +37,10 @@ import integrators as it
 import learn
 import liepoisson as lp
 from benchmarks._report import default_out, write_json
+from paper.w2_observations import diamond
 from liepoisson.systems import LiePoissonSystem, RigidBody, reversing_symmetries, sign_symmetries
 
 H_STEP = 0.1
-
-
-def diamond() -> LiePoissonSystem:
-    """4-dim solvable: [p, q] = z, [n, p] = p, [n, q] = -q; z central. Casimirs z and
-    pq + zn; H is proper on the orbits with z != 0 (bounded motion)."""
-    C = np.zeros((4, 4, 4))
-    for a, b, d, v in ((0, 1, 2, 1.0), (3, 0, 0, 1.0), (3, 1, 1, -1.0)):
-        C[a, b, d], C[b, a, d] = v, -v
-    g = lp.LieAlgebra(C, "diamond", ("p", "q", "z", "n"))
-    return LiePoissonSystem(
-        g, lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 + m[3] ** 2) + 0.1 * xp.exp(-(m[2] ** 2)), name="diamond"
-    )
 
 
 def filiform5() -> LiePoissonSystem:

@@ -173,7 +173,7 @@ class GLPNet(AbstractLearnedMap):
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
         hp = dict(hyperparameters)
         method = _method_from_name(hp.pop("method"))
-        return cls(system, key=key, h=h, method=method, **hp)
+        return cls(system, h=h, method=method, terms=RidgeTerms(system.dim, key=key, **hp))
 
     # -- what learn.fit asks -------------------------------------------------------------------
     def default_optimiser(self):

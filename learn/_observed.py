@@ -202,16 +202,22 @@ class ObservationLoss:
         return self.squared(fitted, inputs, targets, residuals=True)
 
     def squared(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array, residuals: bool = False):
+        """`(squared differences (S, L), mask (S, L))`, or the differences `(S, L, dim)`."""
+        inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)
         length = targets.shape[1]
         index = inputs[:, 0].astype(jnp.int32)
         dt = inputs[:, 1:length]
         mask = inputs[:, length : 2 * length]
         if fitted.starts is None:
+            observed = jnp.ones(index.shape, bool)
             start = targets[:, 0]
         else:
-            start = jnp.where((index >= 0)[:, None], fitted.starts[jnp.clip(index, 0)], targets[:, 0])
+            observed = index < 0
+            start = jnp.where(observed[:, None], targets[:, 0], fitted.starts[jnp.clip(index, 0)])
         predicted = jax.vmap(segment_predictions, in_axes=(None, 0, 0, 0, None))(
             fitted.model, start, dt, mask, self.substeps)
+        # a start taken as observed is not a prediction: it is left out of the mean
+        mask = mask.at[:, 0].set(jnp.where(observed, 0.0, mask[:, 0]))
         difference = (predicted - targets) * mask[..., None]
         if residuals:
             return difference
@@ -287,7 +293,7 @@ def information_criterion(fitted: Fitted, loss_fn: ObservationLoss, inputs: np.n
 
     r = residuals(flat)
     J = np.asarray(jax.jacfwd(residuals)(flat))
-    n = int(np.sum(np.asarray(inputs[:, targets.shape[1] : 2 * targets.shape[1]]))) * targets.shape[-1]
+    n = int(np.sum(loss_fn.squared(fitted, inputs, targets)[1])) * targets.shape[-1]  # fitted components
     ssr = float(jnp.sum(r**2))
     singular = np.linalg.svd(J, compute_uv=False)
     # A direction of the weights that moves the residuals 1e8 times less than the best

@@ -326,3 +326,19 @@ def test_measure_rollout_figures_are_the_paper_definitions():
     pick = y.reshape(-1, 3)[np.random.default_rng(0).choice(3 * 61, size=183, replace=False)]
     assert m["poisson_defect_max"] == np.max(np.asarray(rk4.poisson_defect(pick)))
     assert "diverged_at_step" not in m
+
+
+@pytest.mark.slow  # three families of G-LPNet compiled and fitted: ~70 s
+def test_w2_smoke_writes_its_table_and_verdict(tmp_path):
+    from paper.__main__ import main
+
+    assert main(["run", "W2", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    metrics = json.loads((tmp_path / "W2" / "metrics.json").read_text())
+    models = {r["model"] for r in metrics["rows"]}
+    assert {"G-LPNet", "limit", "MLP"} <= models
+    glpnet = next(r for r in metrics["rows"] if r["model"] == "G-LPNet")
+    # the G-LPNet keeps the Casimir to round-off whatever its training (exact test flows)
+    assert glpnet["casimir_drift"] < 1e-13
+    assert glpnet["family"] in ("quadratic, even", "quadratic", "general")
+    assert any("G-LPNet state error" in v for v in metrics["verdict"])
+    assert (tmp_path / "W2" / "state_error_rigid_body.png").exists()
