@@ -37,8 +37,8 @@ import integrators as it
 import learn
 import liepoisson as lp
 from benchmarks._report import default_out, write_json
-from paper.w2_observations import diamond
 from liepoisson.systems import LiePoissonSystem, RigidBody, reversing_symmetries, sign_symmetries
+from paper.w2_observations import diamond
 
 H_STEP = 0.1
 

@@ -73,9 +73,9 @@ def quadratic_casimir_hessians(system: AbstractPoissonSystem, samples: np.ndarra
     for k in range(system.n_casimirs):
         hessian = jax.vmap(jax.hessian(casimir(k)))(jnp.asarray(samples[: min(len(samples), 8)]))
         hessian = np.asarray(hessian)
-        if np.allclose(hessian, hessian[0], rtol=0, atol=1e-10 * max(1.0, float(np.max(np.abs(hessian))))):
-            if np.any(hessian[0]):
-                out.append(hessian[0])
+        constant = np.allclose(hessian, hessian[0], rtol=0, atol=1e-10 * max(1.0, float(np.max(np.abs(hessian)))))
+        if constant and np.any(hessian[0]):
+            out.append(hessian[0])
     return np.asarray(out).reshape(-1, system.dim, system.dim)
 
 

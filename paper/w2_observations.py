@@ -319,8 +319,8 @@ class W2(AbstractExperiment):
             "",
             "## Every fit",
             "",
-            "| system | sampling | noise | model | state error t=100 | max energy error | Casimir drift | fit [s] "
-            "| H~ family | max error of 1/I_i - 1/I_j |",
+            ("| system | sampling | noise | model | state error t=100 | max energy error | Casimir drift | fit [s] "
+             "| H~ family | max error of 1/I_i - 1/I_j |"),
             "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in metrics.get("rows", []):
