@@ -40,6 +40,8 @@ def main(argv: list[str] | None = None) -> None:
             for noise in args.noise:
                 data = w2.observations(protocol, noise, sampling, seed=args.data_seed)
                 for name in args.models:
+                    if not w2.applies(name, sampling):
+                        continue
                     kwargs = {}
                     if name != "SINDy":
                         kwargs["iterations"] = args.iterations
