@@ -4,10 +4,12 @@ given; the G-LPNet beside SINDy, the unstructured MLP and the parametric limit.
 
     python -m benchmarks.observations [--systems "rigid body" Kirchhoff diamond] [--noise 0 1e-3 1e-2]
         [--sampling regular uneven] [--models G-LPNet limit SINDy MLP] [--data-seed 1] [--seed 0]
-        [--activation identity|sigmoid] [--out benchmarks/results/observations.json]
+        [--activation identity|sigmoid] [--window K] [--observed-starts]
+        [--out benchmarks/results/observations.json]
 
 The protocols, models and figures are `paper.w2_observations`'s (its docstring says what each
-is). `--activation` fixes the G-LPNet's family of H~ instead of choosing it by BIC; the data
+is). `--window` and `--observed-starts` set the G-LPNet's `learn.TrajectoryLoss` (default:
+whole trajectories, fitted starts); `--activation` fixes the G-LPNet's family of H~ instead of choosing it by BIC; the data
 seed draws initial states, times and noise; the seed the training.
 """
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 
+import learn
 from benchmarks._report import default_out, write_json
 from paper import w2_observations as w2
 
@@ -29,6 +32,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=w2.TRAIN_SEED)
     parser.add_argument("--activation", default=None, help="fix the G-LPNet's family of H~ (default: chosen by BIC)")
     parser.add_argument("--iterations", type=int, default=1000)
+    parser.add_argument("--window", type=int, default=None, help="the G-LPNet's loss: intervals per segment")
+    parser.add_argument("--observed-starts", action="store_true",
+                        help="the G-LPNet's loss: segments start from their first observation (no errors in variables)")
     parser.add_argument("--out", default=default_out("observations"))
     args = parser.parse_args(argv)
     protocols = w2.protocols()
@@ -47,6 +53,8 @@ def main(argv: list[str] | None = None) -> None:
                         kwargs["iterations"] = args.iterations
                     if name == "G-LPNet" and args.activation:
                         kwargs["activation"] = args.activation
+                    if name == "G-LPNet" and (args.window or args.observed_starts):
+                        kwargs["loss"] = learn.TrajectoryLoss(window=args.window, latent=not args.observed_starts)
                     row = {"system": system, "noise": noise, "sampling": sampling, "data_seed": args.data_seed,
                            **w2.evaluate(protocol, name, data, y0, reference, seed=args.seed, **kwargs)}
                     rows.append(row)

@@ -12,6 +12,10 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 SMALLER_BUDGETS = {
     "learn.Adam(30_000)": "learn.Adam(200)",
     "learn.QuasiNewton(5_000)": "learn.QuasiNewton(20)",
+    "learn.fit_splitting(body, obs, iterations=1000, validation_fraction=0.0)": (
+        "learn.fit_splitting(body, obs, iterations=10, validation_fraction=0.0, activation='identity', "
+        "progress=False)"
+    ),
     # BFGS as the default, without the warm start (a second compilation, ~5 s; the warm start
     # is tested in test_learn_warm_start.py)
     "learn.fit(learn.GLPNet(body, n_modules=6), data)": (
