@@ -101,7 +101,7 @@ class LPNet(AbstractLearnedMap):
 
     @property
     def takes_step(self) -> bool:
-        """Whether the network sees the step size: $\alpha(y, h)$ (a network of `dim + 1`
+        r"""Whether the network sees the step size: $\alpha(y, h)$ (a network of `dim + 1`
         inputs)."""
         return self.network.in_size == self.system.dim + 1
 

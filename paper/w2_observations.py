@@ -178,7 +178,7 @@ class SindyModel:
     def __init__(self, model):
         self.model = model
 
-    def rollout(self, y0: np.ndarray, steps: int) -> np.ndarray:
+    def simulate(self, y0: np.ndarray, steps: int) -> np.ndarray:
         from scipy.integrate import solve_ivp
 
         t = H_TEST * np.arange(steps + 1)
@@ -248,7 +248,7 @@ def evaluate(protocol: Protocol, name: str, data: it.Observations, y0: np.ndarra
     fit_s = time.perf_counter() - start
     steps = reference.shape[1] - 1
     if isinstance(model, SindyModel):
-        states = model.rollout(y0, steps)
+        states = model.simulate(y0, steps)
     else:
         states = np.asarray(model.with_h(H_TEST).rollout(y0, steps, nonfinite="return"))
     row = {"model": name, "fit_s": fit_s, **figures(protocol.system, states, reference), **extra}
