@@ -60,13 +60,17 @@ def fit(
 
     - `model`: a learned map (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`; not modified).
     - `data`: an `integrators.Trajectories` (consecutive states are the pairs, `h` its step),
-      or `(y0, y1)` arrays `(N, dim)` with `h=`.
+      or `(y0, y1)` arrays `(N, dim)` with `h=`; or `integrators.Observations` (noisy states at
+      their own times), compared by `loss`, a `learn.TrajectoryLoss` (default: whole
+      trajectories from fitted initial states; docs/conventions.md, "Observations"), the
+      held-out fraction taken by whole trajectories, the map's `h` set to `h=`, its own, or the
+      median interval.
     - `optimiser`: an `Adam` or `QuasiNewton`, or a sequence of them run one after the other
       (e.g. `(Adam(100_000), QuasiNewton(30_000))`, the paper's Adam refined by L-BFGS-B);
       default `default_optimiser(model)`. `epochs=N` is short for `optimiser=Adam(N)`.
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
       mini-batches and restarts).
-    - `loss`: `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
+    - `loss` (pairs and trajectories): `"state"` (default, the paper's: MSE between the step of $y_0$ and $y_1$, for an
       LPNet through the exact flow, for a `Reversible` through its explicit residual form
       `training_prediction`) or another of `model.losses`: an LPNet's `"alpha"` (MSE between
       $\alpha(y_0)$ and the pairs' parameters `parametrisation.params_from_pair(y0, y1, h)`).
