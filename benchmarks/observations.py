@@ -4,7 +4,7 @@ given; the G-LPNet beside SINDy, the unstructured MLP and the parametric limit.
 
     python -m benchmarks.observations [--systems "rigid body" Kirchhoff diamond] [--noise 0 1e-3 1e-2]
         [--sampling regular uneven] [--models G-LPNet limit SINDy MLP] [--data-seed 1] [--seed 0]
-        [--activation identity|sigmoid] [--window K] [--observed-starts]
+        [--activation identity|sigmoid] [--window K] [--observed-starts] [--bootstrap N]
         [--out benchmarks/results/observations.json]
 
 The protocols, models and figures are `paper.w2_observations`'s (its docstring says what each
@@ -16,6 +16,8 @@ seed draws initial states, times and noise; the seed the training.
 from __future__ import annotations
 
 import argparse
+
+import numpy as np
 
 import learn
 from benchmarks._report import default_out, write_json
@@ -35,6 +37,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--window", type=int, default=None, help="the G-LPNet's loss: intervals per segment")
     parser.add_argument("--observed-starts", action="store_true",
                         help="the G-LPNet's loss: segments start from their first observation (no errors in variables)")
+    parser.add_argument("--bootstrap", type=int, default=0,
+                        help="rigid body: also refit the G-LPNet to N resamples of the trajectories and print the "
+                             "spread of the identified 1/I_i - 1/I_j")
     parser.add_argument("--out", default=default_out("observations"))
     args = parser.parse_args(argv)
     protocols = w2.protocols()
@@ -59,6 +64,14 @@ def main(argv: list[str] | None = None) -> None:
                            **w2.evaluate(protocol, name, data, y0, reference, seed=args.seed, **kwargs)}
                     rows.append(row)
                     print(w2.line(row), flush=True)
+                if args.bootstrap and protocol.system.name == "RigidBody":
+                    d = w2.bootstrap_differences(protocol, data, args.bootstrap, iterations=args.iterations)
+                    true = w2.differences(protocol.true_theta)
+                    rows.append({"system": system, "noise": noise, "sampling": sampling, "model": "G-LPNet bootstrap",
+                                 "differences": d, "mean": d.mean(0), "std": d.std(0, ddof=1), "true": true})
+                    print(f"{system}, {sampling}, noise {noise:g}: 1/I_i - 1/I_j over {args.bootstrap} resamples "
+                          f"{np.round(d.mean(0), 5).tolist()} +- {np.round(d.std(0, ddof=1), 5).tolist()} "
+                          f"(true {np.round(true, 5).tolist()})", flush=True)
     write_json(args.out, args, rows)
 
 
