@@ -44,6 +44,14 @@ def _per_trajectory(value: Any, name: str, n: int | None) -> list[np.ndarray]:
     return out
 
 
+def times_per_trajectory(times: Any, n: int) -> list[np.ndarray]:
+    """One array of times per trajectory (`n` of them): a single 1-D array is shared by all."""
+    ts = _per_trajectory(times, "times", n)
+    if len(ts) and np.ndim(ts[0]) == 0:
+        ts = [np.asarray(ts, dtype=np.float64)] * n
+    return ts
+
+
 def check_times(t: np.ndarray, name: str) -> np.ndarray:
     """`t` 1-D, finite and strictly increasing, or a `ValueError` naming the first entry that
     is not."""
@@ -94,9 +102,7 @@ class Observations:
             raise ValueError("states must hold at least one trajectory; got none")
         if all(np.ndim(y) == 1 for y in ys) and np.ndim(states) == 2:
             ys = [np.asarray(states, dtype=np.float64)]  # one trajectory (n, dim)
-        ts = _per_trajectory(times, "times", len(ys))
-        if len(ts) and np.ndim(ts[0]) == 0:  # one 1-D array shared by every trajectory
-            ts = [np.asarray(ts, dtype=np.float64)] * len(ys)
+        ts = times_per_trajectory(times, len(ys))
         if len(ts) != len(ys):
             raise ValueError(f"times has {len(ts)} trajectories and states {len(ys)}; give one time array per "
                              "trajectory (or one 1-D array shared by all)")
@@ -368,9 +374,7 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
         raise ValueError(f"law must be one of {LAWS}; got {law!r}")
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)
-    ts = _per_trajectory(times, "times", y0.shape[0])
-    if len(ts) and np.ndim(ts[0]) == 0:
-        ts = [np.asarray(ts, dtype=np.float64)] * y0.shape[0]
+    ts = times_per_trajectory(times, y0.shape[0])
     if len(ts) != y0.shape[0]:
         raise ValueError(f"times has {len(ts)} trajectories and y0 {y0.shape[0]} initial states")
     for j, t in enumerate(ts):

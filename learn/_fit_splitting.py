@@ -4,6 +4,7 @@ then composed by a higher-order method and fitted again."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -14,9 +15,10 @@ from integrators import Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._fit import QuasiNewton, fit
+from ._fit import QuasiNewton, fit, fit_observations, training_record
 from ._glpnet import GLPNet, check_method
-from ._observed import TrajectoryLoss
+from ._learned_terms import RidgeTerms
+from ._observed import TrajectoryLoss, information_criterion
 from ._record import TrainingRecord
 
 
@@ -99,12 +101,6 @@ FAMILIES = {
 
 def _fit_observed(system, data, method, loss, activation, iterations, key, common):
     """Fit each family (or the one of `activation`) to the observations; the lowest BIC wins."""
-    import dataclasses
-
-    from ._fit import fit_observations, training_record
-    from ._learned_terms import RidgeTerms
-    from ._observed import information_criterion
-
     families = FAMILIES if activation is None else {
         activation: {"activation": activation, "linear_term": activation != "identity", "bias": True}}
     fits = []

@@ -154,11 +154,9 @@ class Fitted(eqx.Module):
 
         def to_this(fitted: Fitted, inputs: jax.Array) -> Fitted:
             # the map's warm start is mapped with the observed states, which `inputs` carries
-            dim = self.model.system.dim
-            length = (inputs.shape[1]) // (dim + 2)
-            states = inputs[:, 2 * length :].reshape(-1, dim)
-            mask = inputs[:, length : 2 * length].reshape(-1)
-            return Fitted(mapped(fitted.model, states[np.asarray(mask) > 0]), fitted.starts)
+            _, _, mask, states = unpack(inputs, self.model.system.dim)
+            present = np.asarray(mask).reshape(-1) > 0
+            return Fitted(mapped(fitted.model, states.reshape(-1, states.shape[-1])[present]), fitted.starts)
 
         return Fitted(simpler, self.starts), to_this
 
@@ -204,10 +202,8 @@ class ObservationLoss:
     def squared(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array, residuals: bool = False):
         """`(squared differences (S, L), mask (S, L))`, or the differences `(S, L, dim)`."""
         inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)
-        length = targets.shape[1]
-        index = inputs[:, 0].astype(jnp.int32)
-        dt = inputs[:, 1:length]
-        mask = inputs[:, length : 2 * length]
+        index, dt, mask, _ = unpack(inputs, targets.shape[-1])
+        index = index.astype(jnp.int32)
         if fitted.starts is None:
             observed = jnp.ones(index.shape, bool)
             start = targets[:, 0]
@@ -222,6 +218,13 @@ class ObservationLoss:
         if residuals:
             return difference
         return jnp.sum(difference**2, axis=-1), mask
+
+
+def unpack(inputs: jax.Array, dim: int) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """`(index (S,), dt (S, L-1), mask (S, L), states (S, L, dim))` from `pack`'s inputs."""
+    length = inputs.shape[1] // (dim + 2)
+    return (inputs[:, 0], inputs[:, 1:length], inputs[:, length : 2 * length],
+            inputs[:, 2 * length :].reshape(inputs.shape[0], length, dim))
 
 
 def pack(seg: Segments) -> tuple[np.ndarray, np.ndarray]:

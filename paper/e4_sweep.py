@@ -66,7 +66,7 @@ def _make(point):
 def _evaluate(model, point):
     """The rollout metrics of E4: 2000 steps from the data's last point against heyoka."""
     system = model.system
-    if isinstance(model, learn.Reversible):
+    if isinstance(model, it.AbstractImplicitStepMap):  # an implicit step: enough iterations to converge
         model = model.with_iterations(ROLLOUT_ITERATIONS)
     data = it.ground_truth(system, Y0, h=H, n_steps=N_POINTS - 1)
     reference = it.ground_truth(system, data.states[0, -1], h=H, n_steps=PREDICTION_STEPS)

@@ -15,8 +15,8 @@ times the states' RMS size, at a regular h = 0.1 or at steps drawn from [0.05, 0
   with its coefficients unknown, RK4 with 10 sub-steps) fitted the same way: what the data
   allow at best;
 - **SINDy** (pysindy, extra `peers`; skipped without it): polynomial library of degree 2,
-  STLSQ, derivatives by smoothed finite differences (regular sampling: 12x better than plain
-  ones at noise 1e-3) or finite differences (uneven: the smoother assumes even spacing),
+  STLSQ, derivatives by smoothed finite differences (regular sampling; BENCHMARKS.md compares
+  them with plain ones) or finite differences (uneven: the smoother assumes even spacing),
   integrated by LSODA;
 - **MLP**: the unstructured residual MLP (3x16) on consecutive pairs, Adam then L-BFGS-B
   (regular sampling only: its step has no step-size input).
@@ -123,7 +123,11 @@ def test_set(protocol: Protocol, n: int = N_TEST, steps: int = STEPS_TEST) -> tu
 
 def figures(system, states: np.ndarray, reference: np.ndarray) -> dict[str, float]:
     """Mean state error at the end, max relative energy error and Casimir drift of rollouts
-    `(n, steps + 1, dim)` against the reference (infinite for a rollout that diverged)."""
+    `(n, steps + 1, dim)` against the reference (infinite for a rollout that diverged).
+
+    The issue's protocol, not `integrators.rollout_figures`'s: the mean over initial conditions
+    (not the max), energy relative to E(0), Casimirs in units of |grad C| |y| (a Casimir may
+    vanish on the data); and SINDy's rollouts are not a step map's."""
     if not np.all(np.isfinite(states)):
         return {"state_error": float("inf"), "energy_error": float("inf"), "casimir_drift": float("inf")}
     err = float(np.mean(np.linalg.norm(states[:, -1] - reference[:, -1], axis=-1)))
@@ -196,6 +200,14 @@ class SindyModel:
         return out
 
 
+def simulate(model: Any, y0: np.ndarray, steps: int) -> np.ndarray:
+    """`steps` steps of 0.1 from `y0` `(n, dim)`: a step map's rollout at that step (any step
+    map: the step is an input of the learned ones), or a model's own `simulate`."""
+    if hasattr(model, "simulate"):
+        return model.simulate(y0, steps)
+    return np.asarray(model.with_h(H_TEST).rollout(y0, steps, nonfinite="return"))
+
+
 def sindy_available() -> bool:
     return importlib.util.find_spec("pysindy") is not None
 
@@ -246,11 +258,7 @@ def evaluate(protocol: Protocol, name: str, data: it.Observations, y0: np.ndarra
     start = time.perf_counter()
     model, extra = MODELS[name](protocol, data, seed, **kwargs)
     fit_s = time.perf_counter() - start
-    steps = reference.shape[1] - 1
-    if isinstance(model, SindyModel):
-        states = model.simulate(y0, steps)
-    else:
-        states = np.asarray(model.with_h(H_TEST).rollout(y0, steps, nonfinite="return"))
+    states = simulate(model, y0, reference.shape[1] - 1)
     row = {"model": name, "fit_s": fit_s, **figures(protocol.system, states, reference), **extra}
     if "differences" in row:
         row["difference_error"] = np.abs(np.asarray(row["differences"]) - differences(protocol.true_theta))
