@@ -33,7 +33,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--data-seed", type=int, default=w2.DATA_SEED)
     parser.add_argument("--seed", type=int, default=w2.TRAIN_SEED)
     parser.add_argument("--activation", default=None, help="fix the G-LPNet's family of H~ (default: chosen by BIC)")
-    parser.add_argument("--iterations", type=int, default=1000)
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="Levenberg-Marquardt steps per stage of the G-LPNet and the limit (default 200), "
+                             "L-BFGS-B iterations of the MLP (default 1000)")
     parser.add_argument("--window", type=int, default=None, help="the G-LPNet's loss: intervals per segment")
     parser.add_argument("--observed-starts", action="store_true",
                         help="the G-LPNet's loss: segments start from their first observation (no errors in variables)")
@@ -54,7 +56,7 @@ def main(argv: list[str] | None = None) -> None:
                     if not w2.applies(name, sampling):
                         continue
                     kwargs = {}
-                    if name != "SINDy":
+                    if name != "SINDy" and args.iterations is not None:
                         kwargs["iterations"] = args.iterations
                     if name == "G-LPNet" and args.activation:
                         kwargs["activation"] = args.activation

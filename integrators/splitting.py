@@ -2,6 +2,7 @@
 by coefficient tables; each is a step map (`Strang(system, h=0.1).rollout(y0, n_steps)`)."""
 
 from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
+from ._splitting._base import IndexedFlows as IndexedFlows
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
 from ._splitting._composition import (
     AbstractCompositionMethod as AbstractCompositionMethod,

@@ -12,10 +12,11 @@ from ._base import AbstractLearnedMap as AbstractLearnedMap
 from ._baseline import MLPBaseline as MLPBaseline
 from ._equivariant import GroupAveraged as GroupAveraged
 from ._fit import default_optimiser as default_optimiser, fit as fit
-from ._losses import alpha_mse as alpha_mse, state_mse as state_mse
+from ._losses import MeanSquares as MeanSquares, alpha_mse as alpha_mse, state_mse as state_mse
 from ._optimisers import (
     Adam as Adam,
     Checkpoint as Checkpoint,
+    LevenbergMarquardt as LevenbergMarquardt,
     Progress as Progress,
     QuasiNewton as QuasiNewton,
 )

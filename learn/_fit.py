@@ -21,8 +21,17 @@ from liepoisson.internals import positive_int, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
 from ._data import PairData, prepare
+from ._least_squares import run_levenberg_marquardt
 from ._observed import TrajectoryLoss, observed_objective
-from ._optimisers import Adam, Callback, Checkpoint, Optimiser, Progress, QuasiNewton
+from ._optimisers import (
+    OPTIMISERS,
+    Adam,
+    Callback,
+    Checkpoint,
+    LevenbergMarquardt,
+    Optimiser,
+    Progress,
+)
 from ._quasi_newton import run_quasi_newton
 from ._record import StageRecord, TrainingRecord
 from ._training import train_adam
@@ -65,7 +74,7 @@ def fit(
       trajectories from fitted initial states; docs/conventions.md, "Observations"), the
       held-out fraction taken by whole trajectories, the map's `h` set to `h=`, its own, or the
       median interval.
-    - `optimiser`: an `Adam` or `QuasiNewton`, or a sequence of them run one after the other
+    - `optimiser`: an `Adam`, `QuasiNewton` or `LevenbergMarquardt`, or a sequence of them run one after the other
       (e.g. `(Adam(100_000), QuasiNewton(30_000))`, the paper's Adam refined by L-BFGS-B);
       default `default_optimiser(model)`. `epochs=N` is short for `optimiser=Adam(N)`.
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
@@ -88,11 +97,12 @@ def fit(
             raise ValueError("give either epochs (short for optimiser=learn.Adam(epochs)) or optimiser, not both")
         optimiser = Adam(positive_int(epochs, "epochs"))
     stages = model.default_optimiser() if optimiser is None else optimiser
-    if isinstance(stages, (Adam, QuasiNewton)):
+    if isinstance(stages, OPTIMISERS):
         stages = (stages,)
     stages = tuple(stages)
-    if not stages or not all(isinstance(s, (Adam, QuasiNewton)) for s in stages):
-        raise TypeError(f"optimiser must be a learn.Adam or learn.QuasiNewton, or a sequence of them; got {optimiser!r}")
+    if not stages or not all(isinstance(s, OPTIMISERS) for s in stages):
+        raise TypeError("optimiser must be a learn.Adam, learn.QuasiNewton or learn.LevenbergMarquardt, or a sequence "
+                        f"of them; got {optimiser!r}")
     if not isinstance(normalise, (bool, np.bool_)):
         raise TypeError(f"normalise must be True or False; got {normalise!r}")
     if callback is not None and not callable(callback):
@@ -101,9 +111,10 @@ def fit(
         raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
     if checkpoint is not None and sum(isinstance(s, Adam) for s in stages) != 1:
         raise ValueError("checkpoint needs exactly one Adam stage in optimiser")
-    if any(isinstance(s, QuasiNewton) and s.warm_start for s in stages) and not model.has_warm_start:
-        raise ValueError(f"QuasiNewton(warm_start=True): a {type(model).__name__} has no warm start (the G-LPNet's "
-                         "identity warm start); use warm_start=False")
+    for s in stages:
+        if getattr(s, "warm_start", False) and not model.has_warm_start:
+            raise ValueError(f"{type(s).__name__}(warm_start=True): a {type(model).__name__} has no warm start (the "
+                             "G-LPNet's identity warm start); use warm_start=False")
     progress = show_progress(progress)
     if isinstance(data, Observations):
         if checkpoint is not None:
@@ -170,6 +181,8 @@ def _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progre
         if isinstance(stage, Adam):
             model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress,
                                          report, desc)
+        elif isinstance(stage, LevenbergMarquardt):
+            model, rec, hist = run_levenberg_marquardt(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
         else:
             model, rec, hist = run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
         hist = dict(hist, epoch=hist["epoch"] + offset)

@@ -15,10 +15,11 @@ from integrators import Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._fit import QuasiNewton, fit, fit_observations, training_record
+from ._fit import fit, fit_observations, training_record
 from ._glpnet import GLPNet, check_method
 from ._learned_terms import RidgeTerms
 from ._observed import TrajectoryLoss, information_criterion
+from ._optimisers import LevenbergMarquardt, QuasiNewton
 from ._record import TrainingRecord
 
 
@@ -27,7 +28,7 @@ def fit_splitting(
     data: Trajectories | Observations | tuple[ArrayLike, ArrayLike],
     method: Any = TripleJump,
     *,
-    iterations: int = 1000,
+    iterations: int | None = None,
     loss: TrajectoryLoss | None = None,
     activation: str | None = None,
     key: int | jax.Array = 0,
@@ -42,14 +43,16 @@ def fit_splitting(
     1. **Strang.** `GLPNet(system, n, method=Strang, linear_term=True)`: one module per basis
        direction $e_k$ ($n$ = `system.dim`), $\Phi_k' = a_k\sigma(x) + e_kx + b_k$, whose step
        is the Strang splitting of $\widetilde H = \sum_k\Phi_k(c_ky_k)$, order 2. Fitted by
-       BFGS (`iterations`) from the identity warm start (`QuasiNewton(..., warm_start=True)`).
+       BFGS (`iterations`, default 1000) from the identity warm start
+       (`QuasiNewton(..., warm_start=True)`).
     2. **Refit by `method`** (default `integrators.splitting.TripleJump`; `None` stops at
        step 1): the same learned pieces composed by `method`, fitted again by BFGS from there:
        the pieces move from the modified Hamiltonian of the Strang fit to that of the method.
        Both stages are exact Poisson maps for any weights.
 
     With `integrators.Observations` (noisy states at uneven times) the G-LPNet is composed by
-    `method` from the start and fitted by BFGS with `loss` (default `learn.TrajectoryLoss()`:
+    `method` from the start and fitted by Levenberg-Marquardt (`learn.LevenbergMarquardt`,
+    `iterations` steps at most, default 200) with `loss` (default `learn.TrajectoryLoss()`:
     whole trajectories rolled out at their own intervals, initial states fitted with the map).
     Without `activation`, three nested families of $\widetilde H$ are fitted, each from the
     last: quadratic and even ($\Phi_k' = a_k x$), quadratic ($+ b_k$), and general (sigmoid,
@@ -71,7 +74,9 @@ def fit_splitting(
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
     if isinstance(data, Observations):
         method = Strang if method is None else method
+        iterations = LM_ITERATIONS if iterations is None else iterations
         return _fit_observed(system, data, method, loss, activation, iterations, key, common)
+    iterations = BFGS_ITERATIONS if iterations is None else iterations
     if loss is not None:
         raise ValueError("loss= is for observations (integrators.Observations); pairs and Trajectories are fitted on "
                          "the one-step state loss")
@@ -85,9 +90,12 @@ def fit_splitting(
     return fitted, (first, second)
 
 
-#: Each fit to observations stops once 20 BFGS iterations lower the loss by less than this
-#: fraction: noisy data put a floor under the loss long before `iterations`, and exact data
-#: keep lowering it by more (BENCHMARKS.md, "Learning from observations").
+#: BFGS iterations per stage on pairs, Levenberg-Marquardt steps per stage on observations.
+BFGS_ITERATIONS, LM_ITERATIONS = 1000, 200
+
+#: Each fit to observations stops once 3 Levenberg-Marquardt steps lower the loss by less
+#: than this fraction: noisy data put a floor under the loss long before `iterations`, and
+#: exact data keep lowering it by more (BENCHMARKS.md, "Learning from observations").
 RTOL = 1e-10
 
 #: The nested families of learned Hamiltonians `fit_splitting` chooses from on observations:
@@ -111,11 +119,11 @@ def _fit_observed(system, data, method, loss, activation, iterations, key, commo
         # rollouts; starting a family from the fit of the one it contains can stall in the
         # smaller family's basin: BENCHMARKS.md).
         first, *_ = fit_observations(
-            net, data, (QuasiNewton(iterations, "bfgs", warm_start=settings["activation"] != "identity", rtol=RTOL),),
+            net, data, (LevenbergMarquardt(iterations, RTOL, warm_start=settings["activation"] != "identity"),),
             TrajectoryLoss(window=1, latent=False), common["h"], common["validation_fraction"], common["seed"],
             common["progress"], None)
         fitted, records, history, fit_settings, (loss_fn, train) = fit_observations(
-            first.model, data, (QuasiNewton(iterations, "bfgs", rtol=RTOL),), loss, common["h"],
+            first.model, data, (LevenbergMarquardt(iterations, RTOL),), loss, common["h"],
             common["validation_fraction"], common["seed"], common["progress"], None)
         criterion = information_criterion(fitted, loss_fn, *train)
         records[-1] = dataclasses.replace(records[-1], details={**records[-1].details, **criterion, "family": name})

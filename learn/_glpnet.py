@@ -10,7 +10,7 @@ is an exact Poisson map for any weights, whatever the method composing the piece
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import equinox as eqx
@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
 from integrators.internals import check_state, composition_flops
-from integrators.splitting import AbstractSplittingMethod, LieTrotter
+from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
 from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
@@ -125,13 +125,14 @@ class GLPNet(AbstractLearnedMap):
         r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
         return self.terms.vectors()
 
-    def module_flow(self, s: int, t: Any, y: jax.Array) -> jax.Array:
-        r"""The exact flow of $w\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`."""
+    def module_flow(self, s: int | jax.Array, t: Any, y: jax.Array) -> jax.Array:
+        r"""The exact flow of $w\Phi_s(\langle\alpha_s, y\rangle)$ for time `t` (`s` may be traced)."""
         return self.terms.flow(self.system, s, t / self._time_divisor, y)
 
-    def flows(self) -> list[Callable[[Any, jax.Array], jax.Array]]:
-        r"""The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order."""
-        return [functools.partial(self.module_flow, s) for s in range(self.n_modules)]
+    def flows(self) -> IndexedFlows:
+        r"""The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order: one
+        function of the module index (`integrators.splitting.IndexedFlows`), which the method scans."""
+        return IndexedFlows(self.module_flow, self.n_modules)
 
     def step(self, y: jax.Array) -> jax.Array:
         return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)

@@ -114,11 +114,11 @@ class RidgeTerms(eqx.Module):
             return self.c
         return self.c[:, None] * jnp.eye(self.dim)[jnp.asarray(self.order)]
 
-    def vector(self, s: int) -> jax.Array:
-        r"""$\alpha_s$ alone (a module's flow needs only its own vector)."""
+    def vector(self, s: int | jax.Array) -> jax.Array:
+        r"""$\alpha_s$ alone (a module's flow needs only its own vector; `s` may be traced)."""
         if self.full_vectors:
             return self.c[s]
-        return jnp.zeros(self.dim, self.c.dtype).at[self.order[s]].set(self.c[s])
+        return jnp.zeros(self.dim, self.c.dtype).at[jnp.asarray(self.order)[s]].set(self.c[s])
 
     def reinitialised(self, key: int | jax.Array) -> RidgeTerms:
         """The same family of pieces with fresh parameters from `key`."""
@@ -131,7 +131,7 @@ class RidgeTerms(eqx.Module):
         object.__setattr__(new, "activation", check_activation(activation))
         return new
 
-    def flow(self, system: AbstractPoissonSystem, s: int, t: Any, y: jax.Array) -> jax.Array:
+    def flow(self, system: AbstractPoissonSystem, s: int | jax.Array, t: Any, y: jax.Array) -> jax.Array:
         r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
         alpha = self.vector(s)

@@ -199,6 +199,30 @@ class ObservationLoss:
         zero where no observation is."""
         return self.squared(fitted, inputs, targets, residuals=True)
 
+    def jacobian(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""`(residuals (n,), Jacobian (n, p + S d))` with respect to the flat trainable leaves
+        of `fitted` (the map's $p$ weights, then its $S$ starts of dimension $d$), built from
+        its blocks: segment $s$ depends on the weights and on its own start only (training
+        segments: `index` is their row), so $p + d$ forward passes (the same $d$ directions
+        pushed into every start at once) instead of $p + Sd$ (`learn.LevenbergMarquardt`)."""
+        params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
+        flat, unravel = jax.flatten_util.ravel_pytree(params)
+
+        def residuals(w, s):
+            return self.residuals(Fitted(eqx.combine(unravel(w), static), s), inputs, targets)
+
+        r = residuals(flat, fitted.starts)
+        by_weight = jax.jacfwd(residuals)(flat, fitted.starts)  # (S, L, dim, p)
+        n_seg, dim = fitted.starts.shape
+
+        def push(direction):
+            return jax.jvp(lambda s: residuals(flat, s), (fitted.starts,), (jnp.broadcast_to(direction, (n_seg, dim)),))[1]
+
+        by_start = jax.vmap(push, out_axes=-1)(jnp.eye(dim, dtype=flat.dtype))  # (S, L, dim, d)
+        blocks = by_start[:, :, :, None, :] * jnp.eye(n_seg, dtype=flat.dtype)[:, None, None, :, None]
+        rows = r.size
+        return r.reshape(-1), jnp.concatenate([by_weight.reshape(rows, -1), blocks.reshape(rows, -1)], axis=1)
+
     def squared(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array, residuals: bool = False):
         """`(squared differences (S, L), mask (S, L))`, or the differences `(S, L, dim)`."""
         inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)

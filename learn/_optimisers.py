@@ -88,7 +88,37 @@ class QuasiNewton:
         positive_int(self.restarts, "QuasiNewton.restarts")
 
 
-Optimiser = Adam | QuasiNewton
+@dataclasses.dataclass(frozen=True)
+class LevenbergMarquardt:
+    r"""Levenberg-Marquardt (optimistix, damped Gauss-Newton steps solved by lineax QR) on the
+    residuals of a least-squares loss: every loss of `learn.fit` (pairs: the state and alpha
+    losses; observations: `learn.TrajectoryLoss`), compiled in chunks of 5 steps.
+
+    For a few dozen to a few hundred parameters it reaches the minimum of a least-squares loss
+    in tens of steps where BFGS takes hundreds (BENCHMARKS.md); each step costs one Jacobian
+    ($p$ forward passes; with fitted starts, $p + d$: `ObservationLoss.block_residuals`), so
+    for the thousands of weights of an MLP use `QuasiNewton`.
+
+    `iterations`: steps at most (rounded up to a chunk); `rtol`: stop once a chunk lowers the
+    loss by less than `rtol` of its value; `warm_start`: as `QuasiNewton`'s (half the steps on
+    the simpler map a G-LPNet offers, then the rest from its fit). The result is kept only if
+    it lowers the selection loss (validation, or training without a validation set).
+    """
+
+    iterations: int = 200
+    rtol: float = 1e-10
+    warm_start: bool = False
+
+    def __post_init__(self):
+        positive_int(self.iterations, "LevenbergMarquardt.iterations")
+        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
+            raise ValueError(f"LevenbergMarquardt.rtol must be a number in [0, 1); got {self.rtol!r}")
+        if not isinstance(self.warm_start, (bool, np.bool_)):
+            raise TypeError(f"LevenbergMarquardt.warm_start must be True or False; got {self.warm_start!r}")
+
+
+Optimiser = Adam | QuasiNewton | LevenbergMarquardt
+OPTIMISERS = (Adam, QuasiNewton, LevenbergMarquardt)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -149,7 +149,7 @@ def differences(theta) -> np.ndarray:
     return theta[i] - theta[j]
 
 
-def fit_glpnet(protocol: Protocol, data: it.Observations, seed: int, iterations: int = 1000, **kwargs):
+def fit_glpnet(protocol: Protocol, data: it.Observations, seed: int, iterations: int | None = None, **kwargs):
     model, records = learn.fit_splitting(protocol.system, data, key=seed, seed=seed, validation_fraction=0.0,
                                          iterations=iterations, progress=False, **kwargs)
     chosen = records[-1].stages[-1].details
@@ -162,11 +162,11 @@ def fit_glpnet(protocol: Protocol, data: it.Observations, seed: int, iterations:
     return model, extra
 
 
-def fit_limit(protocol: Protocol, data: it.Observations, seed: int, iterations: int = 500):
+def fit_limit(protocol: Protocol, data: it.Observations, seed: int, iterations: int = 200):
     model = learn.ParametricHamiltonian(protocol.system, protocol.family, np.ones(len(protocol.true_theta)),
                                         substeps=10)
     fitted, record = learn.fit(model, data, loss=learn.TrajectoryLoss(),
-                               optimiser=learn.QuasiNewton(iterations, "bfgs", rtol=1e-12), validation_fraction=0.0,
+                               optimiser=learn.LevenbergMarquardt(iterations, rtol=1e-12), validation_fraction=0.0,
                                seed=seed, progress=False)
     extra: dict[str, Any] = {"train_loss": record.train_loss, "theta": np.asarray(fitted.theta)}
     if protocol.system.name == "RigidBody":
@@ -270,7 +270,8 @@ class Profile:
     systems: tuple[str, ...]
     noises: tuple[float, ...]
     samplings: tuple[str, ...]
-    iterations: int
+    iterations: int  # the MLP's L-BFGS-B iterations (after 10x as many Adam epochs)
+    steps: int = 200  # Levenberg-Marquardt steps per stage: the G-LPNet and the limit
     n_trajectories: int | None = None  # the protocol's when None
     n_observations: int | None = None
     test_steps: int = STEPS_TEST
@@ -278,8 +279,8 @@ class Profile:
 
 PROFILES = {
     # "smoke" exercises the pipeline in seconds (tests): one system, small data, few iterations.
-    "smoke": Profile(("rigid body",), (1e-3,), ("regular",), iterations=30, n_trajectories=6, n_observations=6,
-                     test_steps=50),
+    "smoke": Profile(("rigid body",), (1e-3,), ("regular",), iterations=30, steps=20, n_trajectories=6,
+                     n_observations=6, test_steps=50),
     "quick": Profile(("rigid body",), (0.0, 1e-3, 1e-2), ("regular", "uneven"), iterations=1000),
     "full": Profile(("rigid body", "Kirchhoff", "diamond"), (0.0, 1e-3, 1e-2), ("regular", "uneven"),
                     iterations=1000),
@@ -305,7 +306,7 @@ class W2(AbstractExperiment):
                 for name in models:
                     if not applies(name, sampling):
                         continue
-                    kwargs = {"iterations": P.iterations} if name != "SINDy" else {}
+                    kwargs = {"SINDy": {}, "MLP": {"iterations": P.iterations}}.get(name, {"iterations": P.steps})
                     row = {"system": system, "noise": noise, "sampling": sampling,
                            **evaluate(protocol, name, data, y0, reference, **kwargs)}
                     rows.append(row)
@@ -430,7 +431,7 @@ EXPERIMENT = W2()
 
 
 def bootstrap_differences(protocol: Protocol, data: it.Observations, n: int, seed: int = 0,
-                          iterations: int = 1000) -> np.ndarray:
+                          iterations: int | None = None) -> np.ndarray:
     """The rigid body's identified 1/I_i - 1/I_j from `n` G-LPNets, each fitted to the
     trajectories of `data` resampled with replacement (seeded): `(n, 3)`, their spread the
     uncertainty of the recovered differences."""

@@ -2,7 +2,9 @@ r"""Lie-Trotter splitting (order 1)."""
 
 from __future__ import annotations
 
-from ._base import AbstractSplittingMethod
+import numpy as np
+
+from ._base import AbstractSplittingMethod, IndexedFlows
 
 
 class LieTrotter(AbstractSplittingMethod):
@@ -13,6 +15,8 @@ class LieTrotter(AbstractSplittingMethod):
 
     @classmethod
     def compose(cls, flows, y, h):
+        if isinstance(flows, IndexedFlows):
+            return flows.scan(np.arange(len(flows)), np.ones(len(flows)), h, y)
         for flow in flows:
             y = flow(h, y)
         return y

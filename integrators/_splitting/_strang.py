@@ -2,7 +2,9 @@ r"""Strang splitting (order 2, symmetric): the basic step of every composition m
 
 from __future__ import annotations
 
-from ._base import AbstractSplittingMethod
+import numpy as np
+
+from ._base import AbstractSplittingMethod, IndexedFlows
 
 
 class Strang(AbstractSplittingMethod):
@@ -17,6 +19,9 @@ class Strang(AbstractSplittingMethod):
     @classmethod
     def compose(cls, flows, y, h):
         n = len(flows)
+        if isinstance(flows, IndexedFlows):
+            order = np.r_[np.arange(n - 1), n - 1, np.arange(n - 2, -1, -1)]
+            return flows.scan(order, np.where(order == n - 1, 1.0, 0.5), h, y)
         for k in range(n - 1):
             y = flows[k](0.5 * h, y)
         y = flows[n - 1](h, y)

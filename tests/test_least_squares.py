@@ -1,0 +1,184 @@
+"""`learn.LevenbergMarquardt` (least squares on the residuals of a loss), the block Jacobian of
+the observation loss it uses, and `integrators.splitting.IndexedFlows` (a G-LPNet's modules
+composed in a scan): minima known in closed form, Jacobians against `jax.jacfwd`, scanned
+steps against unrolled ones."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.optimize
+
+import integrators as it
+import learn
+import liepoisson as lp
+from integrators.internals import composition_flops
+from integrators.splitting import METHODS, IndexedFlows, Strang, TripleJump
+from learn._least_squares import run_levenberg_marquardt
+from learn._losses import MeanSquares
+from learn._observed import Fitted, observed_objective
+
+EPS = np.finfo(np.float64).eps
+BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
+
+
+class _Curve(eqx.Module):
+    """y = a exp(b x) + c: a nonlinear least-squares problem with a known minimum."""
+
+    theta: jax.Array
+
+    def warm_start(self):
+        return None
+
+
+def _curve_residuals(model, x, y):
+    a, b, c = model.theta
+    return a * jnp.exp(b * x) + c - y
+
+
+CURVE_LOSS = MeanSquares(_curve_residuals, "curve")
+
+
+def _fit_curve(theta0, y, stage):
+    x = jnp.linspace(0.0, 1.0, 40)
+    empty = (jnp.zeros(0), jnp.zeros(0))
+    return run_levenberg_marquardt(stage, _Curve(jnp.asarray(theta0)), (x, y), empty, CURVE_LOSS, 0, False, None)
+
+
+def test_levenberg_marquardt_finds_the_exact_minimum_of_a_nonlinear_fit():
+    x = jnp.linspace(0.0, 1.0, 40)
+    truth = np.array([2.0, -1.5, 0.3])
+    y = truth[0] * jnp.exp(truth[1] * x) + truth[2]
+    fitted, rec, hist = _fit_curve([1.0, 0.0, 0.0], y, learn.LevenbergMarquardt(100, rtol=0.0))
+    # exact data: the minimum is the truth with zero residual. The parameters are determined to
+    # the conditioning of J (~1e3 here) times eps of the residuals' scale: 1e4 eps is generous.
+    np.testing.assert_allclose(np.asarray(fitted.theta), truth, rtol=0, atol=1e4 * EPS)
+    assert rec.kept and rec.optimiser == "LevenbergMarquardt" and rec.train_loss < 1e-25
+    assert rec.iterations == len(hist["train_loss"]) < 100  # stops when no damping lowers the loss further
+    assert np.all(np.diff(hist["train_loss"]) <= 0)  # every accepted step lowers the loss
+
+
+def test_levenberg_marquardt_minimum_of_noisy_data_is_the_normal_equations_solution():
+    # an independent reference: scipy's trust-region least squares at its tightest tolerances
+    x = np.linspace(0.0, 1.0, 40)
+    y = 2.0 * np.exp(-1.5 * x) + 0.3 + 1e-2 * np.random.default_rng(0).normal(size=x.size)
+    ref = scipy.optimize.least_squares(lambda t: t[0] * np.exp(t[1] * x) + t[2] - y, [1.0, 0.0, 0.0],
+                                       xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    fitted, _, _ = _fit_curve([1.0, 0.0, 0.0], jnp.asarray(y), learn.LevenbergMarquardt(200, rtol=0.0))
+    # Both stop where the sum of squares S ~ 4e-3 no longer changes in floating point: a
+    # parameter error d changes S by ~ lambda_min(J^T J) d^2, so the minimiser is determined
+    # only to sqrt(eps S / lambda_min) ~ 3e-9 (lambda_min = 0.08 for this exponential fit);
+    # measured 1.1e-9 apart.
+    np.testing.assert_allclose(np.asarray(fitted.theta), ref, rtol=0, atol=1e-8)
+
+
+def test_levenberg_marquardt_keeps_the_start_when_it_cannot_improve():
+    x = jnp.linspace(0.0, 1.0, 40)
+    truth = jnp.asarray([2.0, -1.5, 0.3])
+    y = truth[0] * jnp.exp(truth[1] * x) + truth[2]
+    fitted, rec, _ = _fit_curve(truth, y, learn.LevenbergMarquardt(10))
+    assert not rec.kept and rec.train_loss == 0.0
+    np.testing.assert_array_equal(np.asarray(fitted.theta), np.asarray(truth))
+
+
+def test_levenberg_marquardt_is_deterministic():
+    x = jnp.linspace(0.0, 1.0, 40)
+    y = 2.0 * jnp.exp(-1.5 * x) + 0.3 + 1e-2 * jnp.sin(17 * x)
+    a = _fit_curve([1.0, 0.0, 0.0], y, learn.LevenbergMarquardt(50))[0]
+    b = _fit_curve([1.0, 0.0, 0.0], y, learn.LevenbergMarquardt(50))[0]
+    np.testing.assert_array_equal(np.asarray(a.theta), np.asarray(b.theta))
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"iterations": 0}, ValueError, "LevenbergMarquardt.iterations"),
+    ({"rtol": -1e-3}, ValueError, r"LevenbergMarquardt.rtol must be a number in \[0, 1\)"),
+    ({"rtol": True}, ValueError, "LevenbergMarquardt.rtol"),
+    ({"warm_start": "yes"}, TypeError, "LevenbergMarquardt.warm_start must be True or False"),
+])
+def test_bad_levenberg_marquardt_settings(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        learn.LevenbergMarquardt(**kwargs)
+
+
+def test_levenberg_marquardt_needs_a_least_squares_loss():
+    def loss(model, x, y):
+        return jnp.sum(jnp.abs(model.theta))
+
+    with pytest.raises(ValueError, match="needs a least-squares loss"):
+        run_levenberg_marquardt(learn.LevenbergMarquardt(5), _Curve(jnp.ones(3)), (jnp.zeros(3), jnp.zeros(3)),
+                                (jnp.zeros(0), jnp.zeros(0)), loss, 0, False, None)
+
+
+def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observations():
+    """`learn.fit(..., optimiser=learn.LevenbergMarquardt())` with fitted starts: the block
+    Jacobian path, end to end."""
+    y = np.random.default_rng(0).normal(size=(5, 3))
+    y0 = y / np.linalg.norm(y, axis=1, keepdims=True)
+    data = it.observe(BODY, y0, it.uneven_times(5, 9, (0.05, 0.3), seed=1))
+    model = learn.ParametricHamiltonian(BODY, lambda y, d: 0.5 * jnp.sum(d * y**2), np.ones(3))
+    fitted, record = learn.fit(model, data, optimiser=learn.LevenbergMarquardt(100), validation_fraction=0.0,
+                               progress=False)
+    theta = np.asarray(fitted.theta)
+    want = 1.0 / np.array([2.0, 1.0, 2 / 3])
+    # only differences are identified (a multiple of |y|^2 is a Casimir); RK4's truncation error
+    # (10 sub-steps of at most 0.03) moves them by ~1e-10 (the same test with BFGS: 2e-10)
+    np.testing.assert_allclose(theta[:, None] - theta[None, :], want[:, None] - want[None, :], rtol=0, atol=1e-8)
+    assert record.stages[-1].optimiser == "LevenbergMarquardt" and record.train_loss < 1e-18
+
+
+def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
+    data = it.observe(BODY, np.eye(3), it.uneven_times(3, 7, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
+    net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True), method=TripleJump)
+    fitted, (X, T), _, loss_fn, _ = observed_objective(net, data, None, None, 0.0, 0)
+    X, T = jnp.asarray(X), jnp.asarray(T)
+    params, static = eqx.partition(fitted, eqx.is_inexact_array)
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+    assert isinstance(fitted, Fitted) and fitted.starts.shape == (3, 3)
+
+    def residuals(x):
+        return loss_fn.residuals(eqx.combine(unravel(x), static), X, T).reshape(-1)
+
+    r, J = loss_fn.jacobian(fitted, X, T)
+    np.testing.assert_array_equal(np.asarray(r), np.asarray(residuals(flat)))
+    full = np.asarray(jax.jacfwd(residuals)(flat))
+    assert J.shape == full.shape == (r.size, flat.size)
+    # the same derivatives, summed in another order: round-off relative to the largest entry
+    np.testing.assert_allclose(np.asarray(J), full, rtol=0, atol=100 * EPS * np.max(np.abs(full)))
+    assert np.count_nonzero(full[:, -9:]) < full[:, -9:].size  # the starts' columns are block-sparse
+
+
+# -- IndexedFlows: a G-LPNet's modules composed in a scan ---------------------------------------
+@pytest.mark.parametrize("method", [m for m in METHODS if m.__name__ != "BlanesMoan4"], ids=lambda m: m.__name__)
+def test_scanned_glpnet_step_is_the_unrolled_composition(method):
+    net = learn.GLPNet(BODY, 4, key=3, method=method, linear_term=True, h=0.1)
+    flows = net.flows()
+    assert isinstance(flows, IndexedFlows) and len(flows) == 4
+    y = jnp.asarray([0.3, -0.8, 0.5])
+    scanned = net.step(y)
+    unrolled = method.compose(list(flows), y, net.h)
+    # the same flows with the same times (0.5 * h against a traced weight 0.5 times h: equal):
+    # XLA may fuse differently, so a few eps
+    np.testing.assert_allclose(np.asarray(scanned), np.asarray(unrolled), rtol=0, atol=8 * EPS)
+
+
+def test_flop_count_counts_every_scanned_flow():
+    net = learn.GLPNet(BODY, 4, key=3, method=Strang, h=0.1)
+    one = learn.GLPNet(BODY, 1, key=3, method=Strang, h=0.1)
+    # Strang over 4 modules evaluates 7 flows, over 1 module one: XLA counts a scan body once,
+    # so a count that saw the scan would give ~1x, not ~7x
+    assert 5 < composition_flops(net, Strang) / composition_flops(one, Strang) < 9
+
+
+def test_indexed_flows_is_a_sequence_of_flows():
+    calls = []
+
+    def flow(k, t, y):
+        calls.append(k)
+        return y + k * t
+
+    flows = IndexedFlows(flow, 3)
+    assert len(flows) == 3 and len(flows[1:]) == 2
+    assert float(flows[-1](0.5, 1.0)) == 2.0 and calls[-1] == 2
+    with pytest.raises(IndexError, match="flow index 3 out of range for 3 flows"):
+        flows[3]
