@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="Levenberg-Marquardt steps per stage of the G-LPNet and the limit (default 200), "
                              "L-BFGS-B iterations of the MLP (default 1000)")
     parser.add_argument("--window", type=int, default=None, help="the G-LPNet's loss: intervals per segment")
+    parser.add_argument("--max-step", type=float, default=None,
+                        help="the G-LPNet's loss: run each interval in equal sub-steps of at most this")
     parser.add_argument("--observed-starts", action="store_true",
                         help="the G-LPNet's loss: segments start from their first observation (no errors in variables)")
     parser.add_argument("--bootstrap", type=int, default=0,
@@ -60,8 +62,9 @@ def main(argv: list[str] | None = None) -> None:
                         kwargs["iterations"] = args.iterations
                     if name == "G-LPNet" and args.activation:
                         kwargs["activation"] = args.activation
-                    if name == "G-LPNet" and (args.window or args.observed_starts):
-                        kwargs["loss"] = learn.TrajectoryLoss(window=args.window, latent=not args.observed_starts)
+                    if name == "G-LPNet" and (args.window or args.observed_starts or args.max_step):
+                        kwargs["loss"] = learn.TrajectoryLoss(window=args.window, latent=not args.observed_starts,
+                                                              max_step=args.max_step)
                     row = {"system": system, "noise": noise, "sampling": sampling, "data_seed": args.data_seed,
                            **w2.evaluate(protocol, name, data, y0, reference, seed=args.seed, **kwargs)}
                     rows.append(row)
