@@ -12,7 +12,7 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 SMALLER_BUDGETS = {
     "learn.Adam(30_000)": "learn.Adam(200)",
     "learn.QuasiNewton(5_000)": "learn.QuasiNewton(20)",
-    "learn.fit_splitting(body, obs, iterations=1000, validation_fraction=0.0)": (
+    "learn.fit_splitting(body, obs, validation_fraction=0.0)": (
         "learn.fit_splitting(body, obs, iterations=10, validation_fraction=0.0, activation='identity', "
         "progress=False)"
     ),
