@@ -87,7 +87,7 @@ def fit(
       first (inputs: mean/std of $y_0$; outputs: of the pairs' parameters for an LPNet, of
       $y_1 - y_0$ for the baseline). Default `False`: a plain MLP as in the paper (what
       normalising does on E1 is in BENCHMARKS.md).
-    - `checkpoint`: a `Checkpoint` for the Adam stage.
+    - `checkpoint`: a `Checkpoint` for the Adam or Levenberg-Marquardt stage.
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal); `callback(learn.Progress)`: called as training
       goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
@@ -109,8 +109,8 @@ def fit(
         raise TypeError(f"callback must be callable as callback(learn.Progress); got {callback!r}")
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
         raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
-    if checkpoint is not None and sum(isinstance(s, Adam) for s in stages) != 1:
-        raise ValueError("checkpoint needs exactly one Adam stage in optimiser")
+    if checkpoint is not None and sum(isinstance(s, (Adam, LevenbergMarquardt)) for s in stages) != 1:
+        raise ValueError("checkpoint needs exactly one Adam or LevenbergMarquardt stage in optimiser")
     for s in stages:
         if getattr(s, "warm_start", False) and not model.has_warm_start:
             raise ValueError(f"{type(s).__name__}(warm_start=True): a {type(model).__name__} has no warm start (the "
@@ -182,7 +182,8 @@ def _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progre
             model, rec, hist = _run_adam(stage, model, (X, T), (Xv, Tv), loss_fn, settings, checkpoint, progress,
                                          report, desc)
         elif isinstance(stage, LevenbergMarquardt):
-            model, rec, hist = run_levenberg_marquardt(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
+            model, rec, hist = run_levenberg_marquardt(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report,
+                                                       checkpoint, settings)
         else:
             model, rec, hist = run_quasi_newton(stage, model, (X, T), (Xv, Tv), loss_fn, seed, progress, report)
         hist = dict(hist, epoch=hist["epoch"] + offset)

@@ -15,6 +15,7 @@ compiling a G-LPNet fit that runs in 7 s (BENCHMARKS.md, "Second-order optimiser
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 
 import equinox as eqx
@@ -25,6 +26,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from tqdm.auto import tqdm
 
+from . import _checkpoint
 from ._observed import Fitted
 from ._optimisers import LevenbergMarquardt
 from ._quasi_newton import _compiled
@@ -87,10 +89,12 @@ def _damped_step(A, g, D, lam):
 
 
 def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_fn, seed: int, progress: bool,
-                            report):
+                            report, checkpoint=None, settings=None):
     """Minimise the loss's residuals from `model` (after the warm start it offers, if asked);
     the result is kept if it lowers the selection loss (validation, or training without a
-    validation set)."""
+    validation set). With a `learn.Checkpoint`, the state (weights, damping, Marquardt
+    scaling, history, phase) is written every `checkpoint.every` steps and at the end, and a
+    run with `resume` continues from the file, bit-identical to an uninterrupted one."""
     del seed  # one deterministic start
     if not hasattr(loss_fn, "residuals"):
         raise ValueError(f"learn.LevenbergMarquardt needs a least-squares loss (one with residuals); {loss_fn!r} has "
@@ -107,6 +111,9 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
         crit = val_loss if has_val else train_loss
         return (crit if np.isfinite(crit) else np.inf), train_loss, val_loss
 
+    settings = {**(settings or {}), **dataclasses.asdict(stage)}
+    saved = _Saved(checkpoint, model, settings) if checkpoint is not None else None
+    resumed = saved.read() if saved is not None and checkpoint.resume and os.path.exists(checkpoint.path) else None
     iterations = stage.iterations
     history: list[float] = []
     current = model
@@ -114,11 +121,17 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
     if warm is not None:
         simpler, to_model = warm
         first = max(1, iterations // 2)
-        simpler, values = _minimise(stage.rtol, simpler, X, T, loss_fn, first, progress, f"{name} (warm start)")
-        history += values
-        current = to_model(simpler, X)
+        if resumed is None or resumed["phase"] == 0:
+            simpler, values = _minimise(stage.rtol, simpler, X, T, loss_fn, first, progress, f"{name} (warm start)",
+                                        saved, 0, resumed)
+            resumed = None
+            history += values
+            current = to_model(simpler, X)
+        else:
+            history += resumed["warm_history"]
         iterations = max(1, iterations - first)
-    fitted, values = _minimise(stage.rtol, current, X, T, loss_fn, iterations, progress, name)
+    fitted, values = _minimise(stage.rtol, current, X, T, loss_fn, iterations, progress, name, saved, 1, resumed,
+                               history)
     history += values
     crit, train_loss, val_loss = losses(fitted)
     crit0, train0, val0 = losses(model)
@@ -137,29 +150,79 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
     return (fitted if kept else model), rec, hist
 
 
-def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc):
+class _Saved:
+    """A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` and
+    `best` the current weights (every accepted step lowers the loss), `optimizer` the damping
+    $\\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
+    `phase` 0 while fitting the warm start's simpler map, 1 after."""
+
+    def __init__(self, checkpoint, model, settings):
+        self.path = os.fspath(checkpoint.path)
+        self.every = checkpoint.every
+        self.model = model
+        self.settings = settings
+        self.attrs = model.file_attributes()
+
+    def read(self) -> dict:
+        attrs, groups = _checkpoint.read_resumable(self.path, self.model, self.settings)
+        lam, nu, D = groups["optimizer"]
+        losses = list(np.asarray(groups["history"]["train_loss"]))
+        phase = int(attrs.get("phase", 1))
+        done = int(attrs["epoch"])
+        return {"phase": phase, "weights": groups["weights"], "lam": float(lam), "nu": float(nu), "D": np.asarray(D),
+                "values": losses[len(losses) - done:] if phase == 1 else losses,
+                "warm_history": losses[: len(losses) - done] if phase == 1 else [],
+                "elapsed": float(attrs["elapsed_s"])}
+
+    def write(self, phase, model, lam, nu, D, values, earlier, elapsed):
+        leaves = _checkpoint.array_leaves(model)
+        losses = np.asarray([*earlier, *values])
+        _checkpoint.write(self.path, {**self.attrs, "epoch": len(values), "best_epoch": len(losses),
+                                      "best_loss": float(losses[-1]) if losses.size else float("nan"),
+                                      "elapsed_s": float(elapsed), "fit_settings": self.settings, "phase": phase},
+                          {"weights": leaves, "best": leaves,
+                           "optimizer": [np.asarray(lam), np.asarray(nu), np.asarray(D)],
+                           "history": {"epoch": np.arange(1, losses.size + 1), "train_loss": losses,
+                                       "val_loss": np.full(losses.size, np.nan)}})
+
+
+def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None, phase=1, resumed=None,
+              earlier=()):
     """`(model, losses)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
-    once the loss has fallen by less than `rtol` of its value over the last `WINDOW`
-    steps, or no damping finds a lower loss; the loss after each step."""
+    once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
+    or no damping finds a lower loss; the loss after each step. With `saved`, the state is
+    written every `saved.every` steps and at the end; `resumed` continues from a read state."""
+    start = time.perf_counter()
+    if resumed is not None:
+        model = _checkpoint.replace_array_leaves(model, resumed["weights"], "weights")
     params, static = eqx.partition(model, eqx.is_inexact_array)
     fn = _compiled(("residuals", _Residuals(loss_fn, static, params)), lambda: _Residuals(loss_fn, static, params))
     x = ravel_pytree(params)[0]
     r, J = fn.jacobian(x, X, T)
     cost = float(r @ r)
-    scale = cost / float(evaluate_loss(fn, loss_fn, x, X, T)) if cost > 0 else 1.0  # sum r^2 -> the loss
-    D = None
-    lam, nu = None, 2.0
+    # the loss is sum r^2 / n for n the residuals it counts (an integer: rounded, so that a
+    # resumed run divides by the same number)
+    scale = float(round(cost / float(evaluate_loss(fn, loss_fn, x, X, T)))) if cost > 0 else 1.0
+    D, lam, nu = None, 1e-3, 2.0
     values: list[float] = []
-    bar = tqdm(total=iterations, disable=not progress, desc=desc, unit="it", leave=False)
+    elapsed0 = 0.0
+    if resumed is not None:
+        D, lam, nu = jnp.asarray(resumed["D"]), resumed["lam"], resumed["nu"]
+        values, elapsed0 = list(resumed["values"]), resumed["elapsed"]
+    last_saved = len(values)
+
+    def save():
+        if saved is not None:
+            saved.write(phase, fn.model(x), lam, nu, D, values, earlier, elapsed0 + time.perf_counter() - start)
+
+    bar = tqdm(total=iterations, initial=len(values), disable=not progress, desc=desc, unit="it", leave=False)
     try:
-        for _ in range(iterations):
-            if not np.isfinite(cost):
+        while len(values) < iterations:
+            if not np.isfinite(cost) or _converged(values, rtol):
                 break
             A, g = _normal_equations(r, J)
             diag = jnp.maximum(jnp.diag(A), jnp.finfo(A.dtype).tiny)
             D = diag if D is None else jnp.maximum(D, diag)
-            if lam is None:
-                lam = 1e-3
             accepted = False
             for _ in range(MAX_TRIALS):
                 delta = _damped_step(A, g, D, lam)
@@ -183,13 +246,22 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc):
             values.append(cost / scale)
             bar.update(1)
             bar.set_postfix(loss=f"{values[-1]:.3g}")
-            if rtol > 0 and len(values) > WINDOW:
-                before = values[-1 - WINDOW]
-                if before - values[-1] <= rtol * abs(before):
-                    break
+            if saved is not None and len(values) - last_saved >= saved.every:
+                save()
+                last_saved = len(values)
     finally:
         bar.close()
+    if saved is not None and D is not None and len(values) != last_saved:
+        save()
     return fn.model(x), values
+
+
+def _converged(values, rtol) -> bool:
+    """Whether the loss fell by less than `rtol` of its value over the last `WINDOW` steps."""
+    if rtol <= 0 or len(values) <= WINDOW:
+        return False
+    before = values[-1 - WINDOW]
+    return before - values[-1] <= rtol * abs(before)
 
 
 def evaluate_loss(fn, loss_fn, x, X, T) -> float:

@@ -123,10 +123,10 @@ OPTIMISERS = (Adam, QuasiNewton, LevenbergMarquardt)
 
 @dataclasses.dataclass(frozen=True)
 class Checkpoint:
-    """Write Adam's state to `path` (HDF5) every `every` epochs and at the end; with `resume`,
-    continue from the file if it exists (epoch, optimiser state, best weights: bit-identical to
-    an uninterrupted run). Checks that the file was written by the same model, data split and
-    Adam settings."""
+    """Write the state of the fit's Adam or Levenberg-Marquardt stage to `path` (HDF5) every
+    `every` epochs or steps and at the end; with `resume`, continue from the file if it exists
+    (epoch, optimiser state, best weights: bit-identical to an uninterrupted run). Checks that
+    the file was written by the same model, data split and optimiser settings."""
 
     path: str | os.PathLike
     every: int = 10_000

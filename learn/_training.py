@@ -19,10 +19,8 @@ import optax
 from tqdm.auto import tqdm
 
 from liepoisson import common_path_first
-from liepoisson.systems import check_system_matches
 
 from . import _checkpoint
-from ._legacy import upgrade_attributes
 
 CHUNK = 1000
 
@@ -84,22 +82,7 @@ def train_adam(
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
     if checkpoint is not None and resume and os.path.exists(checkpoint):
-        attrs, groups = _checkpoint.read_checkpoint(checkpoint, type(model).__name__, upgrade_attributes)
-        try:
-            check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {checkpoint!r}")
-        except ValueError as err:
-            raise ValueError(f"cannot resume: {err}") from None
-        if attrs["hyperparameters"] != _checkpoint.jsonable(model.hyperparameters()):
-            raise ValueError(
-                f"checkpoint {checkpoint!r} was written for a model with hyperparameters "
-                f"{attrs['hyperparameters']}; this model has {model.hyperparameters()}"
-            )
-        for key, value in _checkpoint.jsonable(settings).items():
-            if attrs["fit_settings"].get(key) != value:
-                raise ValueError(
-                    f"checkpoint {checkpoint!r} was written with {key}={attrs['fit_settings'].get(key)!r}; "
-                    f"resume needs the same value, got {key}={value!r}"
-                )
+        attrs, groups = _checkpoint.read_resumable(checkpoint, model, settings)
         params = eqx.filter(_checkpoint.replace_array_leaves(params, groups["weights"], "weights"), eqx.is_array)
         best = eqx.filter(_checkpoint.replace_array_leaves(params, groups["best"], "best"), eqx.is_array)
         opt_state = _checkpoint.replace_array_leaves(opt_state, groups["optimizer"], "optimizer")

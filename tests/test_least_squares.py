@@ -182,3 +182,57 @@ def test_indexed_flows_is_a_sequence_of_flows():
     assert float(flows[-1](0.5, 1.0)) == 2.0 and calls[-1] == 2
     with pytest.raises(IndexError, match="flow index 3 out of range for 3 flows"):
         flows[3]
+
+
+# -- resuming a Levenberg-Marquardt fit ------------------------------------------------------------
+@pytest.fixture(scope="module")
+def glpnet_pairs():
+    y0 = np.random.default_rng(4).uniform(-1.0, 1.0, size=(6, 3))
+    return it.ground_truth(BODY, y0, h=0.1, n_steps=8)
+
+
+# every 3 steps: writes at steps 3, 6, 9, 12 of the warm start, then 3, 6, 9, 12 after it
+@pytest.mark.parametrize("interrupt_at", [2, 6], ids=["in the warm start", "after it"])
+def test_interrupted_levenberg_marquardt_fit_resumes_bit_identically(glpnet_pairs, tmp_path, monkeypatch,
+                                                                     interrupt_at):
+    import learn._checkpoint as ckpt
+    import learn._least_squares as least_squares
+
+    stage = learn.LevenbergMarquardt(24, rtol=0.0, warm_start=True)
+    kwargs = {"optimiser": stage, "validation_fraction": 0.0, "progress": False}
+    net = learn.GLPNet(BODY, n_modules=3, key=1)
+    straight, straight_record = learn.fit(net, glpnet_pairs, **kwargs)
+
+    path = tmp_path / "lm.h5"
+    write, calls = ckpt.write, []
+
+    def interrupted(*args, **kw):
+        write(*args, **kw)
+        calls.append(1)
+        if len(calls) == interrupt_at:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(ckpt, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        learn.fit(net, glpnet_pairs, checkpoint=learn.Checkpoint(path, every=3), **kwargs)
+    monkeypatch.setattr(ckpt, "write", write)
+    steps = []  # one set of normal equations per step taken after the resume
+    normal = least_squares._normal_equations
+    monkeypatch.setattr(least_squares, "_normal_equations", lambda r, J: steps.append(1) or normal(r, J))
+    resumed, resumed_record = learn.fit(net, glpnet_pairs, checkpoint=learn.Checkpoint(path, every=3, resume=True),
+                                        **kwargs)
+    assert len(steps) == 24 - 3 * interrupt_at  # it continued from the file, not from the start
+    for a, b in zip(jax.tree_util.tree_leaves(straight), jax.tree_util.tree_leaves(resumed)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(resumed_record.history["train_loss"], straight_record.history["train_loss"])
+    assert resumed_record.train_loss == straight_record.train_loss
+    assert len(straight_record.history["train_loss"]) == 24  # every step taken: the interruptions came before the end
+    with pytest.raises(ValueError, match="rtol"):
+        learn.fit(net, glpnet_pairs, checkpoint=learn.Checkpoint(path, resume=True),
+                  **{**kwargs, "optimiser": learn.LevenbergMarquardt(24, rtol=1e-3, warm_start=True)})
+
+
+def test_checkpoint_needs_one_adam_or_levenberg_marquardt_stage(glpnet_pairs, tmp_path):
+    with pytest.raises(ValueError, match="exactly one Adam or LevenbergMarquardt stage"):
+        learn.fit(learn.GLPNet(BODY, n_modules=3), glpnet_pairs, optimiser=learn.QuasiNewton(5, "bfgs"),
+                  checkpoint=learn.Checkpoint(tmp_path / "x.h5"), progress=False)
