@@ -35,6 +35,13 @@ from ._record import StageRecord
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
 MAX_TRIALS = 30
 
+#: The largest Jacobian (residuals x unknowns) a step may hold: 1.6 GB of float64.
+MAX_JACOBIAN = 200_000_000
+
+#: The most forward passes (Jacobian columns computed at once) a step may take: `jax.jacfwd`
+#: holds every pass's intermediates together.
+MAX_PASSES = 2000
+
 #: `LevenbergMarquardt(rtol=...)` compares the loss with its value this many steps earlier.
 WINDOW = 3
 
@@ -198,6 +205,14 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
     params, static = eqx.partition(model, eqx.is_inexact_array)
     fn = _compiled(("residuals", _Residuals(loss_fn, static, params)), lambda: _Residuals(loss_fn, static, params))
     x = ravel_pytree(params)[0]
+    n_residuals = jax.eval_shape(fn.residuals, x, X, T).shape[0]
+    passes = x.size - (params.starts.size - params.starts.shape[-1] if fn.blocks else 0)
+    if n_residuals * x.size > MAX_JACOBIAN or passes > MAX_PASSES:
+        raise ValueError(
+            f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {x.size} unknowns, "
+            f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
+            "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
+        )
     r, J = fn.jacobian(x, X, T)
     cost = float(r @ r)
     # the loss is sum r^2 / n for n the residuals it counts (an integer: rounded, so that a

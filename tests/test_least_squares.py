@@ -236,3 +236,10 @@ def test_checkpoint_needs_one_adam_or_levenberg_marquardt_stage(glpnet_pairs, tm
     with pytest.raises(ValueError, match="exactly one Adam or LevenbergMarquardt stage"):
         learn.fit(learn.GLPNet(BODY, n_modules=3), glpnet_pairs, optimiser=learn.QuasiNewton(5, "bfgs"),
                   checkpoint=learn.Checkpoint(tmp_path / "x.h5"), progress=False)
+
+
+def test_levenberg_marquardt_refuses_a_jacobian_too_large_for_memory(glpnet_pairs):
+    net = learn.LPNet(BODY, hidden=(512, 512), key=0)  # 2.7e5 weights: as many forward passes a step
+    with pytest.raises(ValueError, match=r"the Jacobian would be 144 residuals x \d+ unknowns, \d+ forward passes "
+                                         r"\(at most 2000.* use learn.QuasiNewton"):
+        learn.fit(net, glpnet_pairs, optimiser=learn.LevenbergMarquardt(5), validation_fraction=0.0, progress=False)
