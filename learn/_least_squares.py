@@ -158,9 +158,9 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
 
 
 class _Saved:
-    """A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` and
+    r"""A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` and
     `best` the current weights (every accepted step lowers the loss), `optimizer` the damping
-    $\\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
+    $\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
     `phase` 0 while fitting the warm start's simpler map, 1 after."""
 
     def __init__(self, checkpoint, model, settings):
