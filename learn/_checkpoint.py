@@ -15,7 +15,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from integrators.internals import atomic_path, open_hdf5
-from liepoisson.systems import check_system_matches
 
 FORMAT = "learn-model"
 #: 2: learned maps are composed (LPNet + network, Reversible, GLPNet + method); version 1
@@ -157,28 +156,4 @@ def read_checkpoint(
     absent = [k for k in HISTORY if k not in groups["history"]]
     if absent:
         raise ValueError(f"checkpoint {path!r} is damaged: group 'history' lacks {', '.join(map(repr, absent))}")
-    return attrs, groups
-
-
-def read_resumable(path: str, model: Any, settings: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """`read_checkpoint` for resuming the fit of `model` with fit `settings`: `ValueError` if
-    the file was written for another system, architecture or settings."""
-    from ._legacy import upgrade_attributes  # it reads this module's FORMAT_VERSION
-
-    attrs, groups = read_checkpoint(path, type(model).__name__, upgrade_attributes)
-    try:
-        check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {path!r}")
-    except ValueError as err:
-        raise ValueError(f"cannot resume: {err}") from None
-    if attrs["hyperparameters"] != jsonable(model.hyperparameters()):
-        raise ValueError(
-            f"checkpoint {path!r} was written for a model with hyperparameters "
-            f"{attrs['hyperparameters']}; this model has {model.hyperparameters()}"
-        )
-    for key, value in jsonable(settings).items():
-        if attrs["fit_settings"].get(key) != value:
-            raise ValueError(
-                f"checkpoint {path!r} was written with {key}={attrs['fit_settings'].get(key)!r}; "
-                f"resume needs the same value, got {key}={value!r}"
-            )
     return attrs, groups

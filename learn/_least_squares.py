@@ -31,6 +31,7 @@ from ._observed import Fitted
 from ._optimisers import LevenbergMarquardt
 from ._quasi_newton import _compiled
 from ._record import StageRecord
+from ._training import read_resumable
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
 MAX_TRIALS = 30
@@ -171,7 +172,7 @@ class _Saved:
         self.attrs = model.file_attributes()
 
     def read(self) -> dict:
-        attrs, groups = _checkpoint.read_resumable(self.path, self.model, self.settings)
+        attrs, groups = read_resumable(self.path, self.model, self.settings)
         lam, nu, D = groups["optimizer"]
         losses = list(np.asarray(groups["history"]["train_loss"]))
         phase = int(attrs.get("phase", 1))

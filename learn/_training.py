@@ -19,8 +19,10 @@ import optax
 from tqdm.auto import tqdm
 
 from liepoisson import common_path_first
+from liepoisson.systems import check_system_matches
 
 from . import _checkpoint
+from ._legacy import upgrade_attributes
 
 CHUNK = 1000
 
@@ -82,7 +84,7 @@ def train_adam(
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
     if checkpoint is not None and resume and os.path.exists(checkpoint):
-        attrs, groups = _checkpoint.read_resumable(checkpoint, model, settings)
+        attrs, groups = read_resumable(checkpoint, model, settings)
         params = eqx.filter(_checkpoint.replace_array_leaves(params, groups["weights"], "weights"), eqx.is_array)
         best = eqx.filter(_checkpoint.replace_array_leaves(params, groups["best"], "best"), eqx.is_array)
         opt_state = _checkpoint.replace_array_leaves(opt_state, groups["optimizer"], "optimizer")
@@ -212,3 +214,25 @@ def train_adam(
         "stopped": stopped,
     }
     return best_model, info
+
+
+def read_resumable(path: str, model: Any, settings: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """`read_checkpoint` for resuming the fit of `model` with fit `settings`: `ValueError` if
+    the file was written for another system, architecture or settings."""
+    attrs, groups = _checkpoint.read_checkpoint(path, type(model).__name__, upgrade_attributes)
+    try:
+        check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {path!r}")
+    except ValueError as err:
+        raise ValueError(f"cannot resume: {err}") from None
+    if attrs["hyperparameters"] != _checkpoint.jsonable(model.hyperparameters()):
+        raise ValueError(
+            f"checkpoint {path!r} was written for a model with hyperparameters "
+            f"{attrs['hyperparameters']}; this model has {model.hyperparameters()}"
+        )
+    for key, value in _checkpoint.jsonable(settings).items():
+        if attrs["fit_settings"].get(key) != value:
+            raise ValueError(
+                f"checkpoint {path!r} was written with {key}={attrs['fit_settings'].get(key)!r}; "
+                f"resume needs the same value, got {key}={value!r}"
+            )
+    return attrs, groups
