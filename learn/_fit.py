@@ -21,7 +21,7 @@ from liepoisson.internals import positive_int, show_progress
 
 from ._base import AbstractLearnedMap, check_learned_map
 from ._data import PairData, prepare
-from ._least_squares import run_levenberg_marquardt
+from ._least_squares import check_size, run_levenberg_marquardt
 from ._observed import TrajectoryLoss, observed_objective
 from ._optimisers import (
     OPTIMISERS,
@@ -87,7 +87,8 @@ def fit(
       first (inputs: mean/std of $y_0$; outputs: of the pairs' parameters for an LPNet, of
       $y_1 - y_0$ for the baseline). Default `False`: a plain MLP as in the paper (what
       normalising does on E1 is in BENCHMARKS.md).
-    - `checkpoint`: a `Checkpoint` for the Adam or Levenberg-Marquardt stage.
+    - `checkpoint`: a `Checkpoint` for the Adam or Levenberg-Marquardt stage (pairs and
+      trajectories; not yet for observations).
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal); `callback(learn.Progress)`: called as training
       goes (after every 1000 Adam epochs, after every quasi-Newton start), e.g. to log.
     """
@@ -175,6 +176,8 @@ def _run_stages(stages, model, train, val, loss_fn, settings, checkpoint, progre
     seed = settings["seed"]
     history = {"epoch": np.zeros(0, int), "train_loss": np.zeros(0), "val_loss": np.zeros(0)}
     records = []
+    if any(isinstance(stage, LevenbergMarquardt) for stage in stages):
+        check_size(model, loss_fn, X, T)  # before any stage runs, not after an hour of Adam
     for index, stage in enumerate(stages):
         offset = sum(r.iterations for r in records)  # epochs and iterations run so far
         report = None if callback is None else functools.partial(_report, callback, index, type(stage).__name__)

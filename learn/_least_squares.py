@@ -43,6 +43,9 @@ MAX_JACOBIAN = 200_000_000
 #: holds every pass's intermediates together.
 MAX_PASSES = 2000
 
+#: The damping lambda is kept in this range (relative to the Marquardt scaling D).
+LAMBDA_RANGE = (1e-16, 1e16)
+
 #: `LevenbergMarquardt(rtol=...)` compares the loss with its value this many steps earlier.
 WINDOW = 3
 
@@ -145,7 +148,8 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
     crit0, train0, val0 = losses(model)
     kept = bool(np.isfinite(crit) and crit < crit0)
     if not kept and not np.isfinite(crit0):
-        raise FloatingPointError(f"{name}: the fit diverged (non-finite loss) and the initial weights are not finite")
+        raise FloatingPointError(f"{name}: the loss is not finite at the start nor at the end; check the weights and "
+                                 "the data")
     if report is not None:
         report(len(history), stage.iterations, train_loss, val_loss)
     hist = {"epoch": np.arange(1, len(history) + 1), "train_loss": np.asarray(history),
@@ -159,8 +163,9 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
 
 
 class _Saved:
-    r"""A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` and
-    `best` the current weights (every accepted step lowers the loss), `optimizer` the damping
+    r"""A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` the
+    current weights, `best` the same after the warm start (every accepted step lowers the
+    training loss) and the model's starting weights during it, `optimizer` the damping
     $\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
     `phase` 0 while fitting the warm start's simpler map, 1 after."""
 
@@ -184,11 +189,14 @@ class _Saved:
 
     def write(self, phase, model, lam, nu, D, values, earlier, elapsed):
         leaves = _checkpoint.array_leaves(model)
+        # `best` is what loading the file as a model gives: during the warm start (the simpler
+        # map's weights in `weights`) the model's own starting weights
+        best = leaves if phase == 1 else _checkpoint.array_leaves(self.model)
         losses = np.asarray([*earlier, *values])
         _checkpoint.write(self.path, {**self.attrs, "epoch": len(values), "best_epoch": len(losses),
                                       "best_loss": float(losses[-1]) if losses.size else float("nan"),
                                       "elapsed_s": float(elapsed), "fit_settings": self.settings, "phase": phase},
-                          {"weights": leaves, "best": leaves,
+                          {"weights": leaves, "best": best,
                            "optimizer": [np.asarray(lam), np.asarray(nu), np.asarray(D)],
                            "history": {"epoch": np.arange(1, losses.size + 1), "train_loss": losses,
                                        "val_loss": np.full(losses.size, np.nan)}})
@@ -206,19 +214,12 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
     params, static = eqx.partition(model, eqx.is_inexact_array)
     fn = _compiled(("residuals", _Residuals(loss_fn, static, params)), lambda: _Residuals(loss_fn, static, params))
     x = ravel_pytree(params)[0]
-    n_residuals = jax.eval_shape(fn.residuals, x, X, T).shape[0]
-    passes = x.size - (params.starts.size - params.starts.shape[-1] if fn.blocks else 0)
-    if n_residuals * x.size > MAX_JACOBIAN or passes > MAX_PASSES:
-        raise ValueError(
-            f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {x.size} unknowns, "
-            f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
-            "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
-        )
+    check_size(model, loss_fn, X, T)
     r, J = fn.jacobian(x, X, T)
-    cost = float(r @ r)
-    # the loss is sum r^2 / n for n the residuals it counts (an integer: rounded, so that a
-    # resumed run divides by the same number)
-    scale = float(round(cost / float(evaluate_loss(fn, loss_fn, x, X, T)))) if cost > 0 else 1.0
+    cost = float(r @ r)  # always from the Jacobian's call: a resumed run starts from the same number
+    if not np.isfinite(cost):
+        raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
+    scale = float(loss_fn.count(model, X, T)) if hasattr(loss_fn, "count") else float(r.size)  # sum r^2 -> loss
     D, lam, nu = None, 1e-3, 2.0
     values: list[float] = []
     elapsed0 = 0.0
@@ -237,7 +238,12 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
             if not np.isfinite(cost) or _converged(values, rtol):
                 break
             A, g = _normal_equations(r, J)
-            diag = jnp.maximum(jnp.diag(A), jnp.finfo(A.dtype).tiny)
+            if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
+                raise FloatingPointError(f"{desc}: the Jacobian after step {len(values)} is not finite (the map's "
+                                         "derivatives overflow at these weights); try fewer iterations or another start")
+            diag = jnp.diag(A)
+            # a weight the residuals do not see gets a scale from the others (MINPACK's rule)
+            diag = jnp.maximum(diag, jnp.finfo(A.dtype).eps * jnp.maximum(jnp.max(diag), jnp.finfo(A.dtype).tiny))
             D = diag if D is None else jnp.maximum(D, diag)
             accepted = False
             for _ in range(MAX_TRIALS):
@@ -249,16 +255,17 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
                     predicted = -float(2 * g @ delta + delta @ (A @ delta))  # model decrease of sum r^2
                     if np.isfinite(cost_new) and cost_new < cost and predicted > 0:
                         rho = (cost - cost_new) / predicted
-                        lam *= max(1 / 3, 1 - (2 * rho - 1) ** 3)
+                        lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), LAMBDA_RANGE[0])
                         nu = 2.0
                         accepted = True
                         break
-                lam *= nu
+                lam = min(lam * nu, LAMBDA_RANGE[1])
                 nu *= 2
             if not accepted:  # no damping lowers the loss: a minimum to round-off
                 break
-            x, cost = x_new, cost_new
+            x = x_new
             r, J = fn.jacobian(x, X, T)
+            cost = float(r @ r)
             values.append(cost / scale)
             bar.update(1)
             bar.set_postfix(loss=f"{values[-1]:.3g}")
@@ -272,6 +279,22 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
     return fn.model(x), values
 
 
+def check_size(model, loss_fn, X, T) -> None:
+    """`ValueError` if a Levenberg-Marquardt step on `model` would hold a Jacobian too large
+    for memory (`MAX_JACOBIAN` entries or `MAX_PASSES` forward passes)."""
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    fn = _Residuals(loss_fn, static, params)
+    n_unknowns = ravel_pytree(params)[0].size
+    n_residuals = jax.eval_shape(fn.residuals, ravel_pytree(params)[0], X, T).shape[0]
+    passes = n_unknowns - (params.starts.size - params.starts.shape[-1] if fn.blocks else 0)
+    if n_residuals * n_unknowns > MAX_JACOBIAN or passes > MAX_PASSES:
+        raise ValueError(
+            f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {n_unknowns} unknowns, "
+            f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
+            "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
+        )
+
+
 def _converged(values, rtol) -> bool:
     """Whether the loss fell by less than `rtol` of its value over the last `WINDOW` steps."""
     if rtol <= 0 or len(values) <= WINDOW:
@@ -280,5 +303,3 @@ def _converged(values, rtol) -> bool:
     return before - values[-1] <= rtol * abs(before)
 
 
-def evaluate_loss(fn, loss_fn, x, X, T) -> float:
-    return float(_compiled(("loss", loss_fn), lambda: eqx.filter_jit(loss_fn))(fn.model(x), X, T))

@@ -25,8 +25,12 @@ class MeanSquares:
     def __call__(self, model: Any, inputs: jax.Array, targets: jax.Array) -> jax.Array:
         return jnp.mean(self.residuals(model, inputs, targets) ** 2)
 
+    def count(self, model: Any, inputs: jax.Array, targets: jax.Array) -> int:
+        """How many residual components the mean is over (one per component of the targets)."""
+        return int(jax.eval_shape(self.residuals, model, inputs, targets).size)
+
     def __repr__(self) -> str:
-        return f"learn.{self.name}"
+        return f"MeanSquares({self.name})"
 
 
 def _state_residuals(model: Any, y0: jax.Array, y1: jax.Array) -> jax.Array:

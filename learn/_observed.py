@@ -194,6 +194,15 @@ class ObservationLoss:
         squared, mask = self.squared(fitted, inputs, targets)
         return jnp.sum(squared) / (jnp.sum(mask) * targets.shape[-1])
 
+    def count(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> int:
+        """How many residual components the loss averages: the present observations that are
+        predictions (a start taken as observed is not), times the dimension."""
+        index, _, mask, _ = unpack(jnp.asarray(inputs), targets.shape[-1])
+        observed = np.ones(index.shape, bool) if fitted.starts is None else np.asarray(index) < 0
+        present = np.asarray(mask).copy()
+        present[:, 0] = np.where(observed, 0.0, present[:, 0])
+        return round(float(np.sum(present))) * targets.shape[-1]
+
     def residuals(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> jax.Array:
         """Predicted minus observed states, every component of every segment `(S, L, dim)`,
         zero where no observation is."""
@@ -204,7 +213,8 @@ class ObservationLoss:
         of `fitted` (the map's $p$ weights, then its $S$ starts of dimension $d$), built from
         its blocks: segment $s$ depends on the weights and on its own start only (training
         segments: `index` is their row), so $p + d$ forward passes (the same $d$ directions
-        pushed into every start at once) instead of $p + Sd$ (`learn.LevenbergMarquardt`)."""
+        pushed into every start at once) instead of $p + Sd$ (`learn.LevenbergMarquardt`).
+        Each start belongs to one segment, as `observed_objective` builds them."""
         params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
         flat, unravel = jax.flatten_util.ravel_pytree(params)
 
@@ -219,7 +229,10 @@ class ObservationLoss:
             return jax.jvp(lambda s: residuals(flat, s), (fitted.starts,), (jnp.broadcast_to(direction, (n_seg, dim)),))[1]
 
         by_start = jax.vmap(push, out_axes=-1)(jnp.eye(dim, dtype=flat.dtype))  # (S, L, dim, d)
-        blocks = by_start[:, :, :, None, :] * jnp.eye(n_seg, dtype=flat.dtype)[:, None, None, :, None]
+        # segment s moves with the start of its row `index[s]` (none for a held-out one, -1)
+        index = unpack(jnp.asarray(inputs), dim)[0].astype(jnp.int32)
+        rows_of = jax.nn.one_hot(index, n_seg, dtype=flat.dtype)  # (S, n_starts), zero row for -1
+        blocks = by_start[:, :, :, None, :] * rows_of[:, None, None, :, None]
         rows = r.size
         return r.reshape(-1), jnp.concatenate([by_weight.reshape(rows, -1), blocks.reshape(rows, -1)], axis=1)
 

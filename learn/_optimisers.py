@@ -90,19 +90,25 @@ class QuasiNewton:
 
 @dataclasses.dataclass(frozen=True)
 class LevenbergMarquardt:
-    r"""Levenberg-Marquardt (optimistix, damped Gauss-Newton steps solved by lineax QR) on the
-    residuals of a least-squares loss: every loss of `learn.fit` (pairs: the state and alpha
-    losses; observations: `learn.TrajectoryLoss`), compiled in chunks of 5 steps.
+    r"""Levenberg-Marquardt on the residuals $r$ of a least-squares loss: every loss of
+    `learn.fit` (pairs: the state and alpha losses, `learn.MeanSquares`; observations:
+    `learn.TrajectoryLoss`). Each step evaluates $r$ and its Jacobian $J$ once and solves
+    $(J^TJ + \lambda D)\delta = -J^Tr$ by a lineax Cholesky, $D$ the largest
+    $\mathrm{diag}(J^TJ)$ seen (Marquardt's scaling), $\lambda$ by Nielsen's rule; the loop
+    runs on the host between two compiled functions (`learn/_least_squares.py` says why not
+    optimistix).
 
-    For a few dozen to a few hundred parameters it reaches the minimum of a least-squares loss
-    in tens of steps where BFGS takes hundreds (BENCHMARKS.md); each step costs one Jacobian
-    ($p$ forward passes; with fitted starts, $p + d$: `ObservationLoss.block_residuals`), so
-    for the thousands of weights of an MLP use `QuasiNewton`.
+    For a few dozen to a few hundred unknowns it reaches the minimum of a least-squares loss
+    in tens of steps where BFGS takes hundreds (BENCHMARKS.md, "Learning from observations");
+    each step costs $p$ forward passes for $p$ weights ($p + d$ with fitted starts:
+    `ObservationLoss.jacobian`), so for the thousands of weights of an MLP use `QuasiNewton`
+    (a step that would hold more than 2000 passes is refused).
 
-    `iterations`: steps at most (rounded up to a chunk); `rtol`: stop once a chunk lowers the
-    loss by less than `rtol` of its value; `warm_start`: as `QuasiNewton`'s (half the steps on
-    the simpler map a G-LPNet offers, then the rest from its fit). The result is kept only if
-    it lowers the selection loss (validation, or training without a validation set).
+    `iterations`: steps at most; `rtol`: stop once the loss has fallen by less than `rtol` of
+    its value over the last 3 steps (0: only when no damping lowers it); `warm_start`: as
+    `QuasiNewton`'s (half the steps on the simpler map a G-LPNet offers, then the rest from
+    its fit). The result is kept only if it lowers the selection loss (validation, or training
+    without a validation set). Deterministic; resumable with a `learn.Checkpoint`.
     """
 
     iterations: int = 200
