@@ -8,8 +8,8 @@ damped normal equations $(J^TJ + \lambda D)\delta = -J^Tr$, $D = \mathrm{diag}(J
 largest seen: Marquardt's scaling, Moré 1978), by a lineax Cholesky, trying larger $\lambda$ until
 the step lowers $\|r\|^2$; $\lambda$ is updated by Nielsen's rule. The loop runs on the host
 between two small compiled functions, so a map is compiled twice (residuals, Jacobian), not
-into one solver program: optimistix's `LevenbergMarquardt` on the same losses spends 29 s
-compiling a G-LPNet fit that runs in 7 s (BENCHMARKS.md, "Second-order optimisers").
+into one solver program: optimistix's `LevenbergMarquardt` on the same losses spends longer
+compiling a G-LPNet fit than running it (BENCHMARKS.md, "Learning from observations").
 """
 
 from __future__ import annotations

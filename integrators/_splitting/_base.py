@@ -31,8 +31,8 @@ class IndexedFlows(Sequence):
     r"""`n` flows of pieces of one kind, given by one function `flow(k, t, y)` that takes a
     traced index `k` (their parameters stacked, as a `learn.GLPNet`'s modules). A sequence of
     `flow(t, y)` like any other; `Strang` and `LieTrotter` compose it in a `jax.lax.scan` over
-    `k`, so a step traces one flow, not every one (11x less code, 5x faster compilation for a
-    G-LPNet of 6 modules composed by `TripleJump`)."""
+    `k`, so a step traces one flow, not every one (its compilation time: BENCHMARKS.md,
+    "Learning from observations")."""
 
     def __init__(self, flow: Callable[[int | jax.Array, float, jax.Array], jax.Array], n: int):
         self.flow = flow
