@@ -27,6 +27,9 @@ compared with heyoka: mean state error at t = 100, max relative energy error, Ca
 1/I_i - 1/I_j (`learn.quadratic_part`); for the G-LPNet, its learned Hamiltonian against the
 true one modulo functions of the Casimirs (W1's `hamiltonian_mismatch`: max |H~ - H - f(C)| /
 max |H| on the observed states, f the least-squares quadratic in the Casimirs).
+
+Each row is saved (`<out>/W2/rows/`) as soon as it is measured; a rerun into the same folder
+reads the saved rows and fits only the missing ones, so an interrupted `--full` run resumes.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import itertools
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -45,9 +49,9 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles, span_decades
+from integrators.internals import atomic_write_text, figure, series_styles, span_decades
 
-from ._experiment import AbstractExperiment, fmt
+from ._experiment import AbstractExperiment, _jsonable, fmt
 from .w1_learned_vs_classical import hamiltonian_mismatch
 
 H_TEST, STEPS_TEST, N_TEST = 0.1, 1000, 12
@@ -311,9 +315,14 @@ class W2(AbstractExperiment):
                 for name in models:
                     if not applies(name, sampling):
                         continue
-                    kwargs = {"SINDy": {}, "MLP": {"iterations": P.iterations}}.get(name, {"iterations": P.steps})
-                    row = {"system": system, "noise": noise, "sampling": sampling,
-                           **evaluate(protocol, name, data, y0, reference, **kwargs)}
+                    saved = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{name}.json".replace(" ", "_")
+                    if saved.exists():  # a row of an interrupted run: each row is saved when it is done
+                        row = json.loads(saved.read_text())
+                    else:
+                        kwargs = {"SINDy": {}, "MLP": {"iterations": P.iterations}}.get(name, {"iterations": P.steps})
+                        row = _jsonable({"system": system, "noise": noise, "sampling": sampling,
+                                         **evaluate(protocol, name, data, y0, reference, **kwargs)})
+                        atomic_write_text(saved, json.dumps(row, indent=2) + "\n")
                     rows.append(row)
                     if progress:
                         print(line(row), flush=True)

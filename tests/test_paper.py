@@ -342,3 +342,11 @@ def test_w2_smoke_writes_its_table_and_verdict(tmp_path):
     assert glpnet["family"] in ("quadratic, even", "quadratic", "general")
     assert any("G-LPNet state error" in v for v in metrics["verdict"])
     assert (tmp_path / "W2" / "state_error_rigid_body.png").exists()
+    # every row was saved when done: a rerun (an interrupted run resumed) reads them, fits nothing
+    saved = tmp_path / "W2" / "rows" / "smoke-rigid_body-regular-0.001-G-LPNet.json"
+    row = json.loads(saved.read_text())
+    assert row == glpnet
+    saved.write_text(json.dumps({**row, "state_error": 123.0}))
+    assert main(["run", "W2", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    again = json.loads((tmp_path / "W2" / "metrics.json").read_text())
+    assert next(r for r in again["rows"] if r["model"] == "G-LPNet")["state_error"] == 123.0
