@@ -202,7 +202,8 @@ def ground_truth(
     client: Any = None,
     chunk_size: int | None = None,
 ) -> Trajectories:
-    r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ with heyoka's adaptive Taylor method and
+    r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ (`system.heyoka_system()`; with the
+    dissipation of a `DoubleBracket`) with heyoka's adaptive Taylor method and
     sample it at $t_n = n h$, $n = 0..n_\text{steps}$.
 
     The Taylor order and step follow from `tol` (default machine epsilon), so the local error

@@ -1,4 +1,5 @@
-"""Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle."""
+"""Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle;
+double-bracket dissipation of any Lie-Poisson system."""
 
 from ._base import (
     AbstractLiePoissonSystem as AbstractLiePoissonSystem,
@@ -12,6 +13,11 @@ from ._charged_particle import (
 from ._free_rigid_body import (
     FreeRigidBodyTerm as FreeRigidBodyTerm,
     free_rigid_body_flow as free_rigid_body_flow,
+)
+from ._double_bracket import (
+    DoubleBracket as DoubleBracket,
+    damped_heavy_top as damped_heavy_top,
+    damped_rigid_body as damped_rigid_body,
 )
 from ._heavy_top import HeavyTop as HeavyTop
 from ._kirchhoff import Kirchhoff as Kirchhoff

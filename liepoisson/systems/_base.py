@@ -232,16 +232,23 @@ class AbstractPoissonSystem(abc.ABC):
         ys = list(hy.make_vars(*names)) if self.dim > 1 else [hy.make_vars(*names)]
         H = self.hamiltonian_components(ys, HEYOKA)
         grad = [hy.diff(H, v) for v in ys]
-        B = self.poisson_tensor_components(ys)
-        rhs = []
-        for a in range(self.dim):
-            expr = 0.0
-            for b in range(self.dim):
-                if isinstance(B[a][b], (int, float)) and B[a][b] == 0:
-                    continue
-                expr = expr + B[a][b] * grad[b]
-            rhs.append(hy.expression(0.0) if isinstance(expr, float) else expr)
-        return list(zip(ys, rhs))
+        return list(zip(ys, matvec(self.poisson_tensor_components(ys), grad)))
+
+
+def matvec(B: list[list[Any]], v: list[Any]) -> list[Any]:
+    """`B v` for a matrix of heyoka expressions (or numbers) and a vector of expressions,
+    skipping the entries of `B` that are the number 0."""
+    import heyoka as hy
+
+    rhs = []
+    for row in B:
+        expr = 0.0
+        for b, entry in enumerate(row):
+            if isinstance(entry, (int, float)) and entry == 0:
+                continue
+            expr = expr + entry * v[b]
+        rhs.append(hy.expression(0.0) if isinstance(expr, float) else expr)
+    return rhs
 
 
 def check_system(system: Any) -> AbstractPoissonSystem:
@@ -278,6 +285,13 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
+
+    def generator(self, y: ArrayLike) -> jax.Array:
+        r"""The element $\xi(\mu)$ of $\mathfrak g$ with $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$:
+        the velocity is the coadjoint motion it generates (`test_flow(xi, t, mu)` moves along
+        it). $\nabla H$ for a Hamiltonian system; Lie-group integrators
+        (`integrators.LieEuler`, ...) step with it frozen per stage."""
+        return self.hamiltonian_gradient(y)
 
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
         return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol, names=("y0", "y1"))

@@ -10,6 +10,7 @@ import numpy as np
 
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
+from ._double_bracket import DoubleBracket
 from ._heavy_top import HeavyTop
 from ._kirchhoff import Kirchhoff
 from ._lie_poisson import KIND, LiePoissonSystem
@@ -31,9 +32,11 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
     `LiePoissonSystem` is rebuilt from the definition in its `params` (`params["kind"]`)."""
     if isinstance(params, dict) and params.get("kind") == KIND:
         return LiePoissonSystem.from_params(name, params)
+    if name == DoubleBracket.name and isinstance(params, dict):
+        return DoubleBracket.from_params(params, from_name)
     if name not in SYSTEMS:
         raise ValueError(
-            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)} and user LiePoissonSystems "
+            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket and user LiePoissonSystems "
             "(saved with their definition). For a system class of your own, pass system=... to the loader"
         )
     return SYSTEMS[name](**(params or {}))

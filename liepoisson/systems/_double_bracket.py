@@ -1,0 +1,216 @@
+r"""Double-bracket dissipation of a Lie-Poisson system (Bloch, Krishnaprasad, Marsden & Ratiu,
+*The Euler-Poincaré equations and double bracket dissipation*, Comm. Math. Phys. 175 (1996)):
+the motion stays on the coadjoint orbit, every Casimir is conserved, the energy decays."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._namespace import HEYOKA
+from ._base import AbstractLiePoissonSystem, AbstractPoissonSystem, matvec
+
+#: Relative asymmetry of a metric accepted as symmetric (a matrix typed or computed in
+#: float64 is symmetric to a few roundings of its largest entry).
+_SYMMETRY_RTOL = 1e-12
+
+
+def check_gamma(gamma: Any, name: str = "gamma") -> float:
+    """A finite dissipation strength >= 0 (0: the undamped system)."""
+    if (isinstance(gamma, bool) or not isinstance(gamma, numbers.Real)) and not (
+        isinstance(gamma, np.ndarray) and gamma.ndim == 0
+    ):
+        raise TypeError(f"{name} must be a real number >= 0; got {type(gamma).__name__} {gamma!r}")
+    value = float(gamma)
+    if not np.isfinite(value) or value < 0.0:
+        raise ValueError(
+            f"{name} must be finite and >= 0 (the dissipation strength; 0 is the undamped system); got {value!r}"
+        )
+    return value
+
+
+def check_metric(metric: Any, dim: int, name: str = "metric") -> np.ndarray:
+    r"""`metric` as a symmetric positive definite `(dim, dim)` float64 matrix $K$ (identifying
+    $\mathfrak g^*$ with $\mathfrak g$); the identity for None."""
+    if metric is None:
+        return np.eye(dim)
+    try:
+        K = np.asarray(metric, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be a ({dim}, {dim}) real matrix; got {metric!r}") from err
+    if K.shape != (dim, dim):
+        raise ValueError(f"{name} must have shape ({dim}, {dim}) (the algebra's dimension); got shape {K.shape}")
+    if not np.all(np.isfinite(K)):
+        raise ValueError(f"{name} must be finite; got {K.tolist()}")
+    asymmetry = float(np.max(np.abs(K - K.T)))
+    if asymmetry > _SYMMETRY_RTOL * max(float(np.max(np.abs(K))), np.finfo(float).tiny):
+        raise ValueError(f"{name} must be symmetric; max |K - K^T| = {asymmetry:.3g}")
+    try:
+        np.linalg.cholesky(K)
+    except np.linalg.LinAlgError:
+        low = float(np.linalg.eigvalsh(K)[0])
+        raise ValueError(
+            f"{name} must be positive definite (a metric); its smallest eigenvalue is {low:.3g}"
+        ) from None
+    return 0.5 * (K + K.T)
+
+
+class DoubleBracket(AbstractLiePoissonSystem):
+    r"""A Lie-Poisson system with double-bracket dissipation:
+
+    $$\dot\mu = \mathbb B(\mu)\nabla H(\mu) + \gamma\,\mathbb B(\mu)\,K\,\mathbb B(\mu)\nabla H(\mu)
+    = \mathbb B(\mu)\,\xi(\mu), \qquad \xi(\mu) = \nabla H + \gamma K\,\mathbb B(\mu)\nabla H,$$
+
+    $K$ a symmetric positive definite metric identifying $\mathfrak g^*$ with $\mathfrak g$
+    (default: the basis's, $K = I$). For the rigid body with $K = I$:
+    $\dot\Pi = \Pi\times\Omega + \gamma\,\Pi\times(\Pi\times\Omega)$.
+
+    The velocity is $\mathbb B(\mu)\,\xi$, a coadjoint motion with the state-dependent generator
+    $\xi(\mu)$ (`generator`), so every Casimir is conserved ($\nabla C^\top\mathbb B = 0$); the
+    energy decays, $\dot H = -\gamma\,(\mathbb B\nabla H)^\top K\,(\mathbb B\nabla H) \le 0$
+    (`energy_rate`), to the minimum of $H$ on the orbit. The flow is not Poisson: no
+    Hamiltonian splitting (`hamiltonian_splitting` raises), no G-LPNet can follow it; the
+    Lie-group methods of `integrators` (`LieEuler`, `CommutatorFree2`, `CommutatorFree4`,
+    `DampedSplitting`) and LPNets keep its Casimirs.
+
+    **Arguments:** `system`, a Lie-Poisson system (`RigidBody`, `HeavyTop`, `Kirchhoff` or a
+    `LiePoissonSystem`); `gamma` >= 0, the dissipation strength; `metric`, $K$ as a
+    `(dim, dim)` matrix (default the identity).
+    """
+
+    name = "DoubleBracket"
+    equal_by_params = True
+
+    def __init__(self, system: AbstractLiePoissonSystem, gamma: float, metric: ArrayLike | None = None):
+        if isinstance(system, DoubleBracket):
+            raise TypeError(
+                f"system is already damped ({system!r}); give the undamped system "
+                f"(system.system) with the total dissipation instead"
+            )
+        if not isinstance(system, AbstractLiePoissonSystem):
+            kind = "a Poisson system not on the dual of a Lie algebra" if isinstance(
+                system, AbstractPoissonSystem) else "not a liepoisson system"
+            raise TypeError(
+                f"system must be a Lie-Poisson system (RigidBody, HeavyTop, Kirchhoff or a LiePoissonSystem "
+                f"on any algebra): double-bracket dissipation needs the coadjoint action; got "
+                f"{type(system).__name__}, {kind}"
+            )
+        self.system = system
+        self.algebra = system.algebra
+        self.gamma = check_gamma(gamma)
+        self.metric = check_metric(metric, system.dim)
+        self._identity = metric is None
+        self.equal_by_params = bool(system.equal_by_params)
+
+    def __repr__(self) -> str:
+        metric = "" if self._identity else f", metric={self.metric.tolist()}"
+        return f"DoubleBracket({self.system!r}, gamma={self.gamma!r}{metric})"
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return {
+            "system": self.system.name,
+            "system_params": self.system.params,
+            "gamma": self.gamma,
+            "metric": None if self._identity else self.metric.tolist(),
+        }
+
+    @classmethod
+    def from_params(cls, params: dict[str, Any], rebuild) -> DoubleBracket:
+        """The system of `params` (as `params` returns them), the damped system rebuilt by
+        `rebuild(name, params)`."""
+        try:
+            inner = rebuild(params["system"], params["system_params"])
+            return cls(inner, params["gamma"], params.get("metric"))
+        except (KeyError, TypeError) as err:
+            raise ValueError(f"not a valid DoubleBracket definition: {type(err).__name__}: {err}") from err
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.system.state_names
+
+    def hamiltonian_components(self, y, xp):
+        return self.system.hamiltonian_components(y, xp)
+
+    def singular(self, y):
+        return self.system.singular(y)
+
+    @property
+    def singular_reason(self) -> str:  # type: ignore[override]
+        return self.system.singular_reason
+
+    def hamiltonian_splitting(self):
+        raise ValueError(
+            f"{self!r} is dissipative: its flow is not a composition of Hamiltonian flows, so the "
+            "splitting methods of integrators.splitting cannot integrate it. Use "
+            "integrators.DampedSplitting (the Hamiltonian part split exactly, the dissipation by a "
+            "Lie-group method) or integrators.LieEuler / CommutatorFree2 / CommutatorFree4"
+        )
+
+    # -- the dissipation ----------------------------------------------------------------
+    def dissipative_generator(self, y: ArrayLike) -> jax.Array:
+        r"""$\gamma K\,\mathbb B(\mu)\nabla H(\mu)$: the dissipation is $\mathbb B(\mu)$ times it."""
+        y = self.check_regular(y)
+        B = self.poisson_tensor(y)
+        v = jnp.einsum("...ab,...b->...a", B, self.hamiltonian_gradient(y))
+        return self.gamma * jnp.einsum("ab,...b->...a", jnp.asarray(self.metric), v)
+
+    def dissipation(self, y: ArrayLike) -> jax.Array:
+        r"""$\gamma\,\mathbb B(\mu)\,K\,\mathbb B(\mu)\nabla H(\mu)$, the dissipative part of the velocity."""
+        y = self.check_regular(y)
+        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.dissipative_generator(y))
+
+    def generator(self, y: ArrayLike) -> jax.Array:
+        r"""$\xi(\mu) = \nabla H + \gamma K\,\mathbb B(\mu)\nabla H$, with $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$."""
+        y = self.check_regular(y)
+        return self.hamiltonian_gradient(y) + self.dissipative_generator(y)
+
+    def vector_field(self, y: ArrayLike) -> jax.Array:
+        r"""$\dot\mu = \mathbb B(\mu)\nabla H + \gamma\,\mathbb B(\mu) K\,\mathbb B(\mu)\nabla H$."""
+        y = self.check_regular(y)
+        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.generator(y))
+
+    def energy_rate(self, y: ArrayLike) -> jax.Array:
+        r"""$\dot H = -\gamma\,(\mathbb B\nabla H)^\top K\,(\mathbb B\nabla H) \le 0$, shape `(...)`."""
+        y = self.check_regular(y)
+        v = jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.hamiltonian_gradient(y))
+        return -self.gamma * jnp.einsum("...a,ab,...b->...", v, jnp.asarray(self.metric), v)
+
+    def heyoka_system(self) -> list[tuple[Any, Any]]:
+        r"""$\mathbb B(\nabla H + \gamma K\,\mathbb B\nabla H)$ as heyoka expressions,
+        from the same Hamiltonian and Poisson tensor."""
+        pairs = self.system.heyoka_system()
+        ys = [v for v, _ in pairs]
+        hamiltonian_velocity = [rhs for _, rhs in pairs]  # B grad H
+        import heyoka as hy
+
+        grad = [hy.diff(self.hamiltonian_components(ys, HEYOKA), v) for v in ys]
+        K = self.metric
+        xi = [grad[a] + self.gamma * sum((float(K[a, b]) * hamiltonian_velocity[b] for b in range(self.dim)
+                                          if K[a, b] != 0.0), hy.expression(0.0))
+              for a in range(self.dim)]
+        return list(zip(ys, matvec(self.poisson_tensor_components(ys), xi)))
+
+
+def damped_rigid_body(inertia=(2.0, 1.0, 2.0 / 3.0), gamma: float = 0.05) -> DoubleBracket:
+    r"""The rigid body with a nutation damper, $\dot\Pi = \Pi\times\Omega + \gamma\,\Pi\times(\Pi\times\Omega)$
+    (`DoubleBracket(RigidBody(inertia), gamma)`): from a spin about the minor axis (smallest
+    moment, the default $I_3 = 2/3$), the energy decays at fixed $|\Pi|$ until it spins about
+    the major axis (largest moment), as Explorer 1 did in 1958."""
+    from ._rigid_body import RigidBody
+
+    return DoubleBracket(RigidBody(inertia), gamma)
+
+
+def damped_heavy_top(inertia=(1.0, 1.5, 2.5), mgl: float = 0.7, center_of_mass=(0.0, 0.0, 1.0),
+                     gamma: float = 0.05) -> DoubleBracket:
+    r"""The heavy top with double-bracket dissipation on se(3)* (`DoubleBracket(HeavyTop(...),
+    gamma)`): $\Gamma\cdot\Gamma$ and $\Pi\cdot\Gamma$ are kept while the energy decays."""
+    from ._heavy_top import HeavyTop
+
+    return DoubleBracket(HeavyTop(inertia=inertia, mgl=mgl, center_of_mass=center_of_mass), gamma)
