@@ -8,14 +8,13 @@ import zlib
 
 import numpy as np
 import pytest
+from helpers import ALGEBRAS, EPS, algebra, system, vectors
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import integrators as it
 import liepoisson as lp
 from liepoisson.systems import DoubleBracket, LiePoissonSystem
-
-from helpers import ALGEBRAS, EPS, algebra, system, vectors
 
 
 def _quadratic_system(name: str) -> LiePoissonSystem:
