@@ -1,4 +1,5 @@
-"""Ground truth (heyoka), HDF5 data sets, classical Lie-Poisson splitting, diagnostics."""
+"""Ground truth (heyoka), HDF5 data sets, classical Lie-Poisson splitting, Lie-group methods on
+the coadjoint action (damped systems), diagnostics."""
 
 import liepoisson as _liepoisson  # noqa: F401  (first: it switches JAX to float64)
 
@@ -18,6 +19,7 @@ from ._diagnostics import (
     diagnostics as diagnostics,
     error_growth_rate as error_growth_rate,
 )
+from ._damped_splitting import DampedSplitting as DampedSplitting
 from ._exact import ExactFlow as ExactFlow
 from ._implicit import AbstractImplicitStepMap as AbstractImplicitStepMap
 from ._ground_truth import (
@@ -29,6 +31,13 @@ from ._observations import (
     Observations as Observations,
     observe as observe,
     uneven_times as uneven_times,
+)
+from ._lie_group import (
+    LIE_GROUP_METHODS as LIE_GROUP_METHODS,
+    AbstractLieGroupMethod as AbstractLieGroupMethod,
+    CommutatorFree2 as CommutatorFree2,
+    CommutatorFree4 as CommutatorFree4,
+    LieEuler as LieEuler,
 )
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
