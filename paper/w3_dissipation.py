@@ -183,7 +183,7 @@ class W3(AbstractExperiment):
     def run(self, profile: str, out_dir: Path, progress: bool):
         P = PROFILES[profile]
         all_scenarios = scenarios()
-        rows, truth, orders = [], {}, []
+        rows, truth = [], {}
         for key in P.systems:
             sc = all_scenarios[key]
             system = sc.system
@@ -262,8 +262,8 @@ class W3(AbstractExperiment):
             "",
             "## Every model",
             "",
-            "| system | model | max energy error / H(t) | / energy dissipated | flip time | Casimir drift (1200 steps) "
-            "| Casimir drift (1e4 steps) | observed order (nominal) | flows per step | us per step | gamma-hat | fit [s] |",
+            ("| system | model | max energy error / H(t) | / energy dissipated | flip time | Casimir drift (1200 steps) "
+             "| Casimir drift (1e4 steps) | observed order (nominal) | flows per step | us per step | gamma-hat | fit [s] |"),
             "|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in metrics.get("rows", []):

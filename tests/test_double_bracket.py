@@ -151,3 +151,19 @@ def test_bad_input_is_refused_with_the_argument_named():
     damped = DoubleBracket(body, 0.1)
     with pytest.raises(ValueError, match="dissipative.*DampedSplitting"):
         it.splitting.Strang(damped, 0.1)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), gamma=st.floats(0.0, 2.0))
+def test_a_learned_dissipative_map_keeps_casimirs_for_any_weights(seed, gamma):
+    # an LPNet's step is an exact coadjoint flow whatever its weights: random (untrained)
+    # networks on the damped heavy top keep |Gamma|^2 and Pi.Gamma over 500 steps
+    import learn
+
+    damped = lp.systems.damped_heavy_top(gamma=gamma)
+    model = learn.LPNet(damped, hidden=(8, 8), key=seed, h=0.1)
+    y0 = np.array([0.2, 0.1, 1.0, 0.1, 0.2, 0.97])
+    y = np.asarray(model.rollout(y0, 500))
+    C = np.asarray(damped.casimirs(y))
+    # each step is rounding only: a random walk of 500 steps of a few eps times |y|^2
+    assert np.max(np.abs(C - C[0])) <= 1e-13 * max(1.0, float(np.max(np.abs(y))) ** 2)

@@ -350,3 +350,22 @@ def test_w2_smoke_writes_its_table_and_verdict(tmp_path):
     assert main(["run", "W2", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
     again = json.loads((tmp_path / "W2" / "metrics.json").read_text())
     assert next(r for r in again["rows"] if r["model"] == "G-LPNet")["state_error"] == 123.0
+
+
+@pytest.mark.slow  # heyoka, six classical integrators, an LPNet and a G-LPNet: ~40 s
+def test_w3_smoke_measures_dissipation(tmp_path):
+    from paper.__main__ import main
+
+    assert main(["run", "W3", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    metrics = json.loads((tmp_path / "W3" / "metrics.json").read_text())
+    truth = metrics["truth"]["rigid body"]
+    assert truth["casimir_drift"] < 1e-13 and truth["max_energy_increase"] < 0.0
+    rows = {r["model"]: r for r in metrics["rows"]}
+    for name in ("Lie-Euler", "CF2", "CF4", "Strang + CF2", "TripleJump + CF4"):
+        assert abs(rows[name]["order"] - rows[name]["nominal_order"]) < 0.1, name
+        assert rows[name]["casimir_drift_1e4"] < 1e-13, name
+    assert rows["RK4"]["casimir_drift_1e4"] > 1e-10  # RK4 leaves the orbit
+    # the G-LPNet is a Poisson map: it cannot lose the energy the body dissipates
+    assert rows["G-LPNet"]["energy_error_span"] > 0.5
+    assert rows["LPNet"]["casimir_drift"] < 1e-13
+    assert (tmp_path / "W3" / "energy.png").exists()
