@@ -16,6 +16,9 @@ SMALLER_BUDGETS = {
         "learn.fit_splitting(body, obs, iterations=10, validation_fraction=0.0, activation='identity', "
         "progress=False)"
     ),
+    "optimiser=(learn.Adam(3000), learn.QuasiNewton(1000))": (
+        "optimiser=(learn.Adam(20), learn.QuasiNewton(5)), progress=False"
+    ),
     # BFGS as the default, without the warm start (a second compilation, ~5 s; the warm start
     # is tested in test_learn_warm_start.py)
     "learn.fit(learn.GLPNet(body, n_modules=6), data)": (
@@ -41,3 +44,7 @@ def test_readme_examples_run(capsys, tmp_path, monkeypatch):
     # 10,000 steps saved every 10th, with the initial state
     assert namespace["y"].shape == (10_000 // 10 + 1, 3)
     assert (tmp_path / "lpnet.h5").exists() and (tmp_path / "lpnet-training.h5").exists()
+    # the damped body's LPNet keeps |Pi| over the whole relaxation, however little trained
+    flip = np.asarray(namespace["flip"])
+    assert flip.shape == (1201, 3)
+    assert np.ptp(np.sum(flip**2, axis=-1)) < 1e-13
