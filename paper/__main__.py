@@ -92,7 +92,8 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
         print(f"   done in {time.perf_counter() - t:.0f} s -> {out / exp_id}")
     table = summary_table(results)
     atomic_write_text(out / "summary.md", table)
-    verdict = verdict_table(EXPERIMENTS, {k: v for k, v in results.items() if EXPERIMENTS[k].paper_values})
+    verdict = verdict_table(EXPERIMENTS, {k: v for k, v in results.items() if EXPERIMENTS[k].paper_values},
+                            load_results(REFERENCE_DIR))
     atomic_write_text(out / "verdict.md", verdict)
     print()
     if verdict.count("\n|") > 1:
@@ -147,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.long:
             print(summary_table(saved))
         else:
-            print(verdict_table(EXPERIMENTS, {k: v for k, v in saved.items() if EXPERIMENTS[k].paper_values}))
+            print(verdict_table(EXPERIMENTS, {k: v for k, v in saved.items() if EXPERIMENTS[k].paper_values},
+                                None if args.reference else load_results(REFERENCE_DIR)))
             print(f"(every figure: python -m paper table --long{' --reference' if args.reference else ''})")
         return 0
     if args.profile and args.full and args.profile != "full":

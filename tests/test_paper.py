@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from paper.__main__ import main, summary_table
-from paper._experiment import METRIC_KEYS, REFERENCE_DIR
+from paper._experiment import METRIC_KEYS, REFERENCE_DIR, PaperValue
 from paper._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 
 EPS = np.finfo(np.float64).eps
@@ -200,6 +200,27 @@ def test_verdict_judges_each_kind_of_claim():
     assert judge(PaperValue("rate", 0.25, "~0.25", "approx"), 0.5) == "differs (2x)"
     assert judge(PaperValue("parameters", 21508, "21,508", "count"), "21,508") == "reproduced"
     assert judge(PaperValue("parameters", 21508, "21,508", "count"), "21,638") == "differs (+0.6%)"
+
+
+def test_verdict_says_needs_full_only_where_the_full_reference_reaches_the_claim():
+    from paper._verdict import NEEDS_FULL, verdict_rows
+
+    class Fake:
+        paper_values = (PaperValue("energy", 1e-2, "1%"), PaperValue("loss", 1e-4, "1e-4"))
+
+        def label(self, key):
+            return key
+
+    quick = {"X": {"profile": "quick", "energy": 5e-2, "loss": 3e-4}}
+    full = {"X": {"profile": "full", "energy": 8e-3, "loss": 2e-4}}  # reaches the energy only
+    rows = {r[1]: r[-1] for r in verdict_rows({"X": Fake()}, quick, full)}
+    assert rows["energy"] == f"{NEEDS_FULL} (0.008)"
+    assert rows["loss"].startswith("not reached")
+    # without a reference, a quick result that misses is not reached; a full one is judged alone
+    assert verdict_rows({"X": Fake()}, quick)[0][-1].startswith("not reached")
+    assert verdict_rows({"X": Fake()}, {"X": {**full["X"], "energy": 5e-2}}, full)[0][-1].startswith("not reached")
+    # a reference that is not a full run proves nothing
+    assert verdict_rows({"X": Fake()}, quick, {"X": {**full["X"], "profile": "quick"}})[0][-1].startswith("not")
 
 
 def test_table_prints_one_verdict_row_per_claim_and_the_readme_shows_the_reference_verdict(capsys):
