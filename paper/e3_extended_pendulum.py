@@ -52,9 +52,7 @@ PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless. It skips
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
     "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_restarts=1),
-    # "quick": the full profile's LPNet training (about a minute; the energy claim needs it) and
-    # a smaller G-LPNet.
-    "quick": Profile(50_000, 1000, 20_000, glpnet_iterations=500, glpnet_restarts=1, glpnet_modules=12),
+    "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_restarts=1, glpnet_modules=12),
     "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_restarts=2),
 }
 INITIAL_CONDITIONS = np.array([[0.0, 1.0, 1.0], [0.0, 1.5, 2.35], [0.0, 2.0, 4.2]])
