@@ -4,6 +4,7 @@ Lie-group step of the dissipation, composed by a splitting method's rule."""
 from __future__ import annotations
 
 import functools
+import inspect
 
 import equinox as eqx
 import jax
@@ -12,9 +13,14 @@ from liepoisson.internals import positive_float
 from liepoisson.systems import AbstractExactTerm, DoubleBracket
 
 from ._lie_group import AbstractLieGroupMethod, CommutatorFree2
-from ._splitting._base import AbstractSplittingMethod, Flow
+from ._splitting._base import AbstractSplittingMethod, Flow, composition_flops, default_terms
 from ._splitting._strang import Strang
 from ._step_map import AbstractStepMap, check_state
+
+
+def _final(cls: type) -> bool:
+    """A method class that can step: not abstract, with its order (an abstract base has neither)."""
+    return not inspect.isabstract(cls) and isinstance(getattr(cls, "order", None), int)
 
 
 class DampedSplitting(AbstractStepMap):
@@ -56,9 +62,11 @@ class DampedSplitting(AbstractStepMap):
                 "system must be a liepoisson.systems.DoubleBracket (a damped Lie-Poisson system); got "
                 f"{type(system).__name__}. An undamped system is split by integrators.splitting's methods"
             )
-        if not (isinstance(method, type) and issubclass(method, AbstractSplittingMethod)):
+        if not (isinstance(method, type) and issubclass(method, AbstractSplittingMethod)) or not _final(method):
             raise TypeError(f"method must be a splitting method class (integrators.splitting.Strang, ...); got {method!r}")
-        if not (isinstance(dissipation, type) and issubclass(dissipation, AbstractLieGroupMethod)):
+        if not (isinstance(dissipation, type) and issubclass(dissipation, AbstractLieGroupMethod)) or not _final(
+            dissipation
+        ):
             raise TypeError(
                 "dissipation must be a Lie-group method class (integrators.LieEuler, CommutatorFree2, "
                 f"CommutatorFree4); got {dissipation!r}"
@@ -67,7 +75,7 @@ class DampedSplitting(AbstractStepMap):
         self.h = positive_float(h, "h")
         self.method = method
         self.dissipation = dissipation
-        self.pieces = tuple(system.system.hamiltonian_splitting())
+        self.pieces = default_terms(system.system)  # the same objects each time: compiled code is reused
         method.check_terms(len(self.pieces) + 1, f"the splitting of {system.system!r} and the dissipation")
 
     @property
@@ -84,6 +92,9 @@ class DampedSplitting(AbstractStepMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    def step_flops(self) -> float:
+        return composition_flops(self, self.method)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -91,7 +91,7 @@ class GLPNet(AbstractLearnedMap):
         # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
         # algebra's G-LPNet can rotate about each axis on both sides of the others.
         terms = network_or_default(
-            terms, functools.partial(_default_terms, system.dim), "terms", n_modules=n_modules, order=order, key=key,
+            terms, functools.partial(default_terms, system.dim), "terms", n_modules=n_modules, order=order, key=key,
             activation=activation, full_vectors=full_vectors, linear_term=linear_term)
         if not isinstance(terms, RidgeTerms):
             raise TypeError(f"terms must be a learn.RidgeTerms; got {type(terms).__name__}")
@@ -193,7 +193,7 @@ class GLPNet(AbstractLearnedMap):
         return linear, functools.partial(linear_to_activation, self)
 
 
-def _default_terms(dim: int, n_modules: int | None = None, **kwargs: Any) -> RidgeTerms:
+def default_terms(dim: int, n_modules: int | None = None, **kwargs: Any) -> RidgeTerms:
     return RidgeTerms(dim, 2 * dim if n_modules is None else n_modules, **kwargs)
 
 

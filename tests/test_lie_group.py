@@ -117,3 +117,16 @@ def test_bad_input(damped):
         it.DampedSplitting(damped, 0.1, it.LieEuler)
     with pytest.raises(ValueError, match="BlanesMoan4"):
         it.DampedSplitting(damped, 0.1, sp.BlanesMoan4)
+    with pytest.raises(TypeError, match="dissipation must be a Lie-group method class"):
+        it.DampedSplitting(damped, 0.1, sp.Strang, it.AbstractLieGroupMethod)
+    with pytest.raises(TypeError, match="method must be a splitting method class"):
+        it.DampedSplitting(damped, 0.1, sp.AbstractCompositionMethod)
+
+
+def test_damped_splitting_reuses_its_pieces_and_counts_the_flops_of_every_stage(damped):
+    # the same piece objects for every instance (a static field: equal pieces, no recompile)
+    assert it.DampedSplitting(damped, 0.1).pieces is it.DampedSplitting(damped, 0.2, sp.TripleJump).pieces
+    # XLA counts a scanned Strang step once: the count multiplies it by the composition's stages
+    strang = it.DampedSplitting(damped, 0.1).step_flops()
+    triple = it.DampedSplitting(damped, 0.1, sp.TripleJump).step_flops()
+    assert triple == pytest.approx(3 * strang, rel=0.05)

@@ -95,8 +95,13 @@ class AbstractSplittingMethod(AbstractStepMap):
         terms: Sequence[AbstractExactTerm] | None = None,
     ):
         self.system = check_system(system)
+        if system.dissipative:
+            raise ValueError(
+                f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
+                "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"
+            )
         if terms is None:
-            terms = _default_terms(system)
+            terms = default_terms(system)
         else:
             terms = check_splitting(system, terms, "terms")
         self.pieces = terms
@@ -181,7 +186,7 @@ def _inner_composition(step_map: AbstractStepMap, y: jax.Array, inner: type[Abst
 _TERMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _default_terms(system: AbstractPoissonSystem) -> tuple[AbstractExactTerm, ...]:
+def default_terms(system: AbstractPoissonSystem) -> tuple[AbstractExactTerm, ...]:
     """`system.hamiltonian_splitting()`, the same objects for every method built on `system`:
     the pieces are a static field, so equal pieces let `rollout` reuse its compiled code across
     methods' instances and step sizes instead of recompiling for each new instance."""

@@ -125,6 +125,10 @@ class AbstractPoissonSystem(abc.ABC):
             )
         return y
 
+    #: Whether the motion is not Hamiltonian (a `DoubleBracket`): no composition of the exact
+    #: flows of pieces of $H$ integrates it, and the splitting methods refuse it.
+    dissipative: bool = False
+
     #: What `singular` marks, for error messages.
     singular_reason: str = "the Hamiltonian or the Poisson tensor is not defined there"
 

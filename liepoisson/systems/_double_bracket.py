@@ -21,12 +21,16 @@ _SYMMETRY_RTOL = 1e-12
 
 
 def check_gamma(gamma: Any, name: str = "gamma") -> float:
-    """A finite dissipation strength >= 0 (0: the undamped system)."""
-    if (isinstance(gamma, bool) or not isinstance(gamma, numbers.Real)) and not (
-        isinstance(gamma, np.ndarray) and gamma.ndim == 0
+    """A finite dissipation strength >= 0 (0: the undamped system); a Python, numpy or JAX
+    scalar."""
+    if isinstance(gamma, (bool, str, bytes)) or not (
+        isinstance(gamma, numbers.Real) or getattr(gamma, "ndim", None) == 0
     ):
         raise TypeError(f"{name} must be a real number >= 0; got {type(gamma).__name__} {gamma!r}")
-    value = float(gamma)
+    try:
+        value = float(gamma)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a real number >= 0; got {type(gamma).__name__} {gamma!r}") from None
     if not np.isfinite(value) or value < 0.0:
         raise ValueError(
             f"{name} must be finite and >= 0 (the dissipation strength; 0 is the undamped system); got {value!r}"
@@ -73,7 +77,8 @@ class DoubleBracket(AbstractLiePoissonSystem):
     The velocity is $\mathbb B(\mu)\,\xi$, a coadjoint motion with the state-dependent generator
     $\xi(\mu)$ (`generator`), so every Casimir is conserved ($\nabla C^\top\mathbb B = 0$); the
     energy decays, $\dot H = -\gamma\,(\mathbb B\nabla H)^\top K\,(\mathbb B\nabla H) \le 0$
-    (`energy_rate`), to the minimum of $H$ on the orbit. The flow is not Poisson: no
+    (`energy_rate`), toward the relative equilibria on the orbit (generically a local minimum
+of $H$ there). The flow is not Poisson: no
     Hamiltonian splitting (`hamiltonian_splitting` raises), no G-LPNet can follow it; the
     Lie-group methods of `integrators` (`LieEuler`, `CommutatorFree2`, `CommutatorFree4`,
     `DampedSplitting`) and LPNets keep its Casimirs.
@@ -85,6 +90,7 @@ class DoubleBracket(AbstractLiePoissonSystem):
 
     name = "DoubleBracket"
     equal_by_params = True
+    dissipative = True
 
     def __init__(self, system: AbstractLiePoissonSystem, gamma: float, metric: ArrayLike | None = None):
         if isinstance(system, DoubleBracket):
@@ -104,7 +110,7 @@ class DoubleBracket(AbstractLiePoissonSystem):
         self.algebra = system.algebra
         self.gamma = check_gamma(gamma)
         self.metric = check_metric(metric, system.dim)
-        self._identity = metric is None
+        self._identity = bool(np.array_equal(self.metric, np.eye(system.dim)))  # None and I are one system
         self.equal_by_params = bool(system.equal_by_params)
 
     def __repr__(self) -> str:

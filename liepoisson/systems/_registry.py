@@ -32,7 +32,10 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
     `LiePoissonSystem` is rebuilt from the definition in its `params` (`params["kind"]`)."""
     if isinstance(params, dict) and params.get("kind") == KIND:
         return LiePoissonSystem.from_params(name, params)
-    if name == DoubleBracket.name and isinstance(params, dict):
+    if name == DoubleBracket.name:
+        if not isinstance(params, dict):
+            raise ValueError("a DoubleBracket is rebuilt from its params (system, system_params, gamma, metric); "
+                             f"got {params!r}")
         return DoubleBracket.from_params(params, from_name)
     if name not in SYSTEMS:
         raise ValueError(
