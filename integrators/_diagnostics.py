@@ -216,6 +216,10 @@ def diagnostics(
     `DiagnosticsReport`: `divergence` says where); a non-finite initial state or reference is a
     `ValueError`.
 
+    For a dissipative system (`liepoisson.systems.DoubleBracket`) the "energy error" is the
+    change of $H$ from its initial value, which the physics makes: compare with the energy of
+    `reference` instead, as study W3 does.
+
     **Returns:** a `DiagnosticsReport` (see there for the definitions).
     """
     if not isinstance(system, AbstractPoissonSystem):
