@@ -290,6 +290,11 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
 
+    def vector_field(self, y: ArrayLike) -> jax.Array:
+        r"""$\dot\mu = \mathbb B(\mu)\,\xi(\mu)$, $\xi$ = `generator` ($\nabla H$ unless damped)."""
+        y = self.check_regular(y)
+        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.generator(y))
+
     def generator(self, y: ArrayLike) -> jax.Array:
         r"""The element $\xi(\mu)$ of $\mathfrak g$ with $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$:
         the velocity is the coadjoint motion it generates (`test_flow(xi, t, mu)` moves along

@@ -161,9 +161,7 @@ of $H$ there). The flow is not Poisson: no
     # -- the dissipation ----------------------------------------------------------------
     def dissipative_generator(self, y: ArrayLike) -> jax.Array:
         r"""$\gamma K\,\mathbb B(\mu)\nabla H(\mu)$: the dissipation is $\mathbb B(\mu)$ times it."""
-        y = self.check_regular(y)
-        B = self.poisson_tensor(y)
-        v = jnp.einsum("...ab,...b->...a", B, self.hamiltonian_gradient(y))
+        v = self.system.vector_field(y)  # B grad H, the undamped velocity
         return self.gamma * jnp.einsum("ab,...b->...a", jnp.asarray(self.metric), v)
 
     def dissipation(self, y: ArrayLike) -> jax.Array:
@@ -176,15 +174,9 @@ of $H$ there). The flow is not Poisson: no
         y = self.check_regular(y)
         return self.hamiltonian_gradient(y) + self.dissipative_generator(y)
 
-    def vector_field(self, y: ArrayLike) -> jax.Array:
-        r"""$\dot\mu = \mathbb B(\mu)\nabla H + \gamma\,\mathbb B(\mu) K\,\mathbb B(\mu)\nabla H$."""
-        y = self.check_regular(y)
-        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.generator(y))
-
     def energy_rate(self, y: ArrayLike) -> jax.Array:
         r"""$\dot H = -\gamma\,(\mathbb B\nabla H)^\top K\,(\mathbb B\nabla H) \le 0$, shape `(...)`."""
-        y = self.check_regular(y)
-        v = jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.hamiltonian_gradient(y))
+        v = self.system.vector_field(y)  # B grad H
         return -self.gamma * jnp.einsum("...a,ab,...b->...", v, jnp.asarray(self.metric), v)
 
     def heyoka_system(self) -> list[tuple[Any, Any]]:
