@@ -128,13 +128,19 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
     iterations = stage.iterations
     history: list[float] = []
     current = model
+
+    def on_step(offset):
+        if report is None:
+            return None
+        return lambda done, value: report(offset + done, stage.iterations, value, float("nan"))
+
     warm = model.warm_start() if stage.warm_start else None
     if warm is not None:
         simpler, to_model = warm
         first = max(1, iterations // 2)
         if resumed is None or resumed["phase"] == 0:
             simpler, values = _minimise(stage.rtol, simpler, X, T, loss_fn, first, progress, f"{name} (warm start)",
-                                        saved, 0, resumed)
+                                        saved, 0, resumed, on_step=on_step(0))
             resumed = None
             history += values
             current = to_model(simpler, X)
@@ -142,7 +148,7 @@ def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_f
             history += resumed["warm_history"]
         iterations = max(1, iterations - first)
     fitted, values = _minimise(stage.rtol, current, X, T, loss_fn, iterations, progress, name, saved, 1, resumed,
-                               history)
+                               history, on_step(len(history)))
     history += values
     crit, train_loss, val_loss = losses(fitted)
     crit0, train0, val0 = losses(model)
@@ -203,11 +209,12 @@ class _Saved:
 
 
 def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None, phase=1, resumed=None,
-              earlier=()):
+              earlier=(), on_step=None):
     """`(model, losses)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
     once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
     or no damping finds a lower loss; the loss after each step. With `saved`, the state is
-    written every `saved.every` steps and at the end; `resumed` continues from a read state."""
+    written every `saved.every` steps and at the end; `resumed` continues from a read state;
+    `on_step(steps done, loss)` after every step."""
     start = time.perf_counter()
     if resumed is not None:
         model = _checkpoint.replace_array_leaves(model, resumed["weights"], "weights")
@@ -269,6 +276,8 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
             values.append(cost / scale)
             bar.update(1)
             bar.set_postfix(loss=f"{values[-1]:.3g}")
+            if on_step is not None:
+                on_step(len(values), values[-1])
             if saved is not None and len(values) - last_saved >= saved.every:
                 save()
                 last_saved = len(values)

@@ -147,8 +147,10 @@ class Checkpoint:
 @dataclasses.dataclass(frozen=True)
 class Progress:
     """What a `learn.fit` callback receives: the stage (index and optimiser name), how far it
-    is (`iteration` of `total` epochs or iterations; for `QuasiNewton` reported once per
-    start) and the latest losses (`val_loss` NaN where not measured)."""
+    is (`iteration` of `total` epochs or iterations: `Adam` reports every compiled chunk of
+    epochs, `QuasiNewton` every iteration (SciPy) or chunk (optax) and at the end of each start,
+    `LevenbergMarquardt` every step and at the end) and the latest losses (`val_loss` NaN
+    where not measured: inside a quasi-Newton or Levenberg-Marquardt run)."""
 
     stage: int
     optimiser: str

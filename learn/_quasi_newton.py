@@ -64,14 +64,15 @@ def _value_and_grad(loss):
 
 
 def minimiser(method: str, loss: Callable[[jax.Array, Any, Any], jax.Array], X: Any, Y: Any):
-    """`minimise(x0, max_iter, progress, desc) -> (x, {"epoch", "train_loss"})` for
-    `loss(x, X, Y)`; `x` is the best iterate seen."""
+    """`minimise(x0, max_iter, progress, desc, rtol=0, on_step=None) -> (x, {"epoch", "train_loss"})`
+    for `loss(x, X, Y)`; `x` is the best iterate seen; `on_step(iterations done, loss)` after
+    every iteration (SciPy) or chunk of iterations (optax)."""
     check_method(method)
     if method in _SCIPY:
         value_and_grad = _value_and_grad(loss)
 
-        def minimise(x0, max_iter, progress, desc, rtol=0.0):
-            return _scipy(_SCIPY[method], value_and_grad, x0, X, Y, max_iter, progress, desc, rtol)
+        def minimise(x0, max_iter, progress, desc, rtol=0.0, on_step=None):
+            return _scipy(_SCIPY[method], value_and_grad, x0, X, Y, max_iter, progress, desc, rtol, on_step)
 
         return minimise
     return _optax_lbfgs(loss, X, Y)
@@ -81,7 +82,7 @@ def minimiser(method: str, loss: Callable[[jax.Array, Any, Any], jax.Array], X: 
 RTOL_WINDOW = 20
 
 
-def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc, rtol=0.0):
+def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc, rtol=0.0, on_step=None):
     def fun(x):
         v, g = value_and_grad(jnp.asarray(x), X, Y)
         return float(v), np.asarray(g, dtype=np.float64)
@@ -94,6 +95,8 @@ def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc, rtol=0.0)
         bar.update(1)
         if len(losses) % 50 == 0:
             bar.set_postfix(loss=f"{losses[-1]:.3g}")
+        if on_step is not None:
+            on_step(len(losses), losses[-1])
         if rtol > 0 and len(losses) > RTOL_WINDOW:
             before = losses[-1 - RTOL_WINDOW]
             if before - losses[-1] <= rtol * abs(before):
@@ -133,7 +136,7 @@ def _optax_lbfgs(loss, X, Y):
 
         return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
 
-    def minimise(x0, max_iter, progress, desc, rtol=0.0):  # rtol: SciPy methods only
+    def minimise(x0, max_iter, progress, desc, rtol=0.0, on_step=None):  # rtol: SciPy methods only
         x, state = x0, opt.init(x0)
         losses: list[np.ndarray] = []
         bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
@@ -147,6 +150,8 @@ def _optax_lbfgs(loss, X, Y):
                 done += len(values)
                 bar.update(len(values))
                 bar.set_postfix(loss=f"{values[-1]:.3g}")
+                if on_step is not None:
+                    on_step(done, float(values[-1]))
                 if not np.all(np.isfinite(values)):
                     break
                 x = x_new
@@ -239,6 +244,7 @@ def run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, 
         return (crit if np.isfinite(crit) else np.inf), train_loss, val_loss
 
     name = f"{type(model).__name__} {stage.method}"
+    total = stage.restarts * stage.iterations
     start = time.perf_counter()
     results = []
     base = jax.random.PRNGKey(seed)
@@ -248,23 +254,27 @@ def run_quasi_newton(stage: QuasiNewton, model, train, val, loss_fn, seed: int, 
         else:
             x0 = ravel_pytree(eqx.filter(model.reinitialised(jax.random.fold_in(base, r)), eqx.is_inexact_array))[0]
         desc = f"{name} start {r + 1}/{stage.restarts}" if stage.restarts > 1 else name
+        before = r * stage.iterations
+        on_step = None if report is None else (
+            lambda done, value, before=before: report(before + done, total, value, float("nan")))
         if warm is not None:
             first = max(1, stage.iterations // 2)
-            x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (warm start)")
+            x_lin, h1 = minimise_linear(x0, first, progress, f"{desc} (warm start)", 0.0, on_step)
             # mapped onto this start's own weights (a restart's random vectors and activation)
             to_model = eqx.combine(unravel(x0), static).warm_start()[1]
             mapped = to_model(eqx.combine(lin_unravel(x_lin), lin_static), X)
             x_init = ravel_pytree(eqx.filter(mapped, eqx.is_inexact_array))[0]
             x, h2 = minimise(x_init, max(1, stage.iterations - first), progress, f"{desc} (from the warm start)",
-                             stage.rtol)
+                             stage.rtol, None if on_step is None else
+                             (lambda done, value, f=first, g=on_step: g(f + done, value)))
             shift = h1["epoch"][-1] if len(h1["epoch"]) else 0
             hist = {"epoch": np.concatenate([h1["epoch"], h2["epoch"] + shift]),
                     "train_loss": np.concatenate([h1["train_loss"], h2["train_loss"]])}
         else:
-            x, hist = minimise(x0, stage.iterations, progress, desc, stage.rtol)
+            x, hist = minimise(x0, stage.iterations, progress, desc, stage.rtol, on_step)
         results.append((*losses(x), r, x, hist))
         if report is not None:
-            report((r + 1) * stage.iterations, stage.restarts * stage.iterations, results[-1][1], results[-1][2])
+            report((r + 1) * stage.iterations, total, results[-1][1], results[-1][2])
     wall = time.perf_counter() - start
     crit, train_loss, val_loss, best_r, x, hist = min(results, key=lambda t: (t[0], t[3]))
     crit0, train0, val0 = losses(flat0)

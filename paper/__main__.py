@@ -29,7 +29,7 @@ from integrators.internals import atomic_write_text
 from ._cluster import ENV, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
-from ._verdict import verdict_table
+from ._verdict import SEEDS_FILE, SEEDS_KEY, verdict_table
 
 PROFILES = ("smoke", "quick", "full")
 
@@ -69,6 +69,12 @@ def load_results(folder: Path) -> dict[str, dict]:
         if not isinstance(metrics, dict):
             print(f"warning: skipping {path}: expected a JSON object, got {type(metrics).__name__}", file=sys.stderr)
             continue
+        seeds = folder / exp_id / SEEDS_FILE
+        if seeds.exists():
+            try:
+                metrics[SEEDS_KEY] = json.loads(seeds.read_text())
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+                print(f"warning: skipping {seeds}: not valid JSON ({err})", file=sys.stderr)
         out[exp_id] = metrics
     return out
 

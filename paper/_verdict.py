@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import statistics
 from typing import Any
 
 from ._experiment import AbstractExperiment, PaperValue, fmt, markdown_row, metric_value
@@ -50,6 +51,22 @@ def judge(claim: PaperValue, ours: Any) -> str:
 NEEDS_FULL = "needs --full: reached there"
 
 
+#: The key under which `load_results` puts an experiment's `paper-budget-seeds.json`: the paper's
+#: own model trained at the paper's budget over seeds (E4: `python -m paper.e4_sweep`).
+SEEDS_KEY = "paper_budget_seeds"
+#: The file of an experiment's results folder that holds them.
+SEEDS_FILE = "paper-budget-seeds.json"
+
+
+def _seed_evidence(claim: PaperValue, seeds: dict) -> str:
+    """"the paper's model at the paper's budget reaches it in k of n seeds (median m)"."""
+    values = [float(v) for v in seeds["metrics"][claim.metric]]
+    k = sum(not judge(claim, v).startswith(("not", "differs")) for v in values)
+    median = statistics.median(values)
+    return (f"at the paper's budget ({seeds.get('budget', '?')}) the paper's model reaches it in {k} of "
+            f"{len(values)} seeds (median {fmt(median)})")
+
+
 def verdict_rows(experiments: dict[str, AbstractExperiment], results: dict[str, dict],
                  reference: dict[str, dict] | None = None) -> list[tuple[str, ...]]:
     """`(experiment (profile), quantity, paper, ours, verdict)` for every claim of every
@@ -60,6 +77,7 @@ def verdict_rows(experiments: dict[str, AbstractExperiment], results: dict[str, 
     for exp_id, metrics in results.items():
         exp = experiments[exp_id]
         full = (reference or {}).get(exp_id)
+        seeds = metrics.get(SEEDS_KEY) or (full or {}).get(SEEDS_KEY)
         for claim in exp.paper_values:
             ours = metric_value(metrics, claim.metric)
             verdict = judge(claim, ours)
@@ -68,6 +86,8 @@ def verdict_rows(experiments: dict[str, AbstractExperiment], results: dict[str, 
                 there = metric_value(full, claim.metric)
                 if not judge(claim, there).startswith(("not", "differs")):
                     verdict = f"{NEEDS_FULL} ({fmt(there)})"
+            if verdict.startswith("not reached") and seeds and claim.metric in seeds.get("metrics", {}):
+                verdict += "; " + _seed_evidence(claim, seeds)
             rows.append((f"{exp_id} ({metrics.get('profile')})", exp.label(claim.metric), claim.text, fmt(ours),
                          verdict))
     return rows

@@ -338,3 +338,35 @@ def test_training_record_round_trip(tmp_path, rb, pairs):
     for key, value in record.history.items():
         assert loaded.history[key].dtype == value.dtype
         assert np.array_equal(loaded.history[key], value, equal_nan=True), key
+
+
+@pytest.mark.parametrize("method", ["lbfgsb", "lbfgs"])
+def test_callback_follows_every_stage_as_it_runs(rb, pairs, method):
+    """`callback` sees each optimiser's progress while it runs (what a live plot or a
+    time-to-figure measurement needs): Adam's chunks, every quasi-Newton iteration (SciPy) or
+    chunk (optax), every Levenberg-Marquardt step; the iteration counts rise within a stage,
+    and the losses reported inside a second-order stage are its history's."""
+    seen: list[learn.Progress] = []
+    stages = (learn.Adam(20, learning_rate=1e-2, log_every=1), learn.QuasiNewton(12, method))
+    _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False,
+                          callback=seen.append)
+    assert {p.stage for p in seen} == {0, 1}
+    assert all(isinstance(p, learn.Progress) for p in seen)
+    qn = [p for p in seen if p.stage == 1]
+    assert all(p.optimiser == "QuasiNewton" and p.total == 12 for p in qn)
+    inside = [p for p in qn if np.isnan(p.val_loss)]  # during the run; the last one is the start's result
+    assert len(inside) >= (record.stages[1].iterations if method == "lbfgsb" else 1)
+    assert all(np.diff([p.iteration for p in inside]) > 0)
+    history = record.history["train_loss"][20:]
+    for p in inside:
+        assert p.train_loss == history[p.iteration - 1]
+    assert qn[-1].iteration == 12 and np.isfinite(qn[-1].val_loss)
+
+    pairs_small = (pairs[0][:20], pairs[1][:20])
+    glp = learn.GLPNet(rb, n_modules=2, key=0)
+    seen.clear()
+    _, record = learn.fit(glp, pairs_small, h=H, optimiser=learn.LevenbergMarquardt(5, rtol=0.0), progress=False,
+                          callback=seen.append)
+    steps = [p for p in seen if np.isnan(p.val_loss)]
+    assert [p.iteration for p in steps] == list(range(1, record.stages[0].iterations + 1))
+    np.testing.assert_array_equal([p.train_loss for p in steps], record.history["train_loss"])

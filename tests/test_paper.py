@@ -223,6 +223,37 @@ def test_verdict_says_needs_full_only_where_the_full_reference_reaches_the_claim
     assert verdict_rows({"X": Fake()}, quick, {"X": {**full["X"], "profile": "quick"}})[0][-1].startswith("not")
 
 
+def test_verdict_of_a_claim_not_reached_cites_the_paper_budget_seeds(tmp_path):
+    """Where a claim is not reached, the verdict reports how many seeds of the paper's own model
+    at the paper's budget reach it (E4's `paper-budget-seeds.json`, read by `load_results`),
+    from the run's folder or the reference's."""
+    import json
+
+    from paper.__main__ import load_results
+    from paper._verdict import SEEDS_FILE, SEEDS_KEY, verdict_rows
+
+    class Fake:
+        paper_values = (PaperValue("energy", 2e-2, "1-2%"), PaperValue("loss", 1e-5, "< 1e-5"))
+
+        def label(self, key):
+            return key
+
+    # energies: two of five seeds <= 2%; median 0.03
+    seeds = {"budget": "2e5 steps", "metrics": {"energy": [0.5, 0.01, 0.03, 0.019, 3.0]}}
+    (tmp_path / "E4").mkdir()
+    (tmp_path / "E4" / "metrics.json").write_text(json.dumps({"profile": "full", "energy": 0.5, "loss": 1e-6}))
+    (tmp_path / "E4" / SEEDS_FILE).write_text(json.dumps(seeds))
+    loaded = load_results(tmp_path)
+    assert loaded["E4"][SEEDS_KEY] == seeds
+    rows = {r[1]: r[-1] for r in verdict_rows({"E4": Fake()}, loaded)}
+    assert rows["energy"].startswith("not reached (25x the paper's); at the paper's budget (2e5 steps)")
+    assert rows["energy"].endswith("reaches it in 2 of 5 seeds (median 0.03)")
+    assert rows["loss"] == "beaten (10x lower)"  # a claim reached says nothing of seeds
+    quick = {"E4": {"profile": "quick", "energy": 0.5, "loss": 1e-6}}
+    assert "2 of 5 seeds" in verdict_rows({"E4": Fake()}, quick, loaded)[0][-1]  # from the reference
+    assert "seeds" not in verdict_rows({"E4": Fake()}, quick)[0][-1]  # no evidence, none cited
+
+
 def test_table_prints_one_verdict_row_per_claim_and_the_readme_shows_the_reference_verdict(capsys):
     from paper.__main__ import load_results
     from paper._verdict import verdict_table
