@@ -1,9 +1,13 @@
-"""Where the experiments' independent trainings (seeds, step sizes) run: here, one after the
-other (the default), or on a Dask cluster (`python -m paper ... --scheduler`)."""
+"""Where the experiments' independent trainings (seeds, a baseline, a G-LPNet) run: here, one
+after the other; in worker processes on this machine, one per core (`"processes"`, the default
+of `python -m paper` on a machine with more than one core); or on a Dask cluster
+(`python -m paper ... --scheduler [ADDRESS]`)."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
@@ -15,17 +19,45 @@ ENV = "LIEPOISSON_SCHEDULER"
 #: Seconds to wait for a remote scheduler to answer.
 CONNECT_TIMEOUT = 30.0
 
+#: `scheduler`'s spec for worker processes on this machine.
+PROCESSES = "processes"
+
 _client: Any = None
+_pool: concurrent.futures.ProcessPoolExecutor | None = None
+
+
+def default_spec() -> str | None:
+    """`$LIEPOISSON_SCHEDULER` if set, else `"processes"` on a machine with more than one core
+    (and cloudpickle, of the `paper` extra, to send the tasks), else None (this process)."""
+    spec = os.environ.get(ENV)
+    if spec is not None:
+        return spec
+    try:
+        import cloudpickle  # noqa: F401
+    except ImportError:
+        return None
+    return PROCESSES if (os.cpu_count() or 1) > 1 else None
 
 
 @contextlib.contextmanager
 def scheduler(spec: str | None) -> Iterator[str | None]:
     """Within the block, `map_trainings` runs on the cluster `spec` names: `"local"`, a
-    `LocalCluster` sized to the machine (one single-threaded worker per core), or a scheduler
-    address such as `tcp://10.0.0.5:8786`; `None`/`""`/`"none"`: no Dask. Yields a description."""
-    global _client
+    `LocalCluster` sized to the machine (one single-threaded worker per core), a scheduler
+    address such as `tcp://10.0.0.5:8786`, or `"processes"`: worker processes on this machine,
+    one per core, without Dask; `None`/`""`/`"none"`: this process. Yields a description."""
+    global _client, _pool
     if spec is None or spec.strip().lower() in ("", "none"):
         yield None
+        return
+    if spec.strip().lower() == PROCESSES:
+        workers = os.cpu_count() or 1
+        # spawn, not fork: a forked JAX runtime deadlocks
+        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            _pool = pool
+            try:
+                yield f"{workers} worker processes on this machine"
+            finally:
+                _pool = None
         return
     distributed = require_distributed()
     with contextlib.ExitStack() as stack:
@@ -47,11 +79,45 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
 
 
 def on_cluster() -> bool:
-    """Whether trainings run on a Dask cluster now."""
-    return _client is not None
+    """Whether trainings run elsewhere now (worker processes or a Dask cluster): their
+    progress bars would interleave, so callers turn them off."""
+    return _client is not None or _pool is not None
+
+
+class _Done:
+    """The result of a task run here, as a future holds it."""
+
+    def __init__(self, value: Any):
+        self._value = value
+
+    def result(self) -> Any:
+        return self._value
+
+
+def _call(payload: bytes) -> Any:
+    import cloudpickle
+
+    fn, args = cloudpickle.loads(payload)
+    return fn(*args)
+
+
+def submit(fn: Callable[..., Any], *args: Any) -> Any:
+    """Start `fn(*args)` where trainings run now; returns an object whose `.result()` is its
+    value (raising its exception). Here (no scheduler) it runs at once. In worker processes
+    `fn` and `args` travel by cloudpickle (closures and lambdas included); with Dask, as Dask
+    sends them."""
+    if _pool is not None:
+        import cloudpickle
+
+        return _pool.submit(_call, cloudpickle.dumps((fn, args)))
+    if _client is not None:
+        return _client.submit(fn, *args, pure=False)
+    return _Done(fn(*args))
 
 
 def map_trainings(fn: Callable[..., Any], items: Sequence[tuple[Any, ...]]) -> list[Any]:
-    """`[fn(*args) for args in items]`, on the cluster when there is one (results in order)."""
+    """`[fn(*args) for args in items]`, where trainings run now (results in order)."""
+    if _pool is not None:
+        return [f.result() for f in [submit(fn, *args) for args in items]]
     results = dict(map_unordered(fn, enumerate(items), client=_client))
     return [results[i] for i in range(len(items))]

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -11,7 +14,7 @@ import integrators as it
 import learn
 from learn import AbstractLearnedMap, TrainingRecord
 
-from ._cluster import map_trainings, on_cluster
+from ._cluster import on_cluster, submit
 
 
 def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, system, reference: np.ndarray,
@@ -122,26 +125,52 @@ def refine_after_adam(adam: Trained, data, iterations, system, reference, progre
 
 
 def _one_seed(make, fit, data, refine_iterations, system, reference, seed, progress):
-    """One seed of `lpnet_seeds` (a task on the cluster when there is one)."""
+    """One seed of `start_lpnet_seeds` (a task where trainings run)."""
     first = learn.fit(make(seed), data, **fit(seed), progress=progress)
     (net, rec), adam_only = refine_after_adam(first, data, refine_iterations, system, reference, progress)
     energy = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max"]
     return first, (net, rec), adam_only, energy
 
 
-def lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, progress, label):
-    """Train `make(seed)` for each seed in `seeds` (`learn.fit` with the keyword arguments
-    `fit(seed)`, an Adam stage, then `refine_after_adam`) and roll each out against `reference`.
+def start_training(fn: Callable[..., Any], /, *args: Any, **kwargs: Any):
+    """Start `fn(*args, **kwargs)` where trainings run (`paper._cluster.submit`; its
+    `.result()` waits), its progress bars off when that is elsewhere."""
+    if "progress" in kwargs:
+        kwargs["progress"] = kwargs["progress"] and not on_cluster()
+    return submit(functools.partial(fn, *args, **kwargs))
+
+
+@dataclasses.dataclass(frozen=True)
+class StartedSeeds:
+    """The trainings `start_lpnet_seeds` started: a future per seed."""
+
+    futures: list
+    seeds: list
+    refine_iterations: int
+
+
+def start_lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, progress) -> StartedSeeds:
+    """Start the seeds' trainings where trainings run (`paper._cluster.submit`);
+    `collect_lpnet_seeds` waits for them and says what they are. Between the two, an experiment starts its other
+    trainings (a baseline, a G-LPNet), so that they run beside the seeds."""
+    progress = progress and not on_cluster()
+    futures = [submit(_one_seed, make, fit, data, refine_iterations, system, reference, seed, progress)
+               for seed in seeds]
+    return StartedSeeds(futures, list(seeds), refine_iterations)
+
+
+def collect_lpnet_seeds(started: StartedSeeds, label: str):
+    """Wait for the trainings `start_lpnet_seeds` started: `make(seed)` for each seed, fitted
+    by `learn.fit` with the keyword arguments `fit(seed)` (an Adam stage), then
+    `refine_after_adam`, and rolled out against `reference`.
 
     Returns `(trained, metrics)`: the refined `(network, record)` pairs (seed order) and the
     per-seed lists `energy_rel_err_max_seeds`, `train_loss_seeds` and their `*_adam_only` twins,
     the medians `energy_rel_err_max_median` and `adam_only_energy_median`, and `adam_only`,
     `wall_time_s` of the first seed (Adam plus refinement)."""
     trained, energies, adam_runs = [], [], []
-    progress = progress and not on_cluster()
-    runs = map_trainings(_one_seed, [(make, fit, data, refine_iterations, system, reference, seed, progress)
-                                     for seed in seeds])
-    for seed, (first, (net, rec), adam_only, energy) in zip(seeds, runs):
+    runs = [f.result() for f in started.futures]
+    for seed, (first, (net, rec), adam_only, energy) in zip(started.seeds, runs):
         trained.append((net, rec))
         energies.append(energy)
         adam_runs.append(adam_only)
@@ -160,6 +189,6 @@ def lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, pr
         "train_loss_seeds_adam_only": [a["train_loss"] for a in adam_runs],
         "adam_only": adam_runs[0],
         "wall_time_s": adam_runs[0]["wall_time_s"] + trained[0][1].wall_time_s,
-        "refine_iterations": refine_iterations,
+        "refine_iterations": started.refine_iterations,
     }
     return trained, metrics

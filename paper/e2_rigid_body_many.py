@@ -22,7 +22,13 @@ import integrators as it
 import learn
 import liepoisson as lp
 
-from ._evaluate import compare, glpnet_on_same_data, lpnet_seeds
+from ._evaluate import (
+    collect_lpnet_seeds,
+    compare,
+    glpnet_on_same_data,
+    start_lpnet_seeds,
+    start_training,
+)
 from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue
 
 
@@ -72,26 +78,29 @@ class E2(AbstractExperiment):
         adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-4)
         split = {"validation_fraction": 0.2, "seed": 0}
         # Network seeds vary; the split is the same (seed 0) for all.
-        trained, seed_metrics = lpnet_seeds(
+        # The independent trainings start together (in worker processes by default).
+        glpnet = start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
+                       P.glpnet_restarts, progress=progress)
+        seeds = start_lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=seed),
             lambda seed: {"optimiser": adam, **split},
-            data, P.refine_iterations, system, reference, range(P.seeds), progress, "E2",
+            data, P.refine_iterations, system, reference, range(P.seeds), progress,
         )
+        baseline = start_training(
+            learn.fit, learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0), data,
+            optimiser=(adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb")), **split, progress=progress,
+        )
+        trained, seed_metrics = collect_lpnet_seeds(seeds, "E2")
         net, record = trained[0]
         net.save(out_dir / "lpnet.h5")
         record.save(out_dir / "lpnet-training.h5")
-        base = learn.fit(
-            learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0), data,
-            optimiser=(adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb")), **split, progress=progress,
-        )
+        base = baseline.result()
         metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
         metrics.update(seed_metrics)
         metrics["n_parameters"] = net.n_parameters
         metrics["model"] = "LPNet 3x32"
         metrics["baseline_model"] = "residual MLP 3x32"
-        metrics["glpnet"] = glpnet_on_same_data(
-            system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress
-        )[1]
+        metrics["glpnet"] = glpnet.result()[1]
         metrics["notes"] = [
             (
                 f"Training: Adam as in the paper ({P.epochs} epochs), then {P.refine_iterations} "

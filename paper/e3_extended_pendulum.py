@@ -34,7 +34,13 @@ import integrators as it
 import learn
 import liepoisson as lp
 
-from ._evaluate import compare, glpnet_on_same_data, lpnet_seeds
+from ._evaluate import (
+    collect_lpnet_seeds,
+    compare,
+    glpnet_on_same_data,
+    start_lpnet_seeds,
+    start_training,
+)
 from ._experiment import ADAM_ROWS, GLPNET_ROWS, AbstractExperiment, PaperValue
 
 
@@ -88,18 +94,24 @@ class E3(AbstractExperiment):
 
         adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5)
         fit = {"optimiser": adam, "validation_fraction": 0.5, "seed": 0}
-        ((net, record),), seed_metrics = lpnet_seeds(
+        # The independent trainings start together (in worker processes by default).
+        glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
+                        P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True)
+                  if P.glpnet_iterations else None)
+        seeds = start_lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=seed,
                                      parametrisation=learn.TestFlowParametrisation(system)),
             lambda seed: fit,
-            data, P.refine_iterations, system, reference, [0], progress, "E3",
+            data, P.refine_iterations, system, reference, [0], progress,
         )
-        net.save(out_dir / "lpnet.h5")
-        record.save(out_dir / "lpnet-training.h5")
-        base = learn.fit(
-            learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data,
+        baseline = start_training(
+            learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data,
             **{**fit, "optimiser": (adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb"))}, progress=progress,
         )
+        ((net, record),), seed_metrics = collect_lpnet_seeds(seeds, "E3")
+        net.save(out_dir / "lpnet.h5")
+        record.save(out_dir / "lpnet-training.h5")
+        base = baseline.result()
         metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
         for key in ("adam_only", "wall_time_s", "refine_iterations"):
             metrics[key] = seed_metrics[key]
@@ -111,11 +123,8 @@ class E3(AbstractExperiment):
         metrics["baseline_n_parameters"] = base[0].n_parameters
         metrics["model"] = "LPNet 3x16"
         metrics["baseline_model"] = "residual MLP 3x16"
-        if P.glpnet_iterations:
-            metrics["glpnet"] = glpnet_on_same_data(
-                system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
-                n_modules=P.glpnet_modules, full_vectors=True,
-            )[1]
+        if glpnet is not None:
+            metrics["glpnet"] = glpnet.result()[1]
         metrics["notes"] = [
             (
                 f"Training: Adam as in the paper ({P.epochs} epochs), then {P.refine_iterations} "

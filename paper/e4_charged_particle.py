@@ -37,7 +37,7 @@ import integrators as it
 import learn
 import liepoisson as lp
 
-from ._evaluate import compare, glpnet_on_same_data
+from ._evaluate import compare, glpnet_on_same_data, start_training
 from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue
 
 
@@ -97,24 +97,26 @@ class E4(AbstractExperiment):
             "seed": 0,
             "progress": progress,
         }
-        net, record = learn.fit(
-            learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
-                        parametrisation=learn.TestFlowParametrisation(system)),
-            data, **fit,
-        )
-        net.save(out_dir / "lpnet.h5")
-        record.save(out_dir / "lpnet-training.h5")
-        base = learn.fit(learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data, **fit)
         # The second integral I = x1 p2 - x2 p1 + r^3/3, reported like the energy.
         integrals = {"integral": system.angular_integral}
+        # The independent trainings start together (in worker processes by default).
+        glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
+                        P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True,
+                        integrals=integrals,
+                        method=it.splitting.Strang if P.glpnet_symmetric else it.splitting.LieTrotter)
+                  if P.glpnet_iterations else None)
+        lpnet = start_training(learn.fit, learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
+                                             parametrisation=learn.TestFlowParametrisation(system)), data, **fit)
+        baseline = start_training(learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data,
+                         **fit)
+        net, record = lpnet.result()
+        net.save(out_dir / "lpnet.h5")
+        record.save(out_dir / "lpnet-training.h5")
+        base = baseline.result()
         metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states,
                              integrals=integrals)
-        if P.glpnet_iterations:
-            metrics["glpnet"] = glpnet_on_same_data(
-                system, data, reference, out_dir, P.glpnet_iterations, P.glpnet_restarts, progress,
-                n_modules=P.glpnet_modules, full_vectors=True, integrals=integrals,
-                method=it.splitting.Strang if P.glpnet_symmetric else it.splitting.LieTrotter,
-            )[1]
+        if glpnet is not None:
+            metrics["glpnet"] = glpnet.result()[1]
         n_train = round(0.8 * (P.n_points - 1))
         metrics["adam_steps"] = P.epochs * (n_train // P.batch_size if P.batch_size else 1)
         metrics["start_point"] = start
