@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 from integrators.internals import atomic_write_text
 
-from ._cluster import ENV, default_spec, scheduler
+from ._cluster import ENV, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 from ._verdict import SEEDS_FILE, SEEDS_KEY, verdict_table
@@ -119,11 +120,11 @@ def _options(parser: argparse.ArgumentParser, top: bool) -> None:
     parser.add_argument("--full", action="store_true", default=default(False), help="short for --profile full")
     parser.add_argument("--no-progress", action="store_true", default=default(False), help="no progress bars")
     parser.add_argument(
-        "--scheduler", nargs="?", const="local", default=default(default_spec()), metavar="ADDRESS",
+        "--scheduler", nargs="?", const="local", default=default(os.environ.get(ENV)), metavar="ADDRESS",
         help="where the independent trainings (seeds, baselines, G-LPNets, step sizes) run: 'processes' "
              "(worker processes on this machine, one per core), 'none' (this process, one after the other), "
              "a Dask scheduler address (tcp://host:8786), or no value for a Dask LocalCluster sized to this "
-             f"machine (extra 'dask'); default ${ENV}, else 'processes' on a machine with more than one core",
+             f"machine (extra 'dask'); default ${ENV}, else 'none'",
     )
 
 

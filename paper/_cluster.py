@@ -1,7 +1,11 @@
 """Where the experiments' independent trainings (seeds, a baseline, a G-LPNet) run: here, one
-after the other; in worker processes on this machine, one per core (`"processes"`, the default
-of `python -m paper` on a machine with more than one core); or on a Dask cluster
-(`python -m paper ... --scheduler [ADDRESS]`)."""
+after the other (the default); in worker processes on this machine, one per core
+(`--scheduler processes`); or on a Dask cluster (`--scheduler [ADDRESS]`).
+
+Measured on the 2-core machine of BENCHMARKS.md ("Trainings in worker processes"): two
+trainings at once each take more than twice as long as one alone (a training already keeps both
+cores busy), so the default stays one process; the workers pay off with more cores or a
+cluster."""
 
 from __future__ import annotations
 
@@ -26,19 +30,6 @@ _client: Any = None
 _pool: concurrent.futures.ProcessPoolExecutor | None = None
 
 
-def default_spec() -> str | None:
-    """`$LIEPOISSON_SCHEDULER` if set, else `"processes"` on a machine with more than one core
-    (and cloudpickle, of the `paper` extra, to send the tasks), else None (this process)."""
-    spec = os.environ.get(ENV)
-    if spec is not None:
-        return spec
-    try:
-        import cloudpickle  # noqa: F401
-    except ImportError:
-        return None
-    return PROCESSES if (os.cpu_count() or 1) > 1 else None
-
-
 @contextlib.contextmanager
 def scheduler(spec: str | None) -> Iterator[str | None]:
     """Within the block, `map_trainings` runs on the cluster `spec` names: `"local"`, a
@@ -50,6 +41,11 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
         yield None
         return
     if spec.strip().lower() == PROCESSES:
+        try:
+            import cloudpickle  # noqa: F401
+        except ImportError as err:
+            raise ImportError("worker processes send the trainings by cloudpickle: pip install 'liepoisson[paper]'") \
+                from err
         workers = os.cpu_count() or 1
         # spawn, not fork: a forked JAX runtime deadlocks
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:

@@ -46,7 +46,9 @@ PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
     "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
                      glpnet_restarts=1),
-    "quick": Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000),
+    # quick: a third of the Adam epochs and half the L-BFGS-B of 30k + 10k, which reached 0.044%
+    # (BENCHMARKS.md, "Quick-profile budgets"): the main job in under 10 minutes.
+    "quick": Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
     "full": Profile(epochs=100_000, prediction_steps=10_000, refine_iterations=30_000, seeds=3),
 }
 DATA_SEED = 2

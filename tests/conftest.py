@@ -21,10 +21,6 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 EPS = np.finfo(np.float64).eps
 
-# `python -m paper` runs its trainings in worker processes by default; the suite's smoke runs
-# stay in one process (spawning workers costs more than their seconds of training), and
-# `test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process` covers the pool.
-os.environ.setdefault("LIEPOISSON_SCHEDULER", "none")
 
 
 # One JAX compilation cache per test run, shared by the pytest-xdist workers (which inherit the

@@ -345,17 +345,15 @@ def test_paper_trainings_on_a_local_cluster_give_the_numbers_of_one_process(tmp_
 
 
 def test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process(tmp_path, capsys, monkeypatch):
-    """The default of `python -m paper` on more than one core: the LPNet, the baseline and the
-    G-LPNet of E4 trained in spawned worker processes (sent by cloudpickle) give the figures
-    of one process."""
+    """`--scheduler processes`: the LPNet and the baseline of E4 trained in spawned worker
+    processes (sent by cloudpickle) give the figures of one process."""
     from paper.__main__ import main
 
-    monkeypatch.delenv("LIEPOISSON_SCHEDULER")
     monkeypatch.setattr("os.cpu_count", lambda: 2)
     argv = ["run", "E4", "--profile", "smoke", "--no-progress"]
-    assert main([*argv, "--out", str(tmp_path / "one"), "--scheduler", "none"]) == 0
+    assert main([*argv, "--out", str(tmp_path / "one")]) == 0
     capsys.readouterr()
-    assert main([*argv, "--out", str(tmp_path / "pool")]) == 0  # the default: processes
+    assert main([*argv, "--out", str(tmp_path / "pool"), "--scheduler", "processes"]) == 0
     assert "trainings on the 2 worker processes on this machine" in capsys.readouterr().out
     one, pool = (json.loads((tmp_path / d / "E4" / "metrics.json").read_text()) for d in ("one", "pool"))
     for key in ("train_loss", "val_loss"):  # the trainings: bitwise
