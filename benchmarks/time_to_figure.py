@@ -2,6 +2,7 @@ r"""Time to the paper's figure, per experiment: today's recipe against the secon
 optimisers that run inside JAX.
 
     python -m benchmarks.time_to_figure [--experiments E1 ... E6] [--out FILE.json]
+    python -m benchmarks.time_to_figure --report   # the table of the saved results
 
 For each experiment, its data (as `python -m paper` builds them) and its model, fitted twice
 from the same weights:
@@ -26,8 +27,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -160,15 +163,36 @@ def time_to_figure(case: Case, stages: tuple, figure: float) -> dict[str, Any]:
             "loss": min(best["loss"], record.train_loss)}
 
 
+def table(results: dict) -> str:
+    """The markdown table of `results` (as `main` saves them)."""
+    header = ("| experiment | paper's training loss | old recipe | time to it [s] | new recipe | time to it [s] "
+              "| old / new |")
+    lines = [header, "|---|---|---|---|---|---|---|"]
+
+    def cell(r):
+        if not r["reached"]:
+            return f"not reached ({r['seconds']:.0f} s, best {r['loss']:.2e})"
+        return f"{r['seconds']:.1f} (in {r['stage']}, iteration {r['iteration']})"
+
+    for exp_id, r in results.items():
+        old, new = r["old"], r["new"]
+        ratio = f"{old['seconds'] / new['seconds']:.2f}x" if old["reached"] and new["reached"] else "-"
+        lines.append(f"| {exp_id} | {r['figure']:g} | {old['recipe']} | {cell(old)} | {new['recipe']} | {cell(new)} "
+                     f"| {ratio} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.time_to_figure", description=__doc__.splitlines()[0])
     parser.add_argument("--experiments", nargs="+", default=["E1", "E2", "E3", "E4", "E5", "E6"])
     parser.add_argument("--out", default=default_out("time_to_figure"))
+    parser.add_argument("--report", action="store_true", help="print the table of the results saved in --out")
     args = parser.parse_args(argv)
+    if args.report:
+        print(table(json.loads(Path(args.out).read_text())["results"]))
+        return
     cases = _cases()
     results = {}
-    print("| experiment | paper's training loss | old recipe | time [s] | new recipe | time [s] | speed-up |")
-    print("|---|---|---|---|---|---|---|")
     for exp_id in args.experiments:
         case = cases[exp_id]
         figure = EXPERIMENTS[exp_id].paper_value("train_loss").value
@@ -176,14 +200,9 @@ def main(argv: list[str] | None = None) -> None:
         new = time_to_figure(case, case.new, figure)
         results[exp_id] = {"figure": figure, "old": {"recipe": case.old_name, **old},
                            "new": {"recipe": case.new_name, **new}}
-
-        def cell(r):
-            return f"{r['seconds']:.1f}" if r["reached"] else f"not reached ({r['seconds']:.0f} s, best {r['loss']:.2e})"
-
-        ratio = f"{old['seconds'] / new['seconds']:.2f}x" if old["reached"] and new["reached"] else "-"
-        print(f"| {exp_id} | {figure:g} | {case.old_name} | {cell(old)} | {case.new_name} | {cell(new)} | {ratio} |",
-              flush=True)
+        print(table(results).splitlines()[-1], flush=True)
         write_json(args.out, args, results)  # after each experiment: an interrupted run keeps what it measured
+    print(table(results))
     print(f"results: {args.out}")
 
 

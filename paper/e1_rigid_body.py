@@ -45,7 +45,8 @@ PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
     "smoke": Profile(300, 2, 300, 1e-4, refine_iterations=20, glpnet_iterations=20, glpnet_restarts=1),
     "quick": Profile(30_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_restarts=2),
-    "full": Profile(100_000, 5, 10_000, 1e-5, refine_iterations=30_000, glpnet_iterations=3500, glpnet_restarts=4),
+    # full: the paper's 1e5 Adam epochs, then 10k L-BFGS-B (30k until issue 29: BENCHMARKS.md)
+    "full": Profile(100_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_restarts=4),
 }
 
 
@@ -72,7 +73,7 @@ class E1(AbstractExperiment):
         start = data.states[0, -1]
         reference = it.ground_truth(system, start, h=h, n_steps=P.prediction_steps)
 
-        # The independent trainings start together (in worker processes by default) and are
+        # The independent trainings start together (in worker processes with --scheduler processes) and are
         # collected in order: the G-LPNet (the longest) first, the seeds, the baseline.
         glpnet = start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
                        P.glpnet_restarts, progress=progress)

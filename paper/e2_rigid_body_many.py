@@ -46,10 +46,10 @@ PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
     "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
                      glpnet_restarts=1),
-    # quick: a third of the Adam epochs and half the L-BFGS-B of 30k + 10k, which reached 0.044%
-    # (BENCHMARKS.md, "Quick-profile budgets"): the main job in under 10 minutes.
+    # quick: Adam 10k + L-BFGS-B 5k; full: 30k + 10k over 3 seeds (100k + 30k reached the same
+    # claims in 18 min; BENCHMARKS.md, "Quick-profile budgets" and "--full in 45 minutes").
     "quick": Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
-    "full": Profile(epochs=100_000, prediction_steps=10_000, refine_iterations=30_000, seeds=3),
+    "full": Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000, seeds=3),
 }
 DATA_SEED = 2
 
@@ -80,7 +80,7 @@ class E2(AbstractExperiment):
         adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-4)
         split = {"validation_fraction": 0.2, "seed": 0}
         # Network seeds vary; the split is the same (seed 0) for all.
-        # The independent trainings start together (in worker processes by default).
+        # The independent trainings start together (in worker processes with --scheduler processes).
         glpnet = start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
                        P.glpnet_restarts, progress=progress)
         seeds = start_lpnet_seeds(

@@ -94,7 +94,7 @@ class E3(AbstractExperiment):
 
         adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5)
         fit = {"optimiser": adam, "validation_fraction": 0.5, "seed": 0}
-        # The independent trainings start together (in worker processes by default).
+        # The independent trainings start together (in worker processes with --scheduler processes).
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
                         P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True)
                   if P.glpnet_iterations else None)

@@ -2,6 +2,7 @@ r"""E4's LPNet over seeds and training budgets: does the paper's model (MLP 3x32
 parameters) reach the paper's 1-2% energy and 3-4% integral error over 2000 steps?
 
     python -m paper.e4_sweep [--out DIR] [--model lpnet] [--budgets ...] [--seeds 3] [--scheduler [ADDRESS]]
+    python -m paper.e4_sweep --out DIR --report   # the table of the points finished so far
 
 A `learn.sweep` over seed x budget on E4's data (one heyoka trajectory of 20000 points, 80/20
 split): Adam with mini-batches of 1000 pairs for 45,000 and 90,000 steps (the committed E4 run is
@@ -142,18 +143,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--budgets", nargs="+", choices=[*BUDGETS, *SMOKE], default=list(BUDGETS))
     parser.add_argument("--scheduler", nargs="?", const="local", default=os.environ.get(ENV), metavar="ADDRESS")
+    parser.add_argument("--report", action="store_true",
+                        help="train nothing: write the table of the points already finished in --out")
     args = parser.parse_args(argv)
+    if args.report and not (args.out / "points").is_dir():
+        parser.error(f"--report: no sweep in {args.out} (no points/ folder)")
     # The paper's LPNet's points carry no "model" key (their folders predate the others).
     model = {} if args.model == "lpnet" else {"model": args.model}
     grid = [{"budget": b, "seed": s, **model} for b in args.budgets for s in range(args.seeds)]
-    data = _data(None)
-    with scheduler(args.scheduler) as where:
-        if where:
-            print(f"trainings on the {where}")
-        learn.sweep(
-            _make, [dict(p, optimiser={**BUDGETS, **SMOKE}[p["budget"]]) for p in grid], data, out=args.out,
-            evaluate=_evaluate, validation_fraction=0.2, checkpoint_every=CHECKPOINT_EVERY,
-        )
+    if not args.report:
+        data = _data(None)
+        with scheduler(args.scheduler) as where:
+            if where:
+                print(f"trainings on the {where}")
+            learn.sweep(
+                _make, [dict(p, optimiser={**BUDGETS, **SMOKE}[p["budget"]]) for p in grid], data, out=args.out,
+                evaluate=_evaluate, validation_fraction=0.2, checkpoint_every=CHECKPOINT_EVERY,
+            )
     lines = [
         "# E4 sweep: the paper's LPNet (MLP 3x32, 2404 parameters) and its reversible variants over seeds and budgets",
         "",

@@ -288,6 +288,12 @@ def test_e4_sweep_pipeline_writes_its_table_and_skips_done_points_on_rerun(tmp_p
     rows = json.loads((tmp_path / "e4-sweep.json").read_text())
     assert [(r["model"], r["seed"]) for r in rows] == [("lpnet", 0), ("lpnet", 1), ("reversible_equivariant", 0)]
     assert np.isfinite(rows[-1]["energy_rel_err_max"])
+    # --report: the same table from the finished points, nothing trained, whatever the grid
+    table = (tmp_path / "sweep.md").read_text()
+    (tmp_path / "sweep.md").unlink()
+    assert e4_sweep.main(["--out", str(tmp_path), "--report", "--seeds", "5", "--budgets", "paper2e5"]) == 0
+    assert len(list((tmp_path / "points").glob("*/model.h5"))) == 3
+    assert (tmp_path / "sweep.md").read_text().split("\n", 3)[3] == table.split("\n", 3)[3]  # after the command
 
 
 def test_markdown_rows_escape_pipes_inside_cells():
