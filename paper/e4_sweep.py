@@ -165,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "Produced by `python -m paper.e4_sweep " + " ".join(argv if argv is not None else sys.argv[1:]) + "`. "
         "Energy and integral errors: max relative over 2000 steps from the data's last point (as E4). "
-        "The paper: energy 1-2%, integral 3-4%, losses < 1e-5.",
+        "The paper: energy 1-2%, integral 3-4%, losses < 1e-5. Fit times are wall times on the machine "
+        "that ran the point, shared with other runs or paused at times: not speed figures.",
         "",
         ("| model | budget | seed | train loss | val loss | max energy error | max integral error | trajectory error (t=200) "
          "| reaches the paper's energy / integral | fit time [s] |"),
