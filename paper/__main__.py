@@ -18,6 +18,7 @@ committed reference results in `paper/reference/` are never written by a run.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -164,14 +165,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--full and --profile {args.profile} disagree")
     profile = args.profile or ("full" if args.full else "quick")
     ids = args.ids if args.command == "run" else list(PAPER_EXPERIMENTS)
-    try:
-        with scheduler(args.scheduler) as where:
-            if where:
-                print(f"trainings on the {where}")
-            return _run(ids, profile, False if args.no_progress else None, args.out)  # None: bars on a terminal only
-    except (ImportError, ValueError) as err:  # no dask extra, unreachable scheduler
-        print(f"--scheduler: {err}", file=sys.stderr)
-        return 2
+    with contextlib.ExitStack() as stack:
+        try:
+            where = stack.enter_context(scheduler(args.scheduler))
+        except (ImportError, ValueError) as err:  # no dask extra, unreachable scheduler (not a run's error)
+            print(f"--scheduler: {err}", file=sys.stderr)
+            return 2
+        if where:
+            print(f"trainings on the {where}")
+        return _run(ids, profile, False if args.no_progress else None, args.out)  # None: bars on a terminal only
 
 
 if __name__ == "__main__":

@@ -66,6 +66,14 @@ PREDICTION_STEPS = 100
 GROWTH_WINDOW = (1.0, 10.0)
 
 
+def stages(P: Profile, refine: int) -> tuple:
+    """Adam (if `P.epochs`), then `refine` L-BFGS-B iterations (if any; without Adam: from the
+    random start)."""
+    adam = ((learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=P.batch_size),)
+            if P.epochs else ())
+    return adam + ((learn.QuasiNewton(refine, "lbfgsb"),) if refine else ())
+
+
 class E5(AbstractExperiment):
     id = "E5"
     title = "Kirchhoff's equations (underwater vehicle, se(3)*), LPNet from 500 trajectories"
@@ -99,20 +107,15 @@ class E5(AbstractExperiment):
         data.save(out_dir / "data.h5")
         reference = it.ground_truth(system, y0, h=h, n_steps=PREDICTION_STEPS)
 
-        # Adam (if epochs), then L-BFGS-B (if refine_iterations; epochs=0: from the random start).
-        def stages(refine):
-            adam = learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=P.batch_size)
-            return (adam,) * bool(P.epochs) + (learn.QuasiNewton(refine, "lbfgsb"),) * bool(refine)
-
         fit = {"validation_fraction": 0.2, "seed": 0, "progress": progress, "normalise": P.normalise}
         baseline_refine = P.refine_iterations if P.baseline_iterations is None else P.baseline_iterations
         parametrisation = learn.TestFlowParametrisation(system)
         # The independent trainings start together (in worker processes with --scheduler processes).
         lpnet = start_training(learn.fit, learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
                                                       parametrisation=parametrisation), data,
-                               optimiser=stages(P.refine_iterations), **fit)
+                               optimiser=stages(P, P.refine_iterations), **fit)
         baseline = start_training(learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0),
-                                  data, optimiser=stages(baseline_refine), **fit)
+                                  data, optimiser=stages(P, baseline_refine), **fit)
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations, 1,
                         progress=progress) if P.glpnet_iterations else None)
         net, record = lpnet.result()

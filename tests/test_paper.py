@@ -427,3 +427,33 @@ def test_w3_smoke_measures_dissipation(tmp_path):
     assert rows["G-LPNet"]["energy_error_span"] > 0.5
     assert rows["LPNet"]["casimir_drift"] < 1e-13
     assert (tmp_path / "W3" / "energy.png").exists()
+
+
+def test_an_error_inside_a_run_is_not_reported_as_a_scheduler_error(monkeypatch, capsys):
+    """Only the scheduler's own errors read "--scheduler: ..."; a ValueError raised by a run
+    (E5's full profile once built `Adam(epochs=0)`) propagates with its traceback."""
+    import paper.__main__ as cli
+
+    def failing_run(ids, profile, progress, out):
+        raise ValueError("Adam.epochs must be an integer >= 1; got 0")
+
+    monkeypatch.setattr(cli, "_run", failing_run)
+    with pytest.raises(ValueError, match="Adam.epochs"):
+        main(["run", "E5", "--no-progress"])
+    assert "--scheduler" not in capsys.readouterr().err
+
+
+def test_e5_profiles_build_their_stages():
+    """Every E5 profile's optimiser stages are valid settings; full is L-BFGS-B from the random
+    start (no Adam), for the LPNet and for its baseline."""
+    import learn
+    from paper import e5_kirchhoff
+
+    for name, P in e5_kirchhoff.PROFILES.items():
+        for refine in {P.refine_iterations, P.baseline_iterations or P.refine_iterations}:
+            built = e5_kirchhoff.stages(P, refine)
+            assert built, name
+            assert all(isinstance(s, (learn.Adam, learn.QuasiNewton)) for s in built)
+    full = e5_kirchhoff.PROFILES["full"]
+    assert [type(s).__name__ for s in e5_kirchhoff.stages(full, 500)] == ["QuasiNewton"]
+    assert e5_kirchhoff.stages(full, 500)[0].iterations == 500
