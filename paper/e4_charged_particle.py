@@ -142,8 +142,8 @@ class E4(AbstractExperiment):
             (
                 f"glpnet: a symmetric (palindromic) G-LPNet ({P.glpnet_modules} modules of test "
                 "flows with free vectors alpha_s, exactly Poisson) trained on the same pairs and "
-                "rolled out from the same point: the structured model that reaches the paper's "
-                "1-2% energy and 3-4% integral error. Measured: 6 modules along basis vectors reach "
+                "rolled out from the same point (its energy and integral errors sit at the paper's "
+                "figures, on either side of them from run to run: BENCHMARKS.md). Measured: 6 modules along basis vectors reach "
                 "MSE 2.1e-5 and a 19% energy error; 12 free non-symmetric ones (2000 BFGS "
                 "iterations) 1.9e-6, 2.2% and 13.6% in I."
             ),

@@ -6,7 +6,7 @@ parameters) reach the paper's 1-2% energy and 3-4% integral error over 2000 step
 
 A `learn.sweep` over seed x budget on E4's data (one heyoka trajectory of 20000 points, 80/20
 split): Adam with mini-batches of 1000 pairs for 45,000 and 90,000 steps (the committed E4 run is
-seed 0 at 90,000), 90,000 Adam steps refined by 1000 iterations of full-batch L-BFGS-B, and the
+seed 0 at 45,000), 90,000 Adam steps refined by 1000 iterations of full-batch L-BFGS-B, and the
 paper's budget `paper2e5`: 2e5 full-batch Adam steps (about half an hour a seed on 2 cores;
 checkpointed every 10,000 steps, so an interrupted sweep resumes where it stopped).
 `--model` picks the paper's LPNet (`lpnet`), the reversible LPNet (`reversible`) or the

@@ -37,7 +37,6 @@ class Profile:
     lyapunov_long_time: float = 1000.0
     refine_iterations: int = 0  # L-BFGS-B after Adam (epochs=0: instead of Adam)
     normalise: bool = False
-    baseline_iterations: int | None = None  # the baseline's L-BFGS-B (None: refine_iterations)
 
 
 PROFILES = {
@@ -53,10 +52,8 @@ PROFILES = {
     # from the random start with normalised inputs/outputs: 3000 iterations (588 s) reached
     # 5.0e-6 and 0.31% (commit 49b8207), 5000 iterations reach 2.7e-7 and 0.289%
     # (paper/reference/E5; 1570 s on a shared machine).
-    # The baseline (no claim of the paper) gets 500 iterations at full: 5000 took 21 min, and
-    # --full is to fit in 45 (issue 29; BENCHMARKS.md, "--full in 45 minutes").
     "full": Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=1000,
-                    refine_iterations=5000, normalise=True, baseline_iterations=500),
+                    refine_iterations=5000, normalise=True),
 }
 DATA_SEED = 5
 HIDDEN = (64,) * 6
@@ -108,14 +105,13 @@ class E5(AbstractExperiment):
         reference = it.ground_truth(system, y0, h=h, n_steps=PREDICTION_STEPS)
 
         fit = {"validation_fraction": 0.2, "seed": 0, "progress": progress, "normalise": P.normalise}
-        baseline_refine = P.refine_iterations if P.baseline_iterations is None else P.baseline_iterations
         parametrisation = learn.TestFlowParametrisation(system)
         # The independent trainings start together (in worker processes with --scheduler processes).
         lpnet = start_training(learn.fit, learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
                                                       parametrisation=parametrisation), data,
                                optimiser=stages(P, P.refine_iterations), **fit)
         baseline = start_training(learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0),
-                                  data, optimiser=stages(P, baseline_refine), **fit)
+                                  data, optimiser=stages(P, P.refine_iterations), **fit)
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations, 1,
                         progress=progress) if P.glpnet_iterations else None)
         net, record = lpnet.result()
@@ -148,7 +144,6 @@ class E5(AbstractExperiment):
             "batch_size": P.batch_size,
             "adam_steps": P.epochs * int(0.8 * data.states.shape[0] * 100) // P.batch_size,
             "lbfgsb_iterations": P.refine_iterations,
-            "baseline_lbfgsb_iterations": baseline_refine,
             "normalise": P.normalise,
             "paper": "5e5 full-batch epochs",
         }
@@ -161,9 +156,7 @@ class E5(AbstractExperiment):
                 f"({metrics['training']['adam_steps']} Adam steps), then {P.refine_iterations} "
                 f"full-batch L-BFGS-B iterations (inputs/outputs normalised: {P.normalise}), "
                 f"instead of the paper's 5e5 full-batch Adam epochs, which would take ~14 h on "
-                f"2 cores for {n_pairs} pairs. The baseline the same"
-                + ("." if baseline_refine == P.refine_iterations
-                   else f", with {baseline_refine} L-BFGS-B iterations (it carries no claim of the paper).")
+                f"2 cores for {n_pairs} pairs. LPNet and baseline alike."
             ),
             (
                 f"parameters: ours {net.n_parameters} (6 outputs: alpha = (A, b) in R^6, "

@@ -445,15 +445,13 @@ def test_an_error_inside_a_run_is_not_reported_as_a_scheduler_error(monkeypatch,
 
 def test_e5_profiles_build_their_stages():
     """Every E5 profile's optimiser stages are valid settings; full is L-BFGS-B from the random
-    start (no Adam), for the LPNet and for its baseline."""
+    start (no Adam)."""
     import learn
     from paper import e5_kirchhoff
 
     for name, P in e5_kirchhoff.PROFILES.items():
-        for refine in {P.refine_iterations, P.baseline_iterations or P.refine_iterations}:
-            built = e5_kirchhoff.stages(P, refine)
-            assert built, name
-            assert all(isinstance(s, (learn.Adam, learn.QuasiNewton)) for s in built)
+        built = e5_kirchhoff.stages(P, P.refine_iterations)
+        assert built and all(isinstance(s, (learn.Adam, learn.QuasiNewton)) for s in built), name
     full = e5_kirchhoff.PROFILES["full"]
-    assert [type(s).__name__ for s in e5_kirchhoff.stages(full, 500)] == ["QuasiNewton"]
+    assert [type(s).__name__ for s in e5_kirchhoff.stages(full, full.refine_iterations)] == ["QuasiNewton"]
     assert e5_kirchhoff.stages(full, 500)[0].iterations == 500
