@@ -32,7 +32,7 @@ _pool: concurrent.futures.ProcessPoolExecutor | None = None
 
 @contextlib.contextmanager
 def scheduler(spec: str | None) -> Iterator[str | None]:
-    """Within the block, `map_trainings` runs on the cluster `spec` names: `"local"`, a
+    """Within the block, `submit` and `map_trainings` run where `spec` says: `"local"`, a
     `LocalCluster` sized to the machine (one single-threaded worker per core), a scheduler
     address such as `tcp://10.0.0.5:8786`, or `"processes"`: worker processes on this machine,
     one per core, without Dask; `None`/`""`/`"none"`: this process. Yields a description."""
