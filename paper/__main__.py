@@ -73,9 +73,15 @@ def load_results(folder: Path) -> dict[str, dict]:
         seeds = folder / exp_id / SEEDS_FILE
         if seeds.exists():
             try:
-                metrics[SEEDS_KEY] = json.loads(seeds.read_text())
+                evidence = json.loads(seeds.read_text())
             except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
                 print(f"warning: skipping {seeds}: not valid JSON ({err})", file=sys.stderr)
+            else:
+                if isinstance(evidence, dict) and isinstance(evidence.get("metrics"), dict):
+                    metrics[SEEDS_KEY] = evidence
+                else:
+                    print(f"warning: skipping {seeds}: expected an object with a 'metrics' object "
+                          "(written by python -m paper.e4_sweep)", file=sys.stderr)
         out[exp_id] = metrics
     return out
 

@@ -252,6 +252,9 @@ def test_verdict_of_a_claim_not_reached_cites_the_paper_budget_seeds(tmp_path):
     quick = {"E4": {"profile": "quick", "energy": 0.5, "loss": 1e-6}}
     assert "2 of 5 seeds" in verdict_rows({"E4": Fake()}, quick, loaded)[0][-1]  # from the reference
     assert "seeds" not in verdict_rows({"E4": Fake()}, quick)[0][-1]  # no evidence, none cited
+    # a seeds file of another shape is skipped with a warning naming it, not a crash
+    (tmp_path / "E4" / SEEDS_FILE).write_text("[1, 2]")
+    assert SEEDS_KEY not in load_results(tmp_path)["E4"]
 
 
 def test_table_prints_one_verdict_row_per_claim_and_the_readme_shows_the_reference_verdict(capsys):
