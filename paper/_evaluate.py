@@ -150,12 +150,11 @@ class StartedSeeds:
 
 
 def start_lpnet_seeds(make, fit, data, refine_iterations, system, reference, seeds, progress) -> StartedSeeds:
-    """Start the seeds' trainings where trainings run (`paper._cluster.submit`);
-    `collect_lpnet_seeds` waits for them and says what they are. Between the two, an experiment starts its other
-    trainings (a baseline, a G-LPNet), so that they run beside the seeds."""
-    progress = progress and not on_cluster()
-    futures = [submit(_one_seed, make, fit, data, refine_iterations, system, reference, seed, progress)
-               for seed in seeds]
+    """Start the seeds' trainings (`start_training`); `collect_lpnet_seeds` waits for them and
+    says what they are. Between the two, an experiment starts its other trainings (a baseline,
+    a G-LPNet), so that they run beside the seeds."""
+    futures = [start_training(_one_seed, make, fit, data, refine_iterations, system, reference, seed,
+                              progress=progress) for seed in seeds]
     return StartedSeeds(futures, list(seeds), refine_iterations)
 
 

@@ -46,8 +46,8 @@ PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
     "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
                      glpnet_restarts=1),
-    # quick: Adam 10k + L-BFGS-B 5k; full: 30k + 10k over 3 seeds (100k + 30k reached the same
-    # claims in 18 min; BENCHMARKS.md, "Quick-profile budgets" and "--full in 45 minutes").
+    # quick: Adam 10k + L-BFGS-B 5k; full: 30k + 10k over 3 seeds (100k + 30k until issue 29;
+    # what each reaches: BENCHMARKS.md, "Quick-profile budgets" and "--full in 45 minutes").
     "quick": Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
     "full": Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000, seeds=3),
 }
