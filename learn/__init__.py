@@ -30,6 +30,7 @@ from ._lpnet import LPNet as LPNet
 from ._observed import TrajectoryLoss as TrajectoryLoss
 from ._parametric import ParametricHamiltonian as ParametricHamiltonian
 from ._mlp import AffineMLP as AffineMLP
+from ._plus_affine import PlusAffine as PlusAffine
 from ._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
 from ._parametrisation import (
     AbstractInvertibleParametrisation as AbstractInvertibleParametrisation,

@@ -9,6 +9,7 @@ import jax
 from ._equivariant import GroupAveraged
 from ._mlp import AffineMLP
 from ._networks import AbstractNetwork
+from ._plus_affine import PlusAffine
 
 
 def network_from_spec(spec: dict[str, Any], key: int | jax.Array) -> AbstractNetwork:
@@ -21,4 +22,6 @@ def network_from_spec(spec: dict[str, Any], key: int | jax.Array) -> AbstractNet
         return AffineMLP(key=key, **rest)
     if kind == "GroupAveraged":
         return GroupAveraged(network_from_spec(rest["network"], key), rest["group"])
-    raise ValueError(f"unknown network kind {kind!r}; known: 'AffineMLP', 'GroupAveraged'")
+    if kind == "PlusAffine":
+        return PlusAffine(network_from_spec(rest["network"], key), rest["shift"], rest["linear"])
+    raise ValueError(f"unknown network kind {kind!r}; known: 'AffineMLP', 'GroupAveraged', 'PlusAffine'")

@@ -14,8 +14,8 @@ import numpy as np
 
 class AbstractNetwork(eqx.Module):
     """A network $N: \\mathbb R^{n_\\text{in}} \\to \\mathbb R^{n_\\text{out}}$ on one sample;
-    batch with `jax.vmap`. Final kinds: `learn.AffineMLP` and the wrapper
-    `learn.GroupAveraged`."""
+    batch with `jax.vmap`. Final kinds: `learn.AffineMLP` and the wrappers
+    `learn.GroupAveraged` and `learn.PlusAffine`."""
 
     @property
     @abc.abstractmethod
@@ -97,7 +97,7 @@ def check_network(network: Any, in_size: int, out_size: int, what: str) -> Abstr
     """`network` if it is an `AbstractNetwork` from `in_size` to `out_size`; `TypeError` or
     `ValueError` saying what it must map (`what`) otherwise."""
     if not isinstance(network, AbstractNetwork):
-        raise TypeError(f"network must be a learn.AbstractNetwork (AffineMLP, GroupAveraged); got {network!r}")
+        raise TypeError(f"network must be a learn.AbstractNetwork (AffineMLP, GroupAveraged, PlusAffine); got {network!r}")
     if (network.in_size, network.out_size) != (in_size, out_size):
         raise ValueError(f"network must map {what} ({in_size} to {out_size}); got in_size={network.in_size}, "
                          f"out_size={network.out_size}")
