@@ -128,8 +128,8 @@ def _one_seed(make, fit, data, refine_iterations, system, reference, seed, progr
     """One seed of `start_lpnet_seeds` (a task where trainings run)."""
     first = learn.fit(make(seed), data, **fit(seed), progress=progress)
     (net, rec), adam_only = refine_after_adam(first, data, refine_iterations, system, reference, progress)
-    energy = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max"]
-    return first, (net, rec), adam_only, energy
+    per_trajectory = measure_rollout(net, rec, system, reference.states)["metrics"]["energy_rel_err_max_per_trajectory"]
+    return first, (net, rec), adam_only, per_trajectory
 
 
 def start_training(fn: Callable[..., Any], /, *args: Any, **kwargs: Any):
@@ -165,13 +165,16 @@ def collect_lpnet_seeds(started: StartedSeeds, label: str):
 
     Returns `(trained, metrics)`: the refined `(network, record)` pairs (seed order) and the
     per-seed lists `energy_rel_err_max_seeds`, `train_loss_seeds` and their `*_adam_only` twins,
-    the medians `energy_rel_err_max_median` and `adam_only_energy_median`, and `adam_only`,
-    `wall_time_s` of the first seed (Adam plus refinement)."""
-    trained, energies, adam_runs = [], [], []
+    the medians `energy_rel_err_max_median` and `adam_only_energy_median`,
+    `energy_rel_err_max_per_trajectory_median` (each trajectory's median over seeds), and
+    `adam_only`, `wall_time_s` of the first seed (Adam plus refinement)."""
+    trained, energies, per_trajectory, adam_runs = [], [], [], []
     runs = [f.result() for f in started.futures]
-    for seed, (first, (net, rec), adam_only, energy) in zip(started.seeds, runs):
+    for seed, (first, (net, rec), adam_only, each) in zip(started.seeds, runs):
+        energy = float(np.max(each))
         trained.append((net, rec))
         energies.append(energy)
+        per_trajectory.append(each)
         adam_runs.append(adam_only)
         print(
             f"  {label} seed {seed}: train {rec.train_loss:.2e} val {rec.val_loss:.2e} energy max {energy:.2e} "
@@ -182,6 +185,7 @@ def collect_lpnet_seeds(started: StartedSeeds, label: str):
     metrics = {
         "energy_rel_err_max_seeds": energies,
         "energy_rel_err_max_median": float(np.median(energies)),
+        "energy_rel_err_max_per_trajectory_median": np.median(np.asarray(per_trajectory, dtype=float), axis=0).tolist(),
         "train_loss_seeds": [r.train_loss for _, r in trained],
         "energy_rel_err_max_seeds_adam_only": adam_energies,
         "adam_only_energy_median": float(np.median(adam_energies)),

@@ -52,6 +52,7 @@ class Profile:
     glpnet_iterations: int
     glpnet_restarts: int
     glpnet_modules: int = 18
+    seeds: int = 1
 
 
 PROFILES = {
@@ -59,7 +60,10 @@ PROFILES = {
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
     "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_restarts=1),
     "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_restarts=1, glpnet_modules=12),
-    "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_restarts=2),
+    # full: 5 network seeds (1 until issue 29). Seed 0's energy error sits at the paper's 1%
+    # (0.77% on one thread, 1.04% on two: XLA's reductions differ), the others are 0.11-1.31%:
+    # the median over seeds is the robust figure (BENCHMARKS.md, "--full in 45 minutes").
+    "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_restarts=1, seeds=5),
 }
 INITIAL_CONDITIONS = np.array([[0.0, 1.0, 1.0], [0.0, 1.5, 2.35], [0.0, 2.0, 4.2]])
 HIDDEN = (16, 16, 16)
@@ -70,13 +74,16 @@ class E3(AbstractExperiment):
     title = "extended pendulum (affine bracket), LPNet from 3 trajectories"
     paper_values = (
         PaperValue("train_loss", 1e-7, "1e-7..1e-8 (MSE of alpha)"),
-        PaperValue("energy_rel_err_max", 1e-2, "0.5-1%"),
-        PaperValue("energy_rel_err_max_per_trajectory", 1e-2, "about 1% or less"),
+        # Judged on the medians over seeds: one seed's figure is a draw from 0.11-1.31% here.
+        PaperValue("energy_rel_err_max_median", 1e-2, "0.5-1%"),
+        PaperValue("energy_rel_err_max_per_trajectory_median", 1e-2, "about 1% or less"),
         PaperValue("casimir_rel_drift_max", 1e-15, "round-off", "roundoff"),
     )
     table_rows = (
         AbstractExperiment.table_rows[:3]
-        + (("energy_rel_err_max_per_trajectory", "max |rel. energy error| per trajectory"),)
+        + (("energy_rel_err_max_median", "max |rel. energy error|, median over seeds"),
+           ("energy_rel_err_max_per_trajectory", "max |rel. energy error| per trajectory"),
+           ("energy_rel_err_max_per_trajectory_median", "max |rel. energy error| per trajectory, median over seeds"))
         + AbstractExperiment.table_rows[3:]
         + ADAM_ROWS
         + (("adam_only.energy_rel_err_max_per_trajectory", "before L-BFGS-B (Adam only): max |rel. energy error| per trajectory"),)
@@ -102,19 +109,19 @@ class E3(AbstractExperiment):
             lambda seed: learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=seed,
                                      parametrisation=learn.TestFlowParametrisation(system)),
             lambda seed: fit,
-            data, P.refine_iterations, system, reference, [0], progress,
+            data, P.refine_iterations, system, reference, range(P.seeds), progress,
         )
         baseline = start_training(
             learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data,
             **{**fit, "optimiser": (adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb"))}, progress=progress,
         )
-        ((net, record),), seed_metrics = collect_lpnet_seeds(seeds, "E3")
+        trained, seed_metrics = collect_lpnet_seeds(seeds, "E3")
+        net, record = trained[0]
         net.save(out_dir / "lpnet.h5")
         record.save(out_dir / "lpnet-training.h5")
         base = baseline.result()
         metrics, _ = compare(system, (net, record), base, reference, out_dir, data_states=data.states)
-        for key in ("adam_only", "wall_time_s", "refine_iterations"):
-            metrics[key] = seed_metrics[key]
+        metrics.update(seed_metrics)
         # The second trajectory's energy is near zero (K = -0.07), which inflates its relative
         # error: the table shows each trajectory's maximum as well.
         metrics["energy_at_start"] = system.hamiltonian(starts)
@@ -129,7 +136,8 @@ class E3(AbstractExperiment):
             (
                 f"Training: Adam as in the paper ({P.epochs} epochs), then {P.refine_iterations} "
                 "L-BFGS-B iterations on the same loss and split (LPNet and baseline alike); "
-                "adam_only holds the LPNet before the refinement."
+                "adam_only holds the LPNet before the refinement; energy_rel_err_max and the "
+                f"per-trajectory maxima are seed 0's, *_seeds over {P.seeds} network seeds."
             ),
             (
                 "Data: 3 trajectories x 1000 points (2997 pairs), a random half for training and "
