@@ -44,6 +44,9 @@ def test_experiment_smoke(exp_id, tmp_path):
         assert on_disk["glpnet"]["poisson_defect_max"] < 1e3 * EPS
         assert on_disk["glpnet"]["casimir_rel_drift_max"] < 1e-12
         assert len(on_disk["energy_rel_err_max_seeds"]) == 2
+        # one trajectory: its median over seeds is the median of the seeds' maxima
+        assert on_disk["energy_rel_err_max_per_trajectory_median"] == pytest.approx(
+            [np.median(on_disk["energy_rel_err_max_seeds"])], rel=4 * EPS)
 
 
 @pytest.mark.slow  # 45 s
