@@ -60,9 +60,9 @@ PROFILES = {
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
     "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_restarts=1),
     "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_restarts=1, glpnet_modules=12),
-    # full: 5 network seeds (1 until issue 29). Seed 0's energy error sits at the paper's 1%
-    # (0.77% on one thread, 1.04% on two: XLA's reductions differ), the others are 0.11-1.31%:
-    # the median over seeds is the robust figure (BENCHMARKS.md, "--full in 45 minutes").
+    # full: 5 network seeds (1 until issue 29). One seed's energy error lands on either side of
+    # the paper's 1% (it even moves with the number of XLA threads); the median over seeds is
+    # the robust figure (the seeds: BENCHMARKS.md, "--full in 45 minutes").
     "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_restarts=1, seeds=5),
 }
 INITIAL_CONDITIONS = np.array([[0.0, 1.0, 1.0], [0.0, 1.5, 2.35], [0.0, 2.0, 4.2]])
@@ -74,7 +74,7 @@ class E3(AbstractExperiment):
     title = "extended pendulum (affine bracket), LPNet from 3 trajectories"
     paper_values = (
         PaperValue("train_loss", 1e-7, "1e-7..1e-8 (MSE of alpha)"),
-        # Judged on the medians over seeds: one seed's figure is a draw from 0.11-1.31% here.
+        # Judged on the medians over seeds: one seed's figure is a draw from their spread.
         PaperValue("energy_rel_err_max_median", 1e-2, "0.5-1%"),
         PaperValue("energy_rel_err_max_per_trajectory_median", 1e-2, "about 1% or less"),
         PaperValue("casimir_rel_drift_max", 1e-15, "round-off", "roundoff"),

@@ -48,10 +48,9 @@ PROFILES = {
                      normalise=True),
     # The paper's 5e5 full-batch epochs on 40,000 pairs would take ~14 h on 2 cores. Full-batch
     # L-BFGS-B from the random start with normalised inputs and outputs and the outputs' affine
-    # part fixed from the data (`learn.PlusAffine`): 2000 iterations. Until issue 29 it was 5000
-    # iterations without the affine part (2.7e-7 and 0.289% in one run, 1.2e-6 and 0.91% in
-    # another: BENCHMARKS.md, "E5: the affine part fixed"). The G-LPNet (no paper claim) gets
-    # 500 BFGS iterations (1000 until issue 29).
+    # part fixed from the data (`learn.PlusAffine`): 2000 iterations (5000 without the affine
+    # part until issue 29; both: BENCHMARKS.md, "E5: the affine part fixed"). The G-LPNet (no
+    # paper claim) gets 500 BFGS iterations (1000 until issue 29).
     "full": Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=500,
                     refine_iterations=2000, normalise=True),
 }
