@@ -7,8 +7,8 @@ parameters) reach the paper's 1-2% energy and 3-4% integral error over 2000 step
 A `learn.sweep` over seed x budget on E4's data (one heyoka trajectory of 20000 points, 80/20
 split): Adam with mini-batches of 1000 pairs for 45,000 and 90,000 steps (the committed E4 run is
 seed 0 at 45,000), 90,000 Adam steps refined by 1000 iterations of full-batch L-BFGS-B, and the
-paper's budget `paper2e5`: 2e5 full-batch Adam steps (about half an hour a seed on 2 cores;
-checkpointed every 10,000 steps, so an interrupted sweep resumes where it stopped).
+paper's budget `paper2e5`: 2e5 full-batch Adam steps (about half an hour a seed on 2 cores).
+Every point is checkpointed every 1000 Adam epochs, so an interrupted sweep resumes where it stopped.
 `--model` picks the paper's LPNet (`lpnet`), the reversible LPNet (`reversible`) or the
 reversible LPNet whose network is averaged over the sign symmetry -I (`reversible_equivariant`),
 same MLP; the reversible ones are rolled out with 64 fixed-point iterations (16 do not converge
@@ -50,7 +50,9 @@ BUDGETS = {  # name -> optimiser stages
 BUDGETS["paper2e5"] = (learn.Adam(200_000, learning_rate=1e-3, final_learning_rate=1e-5),)  # full batch
 MODELS = ("lpnet", "reversible", "reversible_equivariant")
 ROLLOUT_ITERATIONS = 64  # fixed-point iterations of a reversible step in the rollout
-CHECKPOINT_EVERY = 10_000  # Adam epochs between checkpoints of a point
+# Adam epochs between checkpoints of a point: every compiled chunk (learn's CHUNK = 1000 epochs),
+# so that a mini-batch point (6000 epochs of 16 steps, hours for a reversible model) resumes too.
+CHECKPOINT_EVERY = 1000
 SMOKE = {"smoke": (learn.Adam(3, batch_size=1000),)}  # the pipeline in seconds (tests); not a default
 PAPER_ENERGY, PAPER_INTEGRAL = 2e-2, 4e-2
 
