@@ -15,6 +15,10 @@ Methods:
 
 Stopping tolerances are zero: a run stops after `max_iter` iterations or when the line search
 can make no more progress at float64 resolution.
+
+The SciPy methods run with NumPy's BLAS on one thread (`threadpoolctl`): their host updates are
+small vector operations, and a multi-threaded BLAS pool spins after each of them on the cores
+that JAX's gradient needs next (BENCHMARKS.md, "BLAS threads in the SciPy loop").
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import numpy as np
 import optax
 import scipy.optimize
 from jax.flatten_util import ravel_pytree
+from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 from liepoisson import common_path_first
@@ -107,9 +112,10 @@ def _scipy(method, value_and_grad, x0, X, Y, max_iter, progress, desc, rtol=0.0,
     else:  # the default maxfun (15000) would stop long runs early
         options = {"maxiter": max_iter, "maxfun": 20 * max_iter, "maxcor": 50, "ftol": 0.0, "gtol": 0.0}
     try:
-        res = scipy.optimize.minimize(
-            fun, np.asarray(x0, dtype=np.float64), jac=True, method=method, callback=callback, options=options
-        )
+        with threadpool_limits(limits=1, user_api="blas"):
+            res = scipy.optimize.minimize(
+                fun, np.asarray(x0, dtype=np.float64), jac=True, method=method, callback=callback, options=options
+            )
     finally:
         bar.close()
     hist = {"epoch": np.arange(1, len(losses) + 1), "train_loss": np.asarray(losses)}

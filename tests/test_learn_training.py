@@ -370,3 +370,25 @@ def test_callback_follows_every_stage_as_it_runs(rb, pairs, method):
     steps = [p for p in seen if np.isnan(p.val_loss)]
     assert [p.iteration for p in steps] == list(range(1, record.stages[0].iterations + 1))
     np.testing.assert_array_equal([p.train_loss for p in steps], record.history["train_loss"])
+
+
+def test_scipy_quasi_newton_runs_numpy_blas_on_one_thread(rb, pairs):
+    # A multi-threaded BLAS pool spins after L-BFGS-B's host updates on the cores that the next
+    # JAX gradient needs (BENCHMARKS.md, "BLAS threads in the SciPy loop"): inside the loop the
+    # pool has one thread, and the caller's setting is back afterwards.
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+
+    def blas_threads():
+        return {p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"}
+
+    if not blas_threads():
+        pytest.skip("NumPy's BLAS is not one threadpoolctl can see")
+    seen = []
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads() == {2}
+        learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=learn.QuasiNewton(5, "lbfgsb"),
+                  progress=False, callback=lambda p: seen.append((p.val_loss, blas_threads())))
+        assert blas_threads() == {2}
+    # Reports from inside SciPy's loop carry no validation loss (NaN); the end-of-start one does.
+    inside = [threads for val, threads in seen if np.isnan(val)]
+    assert len(inside) == 5 and all(t == {1} for t in inside)
