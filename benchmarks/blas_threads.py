@@ -60,8 +60,8 @@ def run(kind: str, threads: str, iterations: int, data, system) -> dict:
 
 
 def report(results: list[dict]) -> str:
-    lines = ["| model | trajectories | BLAS on all cores [ms/it] | BLAS on one thread [ms/it] | speed-up "
-             "| train loss (all / one) |", "|---|---|---|---|---|---|"]
+    lines = [("| model | trajectories | BLAS on all cores [ms/it] | BLAS on one thread [ms/it] | speed-up "
+              "| train loss (all / one) |"), "|---|---|---|---|---|---|"]
     for kind in MODELS:
         for n in sorted({r["trajectories"] for r in results}):
             by = {r["blas_threads"]: r for r in results if r["model"] == kind and r["trajectories"] == n}
