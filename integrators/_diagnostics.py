@@ -29,10 +29,13 @@ class Divergence:
     r"""Where a trajectory stopped being finite.
 
     - `step`: the first step at which some trajectory is not finite (an index into the states
-      given to `diagnostics`; a step of the map in `rollout_figures` and `compare`);
+      given to `diagnostics`; a step of the map in `rollout_figures` and `compare`), or, in
+      `diagnostics`, at which its energy, a Casimir or an integral is not (a state on its way
+      out overflows those first);
     - `trajectory`: which one (the lowest index among those not finite at `step`; 0 for a
       single trajectory);
-    - `state`: its last finite state, the one at `step - 1`.
+    - `state`: its last finite state (with finite energy, Casimirs and integrals), the one at
+      `step - 1`.
     """
 
     step: int
@@ -94,7 +97,8 @@ class DiagnosticsReport:
 
     @property
     def diverged_at_step(self) -> int | None:
-        """The first step at which some trajectory is not finite (`divergence.step`), or `None`."""
+        """The first step at which some trajectory, or its energy, a Casimir or an integral, is not
+        finite (`divergence.step`), or `None`."""
         return None if self.divergence is None else self.divergence.step
 
     def before_divergence(self) -> DiagnosticsReport:
@@ -212,7 +216,8 @@ def diagnostics(
       `(..., dim)` and reported like the energy.
 
     A trajectory that stops being finite (a diverged rollout) has its time series up to the
-    step before the first non-finite state of any trajectory and infinite figures (see
+    step before the first non-finite state of any trajectory, or the first state whose energy,
+    Casimirs or integrals are not finite, and infinite figures (see
     `DiagnosticsReport`: `divergence` says where); a non-finite initial state or reference is a
     `ValueError`.
 
@@ -249,21 +254,37 @@ def diagnostics(
         y, times = y[..., :diverged, :], times[:diverged]
         ref = None if ref is None else ref[..., :diverged, :]
 
-    C = np.asarray(system.casimirs(y))  # (..., T, k)
-    dC = C - C[..., :1, :]
-    dC_rel = dC / _safe_denominator(np.mean(C, axis=-2, keepdims=True))
-    E = np.asarray(system.hamiltonian(y))  # (..., T)
-    dE_rel = (E - E[..., :1]) / _safe_denominator(np.mean(E, axis=-1, keepdims=True))
-
-    values, errors = {}, {}
     for name, f in (integrals or {}).items():
         if not callable(f):
             raise TypeError(f"integrals[{name!r}] must be callable f(y) -> values; got {f!r}")
-        I = np.asarray(f(y), dtype=np.float64)
+    # A finite state far out can overflow its energy, a Casimir or an integral (a rollout on its
+    # way out): the series then end before the first step where one of those is not finite.
+    with np.errstate(over="ignore", invalid="ignore"):
+        C = np.asarray(system.casimirs(y))  # (..., T, k)
+        E = np.asarray(system.hamiltonian(y))  # (..., T)
+        values = {name: np.asarray(f(y), dtype=np.float64) for name, f in (integrals or {}).items()}
+    for name, I in values.items():
         if I.shape != E.shape:
             raise ValueError(f"integrals[{name!r}] must return one value per state, shape {E.shape}; got {I.shape}")
-        values[name] = I
-        errors[name] = (I - I[..., :1]) / _safe_denominator(np.mean(I, axis=-1, keepdims=True))
+    finite = np.isfinite(E) & np.isfinite(C).all(axis=-1)
+    for I in values.values():
+        finite &= np.isfinite(I)
+    if not finite.all():
+        overflow = first_divergence(np.where(finite[..., None], y, np.nan).reshape(-1, finite.shape[-1], system.dim))
+        if overflow.step == 0:
+            raise ValueError(f"trajectory's initial state has a non-finite energy, Casimir or integral: "
+                             f"{overflow.state.tolist()}")
+        k = overflow.step
+        divergence = Divergence(step=k, trajectory=overflow.trajectory,
+                                state=y.reshape(-1, finite.shape[-1], system.dim)[overflow.trajectory, k - 1])
+        y, times, C, E = y[..., :k, :], times[:k], C[..., :k, :], E[..., :k]
+        ref = None if ref is None else ref[..., :k, :]
+        values = {name: I[..., :k] for name, I in values.items()}
+    dC = C - C[..., :1, :]
+    dC_rel = dC / _safe_denominator(np.mean(C, axis=-2, keepdims=True))
+    dE_rel = (E - E[..., :1]) / _safe_denominator(np.mean(E, axis=-1, keepdims=True))
+    errors = {name: (I - I[..., :1]) / _safe_denominator(np.mean(I, axis=-1, keepdims=True))
+              for name, I in values.items()}
     error = None
     if ref is not None:
         error = np.linalg.norm(y - ref, axis=-1)

@@ -193,6 +193,31 @@ def test_single_diverged_trajectory():
     assert finite.diverged_at_step is None and finite.summary()["diverged_at_step"] is None
 
 
+@pytest.mark.filterwarnings("error")  # no numpy overflow or invalid-value warning on the way
+@pytest.mark.parametrize("overflows", ["energy", "integral"])
+def test_finite_states_whose_energy_or_integral_overflows_count_as_diverged(overflows):
+    # A rollout on its way out: every state finite, but at step 5 of trajectory 1 a component of
+    # 1e160 makes |Pi|^2 (energy and Casimir) overflow to inf; or only the integral, a cube of
+    # 1e110, overflows. The series end at step 5, as for a non-finite state.
+    ys = np.array(it.splitting.Strang(BODY, h=0.1).rollout(np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4]]), 9))
+    clean_states = ys[:, :5].copy()
+    ys[1, 5:, 0] = 1e160 if overflows == "energy" else 1e110
+    assert np.all(np.isfinite(ys))
+    integrals = {"I": lambda z: z[..., 0] ** 3}
+    report = it.diagnostics(ys, BODY, integrals=integrals)
+    clean = it.diagnostics(clean_states, BODY, integrals=integrals)
+    assert report.diverged_at_step == 5 and report.divergence.trajectory == 1
+    np.testing.assert_array_equal(report.divergence.state, clean_states[1, 4])
+    assert report.max_energy_error == report.max_integral_error("I") == np.inf
+    assert report.before_divergence().summary() == clean.summary()
+    np.testing.assert_array_equal(report.energy_error_relative, clean.energy_error_relative)
+
+
+def test_initial_state_with_an_overflowing_energy_raises():
+    with pytest.raises(ValueError, match="initial state has a non-finite energy, Casimir or integral"):
+        it.diagnostics(np.full((4, 3), 1e200), BODY)
+
+
 def test_non_finite_start_or_reference_raises():
     y = np.ones((2, 5, 3))
     y[1, 0, 1] = np.nan
