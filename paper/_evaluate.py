@@ -62,21 +62,26 @@ def measure_rollout(model: AbstractLearnedMap, record: TrainingRecord | None, sy
 Trained = tuple[AbstractLearnedMap, TrainingRecord]
 
 
-def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_states=None, label="LPNet", show=0,
-            integrals=None):
-    """Metrics of `ours = (model, record)` with the baseline's beside them, and the paper's
-    figures for trajectory `show` of `reference` (a `Trajectories`).
+def compare(system, ours: Trained, baseline: Trained | None, reference, out_dir, data_states=None, label="LPNet",
+            show=0, integrals=None):
+    """Metrics of `ours = (model, record)` with the baseline's beside them (none if `baseline`
+    is `None`), and the paper's figures for trajectory `show` of `reference` (a `Trajectories`).
 
-    Returns `(metrics, rollouts)`, `rollouts = {"ours": ..., "baseline": ...}` of shape
-    `(n_traj, n_steps+1, dim)`, so that experiments measure more without rolling out again."""
-    res = measure_rollout(*ours, system, reference.states, integrals=integrals)
-    bres = measure_rollout(*baseline, system, reference.states, integrals=integrals)
-    metrics = dict(res["metrics"])
-    metrics["baseline"] = bres["metrics"]
+    Returns `(metrics, rollouts)`, `rollouts = {"ours": ..., "baseline": ...}` (without
+    "baseline" if there is none) of shape `(n_traj, n_steps+1, dim)`, so that experiments
+    measure more without rolling out again."""
+    runs = {"ours": measure_rollout(*ours, system, reference.states, integrals=integrals)}
+    if baseline is not None:
+        runs["baseline"] = measure_rollout(*baseline, system, reference.states, integrals=integrals)
+    metrics = dict(runs["ours"]["metrics"])
+    if baseline is not None:
+        metrics["baseline"] = runs["baseline"]["metrics"]
     truth = reference.states[show]
     curves = {"ground truth (heyoka)": (truth, it.diagnostics(truth, system))}
-    for name, y in ((label, res["rollout"][show]), ("MLP baseline", bres["rollout"][show])):
-        curves[name] = (y, it.diagnostics(y, system, reference=truth))
+    for key, name in (("ours", label), ("baseline", "MLP baseline")):
+        if key in runs:
+            y = runs[key]["rollout"][show]
+            curves[name] = (y, it.diagnostics(y, system, reference=truth))
     try:
         metrics["figures"] = it.plot_comparison(out_dir, system, reference.times, curves, data_states=data_states)
     except ImportError as err:  # figures are an extra: say how to get them, keep the numbers
@@ -89,7 +94,7 @@ def compare(system, ours: Trained, baseline: Trained, reference, out_dir, data_s
     if system.n_casimirs:
         metrics["ground_truth_casimir_rel_drift_max"] = gt.max_casimir_drift_relative
     metrics["ground_truth_energy_rel_err_max"] = gt.max_energy_error
-    return metrics, {"ours": res["rollout"], "baseline": bres["rollout"]}
+    return metrics, {key: run["rollout"] for key, run in runs.items()}
 
 
 def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,

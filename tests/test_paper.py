@@ -435,6 +435,26 @@ def test_w3_smoke_measures_dissipation(tmp_path):
     assert (tmp_path / "W3" / "energy.png").exists()
 
 
+def test_e5_without_its_baseline(tmp_path, monkeypatch):
+    """E5's quick profile trains no baseline: the smoke run without one writes the LPNet's
+    figures, a table whose baseline column is empty, and says why in the notes."""
+    import dataclasses
+
+    from paper import e5_kirchhoff
+
+    smoke = dataclasses.replace(e5_kirchhoff.PROFILES["smoke"], baseline=False)
+    monkeypatch.setitem(e5_kirchhoff.PROFILES, "smoke", smoke)
+    on_disk_metrics = EXPERIMENTS["E5"].execute(profile="smoke", progress=False, out_dir=tmp_path)
+    on_disk = json.loads((tmp_path / "metrics.json").read_text())
+    assert "baseline" not in on_disk and on_disk["baseline_model"] == "none in this profile"
+    assert np.isfinite(on_disk["error_growth_rate"]) and on_disk["casimir_rel_drift_max"] < 1e-12
+    assert any("No baseline in this profile" in n for n in on_disk["notes"])
+    rows = EXPERIMENTS["E5"].rows(on_disk_metrics)
+    assert rows and all(base == "—" for _, _, _, base in rows)
+    for fig in on_disk["figures"]:
+        assert (tmp_path / fig).stat().st_size > 0
+
+
 def test_an_error_inside_a_run_is_not_reported_as_a_scheduler_error(monkeypatch, capsys):
     """Only the scheduler's own errors read "--scheduler: ..."; a ValueError raised by a run
     (E5's full profile once built `Adam(epochs=0)`) propagates with its traceback."""
