@@ -110,12 +110,13 @@ def test_save_load_round_trip_is_bit_identical(tmp_path, rb, fitted):
         learn.TrainingRecord.load(path)
 
 
-def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch):
+@pytest.mark.parametrize("batch_size", [None, 32])  # full batch; seeded mini-batches (E4's sweep)
+def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch, batch_size):
     import learn._checkpoint as ckpt
     import learn._training as training
 
     monkeypatch.setattr(training, "CHUNK", 50)
-    adam = learn.Adam(150, learning_rate=1e-2)
+    adam = learn.Adam(150, learning_rate=1e-2, batch_size=batch_size)
     kwargs = {"h": H, "optimiser": adam, "progress": False}
     net = learn.LPNet(rb, hidden=(4,), key=2)
     straight, straight_record = learn.fit(net, pairs, checkpoint=learn.Checkpoint(tmp_path / "a.h5", every=50), **kwargs)
