@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 from liepoisson.internals import check_system, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._diagnostics import DiagnosticsReport, Divergence, diagnostics, first_divergence
+from ._diagnostics import DiagnosticsReport, Divergence, diagnostics
 from ._ground_truth import ground_truth
 from ._plots import figure, series_styles, span_decades
 from ._step_map import AbstractStepMap
@@ -41,8 +41,9 @@ class RolloutFigures:
     - `integral_error_max`: name $\to$ the same maximum for each integral passed;
     - `poisson_defect_max`: the largest `poisson_defect` of the map over the states sampled (see
       `rollout_figures`; finite states only), or `None` if none were asked for;
-    - `divergence`: a `Divergence` in steps of the map (the first step at which a trajectory is
-      not finite, which one, its last finite state), or `None`;
+    - `divergence`: a `Divergence` in steps of the map (the first step at which a trajectory,
+      or its energy, a Casimir or an integral, is not finite; which one; its last finite
+      state), or `None`;
     - `report`: the `DiagnosticsReport` of the saved states (time series, for plots).
     """
 
@@ -59,7 +60,8 @@ class RolloutFigures:
 
     @property
     def diverged_at_step(self) -> int | None:
-        """The first step of the map at which some trajectory is not finite, or `None`."""
+        """The first step of the map at which some trajectory (or its energy, a Casimir or an
+        integral) is not finite, or `None`."""
         return None if self.divergence is None else self.divergence.step
 
 
@@ -111,15 +113,17 @@ def rollout_figures(
     if report.divergence is None:
         per_trajectory = energy.max(axis=1)
     else:
-        stayed = np.isfinite(y).all(axis=(1, 2))
-        if stayed.any():
-            per_trajectory[stayed] = np.abs(diagnostics(y[stayed], system).energy_error_relative).max(axis=1)
+        # Each trajectory on its own: infinite if it diverged (a non-finite state, or an energy,
+        # Casimir or integral that overflows), else the maximum over all its saved times.
+        for i in np.flatnonzero(np.isfinite(y).all(axis=(1, 2))):
+            per_trajectory[i] = diagnostics(y[i], system, integrals=integrals).max_energy_error
 
     divergence = report.divergence
     if divergence is not None:
         divergence = dataclasses.replace(divergence, step=divergence.step * save_every)
         if save_every > 1:  # find the step between the two saved states
-            exact = first_divergence(np.asarray(step_map.rollout(y[:, 0], divergence.step, nonfinite="return")))
+            rerun = np.asarray(step_map.rollout(y[:, 0], divergence.step, nonfinite="return"))
+            exact = diagnostics(rerun, system, integrals=integrals).divergence
             divergence = exact or divergence  # (a rerun that stays finite keeps the saved states' figure)
 
     defect = None
@@ -173,7 +177,8 @@ class ComparisonRow:
 
     @property
     def diverged_at_step(self) -> int | None:
-        """The first step of the map at which some trajectory is not finite, or `None`."""
+        """The first step of the map at which some trajectory (or its energy, a Casimir or an
+        integral) is not finite, or `None`."""
         return None if self.divergence is None else self.divergence.step
 
 

@@ -75,8 +75,8 @@ class DiagnosticsReport:
       for the extra conserved quantities passed to `diagnostics` (e.g. the charged particle's
       $I = x_1p_2 - x_2p_1 + r^3/3$).
     - `divergence`: where the trajectory stopped being finite (a `Divergence`: the first step at
-      which some trajectory is not finite, which one, its last finite state), or `None`. The time
-      series above then cover the steps before it.
+      which some trajectory, or its energy, a Casimir or an integral, is not finite; which one;
+      its last finite state), or `None`. The time series above then cover the steps before it.
 
     The divergence policy: the scalar figures of a trajectory that stopped being finite
     (`max_energy_error`, `max_casimir_drift_relative`, `max_trajectory_error`, the means,
@@ -217,9 +217,10 @@ def diagnostics(
 
     A trajectory that stops being finite (a diverged rollout) has its time series up to the
     step before the first non-finite state of any trajectory, or the first state whose energy,
-    Casimirs or integrals are not finite, and infinite figures (see
-    `DiagnosticsReport`: `divergence` says where); a non-finite initial state or reference is a
-    `ValueError`.
+    Casimirs or integrals are not finite (an integral that is NaN for another reason, such as
+    `arccos` of $1 + \epsilon$, counts too: make it finite on the states it is given), and
+    infinite figures (see `DiagnosticsReport`: `divergence` says where); a non-finite initial
+    state or reference is a `ValueError`.
 
     For a dissipative system (`liepoisson.systems.DoubleBracket`) the "energy error" is the
     change of $H$ from its initial value, which the physics makes: compare with the energy of
@@ -271,12 +272,16 @@ def diagnostics(
         finite &= np.isfinite(I)
     if not finite.all():
         overflow = first_divergence(np.where(finite[..., None], y, np.nan).reshape(-1, finite.shape[-1], system.dim))
-        if overflow.step == 0:
-            raise ValueError(f"trajectory's initial state has a non-finite energy, Casimir or integral: "
-                             f"{overflow.state.tolist()}")
-        k = overflow.step
-        divergence = Divergence(step=k, trajectory=overflow.trajectory,
-                                state=y.reshape(-1, finite.shape[-1], system.dim)[overflow.trajectory, k - 1])
+        i, k = overflow.trajectory, overflow.step
+        paths = y.reshape(-1, finite.shape[-1], system.dim)
+        if k == 0:
+            first = {"energy": E, **{f"integral {name!r}": I for name, I in values.items()}}
+            bad = [f"{name} {v.reshape(len(paths), -1)[i, 0]}" for name, v in first.items()
+                   if not np.isfinite(v.reshape(len(paths), -1)[i, 0])]
+            bad += ["a non-finite Casimir"] if not np.isfinite(C.reshape(len(paths), -1, C.shape[-1])[i, 0]).all() else []
+            raise ValueError(f"trajectory must start with a finite energy, Casimirs and integrals; the initial "
+                             f"state {paths[i, 0].tolist()} of trajectory {i} has {', '.join(bad)}")
+        divergence = Divergence(step=k, trajectory=i, state=paths[i, k - 1])
         y, times, C, E = y[..., :k, :], times[:k], C[..., :k, :], E[..., :k]
         ref = None if ref is None else ref[..., :k, :]
         values = {name: I[..., :k] for name, I in values.items()}

@@ -81,7 +81,7 @@ def stages(P: Profile, refine: int) -> tuple:
 
 class E5(AbstractExperiment):
     id = "E5"
-    title = "Kirchhoff's equations (underwater vehicle, se(3)*), LPNet from 500 trajectories (quick: 250)"
+    title = "Kirchhoff's equations (underwater vehicle, se(3)*), LPNet from 500 trajectories"
     paper_values = (
         PaperValue("train_loss", 1.65e-4, "1.65e-4"),
         PaperValue("val_loss", 1.35e-3, "1.35e-3"),

@@ -137,6 +137,26 @@ def test_rollout_figures_of_a_finite_and_of_a_diverged_rollout():
         it.rollout_figures(expanding, y, defect_points=-1)
 
 
+@pytest.mark.filterwarnings("error")  # no numpy overflow warning on the way
+def test_rollout_figures_of_a_trajectory_whose_energy_overflows_while_its_states_stay_finite():
+    # Trajectory 1 heads out: its states stay finite, but from saved state 5 on its energy and
+    # Casimir overflow. It alone is infinite per trajectory; the others keep the figures of all
+    # their saved times (not of the series cut at step 5).
+    body = system("RigidBody")
+    strang = it.splitting.Strang(body, h=0.1)
+    y0s = np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4], [-0.2, 0.4, 0.9]])
+    y = np.array(strang.rollout(y0s, 9))
+    y[1, 5:, 0] = 1e160
+    assert np.all(np.isfinite(y))
+    figures = it.rollout_figures(strang, y, defect_points=0)
+    assert figures.diverged_at_step == 5 and figures.divergence.trajectory == 1
+    assert figures.energy_error_max == math.inf
+    per_trajectory = figures.energy_error_max_per_trajectory
+    assert per_trajectory[1] == math.inf
+    np.testing.assert_array_equal(per_trajectory[[0, 2]], [it.diagnostics(y[i], body).max_energy_error for i in (0, 2)])
+    assert np.all(np.isfinite(per_trajectory[[0, 2]]))
+
+
 def test_step_timing_is_the_fastest_of_runs_long_enough():
     body = system("RigidBody")
     strang = it.splitting.Strang(body, h=0.1)

@@ -214,8 +214,13 @@ def test_finite_states_whose_energy_or_integral_overflows_count_as_diverged(over
 
 
 def test_initial_state_with_an_overflowing_energy_raises():
-    with pytest.raises(ValueError, match="initial state has a non-finite energy, Casimir or integral"):
-        it.diagnostics(np.full((4, 3), 1e200), BODY)
+    y = np.ones((2, 4, 3))
+    y[1, 0, 0] = 1e200
+    with pytest.raises(ValueError, match=r"must start with a finite energy, Casimirs and integrals; the initial "
+                                         r"state \[1e\+200, 1.0, 1.0\] of trajectory 1 has energy inf, a non-finite Casimir"):
+        it.diagnostics(y, BODY)
+    with pytest.raises(ValueError, match=r"of trajectory 0 has integral 'I' nan$"):
+        it.diagnostics(np.ones((4, 3)), BODY, integrals={"I": lambda z: np.sqrt(z[..., 0] - 2.0)})
 
 
 def test_non_finite_start_or_reference_raises():
