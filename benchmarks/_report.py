@@ -58,6 +58,18 @@ def default_out(name: str) -> Path:
     return RESULTS / f"{name}.json"
 
 
+def add_output_arguments(parser: Any, name: str) -> None:
+    """`--out` (default `default_out(name)`) and `--report` (print the saved table and stop),
+    the options every benchmark shares."""
+    parser.add_argument("--out", default=default_out(name))
+    parser.add_argument("--report", action="store_true", help="print the table of the results saved in --out and stop")
+
+
+def saved_results(out: str | os.PathLike) -> Any:
+    """The `results` of the JSON file `write_json` wrote to `out`."""
+    return json.loads(Path(out).read_text())["results"]
+
+
 def write_json(out: str | os.PathLike, options: Any, results: Any) -> Path:
     """Write `results` with the command line, the parsed `options` (an `argparse.Namespace`
     or a dict), the commit and the machine to `out` (its folder created); returns the path."""

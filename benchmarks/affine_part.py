@@ -16,9 +16,7 @@ the machine (times are wall-clock).
 from __future__ import annotations
 
 import argparse
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -28,7 +26,7 @@ import liepoisson as lp
 from paper import e5_kirchhoff as e5
 from paper._evaluate import measure_rollout
 
-from ._report import default_out, write_json
+from ._report import add_output_arguments, saved_results, write_json
 
 CHECKPOINTS = (250, 500, 1000, 1500, 2000, 3000, 5000)
 
@@ -75,11 +73,10 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.affine_part", description=__doc__.splitlines()[0])
     parser.add_argument("--iterations", type=int, default=2000)
     parser.add_argument("--networks", nargs="+", choices=("plain", "plus"), default=["plain", "plus"])
-    parser.add_argument("--out", default=default_out("affine_part"))
-    parser.add_argument("--report", action="store_true", help="print the table of the saved results and stop")
+    add_output_arguments(parser, "affine_part")
     args = parser.parse_args(argv)
     if args.report:
-        print(report(json.loads(Path(args.out).read_text())["results"]))
+        print(report(saved_results(args.out)))
         return
     if args.iterations < 1:
         parser.error(f"--iterations must be a positive integer; got {args.iterations}")

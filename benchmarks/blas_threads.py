@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import time
-from pathlib import Path
 from unittest import mock
 
 import numpy as np
@@ -32,7 +30,7 @@ import liepoisson as lp
 from learn import _quasi_newton
 from paper import e5_kirchhoff as e5
 
-from ._report import default_out, write_json
+from ._report import add_output_arguments, saved_results, write_json
 
 MODELS = ("lpnet", "baseline")
 
@@ -77,11 +75,10 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.blas_threads", description=__doc__.splitlines()[0])
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--trajectories", type=int, nargs="+", default=[250, 500])
-    parser.add_argument("--out", default=default_out("blas_threads"))
-    parser.add_argument("--report", action="store_true", help="print the table of the saved results and stop")
+    add_output_arguments(parser, "blas_threads")
     args = parser.parse_args(argv)
     if args.report:
-        print(report(json.loads(Path(args.out).read_text())["results"]))
+        print(report(saved_results(args.out)))
         return
     if args.iterations < 1:
         parser.error(f"--iterations must be a positive integer; got {args.iterations}")

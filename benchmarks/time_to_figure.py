@@ -27,10 +27,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,7 +44,7 @@ from paper import e5_kirchhoff as e5
 from paper import e6_glpnet_rigid_body as e6
 from paper._registry import EXPERIMENTS
 
-from ._report import default_out, write_json
+from ._report import add_output_arguments, saved_results, write_json
 
 H = 0.1
 PI0 = np.array([1 / np.sqrt(2), -1 / np.sqrt(2), 1.0])
@@ -185,11 +183,10 @@ def table(results: dict) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.time_to_figure", description=__doc__.splitlines()[0])
     parser.add_argument("--experiments", nargs="+", default=["E1", "E2", "E3", "E4", "E5", "E6"])
-    parser.add_argument("--out", default=default_out("time_to_figure"))
-    parser.add_argument("--report", action="store_true", help="print the table of the results saved in --out")
+    add_output_arguments(parser, "time_to_figure")
     args = parser.parse_args(argv)
     if args.report:
-        print(table(json.loads(Path(args.out).read_text())["results"]))
+        print(table(saved_results(args.out)))
         return
     cases = _cases()
     results = {}
