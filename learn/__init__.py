@@ -8,40 +8,40 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from ._base import AbstractLearnedMap as AbstractLearnedMap
-from ._baseline import MLPBaseline as MLPBaseline
-from ._equivariant import GroupAveraged as GroupAveraged
-from ._fit import default_optimiser as default_optimiser, fit as fit
-from ._losses import MeanSquares as MeanSquares, alpha_mse as alpha_mse, state_mse as state_mse
-from ._optimisers import (
+from ._models._base import AbstractLearnedMap as AbstractLearnedMap
+from ._models._baseline import MLPBaseline as MLPBaseline
+from ._models._equivariant import GroupAveraged as GroupAveraged
+from ._training._fit import default_optimiser as default_optimiser, fit as fit
+from ._training._losses import MeanSquares as MeanSquares, alpha_mse as alpha_mse, state_mse as state_mse
+from ._solvers._optimisers import (
     Adam as Adam,
     Checkpoint as Checkpoint,
     LevenbergMarquardt as LevenbergMarquardt,
     Progress as Progress,
     QuasiNewton as QuasiNewton,
 )
-from ._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
-from ._fit_splitting import fit_splitting as fit_splitting
-from ._learned_system import LearnedHamiltonian as LearnedHamiltonian
-from ._load import load as load
-from ._learned_terms import RidgeTerms as RidgeTerms
-from ._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
-from ._lpnet import LPNet as LPNet
-from ._observed import TrajectoryLoss as TrajectoryLoss
-from ._parametric import ParametricHamiltonian as ParametricHamiltonian
-from ._mlp import AffineMLP as AffineMLP
-from ._plus_affine import PlusAffine as PlusAffine
-from ._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
-from ._parametrisation import (
+from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
+from ._training._fit_splitting import fit_splitting as fit_splitting
+from ._models._learned_system import LearnedHamiltonian as LearnedHamiltonian
+from ._models._load import load as load
+from ._models._learned_terms import RidgeTerms as RidgeTerms
+from ._training._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
+from ._models._lpnet import LPNet as LPNet
+from ._training._observed import TrajectoryLoss as TrajectoryLoss
+from ._models._parametric import ParametricHamiltonian as ParametricHamiltonian
+from ._models._mlp import AffineMLP as AffineMLP
+from ._models._plus_affine import PlusAffine as PlusAffine
+from ._models._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
+from ._models._parametrisation import (
     AbstractInvertibleParametrisation as AbstractInvertibleParametrisation,
     AbstractStepParametrisation as AbstractStepParametrisation,
     SE3RotationShear as SE3RotationShear,
     TestFlowParametrisation as TestFlowParametrisation,
     default_parametrisation as default_parametrisation,
 )
-from ._reversible import Reversible as Reversible
-from ._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
-from ._sweep import (
+from ._models._reversible import Reversible as Reversible
+from ._solvers._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
+from ._training._sweep import (
     Sweep as Sweep,
     SweepResult as SweepResult,
     grid_points as grid_points,

@@ -275,8 +275,8 @@ def _make_lpnet(point):
 
 
 def test_an_interrupted_sweep_point_resumes_from_its_checkpoint(tmp_path, monkeypatch):
-    import learn._checkpoint as ckpt
-    import learn._training as training
+    import learn._files as ckpt
+    import learn._solvers._adam as training
 
     monkeypatch.setattr(training, "CHUNK", 10)
     adam = learn.Adam(30, learning_rate=1e-2)

@@ -18,7 +18,7 @@ import integrators as it
 import learn
 import liepoisson as lp
 from integrators.splitting import TripleJump
-from learn._observed import information_criterion, observed_objective
+from learn._training._observed import information_criterion, observed_objective
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))

@@ -311,7 +311,7 @@ def test_arguments():
 def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
     """Quasi-Newton losses are compiled once per model structure with h as an argument: a fit
     at h = 0.2 after one at h = 0.1 (cache warm) equals a fit at h = 0.2 from a cold cache."""
-    import learn._quasi_newton as qn_module
+    import learn._solvers._quasi_newton as qn_module
 
     body = lp.systems.RigidBody()
     y0 = np.random.default_rng(0).uniform(-1.0, 1.0, size=(6, 3))

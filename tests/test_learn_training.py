@@ -112,8 +112,8 @@ def test_save_load_round_trip_is_bit_identical(tmp_path, rb, fitted):
 
 @pytest.mark.parametrize("batch_size", [None, 32])  # full batch; seeded mini-batches (E4's sweep)
 def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch, batch_size):
-    import learn._checkpoint as ckpt
-    import learn._training as training
+    import learn._files as ckpt
+    import learn._solvers._adam as training
 
     monkeypatch.setattr(training, "CHUNK", 50)
     adam = learn.Adam(150, learning_rate=1e-2, batch_size=batch_size)
@@ -282,7 +282,7 @@ def test_refinement_is_dropped_when_validation_gets_worse():
     """Training targets y = 2x, validation targets y = 0: minimising the training loss from
     w = 0 raises the validation loss, so the quasi-Newton stage must keep the starting
     weights."""
-    from learn._quasi_newton import run_quasi_newton as _run_quasi_newton
+    from learn._solvers._quasi_newton import run_quasi_newton as _run_quasi_newton
 
     class Line(eqx.Module):
         w: jax.Array

@@ -7,7 +7,7 @@ import pytest
 
 import learn
 import liepoisson as lp
-from learn._glpnet import linear_to_activation
+from learn._models._glpnet import linear_to_activation
 
 
 @pytest.mark.parametrize("activation", ["sigmoid", "tanh"])

@@ -15,9 +15,9 @@ import learn
 import liepoisson as lp
 from integrators.internals import composition_flops
 from integrators.splitting import METHODS, IndexedFlows, Strang, TripleJump
-from learn._least_squares import run_levenberg_marquardt
-from learn._losses import MeanSquares
-from learn._observed import Fitted, observed_objective
+from learn._solvers._levenberg_marquardt import run_levenberg_marquardt
+from learn._training._losses import MeanSquares
+from learn._training._observed import Fitted, observed_objective
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
@@ -207,8 +207,8 @@ def glpnet_pairs():
                          ids=["in the warm start", "at its end", "after it"])
 def test_interrupted_levenberg_marquardt_fit_resumes_bit_identically(glpnet_pairs, tmp_path, monkeypatch,
                                                                      interrupt_at, left):
-    import learn._checkpoint as ckpt
-    import learn._least_squares as least_squares
+    import learn._files as ckpt
+    import learn._solvers._levenberg_marquardt as least_squares
 
     stage = learn.LevenbergMarquardt(24, rtol=0.0, warm_start=True)
     kwargs = {"optimiser": stage, "validation_fraction": 0.0, "progress": False}

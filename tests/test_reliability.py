@@ -217,7 +217,7 @@ _TRAIN_SCRIPT = textwrap.dedent(
     import sys
     import numpy as np
     import integrators as it, learn, liepoisson as lp
-    import learn._training as training
+    import learn._solvers._adam as training
     training.CHUNK = 50
     body = lp.systems.RigidBody()
     data = it.ground_truth(body, np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4]]), h=0.1, n_steps=20, seed=0)
@@ -231,7 +231,7 @@ EPOCHS = 6000
 
 @pytest.mark.slow
 def test_training_killed_with_sigkill_resumes_bit_identically(tmp_path, monkeypatch):
-    import learn._training as training
+    import learn._solvers._adam as training
 
     path = tmp_path / "ckpt.h5"
     proc = _start(_TRAIN_SCRIPT, str(path), str(EPOCHS))
@@ -240,7 +240,7 @@ def test_training_killed_with_sigkill_resumes_bit_identically(tmp_path, monkeypa
     proc.kill()
     proc.wait(timeout=60)
     proc.stdout.close()
-    epoch = learn._checkpoint.read(path)[0]["epoch"]
+    epoch = learn._files.read(path)[0]["epoch"]
     assert 0 < epoch < EPOCHS, epoch  # killed mid-training, with a checkpoint to resume from
     monkeypatch.setattr(training, "CHUNK", 50)
     data = it.ground_truth(BODY, Y0, h=0.1, n_steps=20, seed=0)
@@ -248,7 +248,7 @@ def test_training_killed_with_sigkill_resumes_bit_identically(tmp_path, monkeypa
     net = learn.LPNet(BODY, hidden=(4,), key=2)
     straight, straight_record = learn.fit(net, data, checkpoint=learn.Checkpoint(tmp_path / "s.h5", every=50), **kwargs)
     resumed, resumed_record = learn.fit(net, data, checkpoint=learn.Checkpoint(path, every=50, resume=True), **kwargs)
-    for a, b in zip(learn._checkpoint.array_leaves(straight), learn._checkpoint.array_leaves(resumed), strict=True):
+    for a, b in zip(learn._files.array_leaves(straight), learn._files.array_leaves(resumed), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(straight_record.history["train_loss"], resumed_record.history["train_loss"])
     assert sorted(os.listdir(tmp_path)) == ["ckpt.h5", "s.h5"]  # no stray temporaries

@@ -19,11 +19,11 @@ from integrators import Trajectories
 from integrators.internals import atomic_write_text, check_client, map_unordered
 from liepoisson.internals import positive_int, progress_bar, show_progress
 
-from ._base import AbstractLearnedMap, check_learned_map
+from .._models._base import AbstractLearnedMap, check_learned_map
 from ._fit import fit
-from ._load import load
-from ._optimisers import Adam, Checkpoint, QuasiNewton
-from ._record import TrainingRecord
+from .._models._load import load
+from .._solvers._optimisers import Adam, Checkpoint, QuasiNewton
+from .._solvers._record import TrainingRecord
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
 FIT_KEYS = ("seed", "epochs", "optimiser", "loss", "normalise", "validation_fraction")

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _checkpoint
+from .. import _files as _checkpoint
 
 _KIND = "TrainingRecord"
 

@@ -16,11 +16,11 @@ from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._fit import fit, fit_observations, training_record
-from ._glpnet import GLPNet, check_method
-from ._learned_terms import RidgeTerms
+from .._models._glpnet import GLPNet, check_method
+from .._models._learned_terms import RidgeTerms
 from ._observed import TrajectoryLoss, information_criterion
-from ._optimisers import LevenbergMarquardt, QuasiNewton
-from ._record import TrainingRecord
+from .._solvers._optimisers import LevenbergMarquardt, QuasiNewton
+from .._solvers._record import TrainingRecord
 
 
 def fit_splitting(

@@ -21,8 +21,8 @@ from tqdm.auto import tqdm
 from liepoisson import common_path_first
 from liepoisson.systems import check_system_matches
 
-from . import _checkpoint
-from ._legacy import upgrade_attributes
+from .. import _files as _checkpoint
+from .._models._legacy import upgrade_attributes
 
 CHUNK = 1000
 

@@ -19,7 +19,7 @@ from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
 from ._equivariant import check_group_law
-from ._losses import alpha_mse
+from .._training._losses import alpha_mse
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
 from ._networks import AbstractNetwork, check_network, network_or_default

@@ -95,7 +95,7 @@ class LevenbergMarquardt:
     `learn.TrajectoryLoss`). Each step evaluates $r$ and its Jacobian $J$ once and solves
     $(J^TJ + \lambda D)\delta = -J^Tr$ by a lineax Cholesky, $D$ the largest
     $\mathrm{diag}(J^TJ)$ seen (Marquardt's scaling), $\lambda$ by Nielsen's rule; the loop
-    runs on the host between two compiled functions (`learn/_least_squares.py` says why not
+    runs on the host between two compiled functions (`learn/_solvers/_levenberg_marquardt.py` says why not
     optimistix).
 
     For a few dozen to a few hundred unknowns it reaches the minimum of a least-squares loss

@@ -19,11 +19,11 @@ from numpy.typing import ArrayLike
 from integrators import Observations, Trajectories
 from liepoisson.internals import positive_int, show_progress
 
-from ._base import AbstractLearnedMap, check_learned_map
+from .._models._base import AbstractLearnedMap, check_learned_map
 from ._data import PairData, prepare
-from ._least_squares import check_size, run_levenberg_marquardt
+from .._solvers._levenberg_marquardt import check_size, run_levenberg_marquardt
 from ._observed import TrajectoryLoss, observed_objective
-from ._optimisers import (
+from .._solvers._optimisers import (
     OPTIMISERS,
     Adam,
     Callback,
@@ -32,9 +32,9 @@ from ._optimisers import (
     Optimiser,
     Progress,
 )
-from ._quasi_newton import run_quasi_newton
-from ._record import StageRecord, TrainingRecord
-from ._training import train_adam
+from .._solvers._quasi_newton import run_quasi_newton
+from .._solvers._record import StageRecord, TrainingRecord
+from .._solvers._adam import train_adam
 
 _Map = TypeVar("_Map", bound=AbstractLearnedMap)
 

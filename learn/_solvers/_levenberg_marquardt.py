@@ -26,12 +26,12 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from tqdm.auto import tqdm
 
-from . import _checkpoint
-from ._observed import Fitted
+from .. import _files as _checkpoint
+from .._training._observed import Fitted
 from ._optimisers import LevenbergMarquardt
 from ._quasi_newton import _compiled
 from ._record import StageRecord
-from ._training import read_resumable
+from ._adam import read_resumable
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
 MAX_TRIALS = 30

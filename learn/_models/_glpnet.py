@@ -28,7 +28,7 @@ from ._base import AbstractLearnedMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
 from ._networks import network_or_default
-from ._optimisers import QuasiNewton
+from .._solvers._optimisers import QuasiNewton
 
 
 def check_method(method: Any) -> type[AbstractSplittingMethod]:

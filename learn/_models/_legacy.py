@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ._checkpoint import FORMAT_VERSION
+from .._files import FORMAT_VERSION
 
 
 def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:

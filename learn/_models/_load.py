@@ -6,7 +6,7 @@ import os
 
 from liepoisson.systems import AbstractPoissonSystem
 
-from . import _checkpoint
+from .. import _files as _checkpoint
 from ._base import AbstractLearnedMap
 from ._baseline import MLPBaseline
 from ._glpnet import GLPNet

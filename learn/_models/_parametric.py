@@ -18,7 +18,7 @@ from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
-from ._optimisers import QuasiNewton
+from .._solvers._optimisers import QuasiNewton
 
 
 class ParametricHamiltonian(AbstractLearnedMap):

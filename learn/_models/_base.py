@@ -18,10 +18,10 @@ from integrators import AbstractStepMap
 from liepoisson.internals import check_system
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
-from . import _checkpoint
+from .. import _files as _checkpoint
 from ._legacy import upgrade_attributes
-from ._losses import state_mse
-from ._optimisers import Adam
+from .._training._losses import state_mse
+from .._solvers._optimisers import Adam
 
 if TYPE_CHECKING:  # typing.Self needs Python 3.11
     from typing_extensions import Self
