@@ -17,7 +17,7 @@ from liepoisson.systems import AbstractPoissonSystem
 from ._diagnostics import DiagnosticsReport, Divergence, diagnostics
 from ._ground_truth import ground_truth
 from ._plots import figure, series_styles, span_decades
-from ._step_map import AbstractStepMap
+from ._step_map import AbstractStepMap, check_h
 from ._timing import step_timing
 from ._trajectories import Trajectories
 
@@ -301,7 +301,7 @@ def compare(
             raise TypeError(f"maps[{label!r}] must be an integrators.AbstractStepMap; got {type(m).__name__}")
         if m.system is not system:
             raise ValueError(f"maps[{label!r}] is a map of {m.system!r}, not of the system compared, {system!r}")
-        h = m._check_h()
+        h = check_h(m)
         per_output = round(interval / h)
         if per_output < 1 or not math.isclose(per_output * h, interval, rel_tol=1e-9):
             raise ValueError(

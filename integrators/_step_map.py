@@ -67,12 +67,8 @@ class AbstractStepMap(eqx.Module):
         return eqx.tree_at(lambda m: m.h, self, h, is_leaf=lambda x: x is None)
 
     def _check_h(self) -> float:
-        if self.h is None:
-            raise ValueError(
-                f"{type(self).__name__} has no step size h yet: fit it to data "
-                "(learn.fit(model, data)) or construct it with h=..."
-            )
-        return self.h
+        # Kept for the subclasses that call it; `check_h(self)` is the name to use.
+        return check_h(self)
 
     def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1, nonfinite: str = "raise") -> jax.Array:
         r"""Iterate the step: $y_k = \Phi_h^k(y_0)$ for $k = 0, s, 2s, \dots, n$ ($s$ =
@@ -91,7 +87,7 @@ class AbstractStepMap(eqx.Module):
         `nonfinite="return"` returns the states with their non-finite tail instead
         (`integrators.diagnostics` reports up to the first non-finite step).
         """
-        self._check_h()
+        check_h(self)
         dim = self.system.dim
         n_steps = positive_int(n_steps, "n_steps", minimum=0)
         save_every = positive_int(save_every, "save_every")
@@ -114,7 +110,7 @@ class AbstractStepMap(eqx.Module):
         r"""$\max_{ab}|(J\,\mathbb B(y)\,J^\top - \mathbb B(\Phi_h(y)))_{ab}|$ per point, with
         $J = \partial\Phi_h/\partial y$ (forward-mode autodiff): zero, up to round-off, exactly
         when the step is a Poisson map. `y` of shape `(..., dim)`; returns `(...)`."""
-        self._check_h()
+        check_h(self)
         dim = self.system.dim
         y = states(y, "y", dim)
         return _defect_compiled(traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
@@ -129,7 +125,7 @@ class AbstractStepMap(eqx.Module):
     def cost(self) -> StepCost:
         """The cost of one step (see `StepCost`); `flops` from XLA's cost analysis of the
         compiled step (`step_flops`)."""
-        self._check_h()
+        check_h(self)
         return StepCost(flops=self.step_flops(), exact_flows=self.exact_flows_per_step)
 
     def step_flops(self) -> float:
@@ -198,6 +194,17 @@ def xla_flops(fn: Callable[..., Any], *args: Any) -> float:
     if key is not None:
         _FLOPS[key] = flops
     return flops
+
+
+def check_h(step_map: AbstractStepMap) -> float:
+    """The step size of `step_map`, or a `ValueError` saying that a map without one (a learned
+    map not fitted yet) cannot be stepped."""
+    if step_map.h is None:
+        raise ValueError(
+            f"{type(step_map).__name__} has no step size h yet: fit it to data "
+            "(learn.fit(model, data)) or construct it with h=..."
+        )
+    return step_map.h
 
 
 def check_state(y: jax.Array, dim: int) -> jax.Array:

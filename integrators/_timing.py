@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from liepoisson.internals import positive_float, positive_int, states
 
-from ._step_map import AbstractStepMap
+from ._step_map import AbstractStepMap, check_h
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,7 +56,7 @@ def step_timing(
     """
     if not isinstance(step_map, AbstractStepMap):
         raise TypeError(f"step_map must be an integrators.AbstractStepMap; got {type(step_map).__name__}")
-    step_map._check_h()
+    check_h(step_map)
     y0s = states(y0s, "y0s", step_map.system.dim).reshape(-1, step_map.system.dim)
     min_seconds = positive_float(min_seconds, "min_seconds")
     repeats = positive_int(repeats, "repeats")

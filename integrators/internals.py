@@ -2,7 +2,8 @@
 `benchmarks`): step-map helpers, atomic files, Dask helpers and figure styles. Not a user API:
 these names may change with the library.
 
-- `check_state(y, dim)`: one float64 state `(dim,)` (works on traced values).
+- `check_state(y, dim)`: one float64 state `(dim,)` (works on traced values); `check_h(step_map)`:
+  its step size, or a `ValueError` for a map that has none yet.
 - `composition_flops(step_map, method)`: XLA's flops of a step composed by a splitting method.
 - `traced_h(step_map)`: the map with its step size as a traced array (one compiled program for
   every h); `xla_flops(fn, *args)`: XLA's flop count of `fn` compiled.
@@ -32,6 +33,7 @@ from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
 from ._splitting._base import composition_flops as composition_flops
+from ._step_map import check_h as check_h
 from ._step_map import check_state as check_state
 from ._step_map import traced_h as traced_h
 from ._step_map import xla_flops as xla_flops
