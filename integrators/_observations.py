@@ -14,11 +14,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 import liepoisson
-from liepoisson.internals import fraction, positive_float, positive_int
+from liepoisson.internals import fraction, jsonable, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
 from ._ground_truth import taylor_integrator
+from ._validation_split import validation_split
 
 FORMAT = "liepoisson-observations"
 FORMAT_VERSION = 1
@@ -42,6 +43,12 @@ def _per_trajectory(value: Any, name: str, n: int | None) -> list[np.ndarray]:
         except (TypeError, ValueError) as err:
             raise TypeError(f"{name}[{j}] must be a real array; got {type(item).__name__}") from err
     return out
+
+
+def rms_size(states: Sequence[np.ndarray]) -> float:
+    r"""$\sqrt{\operatorname{mean}_k |y_k|^2}$ over the rows of every array `(n_k, dim)` of
+    `states`: the size noise is measured against."""
+    return float(np.sqrt(np.mean(np.concatenate([np.sum(y**2, axis=1) for y in states]))))
 
 
 def times_per_trajectory(times: Any, n: int) -> list[np.ndarray]:
@@ -128,7 +135,7 @@ class Observations:
         self.times: tuple[np.ndarray, ...] = tuple(t.copy() for t in ts)
         self.states: tuple[np.ndarray, ...] = tuple(y.copy() for y in ys)
         try:
-            self.metadata: dict[str, Any] = json.loads(json.dumps(dict(metadata or {})))
+            self.metadata: dict[str, Any] = jsonable(dict(metadata or {}))
         except (TypeError, ValueError) as err:
             raise TypeError(f"metadata must be a dict of JSON values; got {metadata!r}") from err
 
@@ -170,7 +177,7 @@ class Observations:
     def rms_size(self) -> float:
         r"""$\sqrt{\operatorname{mean}_k |y_k|^2}$ over every observation: the size noise is
         measured against."""
-        return float(np.sqrt(np.mean(np.concatenate([np.sum(y**2, axis=1) for y in self.states]))))
+        return rms_size(self.states)
 
     def select(self, indices: int | Sequence[int] | np.ndarray) -> Observations:
         """The trajectories `indices` (an int or a sequence of ints)."""
@@ -185,15 +192,11 @@ class Observations:
     def split(self, validation_fraction: float, seed: int = 0) -> tuple[Observations, Observations | None]:
         """`(training, validation)` by whole trajectories (random, seeded): a held-out
         trajectory shares no observation with the training ones. `None` for no validation."""
-        validation_fraction = fraction(validation_fraction, "validation_fraction")
-        n_val = round(validation_fraction * len(self))
-        if n_val == 0:
+        seed = positive_int(seed, "seed", minimum=0)
+        train, val = validation_split(len(self), validation_fraction, seed, "trajectory")
+        if len(val) == 0:
             return self, None
-        if n_val >= len(self):
-            raise ValueError(f"validation_fraction={validation_fraction} leaves no training trajectory out of "
-                             f"{len(self)}")
-        perm = np.random.default_rng(positive_int(seed, "seed", minimum=0)).permutation(len(self))
-        return self.select(np.sort(perm[n_val:])), self.select(np.sort(perm[:n_val]))
+        return self.select(train), self.select(val)
 
     # -- files -----------------------------------------------------------------------------
     def _long(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -397,8 +400,7 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
         if outcome != hy.taylor_outcome.time_limit:
             raise RuntimeError(f"heyoka stopped trajectory {j} (y0={y.tolist()}) at t={ta.time}: {outcome}")
         clean.append(np.array(states[keep[j]]))
-    size = float(np.sqrt(np.mean(np.concatenate([np.sum(y**2, axis=1) for y in clean]))))
-    std = noise * size
+    std = noise * rms_size(clean)
     observed = []
     for y in clean:
         if law == "gaussian":

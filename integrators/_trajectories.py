@@ -17,6 +17,7 @@ from liepoisson.internals import positive_float
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
+from ._validation_split import validation_split
 
 #: Version of the on-disk layout; `Trajectories.load` refuses any other.
 FORMAT_VERSION = 1
@@ -223,20 +224,9 @@ class Trajectories:
         `round(validation_fraction * n_pairs)` pairs, drawn without replacement by
         `numpy.random.default_rng(seed)`, go to validation; both parts keep their time order.
         """
-        if isinstance(validation_fraction, bool) or not isinstance(validation_fraction, numbers.Real):
-            raise TypeError(f"validation_fraction must be a real number in [0, 1); got {validation_fraction!r}")
-        if not 0.0 <= float(validation_fraction) < 1.0:
-            raise ValueError(f"validation_fraction must be in [0, 1); got {validation_fraction!r}")
         seed = _check_seed(seed)
         y0, y1 = self.pairs()
-        n = y0.shape[0]
-        n_val = round(float(validation_fraction) * n)
-        if n - n_val < 1:
-            raise ValueError(
-                f"validation_fraction={validation_fraction} leaves no training pair out of {n}"
-            )
-        perm = np.random.default_rng(seed).permutation(n)
-        val, train = np.sort(perm[:n_val]), np.sort(perm[n_val:])
+        train, val = validation_split(y0.shape[0], validation_fraction, seed, "pair")
         return (y0[train], y1[train]), (y0[val], y1[val])
 
     # -- subsets ----------------------------------------------------------------------------

@@ -12,6 +12,10 @@ these names may change with the library.
 - `require_distributed()`, `check_client(client)`, `map_unordered(...)`: Dask helpers;
   `integrate_chunk(...)`: one chunk of a ground-truth ensemble (the unit of work of
   `save_ground_truth` on a cluster).
+- `validation_split(n, validation_fraction, seed, unit)`: the seeded training/validation split
+  of `n` items (pairs of `Trajectories`, trajectories of `Observations`), as sorted indices.
+- `rms_size(states)`: sqrt(mean |y|^2) over a list of arrays of states, the
+  size `observe`'s noise is relative to.
 - `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
   library's style.
 """
@@ -33,7 +37,9 @@ from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
 from ._splitting._base import composition_flops as composition_flops
+from ._observations import rms_size as rms_size
 from ._step_map import check_h as check_h
 from ._step_map import check_state as check_state
 from ._step_map import traced_h as traced_h
 from ._step_map import xla_flops as xla_flops
+from ._validation_split import validation_split as validation_split

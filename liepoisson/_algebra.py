@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._casimir_values import casimir_gradient_values, casimir_values
 from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
 from ._inverse import checked_flow_parameters
@@ -349,20 +350,11 @@ class LieAlgebra:
     # -- Casimirs --------------------------------------------------------------------------
     def casimirs(self, mu: ArrayLike) -> jax.Array:
         """Values of the independent Casimirs, shape `(..., k)`."""
-        mu = as_state(mu, "mu", self.dim)
-        comps = [mu[..., i] for i in range(self.dim)]
-        vals = [jnp.broadcast_to(p.evaluate(comps), mu.shape[:-1]) for p in self.casimir_polynomials]
-        return jnp.stack(vals, axis=-1) if vals else jnp.zeros(mu.shape[:-1] + (0,))
+        return casimir_values(self.casimir_polynomials, as_state(mu, "mu", self.dim))
 
     def casimir_gradients(self, mu: ArrayLike) -> jax.Array:
         """Gradients $\\partial C_j/\\partial\\mu$, shape `(..., k, n)`."""
-        mu = as_state(mu, "mu", self.dim)
-        comps = [mu[..., i] for i in range(self.dim)]
-        rows = [
-            jnp.stack([jnp.broadcast_to(g.evaluate(comps), mu.shape[:-1]) for g in grads], axis=-1)
-            for grads in self._casimir_gradient_polys
-        ]
-        return jnp.stack(rows, axis=-2) if rows else jnp.zeros(mu.shape[:-1] + (0, self.dim))
+        return casimir_gradient_values(self._casimir_gradient_polys, as_state(mu, "mu", self.dim))
 
     def orbit_dimension(self, mu: ArrayLike, rtol: float = 1e-10) -> int | np.ndarray:
         r"""Dimension of the coadjoint orbit through $\mu$: $\operatorname{rank}\mathbb{B}(\mu)$."""

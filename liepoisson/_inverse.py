@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._casimir_values import casimir_scale
 from ._validation import nonzero_time, pairs, positive_float, positive_int
 
 Flow = Callable[[jax.Array, jax.Array, jax.Array], jax.Array]
@@ -122,8 +123,7 @@ def check_casimirs_agree(
         return
     C0, C1 = np.asarray(casimirs(a)), np.asarray(casimirs(b))
     # A Casimir change comparable to rtol times |grad C| |y| is round-off-level.
-    cscale = np.linalg.norm(gradients, axis=-1) * np.linalg.norm(a, axis=-1)[:, None]
-    cscale = np.maximum(cscale, np.abs(C0)) + np.finfo(float).tiny
+    cscale = np.maximum(casimir_scale(gradients, a), np.abs(C0)) + np.finfo(float).tiny
     bad = np.abs(C1 - C0) > rtol * cscale
     if np.any(bad):
         i, j = (int(v) for v in np.argwhere(bad)[0])

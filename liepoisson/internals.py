@@ -6,12 +6,16 @@ argument, and progress bars. Not a user API: these names may change with the lib
   states `(..., dim)`, finite, checked.
 - `positive_float(x, name)`, `positive_int(n, name, minimum=1)`, `fraction(x, name)`: scalars.
 - `check_system(system)`: a `liepoisson.systems.AbstractPoissonSystem`.
-- `check_casimirs_agree(...)`: pairs whose Casimirs differ are named.
+- `check_casimirs_agree(...)`: pairs whose Casimirs differ are named; `casimir_scale(gradients,
+  y)`: |grad C_j(y)| |y|, the size a Casimir change is measured against.
+- `jsonable(value)`: `value` as reading it back from JSON gives it (tuples as lists).
 - `show_progress(progress)`, `progress_bar(total, desc, unit, progress)`: tqdm bars, on by
   default only when stderr is a terminal.
 """
 
+from ._casimir_values import casimir_scale as casimir_scale
 from ._inverse import check_casimirs_agree as check_casimirs_agree
+from ._jsonable import jsonable as jsonable
 from ._progress import progress_bar as progress_bar
 from ._progress import show_progress as show_progress
 from ._validation import (

@@ -187,3 +187,24 @@ def test_pendulum_casimir_over_composed_test_flows():
     size = np.max(ys[:, 0] ** 2 + ys[:, 1] ** 2) + abs(c0)
     assert np.max(np.abs(c - c0)) <= 4 * N * EPS * size
     assert np.max(np.abs(ys[-1] - np.asarray(y0))) > 0.1
+
+
+def test_casimir_scale_is_gradient_norm_times_state_norm():
+    """so(3): the Casimir is c |Pi|^2, its gradient 2 c Pi, so the scale |grad C| |Pi| is 2 |C(Pi)|."""
+    from liepoisson.internals import casimir_scale
+
+    body = lp.systems.RigidBody()
+    y = np.random.default_rng(0).normal(size=(5, 4, 3))
+    scale = casimir_scale(np.asarray(body.casimir_gradients(y)), y)
+    assert scale.shape == (5, 4, 1)
+    np.testing.assert_allclose(scale, 2 * np.abs(np.asarray(body.casimirs(y))), rtol=4 * EPS)
+
+
+@pytest.mark.parametrize("name", ["so3", "se3", "sl2"])
+def test_system_and_algebra_evaluate_casimirs_alike(name):
+    """A Lie-Poisson system's Casimirs and their gradients are its algebra's, to the bit."""
+    g = algebra(name)
+    s = lp.systems.LiePoissonSystem(g, lambda y, xp: 0.5 * sum(v * v for v in y))
+    y = np.random.default_rng(1).normal(size=(7, g.dim))
+    np.testing.assert_array_equal(np.asarray(s.casimirs(y)), np.asarray(g.casimirs(y)))
+    np.testing.assert_array_equal(np.asarray(s.casimir_gradients(y)), np.asarray(g.casimir_gradients(y)))

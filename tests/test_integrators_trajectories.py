@@ -152,3 +152,23 @@ def test_validation(args, error, words):
         it.Trajectories(*args, lp.systems.RigidBody())
     for w in words:
         assert w in str(info.value)
+
+
+def test_validation_split_is_the_rule_of_pairs_and_observations(data):
+    """`validation_split` is the one split: sorted, disjoint indices covering every item, the
+    validation part a seeded draw of round(fraction * n), the same as `Trajectories.split`."""
+    from integrators.internals import validation_split
+
+    train, val = validation_split(20, 0.2, 3)
+    assert len(val) == 4 and np.array_equal(np.sort(np.concatenate([train, val])), np.arange(20))
+    assert np.all(np.diff(train) > 0) and np.all(np.diff(val) > 0)
+    perm = np.random.default_rng(3).permutation(20)  # the rule, written out
+    np.testing.assert_array_equal(val, np.sort(perm[:4]))
+    y0, _ = data.pairs()
+    (a0, _), (v0, _) = data.split(0.2, seed=3)
+    np.testing.assert_array_equal(a0, y0[train])
+    np.testing.assert_array_equal(v0, y0[val])
+    train, val = validation_split(5, 0.0, None)
+    assert np.array_equal(train, np.arange(5)) and val.size == 0
+    with pytest.raises(ValueError, match="leaves no training trajectory out of 3"):
+        validation_split(3, 0.9, 0, "trajectory")

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._casimir_values import casimir_gradient_values, casimir_values
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
 from .._polynomial import Polynomial
@@ -162,20 +163,12 @@ class AbstractPoissonSystem(abc.ABC):
 
     def casimirs(self, y: ArrayLike) -> jax.Array:
         """Values of the Casimirs, shape `(..., k)` (`k` may be 0)."""
-        y = as_state(y, "y", self.dim)
-        comps = self._components(y)
-        vals = [jnp.broadcast_to(p.evaluate(comps), y.shape[:-1]) for p in self.casimir_polynomials]
-        return jnp.stack(vals, -1) if vals else jnp.zeros(y.shape[:-1] + (0,))
+        return casimir_values(self.casimir_polynomials, as_state(y, "y", self.dim))
 
     def casimir_gradients(self, y: ArrayLike) -> jax.Array:
         """Gradients of the Casimirs, shape `(..., k, dim)`."""
-        y = as_state(y, "y", self.dim)
-        comps = self._components(y)
-        rows = [
-            jnp.stack([jnp.broadcast_to(g.evaluate(comps), y.shape[:-1]) for g in p.gradient()], -1)
-            for p in self.casimir_polynomials
-        ]
-        return jnp.stack(rows, -2) if rows else jnp.zeros(y.shape[:-1] + (0, self.dim))
+        gradients = tuple(p.gradient() for p in self.casimir_polynomials)
+        return casimir_gradient_values(gradients, as_state(y, "y", self.dim))
 
     @property
     def n_casimirs(self) -> int:

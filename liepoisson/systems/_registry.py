@@ -3,11 +3,11 @@ that a system given by the user matches them."""
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
 
+from .._jsonable import jsonable
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
 from ._double_bracket import DoubleBracket
@@ -45,10 +45,6 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
     return SYSTEMS[name](**(params or {}))
 
 
-def _normalise(params: Any) -> Any:
-    return json.loads(json.dumps(params, sort_keys=True))
-
-
 def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[str, Any], where: str) -> None:
     """`ValueError` unless `system` is the system saved as `(name, params)` in `where` (a file).
 
@@ -81,7 +77,7 @@ def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[
                 f"file has H = {H[k]!r}, the given system {mine[k]!r})"
             )
         return
-    if _normalise(system.params) != _normalise(params):
+    if jsonable(system.params) != jsonable(params):
         raise ValueError(f"{prefix}: the parameters differ ({system.params} vs {params})")
 
 
