@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +107,47 @@ def fmt(x: Any) -> str:
     if 1e-3 <= abs(x) < 1e4:
         return f"{x:.4g}"
     return f"{x:.2e}"
+
+
+def optional(default: Any = None) -> Any:
+    """A field of a typed row that is left out of metrics.json while it is `None` (a figure
+    measured for some rows only: the training loss of a learned map, the order of a classical one)."""
+    return dataclasses.field(default=default, metadata={"optional": True})
+
+
+def row_to_json(row: Any) -> dict[str, Any]:
+    """A typed row (a dataclass) as a JSON object: every field, those declared `optional()` only
+    when set."""
+    return {
+        f.name: _jsonable(getattr(row, f.name))
+        for f in dataclasses.fields(row)
+        if not (f.metadata.get("optional") and getattr(row, f.name) is None)
+    }
+
+
+def row_from_json(cls: type, values: dict[str, Any]) -> Any:
+    """The typed row of class `cls` that `row_to_json` wrote as `values` (an infinite figure,
+    stored as the string "inf", is a float again)."""
+    def value(v: Any) -> Any:
+        return float(v) if v in ("inf", "-inf") else v
+
+    return cls(**{f.name: value(values[f.name]) for f in dataclasses.fields(cls) if f.name in values})
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    """A column of a table of typed rows: its `header` and the `cell` of a row (a number is
+    written by `fmt`, a string as it is)."""
+
+    header: str
+    cell: Callable[[Any], Any]
+
+
+def table_lines(columns: Sequence[Column], rows: Iterable[Any]) -> list[str]:
+    """The Markdown table of `rows`, one line each, under the `columns`' headers."""
+    lines = [markdown_row(c.header for c in columns), "|" + "---|" * len(columns)]
+    lines += [markdown_row(fmt(c.cell(r)) for c in columns) for r in rows]
+    return lines
 
 
 def check_out_dir(out_dir: Path) -> None:

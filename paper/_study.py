@@ -1,0 +1,269 @@
+"""The models of the studies beyond the paper (W1-W3) behind one interface: `fit` to data, then
+`simulate` from held-out initial conditions. One final class per kind of model; what differs
+per system is data on the study's own protocol object, never a branch on its name."""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+import integrators as it
+import learn
+import liepoisson as lp
+
+
+@dataclasses.dataclass(frozen=True)
+class Fitted:
+    """A model fitted by a study: its `step_map` (what `integrators.rollout_figures` measures)
+    and the `records` of its trainings, in order (none for a classical map)."""
+
+    step_map: it.AbstractStepMap
+    records: tuple[learn.TrainingRecord, ...] = ()
+
+    @property
+    def train_loss(self) -> float | None:
+        """The training loss of the last training, or `None` for a map that was not trained."""
+        return self.records[-1].train_loss if self.records else None
+
+    @property
+    def wall_time_s(self) -> float | None:
+        """The training time of the last training, or `None`."""
+        return self.records[-1].wall_time_s if self.records else None
+
+
+class AbstractStudyModel(abc.ABC):
+    """A model of a study: `fit(system, data)` returns a `Fitted`, `simulate(fitted, y0,
+    n_steps, h)` its states from `y0` `(n, dim)` every step $h$, `(n, n_steps + 1, dim)`, with
+    their non-finite tail if it diverged. `label` names it in the study's rows."""
+
+    label: str
+
+    @abc.abstractmethod
+    def fit(self, system: lp.systems.AbstractPoissonSystem, data: Any, *, progress: bool = False) -> Fitted:
+        """Fit to `data` (an `integrators.Trajectories` or `Observations`) of `system`."""
+
+    @abc.abstractmethod
+    def simulate(self, fitted: Fitted, y0: np.ndarray, n_steps: int, h: float) -> np.ndarray:
+        """`n_steps` steps of `h` from `y0`."""
+
+    def accepts(self, data: Any) -> bool:
+        """Whether the model can be fitted to `data` (all models but those whose step has no
+        step-size input take any sampling)."""
+        return True
+
+
+class AbstractStepMapModel(AbstractStudyModel):
+    """A model whose fitted form is a step map: it simulates by the map's rollout at `h`."""
+
+    def simulate(self, fitted: Fitted, y0: np.ndarray, n_steps: int, h: float) -> np.ndarray:
+        return np.asarray(fitted.step_map.with_h(h).rollout(y0, n_steps, nonfinite="return"))
+
+
+@dataclasses.dataclass(frozen=True)
+class ClassicalMap(AbstractStepMapModel):
+    """A classical integrator: `make(system, h)` returns its step map at step `h`; nothing is fitted."""
+
+    label: str
+    make: Callable[[lp.systems.AbstractPoissonSystem, float], it.AbstractStepMap]
+    h: float
+
+    def fit(self, system, data=None, *, progress=False) -> Fitted:
+        return Fitted(self.make(system, self.h))
+
+
+@dataclasses.dataclass(frozen=True)
+class Training:
+    """One call of `learn.fit`: its optimiser (or stages) and the objective's settings, passed
+    as they are (`learn.fit`'s defaults are the defaults here)."""
+
+    optimiser: Any
+    loss: Any = None
+    validation_fraction: float = 0.2
+    seed: int = 0
+    normalise: bool = False
+
+
+class AbstractTrainedModel(AbstractStepMapModel):
+    """A learned map built by `network(system)` and fitted by `learn.fit` in one call per
+    `Training` of `trainings`, each from the previous one's result."""
+
+    trainings: tuple[Training, ...]
+
+    @abc.abstractmethod
+    def network(self, system: lp.systems.AbstractPoissonSystem) -> learn.AbstractLearnedMap:
+        """The untrained map."""
+
+    def fit(self, system, data, *, progress=False) -> Fitted:
+        model, records = self.network(system), []
+        for t in self.trainings:
+            model, record = learn.fit(model, data, optimiser=t.optimiser, loss=t.loss,
+                                      validation_fraction=t.validation_fraction, seed=t.seed,
+                                      normalise=t.normalise, progress=progress)
+            records.append(record)
+        return Fitted(model, tuple(records))
+
+
+@dataclasses.dataclass(frozen=True)
+class LPNetModel(AbstractTrainedModel):
+    """An LPNet (`learn.LPNet(system, key=key, h=h)`, the paper's architecture)."""
+
+    label: str
+    trainings: tuple[Training, ...]
+    key: int = 0
+    h: float | None = None
+
+    def network(self, system):
+        return learn.LPNet(system, key=self.key, h=self.h)
+
+
+@dataclasses.dataclass(frozen=True)
+class GLPNetModel(AbstractTrainedModel):
+    """A G-LPNet of `modules_per_dimension` times the dimension modules composed by `method`."""
+
+    label: str
+    trainings: tuple[Training, ...]
+    method: Any
+    modules_per_dimension: int = 2
+    key: int = 0
+
+    def network(self, system):
+        return learn.GLPNet(system, n_modules=self.modules_per_dimension * system.dim, key=self.key,
+                            method=self.method)
+
+
+@dataclasses.dataclass(frozen=True)
+class MLPModel(AbstractTrainedModel):
+    """The unstructured residual MLP (`learn.MLPBaseline`). Its step has no step-size input:
+    it is fitted to regularly sampled data only."""
+
+    label: str
+    trainings: tuple[Training, ...]
+    hidden: tuple[int, ...] = (16, 16, 16)
+    key: int = 0
+
+    def network(self, system):
+        return learn.MLPBaseline(system, hidden=self.hidden, key=self.key)
+
+    def accepts(self, data) -> bool:
+        return data.is_regular()
+
+
+@dataclasses.dataclass(frozen=True)
+class Identified:
+    """What a model identified of the true Hamiltonian $H$: the family of its learned
+    $\\widetilde H$ chosen by BIC and the criterion of each family (`learn.fit_splitting`), its
+    fitted coefficients `theta` (a parametric model), `hamiltonian_mismatch` against $H$, and the
+    differences of the diagonal of its quadratic part (for the rigid body the identified
+    $1/I_i - 1/I_j$). `None`: not measured for this model."""
+
+    family: str | None = None
+    bic: dict[str, float] | None = None
+    theta: np.ndarray | None = None
+    mismatch: dict[str, float] | None = None
+    differences: np.ndarray | None = None
+
+
+class AbstractHamiltonianModel(AbstractStudyModel):
+    """A model that learns a Hamiltonian: `identify` says what of the true one it recovered."""
+
+    @abc.abstractmethod
+    def identify(self, fitted: Fitted, system, states: np.ndarray, diagonal: bool) -> Identified:
+        """What `fitted` identified, measured on `states`; the diagonal differences if `diagonal`."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SplittingModel(AbstractStepMapModel, AbstractHamiltonianModel):
+    """A G-LPNet fitted by `learn.fit_splitting` (the family of its learned Hamiltonian chosen by
+    the Bayesian information criterion), with that function's arguments."""
+
+    label: str
+    iterations: int | None = None
+    key: int = 0
+    seed: int = 0
+    validation_fraction: float = 0.2
+    loss: learn.TrajectoryLoss | None = None
+    activation: str | None = None
+
+    def fit(self, system, data, *, progress=False) -> Fitted:
+        model, records = learn.fit_splitting(system, data, key=self.key, seed=self.seed,
+                                             validation_fraction=self.validation_fraction,
+                                             iterations=self.iterations, loss=self.loss,
+                                             activation=self.activation, progress=progress)
+        return Fitted(model, tuple(records))
+
+    def identify(self, fitted, system, states, diagonal) -> Identified:
+        family = fitted.records[-1].stages[-1].details.get("family")
+        bic = {r.stages[-1].details.get("family"): r.stages[-1].details.get("bic") for r in fitted.records}
+        hamiltonian = fitted.step_map.hamiltonian
+        differences = None
+        if diagonal:
+            differences = learn.quadratic_part(hamiltonian, system, states).diagonal_differences()
+        return Identified(family=family, bic=bic, mismatch=hamiltonian_mismatch(hamiltonian, system, states),
+                          differences=differences)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParametricModel(AbstractTrainedModel, AbstractHamiltonianModel):
+    """The true model family `family(y, theta)` with unknown coefficients
+    (`learn.ParametricHamiltonian`, RK4 with `substeps` sub-steps), from `theta0`."""
+
+    label: str
+    trainings: tuple[Training, ...]
+    family: Callable[[Any, Any], Any]
+    theta0: tuple[float, ...]
+    substeps: int = 10
+
+    def network(self, system):
+        return learn.ParametricHamiltonian(system, self.family, np.asarray(self.theta0, dtype=np.float64),
+                                           substeps=self.substeps)
+
+    def identify(self, fitted, system, states, diagonal) -> Identified:
+        theta = np.asarray(fitted.step_map.theta)
+        return Identified(theta=theta, differences=differences(theta) if diagonal else None)
+
+
+def differences(theta) -> np.ndarray:
+    """theta_i - theta_j for i < j (for the rigid body, the identified 1/I_i - 1/I_j)."""
+    theta = np.asarray(theta)
+    i, j = np.triu_indices(theta.size, 1)
+    return theta[i] - theta[j]
+
+
+def hamiltonian_mismatch(learned_hamiltonian, system, y) -> dict[str, float]:
+    r"""How far a learned Hamiltonian $\widetilde H$ is from the system's $H$ on the states `y`:
+
+    - `learned_hamiltonian_vs_H`: $\max|d - \bar d| / \max|H|$ with $d = \widetilde H - H$. A
+      function of the Casimirs in $d$ shows here although it moves no trajectory;
+    - `learned_hamiltonian_vs_H_mod_casimirs`: the same after subtracting from $d$ its
+      least-squares fit by the polynomials of degree $\le 2$ in the Casimirs;
+    - `learned_vector_field_vs_H`: $\max|X_{\widetilde H} - X_H| / \max|X_H|$ with
+      $X_F = \mathbb B(y)\nabla F$: blind to Casimir terms by construction.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    H = np.asarray(system.hamiltonian(y))
+    d = np.asarray(learned_hamiltonian(y)) - H
+    C = np.asarray(system.casimirs(y))
+    k = C.shape[-1]
+    basis = np.stack([np.ones_like(d), *C.T, *(C[:, i] * C[:, j] for i in range(k) for j in range(i, k))], axis=-1)
+    fit, *_ = np.linalg.lstsq(basis, d, rcond=None)
+    grad = jax.vmap(jax.grad(lambda z: learned_hamiltonian(z[None])[0]))(y)
+    X_learned = np.einsum("...ab,...b->...a", np.asarray(system.poisson_tensor(y)), np.asarray(grad))
+    X = np.asarray(system.vector_field(y))
+    return {
+        "learned_hamiltonian_vs_H": float(np.max(np.abs(d - d.mean())) / np.max(np.abs(H))),
+        "learned_hamiltonian_vs_H_mod_casimirs": float(np.max(np.abs(d - basis @ fit)) / np.max(np.abs(H))),
+        "learned_vector_field_vs_H": float(
+            np.max(np.linalg.norm(X_learned - X, axis=-1)) / np.max(np.linalg.norm(X, axis=-1))
+        ),
+    }
+
+
+def fit_all(models: Sequence[AbstractStudyModel], system, data, progress: bool = False) -> list[Fitted]:
+    """`model.fit(system, data)` for each model (one task of `paper._cluster.map_trainings`)."""
+    return [model.fit(system, data, progress=progress) for model in models]
+
