@@ -7,7 +7,7 @@ import equinox as eqx
 import jax
 
 from liepoisson.internals import check_system, positive_float
-from liepoisson.systems import AbstractPoissonSystem
+from liepoisson.systems import AbstractExactlySolvableSystem, AbstractPoissonSystem
 
 from ._step_map import AbstractStepMap, check_state
 
@@ -17,18 +17,18 @@ class ExactFlow(AbstractStepMap):
     (e.g. `RigidBody`: Jacobi elliptic functions). Exact to round-off for every `h`, Poisson
     and Casimir-preserving; one exact flow per step.
 
-    **Arguments:** `system`, with a method `exact_flow(t, y)`; `h` > 0.
+    **Arguments:** `system`, a `liepoisson.systems.AbstractExactlySolvableSystem`; `h` > 0.
     """
 
-    system: AbstractPoissonSystem = eqx.field(static=True)
+    system: AbstractExactlySolvableSystem = eqx.field(static=True)
     h: float
 
     def __init__(self, system: AbstractPoissonSystem, h: float):
         self.system = check_system(system)
-        if not callable(getattr(system, "exact_flow", None)):
+        if not isinstance(system, AbstractExactlySolvableSystem):
             raise TypeError(
-                f"ExactFlow needs a system with a closed-form solution exact_flow(t, y) "
-                f"(e.g. RigidBody); {system!r} has none"
+                f"ExactFlow needs a system with a closed-form solution exact_flow(t, y), a "
+                f"liepoisson.systems.AbstractExactlySolvableSystem (e.g. RigidBody); {system!r} is not one"
             )
         self.h = positive_float(h, "h")
 

@@ -407,3 +407,40 @@ def test_systems_described_by_their_params_are_equal_by_value_so_compiled_code_i
     o = Opaque(inertia=(1.0, 2.0, 3.0))
     assert o == o  # noqa: PLR0124 (an opaque system equals itself: identity)
     assert o != Opaque(inertia=(1.0, 2.0, 3.0)) and o != a
+
+
+@system_names
+def test_capabilities_are_classes(name):
+    """A closed-form solution and dissipation are abstract classes a system is an instance of:
+    the rigid body is exactly solvable, the double-bracket systems are dissipative, and the
+    splitting methods and `ExactFlow` decide by `isinstance`."""
+    import integrators as it
+    from liepoisson.systems import AbstractDissipativeSystem, AbstractExactlySolvableSystem
+
+    s = system(name)
+    assert isinstance(s, AbstractExactlySolvableSystem) == (name == "RigidBody")
+    assert not isinstance(s, AbstractDissipativeSystem)
+    if isinstance(s, AbstractExactlySolvableSystem):
+        np.testing.assert_array_equal(np.asarray(it.ExactFlow(s, 0.1).step(np.array([0.3, -1.1, 0.8]))),
+                                      np.asarray(s.exact_flow(0.1, np.array([0.3, -1.1, 0.8]))))
+    else:
+        with pytest.raises(TypeError, match="AbstractExactlySolvableSystem"):
+            it.ExactFlow(s, 0.1)
+
+
+def test_a_method_named_exact_flow_is_not_the_capability():
+    """A system with a method `exact_flow` but not of the class is refused; the class is the
+    capability, and a damped system is dissipative whatever it wraps."""
+    import integrators as it
+    from liepoisson.systems import AbstractDissipativeSystem, DoubleBracket, RigidBody
+
+    class Kirchhoff(lp.systems.Kirchhoff):
+        def exact_flow(self, t, y):
+            return y
+
+    with pytest.raises(TypeError, match="AbstractExactlySolvableSystem"):
+        it.ExactFlow(Kirchhoff(), 0.1)
+    damped = DoubleBracket(RigidBody(), 0.1)
+    assert isinstance(damped, AbstractDissipativeSystem)
+    with pytest.raises(ValueError, match="dissipative"):
+        it.splitting.Strang(damped, 0.1)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liepoisson.internals import check_system, positive_float
-from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem, check_splitting
+from liepoisson.systems import AbstractDissipativeSystem, AbstractExactTerm, AbstractPoissonSystem, check_splitting
 
 from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops
 
@@ -95,7 +95,7 @@ class AbstractSplittingMethod(AbstractStepMap):
         terms: Sequence[AbstractExactTerm] | None = None,
     ):
         self.system = check_system(system)
-        if system.dissipative:
+        if isinstance(system, AbstractDissipativeSystem):
             raise ValueError(
                 f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
                 "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"

@@ -2,6 +2,8 @@
 double-bracket dissipation of any Lie-Poisson system."""
 
 from ._base import (
+    AbstractDissipativeSystem as AbstractDissipativeSystem,
+    AbstractExactlySolvableSystem as AbstractExactlySolvableSystem,
     AbstractLiePoissonSystem as AbstractLiePoissonSystem,
     AbstractPoissonSystem as AbstractPoissonSystem,
 )

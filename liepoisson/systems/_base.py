@@ -126,10 +126,6 @@ class AbstractPoissonSystem(abc.ABC):
             )
         return y
 
-    #: Whether the motion is not Hamiltonian (a `DoubleBracket`): no composition of the exact
-    #: flows of pieces of $H$ integrates it, and the splitting methods refuse it.
-    dissipative: bool = False
-
     #: What `singular` marks, for error messages.
     singular_reason: str = "the Hamiltonian or the Poisson tensor is not defined there"
 
@@ -297,3 +293,25 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
         return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol, names=("y0", "y1"))
+
+
+class AbstractExactlySolvableSystem(AbstractPoissonSystem):
+    r"""A Poisson system whose motion has a closed-form solution $y(t) = \varphi_t(y(0))$
+    (`RigidBody`: Jacobi elliptic functions); `integrators.ExactFlow` steps with it."""
+
+    @abc.abstractmethod
+    def exact_flow(self, t: ArrayLike, y: ArrayLike) -> jax.Array:
+        """$\varphi_t(y)$, the exact solution at time `t` from `y`, batched over `y` `(..., dim)`."""
+
+
+class AbstractDissipativeSystem(AbstractLiePoissonSystem):
+    r"""A Lie-Poisson system with dissipation on the coadjoint orbit: $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$
+    with $\xi = \nabla H + \eta(\mu)$, $\eta$ the `dissipative_generator` (`DoubleBracket`).
+
+    The motion is not Hamiltonian: no composition of the exact flows of pieces of $H$
+    integrates it, so the splitting methods refuse it (`integrators.DampedSplitting` and the
+    Lie-group methods integrate it)."""
+
+    @abc.abstractmethod
+    def dissipative_generator(self, y: ArrayLike) -> jax.Array:
+        r"""$\eta(\mu)$: the dissipative part of the velocity is $\mathbb B(\mu)\,\eta(\mu)$."""

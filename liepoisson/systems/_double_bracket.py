@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._namespace import HEYOKA
-from ._base import AbstractLiePoissonSystem, AbstractPoissonSystem, matvec
+from ._base import AbstractDissipativeSystem, AbstractLiePoissonSystem, AbstractPoissonSystem, matvec
 
 #: Relative asymmetry of a metric accepted as symmetric (a matrix typed or computed in
 #: float64 is symmetric to a few roundings of its largest entry).
@@ -64,7 +64,7 @@ def check_metric(metric: Any, dim: int, name: str = "metric") -> np.ndarray:
     return 0.5 * (K + K.T)
 
 
-class DoubleBracket(AbstractLiePoissonSystem):
+class DoubleBracket(AbstractDissipativeSystem):
     r"""A Lie-Poisson system with double-bracket dissipation:
 
     $$\dot\mu = \mathbb B(\mu)\nabla H(\mu) + \gamma\,\mathbb B(\mu)\,K\,\mathbb B(\mu)\nabla H(\mu)
@@ -90,7 +90,6 @@ of $H$ there). The flow is not Poisson: no
 
     name = "DoubleBracket"
     equal_by_params = True
-    dissipative = True
 
     def __init__(self, system: AbstractLiePoissonSystem, gamma: float, metric: ArrayLike | None = None):
         if isinstance(system, DoubleBracket):
