@@ -40,6 +40,13 @@ from ._lie_group import (
     LieEuler as LieEuler,
 )
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
+from ._noise import (
+    NOISE_LAWS as NOISE_LAWS,
+    AbstractNoiseLaw as AbstractNoiseLaw,
+    GaussianNoise as GaussianNoise,
+    LaplaceNoise as LaplaceNoise,
+    UniformNoise as UniformNoise,
+)
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics
 from ._step_map import (

@@ -19,12 +19,11 @@ from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
 from ._ground_truth import taylor_integrator
+from ._noise import AbstractNoiseLaw, noise_law
 from ._validation_split import validation_split
 
 FORMAT = "liepoisson-observations"
 FORMAT_VERSION = 1
-#: The noise laws of `observe`, each scaled to the standard deviation asked for.
-LAWS = ("gaussian", "uniform", "laplace")
 
 
 def _per_trajectory(value: Any, name: str, n: int | None) -> list[np.ndarray]:
@@ -344,8 +343,9 @@ def uneven_times(n_trajectories: int, n_observations: int, steps: tuple[float, f
     return np.concatenate([np.zeros((n_trajectories, 1)), np.cumsum(dt, axis=1)], axis=1)
 
 
-def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: float = 0.0, law: str = "gaussian",
-            drop: float = 0.0, seed: int = 0, tol: float | None = None) -> Observations:
+def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: float = 0.0,
+            law: str | AbstractNoiseLaw = "gaussian", drop: float = 0.0, seed: int = 0,
+            tol: float | None = None) -> Observations:
     r"""Observations of heyoka ground truth, for studies: trajectory $j$ starts from `y0[j]` at
     its first time and is observed at `times[j]`, with noise and dropped samples.
 
@@ -355,7 +355,9 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
       trajectory, or `uneven_times(...)`).
     - `noise`: standard deviation of the noise on each component, relative to the RMS size
       $\sqrt{\operatorname{mean}|y|^2}$ of the clean observations (>= 0).
-    - `law`: `"gaussian"`, `"uniform"` or `"laplace"`, each with that standard deviation.
+    - `law`: an `AbstractNoiseLaw` (`GaussianNoise()`, `UniformNoise()`, `LaplaceNoise()` or
+      your own), or its name `"gaussian"`, `"uniform"` or `"laplace"`; scaled to that
+      standard deviation.
     - `drop`: the probability that an observation is dropped (the first and last of each
       trajectory are kept).
     - `seed`: the drops and the noise are drawn from two independent streams of this seed, so
@@ -373,8 +375,7 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
         raise TypeError(f"noise must be a number >= 0 (relative to the states' RMS size); got {noise!r}") from None
     if not np.isfinite(noise) or noise < 0:
         raise ValueError(f"noise must be a finite number >= 0 (relative to the states' RMS size); got {noise}")
-    if law not in LAWS:
-        raise ValueError(f"law must be one of {LAWS}; got {law!r}")
+    law = noise_law(law)
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)
     ts = times_per_trajectory(times, y0.shape[0])
@@ -403,13 +404,7 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
     std = noise * rms_size(clean)
     observed = []
     for y in clean:
-        if law == "gaussian":
-            e = noises.standard_normal(y.shape)
-        elif law == "uniform":
-            e = noises.uniform(-np.sqrt(3.0), np.sqrt(3.0), y.shape)
-        else:
-            e = noises.laplace(0.0, 1.0 / np.sqrt(2.0), y.shape)
-        observed.append(y + std * e)
-    metadata = {"source": "integrators.observe", "noise": noise, "noise_std": std, "law": law, "drop": drop,
+        observed.append(y + std * law.sample(noises, y.shape))
+    metadata = {"source": "integrators.observe", "noise": noise, "noise_std": std, "law": law.name, "drop": drop,
                 "seed": seed, "tolerance": tol}
     return Observations(system, [t[k] for t, k in zip(ts, keep)], observed, metadata=metadata)

@@ -483,6 +483,41 @@ def test_noise_has_the_asked_size_and_law(law):
         assert np.max(np.abs(e)) <= np.sqrt(3.0) * (1 + 1e-9)
 
 
+@pytest.mark.parametrize("law", [it.GaussianNoise(), it.UniformNoise(), it.LaplaceNoise()], ids=repr)
+def test_a_noise_law_is_a_class_and_its_name(law):
+    """Each law alone draws unit standard deviation with its own shape (the 5-sigma bands of
+    `test_noise_has_the_asked_size_and_law`), and `observe` with the instance is `observe` with
+    its name, to the bit."""
+    e = law.sample(np.random.default_rng(0), (40_000,))
+    n = e.size
+    assert abs(np.std(e) - 1) <= 5 * np.sqrt((KURTOSIS[law.name] - 1) / (4 * n))
+    assert abs(np.mean(np.abs(e) < 1) - WITHIN_ONE_STD[law.name]) <= 5 * np.sqrt(0.25 / n)
+    assert it.NOISE_LAWS[law.name] == law
+    T = it.uneven_times(3, 6, seed=1)
+    y0 = np.random.default_rng(2).normal(size=(3, 3))
+    by_class = it.observe(BODY, y0, T, noise=0.1, law=law, seed=4)
+    by_name = it.observe(BODY, y0, T, noise=0.1, law=law.name, seed=4)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(by_class.states, by_name.states))
+    assert by_class.metadata == by_name.metadata
+
+
+def test_a_noise_law_of_your_own():
+    class Rademacher(it.AbstractNoiseLaw):
+        name = "rademacher"
+
+        def sample(self, rng, shape):
+            return rng.choice([-1.0, 1.0], size=shape)
+
+    T = it.uneven_times(4, 8, seed=1)
+    y0 = np.random.default_rng(3).normal(size=(4, 3))
+    clean = it.observe(BODY, y0, T, seed=5)
+    noisy = it.observe(BODY, y0, T, noise=0.1, law=Rademacher(), seed=5)
+    std = noisy.metadata["noise_std"]
+    e = np.concatenate([y - c for y, c in zip(noisy.states, clean.states)]) / std
+    np.testing.assert_allclose(np.abs(e), 1.0, rtol=1e-9)  # round-off of y + std e - y, relative to |y| / std
+    assert noisy.metadata["law"] == "rademacher"
+
+
 def test_first_and_last_observations_are_never_dropped():
     T = it.uneven_times(20, 12, seed=2)
     y0 = np.random.default_rng(10).normal(size=(20, 3))
@@ -512,7 +547,7 @@ def test_drop_rate():
         ({"noise": -0.1}, ValueError, r"noise must be a finite number >= 0.*got -0.1"),
         ({"noise": np.nan}, ValueError, r"noise must be a finite number >= 0.*got nan"),
         ({"noise": np.inf}, ValueError, r"noise must be a finite number >= 0.*got inf"),
-        ({"law": "normal"}, ValueError, r"law must be one of \('gaussian', 'uniform', 'laplace'\); got 'normal'"),
+        ({"law": "normal"}, ValueError, r"law must be one of \('gaussian', 'uniform', 'laplace'\) or an integrators.AbstractNoiseLaw; got 'normal'"),
         ({"law": "Gaussian"}, ValueError, r"law must be one of .*got 'Gaussian'"),
         ({"drop": -0.1}, ValueError, r"drop must be in \[0, 1\); got -0.1"),
         ({"drop": 1.5}, ValueError, r"drop must be in \[0, 1\); got 1.5"),

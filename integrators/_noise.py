@@ -1,0 +1,68 @@
+r"""Noise laws of `observe`: the distribution of the measurement noise, each drawn with zero mean
+and unit standard deviation (`observe` scales it to the standard deviation asked for)."""
+
+from __future__ import annotations
+
+import abc
+
+import numpy as np
+
+
+class AbstractNoiseLaw(abc.ABC):
+    """A distribution of zero mean and unit variance; `name` is what `observe` records in the
+    metadata (and accepts as a string)."""
+
+    name: str
+
+    @abc.abstractmethod
+    def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+        """Independent draws of the law, of shape `shape`, from `rng`."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+    def __eq__(self, other: object) -> bool:
+        return type(self) is type(other)
+
+    def __hash__(self) -> int:
+        return hash(type(self))
+
+
+class GaussianNoise(AbstractNoiseLaw):
+    """The standard normal law."""
+
+    name = "gaussian"
+
+    def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+        return rng.standard_normal(shape)
+
+
+class UniformNoise(AbstractNoiseLaw):
+    r"""Uniform on $[-\sqrt3, \sqrt3]$ (variance $(2\sqrt3)^2/12 = 1$)."""
+
+    name = "uniform"
+
+    def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+        return rng.uniform(-np.sqrt(3.0), np.sqrt(3.0), shape)
+
+
+class LaplaceNoise(AbstractNoiseLaw):
+    r"""Laplace of scale $b = 1/\sqrt2$ (variance $2b^2 = 1$)."""
+
+    name = "laplace"
+
+    def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+        return rng.laplace(0.0, 1.0 / np.sqrt(2.0), shape)
+
+
+#: The laws by the names `observe` accepts.
+NOISE_LAWS: dict[str, AbstractNoiseLaw] = {law.name: law for law in (GaussianNoise(), UniformNoise(), LaplaceNoise())}
+
+
+def noise_law(law: str | AbstractNoiseLaw) -> AbstractNoiseLaw:
+    """`law` as an `AbstractNoiseLaw`: an instance, or one of the names of `NOISE_LAWS`."""
+    if isinstance(law, AbstractNoiseLaw):
+        return law
+    if isinstance(law, str) and law in NOISE_LAWS:
+        return NOISE_LAWS[law]
+    raise ValueError(f"law must be one of {tuple(NOISE_LAWS)} or an integrators.AbstractNoiseLaw; got {law!r}")
