@@ -35,9 +35,9 @@ reads the saved rows and fits only the missing ones, so an interrupted `--full` 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import itertools
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -50,9 +50,21 @@ import integrators as it
 import learn
 import liepoisson as lp
 from integrators.internals import atomic_write_text, figure, series_styles, span_decades
+from liepoisson.internals import casimir_scale
 
-from ._experiment import AbstractExperiment, _jsonable, fmt
-from .w1_learned_vs_classical import hamiltonian_mismatch
+from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
+from ._sindy import SINDyModel, sindy_available
+from ._study import (
+    AbstractHamiltonianModel,
+    AbstractStudyModel,
+    Fitted,
+    Identified,
+    MLPModel,
+    ParametricModel,
+    SplittingModel,
+    Training,
+    differences as differences,
+)
 
 H_TEST, STEPS_TEST, N_TEST = 0.1, 1000, 12
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
@@ -91,8 +103,10 @@ def _diamond_family(y, theta):
 
 @dataclasses.dataclass(frozen=True)
 class Protocol:
-    """A study's system, its observations (trajectories x observations from `initial`) and
-    the true model family `family(y, theta)` with its true parameters."""
+    """A study's system, its observations (trajectories x observations from `initial`), the
+    true model family `family(y, theta)` with its true parameters, and whether the differences
+    of the diagonal of $H$ are reported (`diagonal_differences`: the rigid body, whose
+    Hamiltonian is identified only modulo $|\Pi|^2$, so by its $1/I_i - 1/I_j$)."""
 
     system: lp.systems.AbstractPoissonSystem
     n_trajectories: int
@@ -100,12 +114,13 @@ class Protocol:
     initial: Callable[[int, np.random.Generator], np.ndarray]
     family: Callable[[Any, Any], Any]
     true_theta: tuple[float, ...]
+    diagonal_differences: bool = False
 
 
 def protocols() -> dict[str, Protocol]:
     return {
         "rigid body": Protocol(lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0)), 30, 21, _sphere, _diagonal,
-                               (0.5, 1.0, 1.5)),
+                               (0.5, 1.0, 1.5), diagonal_differences=True),
         "Kirchhoff": Protocol(lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)), 40, 21, _cube(6),
                               _diagonal, (1.0, 0.5, 1.0, 1.0, 0.5, 1.0)),
         "diamond": Protocol(diamond(), 40, 21, _cube(4), _diamond_family, (1.0, 1.0, 1.0, 0.1)),
@@ -128,150 +143,120 @@ def test_set(protocol: Protocol, n: int = N_TEST, steps: int = STEPS_TEST) -> tu
     return y0, it.ground_truth(protocol.system, y0, H_TEST, steps).states
 
 
-def figures(system, states: np.ndarray, reference: np.ndarray) -> dict[str, float]:
-    """Mean state error at the end, max relative energy error and Casimir drift of rollouts
-    `(n, steps + 1, dim)` against the reference (infinite for a rollout that diverged).
+@dataclasses.dataclass(frozen=True)
+class RolloutFigures:
+    """The study's figures of rollouts against heyoka: `state_error`, the mean over initial
+    conditions of the error at the end; `energy_error`, the max relative error of the true $H$
+    against its initial value; `casimir_drift`, max $|C(t) - C(0)|$ in units of
+    $|\nabla C|\,|y|$ at the start (a Casimir may vanish on the data; `None` for a system without
+    Casimirs). Infinite for a rollout that diverged."""
 
-    The issue's protocol, not `integrators.rollout_figures`'s: the mean over initial conditions
-    (not the max), energy relative to E(0), Casimirs in units of |grad C| |y| (a Casimir may
-    vanish on the data); and SINDy's rollouts are not a step map's."""
-    if not np.all(np.isfinite(states)):
-        return {"state_error": float("inf"), "energy_error": float("inf"), "casimir_drift": float("inf")}
-    err = float(np.mean(np.linalg.norm(states[:, -1] - reference[:, -1], axis=-1)))
-    energy = np.asarray(system.hamiltonian(states))
+    state_error: float
+    energy_error: float
+    casimir_drift: float | None
+
+
+def figures(fitted: Fitted, states: np.ndarray, reference: np.ndarray) -> RolloutFigures:
+    """The figures of rollouts `(n, steps + 1, dim)` of `fitted`, from its
+    `integrators.rollout_figures` against `reference`: the issue's protocol rather than that
+    function's summaries (the mean over initial conditions, not the max; energy relative to
+    E(0); Casimirs in units of |grad C| |y|)."""
+    system = fitted.step_map.system
+    result = it.rollout_figures(fitted.step_map, states, reference, defect_points=0)
+    if result.divergence is not None:
+        return RolloutFigures(np.inf, np.inf, np.inf if system.n_casimirs else None)
+    report = result.report
     energy0 = np.asarray(system.hamiltonian(reference[:, :1]))
-    out = {"state_error": err, "energy_error": float(np.max(np.abs(energy - energy0) / np.abs(energy0)))}
+    drift = None
     if system.n_casimirs:
-        c = np.asarray(system.casimirs(states)).reshape(*states.shape[:2], -1)
-        g = np.asarray(system.casimir_gradients(states[:, :1])).reshape(states.shape[0], 1, -1, states.shape[-1])
-        scale = np.linalg.norm(g, axis=-1) * np.linalg.norm(states[:, :1], axis=-1)[..., None]
-        out["casimir_drift"] = float(np.max(np.abs(c - c[:, :1]) / np.maximum(scale, np.finfo(float).tiny)))
+        gradients = np.asarray(system.casimir_gradients(states[:, :1])).reshape(len(states), 1, -1, states.shape[-1])
+        scale = casimir_scale(gradients, states[:, :1])
+        drift = float(np.max(np.abs(report.casimir_drift) / np.maximum(scale, np.finfo(float).tiny)))
+    return RolloutFigures(
+        state_error=float(np.mean(report.trajectory_error[:, -1])),
+        energy_error=float(np.max(np.abs(report.energy - energy0) / np.abs(energy0))),
+        casimir_drift=drift,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class W2Row:
+    """One model fitted to one condition (system, sampling, noise): its `RolloutFigures`, fit
+    time and training loss, and for a model that learns a Hamiltonian what it `Identified`
+    (flattened: `family`, `bic`, `theta`, the `hamiltonian_mismatch` figures, the diagonal
+    `differences` and their `difference_error` against the truth)."""
+
+    system: str
+    noise: float
+    sampling: str
+    model: str
+    fit_seconds: float
+    state_error: float
+    energy_error: float
+    casimir_drift: float | None = optional()
+    train_loss: float | None = optional()
+    family: str | None = optional()
+    bic: dict[str, float] | None = optional()
+    theta: Any = optional()
+    learned_hamiltonian_vs_H: float | None = optional()
+    learned_hamiltonian_vs_H_mod_casimirs: float | None = optional()
+    learned_vector_field_vs_H: float | None = optional()
+    differences: Any = optional()
+    difference_error: Any = optional()
+
+    @property
+    def condition(self) -> tuple[str, str, float]:
+        return self.system, self.sampling, self.noise
+
+
+def models(protocol: Protocol, profile: Profile) -> list[AbstractStudyModel]:
+    """The study's models for `protocol`: the G-LPNet (`learn.fit_splitting`), the parametric
+    limit, SINDy (if pysindy is installed) and the MLP, fitted with `TRAIN_SEED`."""
+    out: list[AbstractStudyModel] = [
+        SplittingModel("G-LPNet", iterations=profile.steps, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0),
+        ParametricModel("limit", (Training(learn.LevenbergMarquardt(profile.steps, rtol=1e-12),
+                                           loss=learn.TrajectoryLoss(), validation_fraction=0.0, seed=TRAIN_SEED),),
+                        family=protocol.family, theta0=(1.0,) * len(protocol.true_theta)),
+    ]
+    if sindy_available():
+        out.append(SINDyModel("SINDy"))
+    out.append(mlp(profile.iterations))
     return out
 
 
-def differences(theta) -> np.ndarray:
-    """theta_i - theta_j for i < j (for the rigid body, the identified 1/I_i - 1/I_j)."""
-    theta = np.asarray(theta)
-    i, j = np.triu_indices(theta.size, 1)
-    return theta[i] - theta[j]
-
-
-def fit_glpnet(protocol: Protocol, data: it.Observations, seed: int, iterations: int | None = None, **kwargs):
-    model, records = learn.fit_splitting(protocol.system, data, key=seed, seed=seed, validation_fraction=0.0,
-                                         iterations=iterations, progress=False, **kwargs)
-    chosen = records[-1].stages[-1].details
-    extra: dict[str, Any] = {"train_loss": records[-1].train_loss, "family": chosen.get("family"),
-                             "bic": {r.stages[-1].details.get("family"): r.stages[-1].details.get("bic")
-                                     for r in records}}
-    states = np.concatenate(data.states)
-    # H~ against the true H, modulo functions of the Casimirs (which move nothing), on the data
-    extra.update(hamiltonian_mismatch(model.hamiltonian, protocol.system, states))
-    if protocol.system.name == "RigidBody":
-        extra["differences"] = learn.quadratic_part(model.hamiltonian, protocol.system, states).diagonal_differences()
-    return model, extra
-
-
-def fit_limit(protocol: Protocol, data: it.Observations, seed: int, iterations: int = 200):
-    model = learn.ParametricHamiltonian(protocol.system, protocol.family, np.ones(len(protocol.true_theta)),
-                                        substeps=10)
-    fitted, record = learn.fit(model, data, loss=learn.TrajectoryLoss(),
-                               optimiser=learn.LevenbergMarquardt(iterations, rtol=1e-12), validation_fraction=0.0,
-                               seed=seed, progress=False)
-    extra: dict[str, Any] = {"train_loss": record.train_loss, "theta": np.asarray(fitted.theta)}
-    if protocol.system.name == "RigidBody":
-        extra["differences"] = differences(fitted.theta)
-    return fitted, extra
-
-
-class SindyModel:
-    """A fitted SINDy model rolled out like a step map: its ODE integrated by LSODA (tolerance
-    1e-12, as `SINDy.simulate`), stopped (and reported as diverged) once |y| exceeds 100 times
-    its start."""
-
-    def __init__(self, model):
-        self.model = model
-
-    def simulate(self, y0: np.ndarray, steps: int) -> np.ndarray:
-        from scipy.integrate import solve_ivp
-
-        t = H_TEST * np.arange(steps + 1)
-        out = np.full((y0.shape[0], t.size, y0.shape[1]), np.nan)
-        for i, y in enumerate(y0):
-            limit = 100.0 * max(float(np.linalg.norm(y)), 1e-3)
-
-            def blow_up(_, z, limit=limit):
-                return limit - np.linalg.norm(z)
-
-            blow_up.terminal = True
-            sol = solve_ivp(lambda _, z: self.model.predict(z[None])[0], (0.0, t[-1]), y, method="LSODA", t_eval=t,
-                            rtol=1e-12, atol=1e-12, events=blow_up)
-            out[i, : sol.y.shape[1]] = sol.y.T
-        return out
-
-
-def simulate(model: Any, y0: np.ndarray, steps: int) -> np.ndarray:
-    """`steps` steps of 0.1 from `y0` `(n, dim)`: a step map's rollout at that step (any step
-    map: the step is an input of the learned ones), or a model's own `simulate`."""
-    if hasattr(model, "simulate"):
-        return model.simulate(y0, steps)
-    return np.asarray(model.with_h(H_TEST).rollout(y0, steps, nonfinite="return"))
-
-
-def sindy_available() -> bool:
-    return importlib.util.find_spec("pysindy") is not None
-
-
-def fit_sindy(protocol: Protocol, data: it.Observations, seed: int):
-    import warnings
-
-    import pysindy as ps
-
-    if data.is_regular():
-        # the smoother's default window of 11 points, or the shortest trajectory's (odd) length
-        shortest = min(t.size for t in data.times)
-        window = min(11, shortest if shortest % 2 else shortest - 1)
-        derivative = ps.SmoothedFiniteDifference(smoother_kws={"window_length": window})
-    else:  # Savitzky-Golay smoothing assumes even spacing; finite differences take any times
-        derivative = ps.FiniteDifference()
-    model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
-                     differentiation_method=derivative)
-    with warnings.catch_warnings():  # pysindy warns about ill-conditioned fits of noisy data
-        warnings.simplefilter("ignore")
-        model.fit(list(data.states), t=list(data.times))
-    return SindyModel(model), {}
-
-
-def fit_mlp(protocol: Protocol, data: it.Observations, seed: int, iterations: int = 1000):
-    """The residual MLP on consecutive pairs: Adam (10 epochs per iteration, learning rate
+def mlp(iterations: int, seed: int = TRAIN_SEED) -> MLPModel:
+    """The residual MLP (3x16) on consecutive pairs: Adam (10 epochs per iteration, learning rate
     1e-3 decaying to 1e-5, full batch), then L-BFGS-B (`iterations`)."""
-    model = learn.MLPBaseline(protocol.system, hidden=(16, 16, 16), key=seed)
     optimiser = (learn.Adam(10 * iterations, learning_rate=1e-3, final_learning_rate=1e-5),
                  learn.QuasiNewton(iterations, "lbfgsb"))
-    fitted, record = learn.fit(model, data, loss=learn.TrajectoryLoss(window=1, latent=False), optimiser=optimiser,
-                               validation_fraction=0.0, seed=seed, progress=False)
-    return fitted, {"train_loss": record.train_loss}
+    return MLPModel("MLP", (Training(optimiser, loss=learn.TrajectoryLoss(window=1, latent=False),
+                                     validation_fraction=0.0, seed=seed),), key=seed)
 
 
-MODELS = {"G-LPNet": fit_glpnet, "limit": fit_limit, "SINDy": fit_sindy, "MLP": fit_mlp}
-
-
-def applies(name: str, sampling: str) -> bool:
-    """Whether model `name` is fitted to data of this sampling: the MLP's step has no
-    step-size input, so it is fitted to regular samples only."""
-    return name != "MLP" or sampling == "regular"
-
-
-def evaluate(protocol: Protocol, name: str, data: it.Observations, y0: np.ndarray, reference: np.ndarray,
-             seed: int = TRAIN_SEED, **kwargs) -> dict[str, Any]:
-    """Fit model `name` to `data` and measure its rollouts against `reference`."""
+def evaluate(protocol: Protocol, model: AbstractStudyModel, data: it.Observations, y0: np.ndarray,
+             reference: np.ndarray, *, system: str, noise: float, sampling: str) -> W2Row:
+    """Fit `model` to `data` and measure its rollouts against `reference`."""
     start = time.perf_counter()
-    model, extra = MODELS[name](protocol, data, seed, **kwargs)
-    fit_s = time.perf_counter() - start
-    states = simulate(model, y0, reference.shape[1] - 1)
-    row = {"model": name, "fit_s": fit_s, **figures(protocol.system, states, reference), **extra}
-    if "differences" in row:
-        row["difference_error"] = np.abs(np.asarray(row["differences"]) - differences(protocol.true_theta))
-    return row
+    fitted = model.fit(protocol.system, data)
+    identified = Identified()
+    if isinstance(model, AbstractHamiltonianModel):
+        identified = model.identify(fitted, protocol.system, np.concatenate(data.states),
+                                    protocol.diagonal_differences)
+    fit_seconds = time.perf_counter() - start
+    measured = figures(fitted, model.simulate(fitted, y0, reference.shape[1] - 1, H_TEST), reference)
+    error = None
+    if identified.differences is not None:
+        error = np.abs(np.asarray(identified.differences) - differences(protocol.true_theta))
+    mismatch = identified.mismatch or {}
+    return W2Row(
+        system=system, noise=noise, sampling=sampling, model=model.label, fit_seconds=fit_seconds,
+        state_error=measured.state_error, energy_error=measured.energy_error, casimir_drift=measured.casimir_drift,
+        train_loss=fitted.train_loss, family=identified.family, bic=identified.bic, theta=identified.theta,
+        learned_hamiltonian_vs_H=mismatch.get("learned_hamiltonian_vs_H"),
+        learned_hamiltonian_vs_H_mod_casimirs=mismatch.get("learned_hamiltonian_vs_H_mod_casimirs"),
+        learned_vector_field_vs_H=mismatch.get("learned_vector_field_vs_H"),
+        differences=identified.differences, difference_error=error,
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -296,6 +281,17 @@ PROFILES = {
 }
 
 
+def _saved(path: Path) -> W2Row | None:
+    """The row an earlier run saved at `path`, or `None` (none, or one of another format: refit)."""
+    if not path.exists():
+        return None
+    try:
+        return row_from_json(W2Row, json.loads(path.read_text()))
+    except (TypeError, json.JSONDecodeError) as err:
+        print(f"warning: refitting {path}: not a row of this version ({err})", file=sys.stderr)
+        return None
+
+
 class W2(AbstractExperiment):
     id = "W2"
     title = "learning from observations: noisy, unevenly sampled trajectories, against SINDy and the parametric limit"
@@ -303,8 +299,7 @@ class W2(AbstractExperiment):
 
     def run(self, profile: str, out_dir: Path, progress: bool):
         P = PROFILES[profile]
-        models = [m for m in MODELS if m != "SINDy" or sindy_available()]
-        rows: list[dict[str, Any]] = []
+        rows: list[W2Row] = []
         all_protocols = protocols()
         for system in P.systems:
             protocol = all_protocols[system]
@@ -312,22 +307,20 @@ class W2(AbstractExperiment):
             for sampling, noise in itertools.product(P.samplings, P.noises):
                 data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
                                     n_observations=P.n_observations)
-                for name in models:
-                    if not applies(name, sampling):
+                for model in models(protocol, P):
+                    if not model.accepts(data):
                         continue
-                    saved = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{name}.json".replace(" ", "_")
-                    if saved.exists():  # a row of an interrupted run: each row is saved when it is done
-                        row = json.loads(saved.read_text())
-                    else:
-                        kwargs = {"SINDy": {}, "MLP": {"iterations": P.iterations}}.get(name, {"iterations": P.steps})
-                        row = _jsonable({"system": system, "noise": noise, "sampling": sampling,
-                                         **evaluate(protocol, name, data, y0, reference, **kwargs)})
-                        atomic_write_text(saved, json.dumps(row, indent=2) + "\n")
+                    path = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(" ", "_")
+                    row = _saved(path)  # a row of an interrupted run: each row is saved when it is done
+                    if row is None:
+                        row = evaluate(protocol, model, data, y0, reference, system=system, noise=noise,
+                                       sampling=sampling)
+                        atomic_write_text(path, json.dumps(row_to_json(row), indent=2) + "\n")
                     rows.append(row)
                     if progress:
                         print(line(row), flush=True)
         return {
-            "rows": rows,
+            "rows": [row_to_json(r) for r in rows],
             "verdict": verdict(rows),
             "figures": _plots(rows, out_dir),
             "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
@@ -337,9 +330,10 @@ class W2(AbstractExperiment):
         }
 
     def rows(self, metrics):
-        return [(f"{r['system']} {r['sampling']} noise {r['noise']:g} G-LPNet state error(t=100)", "—",
-                 fmt(r["state_error"]), fmt(_peer(metrics["rows"], r, "limit").get("state_error")))
-                for r in metrics.get("rows", []) if r["model"] == "G-LPNet"]
+        rows = _rows(metrics)
+        return [(f"{r.system} {r.sampling} noise {r.noise:g} G-LPNet state error(t=100)", "—",
+                 fmt(r.state_error), fmt(getattr(_peer(rows, r, "limit"), "state_error", None)))
+                for r in rows if r.model == "G-LPNet"]
 
     def markdown_table(self, metrics):
         lines = [
@@ -357,18 +351,28 @@ class W2(AbstractExperiment):
             "",
             "## Every fit",
             "",
-            ("| system | sampling | noise | model | state error t=100 | max energy error | Casimir drift | fit [s] "
-             "| H~ family | H~ - H mod Casimirs | max error of 1/I_i - 1/I_j |"),
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            *table_lines(COLUMNS, _rows(metrics)),
         ]
-        for r in metrics.get("rows", []):
-            diff = r.get("difference_error")
-            lines.append(
-                f"| {r['system']} | {r['sampling']} | {r['noise']:g} | {r['model']} | {fmt(r['state_error'])} | "
-                f"{fmt(r['energy_error'])} | {fmt(r.get('casimir_drift', float('nan')))} | {r['fit_s']:.1f} | "
-                f"{r.get('family') or '—'} | {fmt(r.get('learned_hamiltonian_vs_H_mod_casimirs'))} | "
-                f"{fmt(max(diff)) if diff is not None else '—'} |")
         return "\n".join(lines) + "\n"
+
+
+COLUMNS = (
+    Column("system", lambda r: r.system),
+    Column("sampling", lambda r: r.sampling),
+    Column("noise", lambda r: f"{r.noise:g}"),
+    Column("model", lambda r: r.model),
+    Column("state error t=100", lambda r: r.state_error),
+    Column("max energy error", lambda r: r.energy_error),
+    Column("Casimir drift", lambda r: r.casimir_drift),
+    Column("fit [s]", lambda r: f"{r.fit_seconds:.1f}"),
+    Column("H~ family", lambda r: r.family or "—"),
+    Column("H~ - H mod Casimirs", lambda r: r.learned_hamiltonian_vs_H_mod_casimirs),
+    Column("max error of 1/I_i - 1/I_j", lambda r: None if r.difference_error is None else max(r.difference_error)),
+)
+
+
+def _rows(metrics) -> list[W2Row]:
+    return [row_from_json(W2Row, r) for r in metrics.get("rows", [])]
 
 
 def _version(name: str) -> str:
@@ -377,62 +381,59 @@ def _version(name: str) -> str:
     return version(name)
 
 
-def _peer(rows, row, model) -> dict[str, Any]:
-    for r in rows:
-        if (r["system"], r["sampling"], r["noise"], r["model"]) == (row["system"], row["sampling"], row["noise"], model):
-            return r
-    return {}
+def _peer(rows: list[W2Row], row: W2Row, model: str) -> W2Row | None:
+    return next((r for r in rows if r.condition == row.condition and r.model == model), None)
 
 
-def line(row: dict) -> str:
+def line(row: W2Row) -> str:
     extra = ""
-    if "difference_error" in row:
-        extra = f", max |error of 1/I_i - 1/I_j| {np.max(row['difference_error']):.1e}"
-    if row.get("family"):
-        extra += f", H~ {row['family']}"
-    if "learned_hamiltonian_vs_H_mod_casimirs" in row:
-        extra += f", H~ - H mod Casimirs {fmt(row['learned_hamiltonian_vs_H_mod_casimirs'])}"
-    return (f"{row['system']}, {row['sampling']}, noise {row['noise']:g}, {row['model']}: state error (t=100) "
-            f"{fmt(row['state_error'])}, energy {fmt(row['energy_error'])}, Casimir "
-            f"{fmt(row.get('casimir_drift', float('nan')))}, fit {row['fit_s']:.1f} s{extra}")
+    if row.difference_error is not None:
+        extra = f", max |error of 1/I_i - 1/I_j| {np.max(row.difference_error):.1e}"
+    if row.family:
+        extra += f", H~ {row.family}"
+    if row.learned_hamiltonian_vs_H_mod_casimirs is not None:
+        extra += f", H~ - H mod Casimirs {fmt(row.learned_hamiltonian_vs_H_mod_casimirs)}"
+    return (f"{row.system}, {row.sampling}, noise {row.noise:g}, {row.model}: state error (t=100) "
+            f"{fmt(row.state_error)}, energy {fmt(row.energy_error)}, Casimir {fmt(row.casimir_drift)}, "
+            f"fit {row.fit_seconds:.1f} s{extra}")
 
 
-def verdict(rows: list[dict[str, Any]]) -> list[str]:
+def verdict(rows: list[W2Row]) -> list[str]:
     """Per system, sampling and noise: the G-LPNet against SINDy and the parametric limit."""
     out = []
     for r in rows:
-        if r["model"] != "G-LPNet":
+        if r.model != "G-LPNet":
             continue
         limit, sindy = _peer(rows, r, "limit"), _peer(rows, r, "SINDy")
-        parts = [f"{r['system']}, {r['sampling']}, noise {r['noise']:g}: G-LPNet state error {fmt(r['state_error'])}"]
-        if limit and r["noise"] == 0:
-            parts.append(f"the limit {fmt(limit['state_error'])} (exact data: the true family is exact up to its "
+        parts = [f"{r.system}, {r.sampling}, noise {r.noise:g}: G-LPNet state error {fmt(r.state_error)}"]
+        if limit and r.noise == 0:
+            parts.append(f"the limit {fmt(limit.state_error)} (exact data: the true family is exact up to its "
                          "RK4; the G-LPNet's error is that of its splitting)")
         elif limit:
-            parts.append(f"{r['state_error'] / limit['state_error']:.2f}x the limit's ({fmt(limit['state_error'])}), "
-                         f"energy error {r['energy_error'] / limit['energy_error']:.2f}x")
+            parts.append(f"{r.state_error / limit.state_error:.2f}x the limit's ({fmt(limit.state_error)}), "
+                         f"energy error {r.energy_error / limit.energy_error:.2f}x")
         if sindy:
-            below = r["state_error"] < sindy["state_error"]
-            parts.append(f"{'below' if below else 'ABOVE'} SINDy's {fmt(sindy['state_error'])}")
-        parts.append(f"Casimir drift {fmt(r.get('casimir_drift', float('nan')))}")
+            below = r.state_error < sindy.state_error
+            parts.append(f"{'below' if below else 'ABOVE'} SINDy's {fmt(sindy.state_error)}")
+        parts.append(f"Casimir drift {fmt(r.casimir_drift)}")
         out.append("; ".join(parts))
     return out
 
 
-def _plots(rows, out_dir: Path) -> list[str]:
+def _plots(rows: list[W2Row], out_dir: Path) -> list[str]:
     """Per system and sampling: state error at t = 100 against the noise, one line per model."""
     names = []
-    for system in dict.fromkeys(r["system"] for r in rows):
-        samplings = list(dict.fromkeys(r["sampling"] for r in rows if r["system"] == system))
+    for system in dict.fromkeys(r.system for r in rows):
+        samplings = list(dict.fromkeys(r.sampling for r in rows if r.system == system))
         fig = figure(figsize=(5.5 * len(samplings), 4.5))
         axes = np.atleast_1d(fig.subplots(1, len(samplings)))
         for ax, sampling in zip(axes, samplings):
-            sub = [r for r in rows if r["system"] == system and r["sampling"] == sampling]
-            models = list(dict.fromkeys(r["model"] for r in sub))
-            for model, style in zip(models, series_styles(len(models))):
-                pts = sorted((r for r in sub if r["model"] == model), key=lambda r: r["noise"])
-                noise = np.array([max(r["noise"], 1e-4) for r in pts])  # noise 0 drawn at 1e-4
-                ax.loglog(noise, [r["state_error"] for r in pts], label=model, **style)
+            sub = [r for r in rows if r.system == system and r.sampling == sampling]
+            labels = list(dict.fromkeys(r.model for r in sub))
+            for label, style in zip(labels, series_styles(len(labels))):
+                pts = sorted((r for r in sub if r.model == label), key=lambda r: r.noise)
+                noise = np.array([max(r.noise, 1e-4) for r in pts])  # noise 0 drawn at 1e-4
+                ax.loglog(noise, [r.state_error for r in pts], label=label, **style)
             ax.set_xlabel("noise (relative; 0 drawn at 1e-4)")
             ax.set_ylabel("mean state error at t = 100")
             ax.set_title(f"{system}, {sampling} sampling")
@@ -452,9 +453,11 @@ def bootstrap_differences(protocol: Protocol, data: it.Observations, n: int, see
     """The rigid body's identified 1/I_i - 1/I_j from `n` G-LPNets, each fitted to the
     trajectories of `data` resampled with replacement (seeded): `(n, 3)`, their spread the
     uncertainty of the recovered differences."""
+    model = SplittingModel("G-LPNet", iterations=iterations, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0)
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
         sample = data.select(rng.integers(0, len(data), len(data)))
-        out.append(fit_glpnet(protocol, sample, TRAIN_SEED, iterations)[1]["differences"])
+        fitted = model.fit(protocol.system, sample)
+        out.append(model.identify(fitted, protocol.system, np.concatenate(sample.states), diagonal=True).differences)
     return np.asarray(out)
