@@ -49,10 +49,13 @@ from ._noise import (
 )
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics
-from ._step_map import (
-    AbstractStepMap as AbstractStepMap,
+from ._nonfinite import (
+    NONFINITE_POLICIES as NONFINITE_POLICIES,
+    AbstractNonfinitePolicy as AbstractNonfinitePolicy,
+    RaiseIfNonfinite as RaiseIfNonfinite,
+    ReturnNonfinite as ReturnNonfinite,
     RolloutDivergedError as RolloutDivergedError,
-    StepCost as StepCost,
 )
+from ._step_map import AbstractStepMap as AbstractStepMap, StepCost as StepCost
 from ._timing import StepTiming as StepTiming, step_timing as step_timing
 from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

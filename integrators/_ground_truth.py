@@ -33,12 +33,16 @@ EPS = float(np.finfo(np.float64).eps)
 # describe (`system.value_key()`), else on the object itself.
 # An integrator is not thread-safe (it holds its state), so each thread has its own caches: the
 # threads of a Dask worker (or of any thread pool) integrate chunks at the same time.
-_CACHES = threading.local()
+class _ThreadCaches(threading.local):
+    def __init__(self):  # runs once in each thread that reads it
+        self.by_params: dict[tuple[Any, ...], Any] = {}
+        self.by_object: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+_CACHES = _ThreadCaches()
 
 
 def _caches() -> tuple[dict[tuple[Any, ...], Any], weakref.WeakKeyDictionary]:
-    if not hasattr(_CACHES, "by_params"):
-        _CACHES.by_params, _CACHES.by_object = {}, weakref.WeakKeyDictionary()
     return _CACHES.by_params, _CACHES.by_object
 
 

@@ -24,6 +24,8 @@ from liepoisson import vmap_samples
 from liepoisson.internals import as_state, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
+from ._nonfinite import AbstractNonfinitePolicy, nonfinite_policy
+
 
 @dataclasses.dataclass(frozen=True)
 class StepCost:
@@ -70,7 +72,8 @@ class AbstractStepMap(eqx.Module):
         # Kept for the subclasses that call it; `check_h(self)` is the name to use.
         return check_h(self)
 
-    def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1, nonfinite: str = "raise") -> jax.Array:
+    def rollout(self, y0: ArrayLike, n_steps: int, *, save_every: int = 1,
+                nonfinite: str | AbstractNonfinitePolicy = "raise") -> jax.Array:
         r"""Iterate the step: $y_k = \Phi_h^k(y_0)$ for $k = 0, s, 2s, \dots, n$ ($s$ =
         `save_every`, which must divide `n_steps`).
 
@@ -83,9 +86,10 @@ class AbstractStepMap(eqx.Module):
 
         A trajectory that leaves the finite range (a learned map far outside its training
         region, too large a step) raises `RolloutDivergedError` naming the trajectory, the steps
-        between which it diverged and its last finite state (`nonfinite="raise"`, the default);
-        `nonfinite="return"` returns the states with their non-finite tail instead
-        (`integrators.diagnostics` reports up to the first non-finite step).
+        between which it diverged and its last finite state (`nonfinite=RaiseIfNonfinite()`, or
+        `"raise"`, the default); `nonfinite=ReturnNonfinite()` (or `"return"`) returns the
+        states with their non-finite tail instead (`integrators.diagnostics` reports up to the
+        first non-finite step).
         """
         check_h(self)
         dim = self.system.dim
@@ -95,15 +99,13 @@ class AbstractStepMap(eqx.Module):
             raise ValueError(
                 f"save_every must divide n_steps; got n_steps={n_steps}, save_every={save_every}"
             )
-        if nonfinite not in ("raise", "return"):
-            raise ValueError(f"nonfinite must be 'raise' or 'return'; got {nonfinite!r}")
+        nonfinite = nonfinite_policy(nonfinite)
         y0 = states(y0, "y0", dim)
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
         every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32 if save_every < 2**31 else jnp.int64)
         out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, every)
-        if nonfinite == "raise":
-            _check_finite(self, out, save_every)
+        nonfinite.check(self, out, save_every)
         return out[0] if y0.ndim == 1 else out
 
     def poisson_defect(self, y: ArrayLike) -> jax.Array:
@@ -136,38 +138,6 @@ class AbstractStepMap(eqx.Module):
 
 
 _FLOPS: dict[Any, float] = {}
-
-
-class RolloutDivergedError(FloatingPointError):
-    """A rollout left the finite range. Attributes: `trajectory` (index into `y0`), `step`
-    (the first saved step that is not finite), `last_finite_step`, `state` (the state there)
-    and `states` (the whole output, with its non-finite tail)."""
-
-    def __init__(self, message: str, *, trajectory: int, step: int, last_finite_step: int, state: np.ndarray,
-                 states: np.ndarray):
-        super().__init__(message)
-        self.trajectory, self.step, self.last_finite_step = trajectory, step, last_finite_step
-        self.state, self.states = state, states
-
-
-def _check_finite(step_map: AbstractStepMap, out: jax.Array, save_every: int) -> None:
-    """Raise `RolloutDivergedError` for the earliest non-finite saved state of `out`
-    `(N, T, dim)` (ties: the lowest trajectory index)."""
-    y = np.asarray(out)
-    finite = np.isfinite(y).all(axis=-1)
-    if finite.all():
-        return
-    first = np.where(finite.all(axis=1), y.shape[1], np.argmin(finite, axis=1))
-    i = int(np.argmin(first))
-    k = int(first[i])
-    last = y[i, k - 1]
-    when = f"at step {k}" if save_every == 1 else f"between steps {(k - 1) * save_every} and {k * save_every}"
-    raise RolloutDivergedError(
-        f"{type(step_map).__name__} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
-        f"{when}; its last finite state (step {(k - 1) * save_every}) is {np.round(last, 6).tolist()}. "
-        f"{step_map.divergence_hint}; pass nonfinite='return' to get the states with their non-finite tail",
-        trajectory=i, step=k * save_every, last_finite_step=(k - 1) * save_every, state=last, states=y,
-    )
 
 
 def xla_flops(fn: Callable[..., Any], *args: Any) -> float:

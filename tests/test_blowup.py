@@ -41,8 +41,32 @@ def test_a_single_state_and_a_finite_rollout():
 
 
 def test_nonfinite_must_be_raise_or_return():
-    with pytest.raises(ValueError, match="nonfinite must be 'raise' or 'return'; got 'ignore'"):
+    with pytest.raises(ValueError, match="nonfinite must be 'raise' or 'return' or an integrators.AbstractNonfinitePolicy; got 'ignore'"):
         it.RK4(BODY, h=0.1).rollout(np.ones(3), 2, nonfinite="ignore")
+
+
+def test_nonfinite_policies_are_classes_and_their_names():
+    """`RaiseIfNonfinite()` is `"raise"`, `ReturnNonfinite()` is `"return"`; a policy of your own
+    sees the whole rollout."""
+    m, y0 = it.RK4(BODY, h=20.0), np.array([[1.0, 0.5, 0.2], [0.1, 0.2, 0.3]])
+    returned = np.asarray(m.rollout(y0, 60, nonfinite=it.ReturnNonfinite()))
+    np.testing.assert_array_equal(returned, np.asarray(m.rollout(y0, 60, nonfinite="return")))
+    assert not np.isfinite(returned).all()
+    with pytest.raises(it.RolloutDivergedError, match="trajectory 0"):
+        m.rollout(y0, 60, nonfinite=it.RaiseIfNonfinite())
+    assert it.NONFINITE_POLICIES == {"raise": it.RaiseIfNonfinite(), "return": it.ReturnNonfinite()}
+
+    seen = []
+
+    class Record(it.AbstractNonfinitePolicy):
+        name = "record"
+
+        def check(self, step_map, out, save_every):
+            seen.append((step_map, np.asarray(out), save_every))
+
+    m.rollout(y0, 60, save_every=3, nonfinite=Record())
+    assert seen[0][0] is m and seen[0][2] == 3
+    np.testing.assert_array_equal(seen[0][1], returned[:, ::3])
 
 
 def test_splitting_on_a_non_compact_algebra_overflows_into_an_error():
