@@ -41,8 +41,8 @@ import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
+import jax
 import numpy as np
 
 import integrators as it
@@ -51,7 +51,8 @@ import liepoisson as lp
 from integrators import splitting as sp
 from integrators.internals import figure, series_styles
 
-from ._experiment import AbstractExperiment, fmt
+from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
+from ._study import AbstractStudyModel, ClassicalMap, Fitted, LPNetModel, SplittingModel, Training
 
 H, STEPS, LONG_STEPS = 0.1, 1200, 10_000
 ORDER_T, ORDER_H = 4.0, (0.025, 0.0125)
@@ -64,6 +65,7 @@ class Scenario:
     y0: np.ndarray
     sample: Callable[[np.random.Generator, int], np.ndarray]  # training initial conditions
     threshold: Callable[[np.ndarray], float]  # the flip energy, from heyoka's energies
+    noises: bool = False  # also LPNets from noisy observations (the profile's noises)
 
 
 def _unit(v) -> np.ndarray:
@@ -87,21 +89,35 @@ def scenarios() -> dict[str, Scenario]:
     separatrix = float(np.dot(y0, y0)) / (2.0 * 1.0)  # |Pi|^2 / (2 I_2), I_2 = 1 the middle moment
     top = lp.systems.damped_heavy_top(gamma=0.05)
     return {
-        "rigid body": Scenario(body, y0, _body_sample, lambda H: separatrix),
+        "rigid body": Scenario(body, y0, _body_sample, lambda H: separatrix, noises=True),
         "heavy top": Scenario(top, np.r_[0.2, 0.1, 1.0, _unit([0.1, 0.2, 0.97])], _top_sample,
                               lambda H: 0.5 * (H[0] + H[-1])),
     }
 
 
-def classical(system) -> dict[str, Callable[[float], it.AbstractStepMap]]:
-    return {
-        "Lie-Euler": lambda h: it.LieEuler(system, h),
-        "CF2": lambda h: it.CommutatorFree2(system, h),
-        "CF4": lambda h: it.CommutatorFree4(system, h),
-        "Strang + CF2": lambda h: it.DampedSplitting(system, h, sp.Strang, it.CommutatorFree2),
-        "TripleJump + CF4": lambda h: it.DampedSplitting(system, h, sp.TripleJump, it.CommutatorFree4),
-        "RK4": lambda h: it.RK4(system, h),
-    }
+@dataclasses.dataclass(frozen=True)
+class Classical:
+    """A classical integrator of the study and the order it has in theory."""
+
+    model: ClassicalMap
+    nominal_order: int
+
+
+def _damped(method, dissipation):
+    """`integrators.DampedSplitting` by the splitting `method` with the Lie-group `dissipation`."""
+    return lambda system, h: it.DampedSplitting(system, h, method, dissipation)
+
+
+def classical() -> tuple[Classical, ...]:
+    """The Lie-group methods on the whole generator, the damped splittings and RK4, at step `H`."""
+    return (
+        Classical(ClassicalMap("Lie-Euler", it.LieEuler, H), 1),
+        Classical(ClassicalMap("CF2", it.CommutatorFree2, H), 2),
+        Classical(ClassicalMap("CF4", it.CommutatorFree4, H), 4),
+        Classical(ClassicalMap("Strang + CF2", _damped(sp.Strang, it.CommutatorFree2), H), 2),
+        Classical(ClassicalMap("TripleJump + CF4", _damped(sp.TripleJump, it.CommutatorFree4), H), 4),
+        Classical(ClassicalMap("RK4", it.RK4, H), 4),
+    )
 
 
 def flip_time(energy: np.ndarray, level: float, h: float = H) -> float:
@@ -114,11 +130,6 @@ def flip_time(energy: np.ndarray, level: float, h: float = H) -> float:
     return float((k - 1 + (energy[k - 1] - level) / (energy[k - 1] - energy[k])) * h)
 
 
-def casimir_drift(system, y: np.ndarray) -> float:
-    C = np.asarray(system.casimirs(y))
-    return float(np.max(np.abs(C - C[0]))) if C.size else 0.0
-
-
 def dissipation_rate(system, states: np.ndarray, images: np.ndarray, h: float = H) -> float:
     r"""$\hat\gamma$: least squares of $(H(y') - H(y))/h = -\hat\gamma\,|\mathbb B\nabla H|_K^2$
     at the midpoint $(y + y')/2$, over the pairs `(states, images)`."""
@@ -127,39 +138,87 @@ def dissipation_rate(system, states: np.ndarray, images: np.ndarray, h: float = 
     return float(-np.sum(rate * w) / np.sum(w * w))
 
 
-def measure(scenario: Scenario, name: str, stepper, reference: np.ndarray, long: bool) -> dict[str, Any]:
-    system = scenario.system
-    y = np.asarray(stepper.rollout(scenario.y0, reference.shape[0] - 1))
-    energy, energy_ref = np.asarray(system.hamiltonian(y)), np.asarray(system.hamiltonian(reference))
-    span = energy_ref[0] - energy_ref[-1]
-    row = {
-        "model": name,
-        "energy_error_rel": float(np.max(np.abs(energy - energy_ref) / np.abs(energy_ref))),
-        "energy_error_span": float(np.max(np.abs(energy - energy_ref)) / span),
-        "flip_time": flip_time(energy, scenario.threshold(energy_ref)),
-        "casimir_drift": casimir_drift(system, y),
-        "exact_flows_per_step": int(stepper.exact_flows_per_step),
-        "gamma_hat": dissipation_rate(system, reference[:-1], np.asarray(_steps(stepper, reference[:-1]))),
-        "energy": energy,
-    }
-    if long:  # 10^4 steps: the Casimir drift, and the cost per step once compiled
-        np.asarray(stepper.rollout(scenario.y0, LONG_STEPS))
-        start = time.perf_counter()
-        far = np.asarray(stepper.rollout(scenario.y0, LONG_STEPS))
-        row["step_us"] = (time.perf_counter() - start) / LONG_STEPS * 1e6
-        row["casimir_drift_1e4"] = casimir_drift(system, far)
-    return row
+@dataclasses.dataclass(frozen=True)
+class W3Truth:
+    """heyoka's relaxation: Casimir drift, the largest rise of the energy between outputs, the
+    flip time, the energy at the start and the end, $\gamma$ and the $\hat\gamma$ of its exact
+    steps (the estimate's $O(h^2)$ bias)."""
+
+    casimir_drift: float
+    max_energy_increase: float
+    flip_time: float
+    energy_start: float
+    energy_end: float
+    gamma: float
+    gamma_hat: float
 
 
-def _steps(stepper, states):
-    import jax
+@dataclasses.dataclass(frozen=True)
+class W3Row:
+    """One model on one system, against heyoka over `STEPS` steps: max energy error relative to
+    $H(t)$ and to the energy dissipated, flip time, Casimir drift, exact flows per step, the
+    learned $\hat\gamma$; a classical map's Casimir drift over `LONG_STEPS` steps, cost per step
+    (`integrators.step_timing`), observed and nominal order (`integrators.convergence`); a
+    learned map's noise, fit time and training loss. A map that diverged has infinite figures."""
 
-    return jax.jit(jax.vmap(stepper.step))(states)
+    system: str
+    kind: str  # "classical" or "learned"
+    model: str
+    energy_error_rel: float
+    energy_error_span: float
+    flip_time: float | None
+    casimir_drift: float
+    exact_flows_per_step: int
+    gamma_hat: float
+    noise: float | None = optional()
+    fit_seconds: float | None = optional()
+    train_loss: float | None = optional()
+    seconds_per_step: float | None = optional()
+    casimir_drift_1e4: float | None = optional()
+    order: float | None = optional()
+    nominal_order: int | None = optional()
 
 
-def observed_order(system, make, reference: np.ndarray, y0: np.ndarray) -> float:
-    errors = [np.linalg.norm(np.asarray(make(h).rollout(y0, round(ORDER_T / h)))[-1] - reference) for h in ORDER_H]
-    return float(np.log2(errors[0] / errors[1]))
+def measure(scenario: Scenario, key: str, kind: str, model: AbstractStudyModel, fitted: Fitted,
+            reference: np.ndarray) -> tuple[W3Row, np.ndarray]:
+    """The row of `fitted` (a `model`) on `scenario` against heyoka's `reference`, and its energy
+    series (for the figure)."""
+    system, step_map = scenario.system, fitted.step_map
+    y = model.simulate(fitted, scenario.y0[None], reference.shape[0] - 1, H)[0]
+    figures = it.rollout_figures(step_map, y, reference, defect_points=0)
+    energy, energy_ref = figures.report.energy, np.asarray(system.hamiltonian(reference))
+    if figures.divergence is None:
+        error = np.abs(energy - energy_ref)
+        relative, span = float(np.max(error / np.abs(energy_ref))), float(np.max(error) / (energy_ref[0] - energy_ref[-1]))
+    else:
+        relative = span = np.inf
+    states = reference[:-1]
+    row = W3Row(
+        system=key, kind=kind, model=model.label, energy_error_rel=relative, energy_error_span=span,
+        flip_time=flip_time(energy, scenario.threshold(energy_ref)),
+        casimir_drift=figures.report.max_casimir_drift,
+        exact_flows_per_step=int(step_map.exact_flows_per_step),
+        gamma_hat=dissipation_rate(system, states, np.asarray(jax.jit(jax.vmap(step_map.step))(states))),
+        train_loss=fitted.train_loss,
+    )
+    return row, energy
+
+
+def measure_classical(scenario: Scenario, key: str, entry: Classical, reference: np.ndarray) -> tuple[W3Row, np.ndarray]:
+    """`measure`, and the classical figures: Casimir drift over `LONG_STEPS` steps, the cost per
+    step, the observed order at `ORDER_T` for the step sizes `ORDER_H`."""
+    system, model = scenario.system, entry.model
+    fitted = model.fit(system)
+    row, energy = measure(scenario, key, "classical", model, fitted, reference)
+    far = np.asarray(fitted.step_map.rollout(scenario.y0, LONG_STEPS, nonfinite="return"))
+    order = it.convergence(lambda h: model.make(system, h), system, scenario.y0, t_final=ORDER_T, hs=ORDER_H).order
+    row = dataclasses.replace(
+        row,
+        seconds_per_step=it.step_timing(fitted.step_map, scenario.y0).seconds_per_step,
+        casimir_drift_1e4=it.rollout_figures(fitted.step_map, far, defect_points=0).report.max_casimir_drift,
+        order=order, nominal_order=entry.nominal_order,
+    )
+    return row, energy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -170,7 +229,7 @@ class Profile:
     adam: int
     lbfgs: int
     glpnet_iterations: int | None = None
-    noises: tuple[float, ...] = (1e-3, 1e-2)  # the rigid body's noisy observations
+    noises: tuple[float, ...] = (1e-3, 1e-2)  # the noisy observations of the scenarios that have them
     lm_steps: int = 30  # Levenberg-Marquardt on whole noisy trajectories, after the one-step fit
 
 
@@ -182,21 +241,25 @@ PROFILES = {
 }
 
 
-def fit_noisy(sc: Scenario, noise: float, P: Profile, reference: np.ndarray) -> dict[str, Any]:
-    """An LPNet from noisy observations of the training trajectories (`integrators.observe`,
-    noise relative to the states' RMS size): the one-step loss on consecutive observations
-    (Adam, then L-BFGS-B), then Levenberg-Marquardt on whole trajectories from fitted clean
-    starts (errors in variables, `learn.TrajectoryLoss()`)."""
-    system = sc.system
-    starts = sc.sample(np.random.default_rng(DATA_SEED), P.n_train["rigid body"])
-    data = it.observe(system, starts, np.arange(P.train_steps + 1) * H, noise=noise, seed=DATA_SEED + 1)
-    begin = time.perf_counter()
-    model, _ = learn.fit(learn.LPNet(system, key=TRAIN_SEED, h=H), data, progress=False,
-                         loss=learn.TrajectoryLoss(window=1, latent=False),
-                         optimiser=(learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)))
-    model, record = learn.fit(model, data, optimiser=learn.LevenbergMarquardt(P.lm_steps), progress=False)
-    return {**measure(sc, f"LPNet, noise {noise:g}", model, reference, long=False),
-            "fit_s": time.perf_counter() - begin, "train_loss": record.train_loss}
+def lpnet(P: Profile) -> LPNetModel:
+    """An LPNet (paper architecture, normalised) fitted to exact pairs by Adam, then L-BFGS-B."""
+    return LPNetModel("LPNet", (Training((learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)), normalise=True),),
+                      key=TRAIN_SEED)
+
+
+def noisy_lpnet(P: Profile, noise: float) -> LPNetModel:
+    """An LPNet from noisy observations: the one-step loss on consecutive observations (Adam,
+    then L-BFGS-B, unnormalised), then Levenberg-Marquardt on whole trajectories from fitted
+    clean starts (errors in variables, `learn.TrajectoryLoss()`)."""
+    return LPNetModel(f"LPNet, noise {noise:g}", (
+        Training((learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)), loss=learn.TrajectoryLoss(window=1, latent=False)),
+        Training(learn.LevenbergMarquardt(P.lm_steps)),
+    ), key=TRAIN_SEED, h=H)
+
+
+def glpnet(P: Profile) -> SplittingModel:
+    """A G-LPNet (`learn.fit_splitting`): an exactly Poisson map, which cannot follow the decay."""
+    return SplittingModel("G-LPNet", iterations=P.glpnet_iterations)
 
 
 class W3(AbstractExperiment):
@@ -207,75 +270,65 @@ class W3(AbstractExperiment):
     def run(self, profile: str, out_dir: Path, progress: bool):
         P = PROFILES[profile]
         all_scenarios = scenarios()
-        rows, truth = [], {}
+        rows: list[W3Row] = []
+        truth: dict[str, W3Truth] = {}
+        energies: dict[tuple[str, str], np.ndarray] = {}
+
+        def keep(row: W3Row, energy: np.ndarray) -> None:
+            rows.append(row)
+            energies[row.system, row.model] = energy
+            if progress:
+                print(line(row), flush=True)
+
         for key in P.systems:
             sc = all_scenarios[key]
             system = sc.system
             reference = np.asarray(it.ground_truth(system, sc.y0, h=H, n_steps=STEPS).states[0])
             energy_ref = np.asarray(system.hamiltonian(reference))
-            truth[key] = {
-                "casimir_drift": casimir_drift(system, reference),
-                "max_energy_increase": float(np.max(np.diff(energy_ref))),
-                "flip_time": flip_time(energy_ref, sc.threshold(energy_ref)),
-                "energy_start": float(energy_ref[0]), "energy_end": float(energy_ref[-1]),
-                "gamma": system.gamma,
-                "gamma_hat": dissipation_rate(system, reference[:-1], reference[1:]),
-                "energy": energy_ref,
-            }
+            energies[key, "heyoka"] = energy_ref
+            truth[key] = W3Truth(
+                casimir_drift=it.diagnostics(reference, system).max_casimir_drift,
+                max_energy_increase=float(np.max(np.diff(energy_ref))),
+                flip_time=flip_time(energy_ref, sc.threshold(energy_ref)),
+                energy_start=float(energy_ref[0]), energy_end=float(energy_ref[-1]),
+                gamma=system.gamma,
+                gamma_hat=dissipation_rate(system, reference[:-1], reference[1:]),
+            )
             if progress:
-                print(f"{key}: heyoka flip at t = {truth[key]['flip_time']:.3f}, Casimir drift "
-                      f"{fmt(truth[key]['casimir_drift'])}, max energy increase {fmt(truth[key]['max_energy_increase'])}",
-                      flush=True)
-            end = np.asarray(it.ground_truth(system, sc.y0, h=ORDER_T, n_steps=1).states[0, -1])
-            for name, make in classical(system).items():
-                row = {"system": key, "kind": "classical", **measure(sc, name, make(H), reference, long=True)}
-                row["order"] = observed_order(system, make, end, sc.y0)
-                row["nominal_order"] = int(getattr(make(H), "order", 4))
-                rows.append(row)
-                if progress:
-                    print(line(row), flush=True)
-            data = it.ground_truth(system, sc.sample(np.random.default_rng(DATA_SEED), P.n_train[key]), h=H,
-                                   n_steps=P.train_steps)
-            start = time.perf_counter()
-            lpnet, record = learn.fit(learn.LPNet(system, key=TRAIN_SEED), data, normalise=True, progress=progress,
-                                      optimiser=(learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)))
-            fit_s = time.perf_counter() - start
-            row = {"system": key, "kind": "learned", **measure(sc, "LPNet", lpnet, reference, long=False),
-                   "fit_s": fit_s, "train_loss": record.train_loss}
-            rows.append(row)
-            if progress:
-                print(line(row), flush=True)
-            if key == "rigid body":
-                for noise in P.noises:
-                    row = {"system": key, "kind": "learned", "noise": noise,
-                           **fit_noisy(sc, noise, P, reference)}
-                    rows.append(row)
-                    if progress:
-                        print(line(row), flush=True)
-            start = time.perf_counter()
-            glpnet, _ = learn.fit_splitting(system, data, iterations=P.glpnet_iterations, progress=progress)
-            row = {"system": key, "kind": "learned", **measure(sc, "G-LPNet", glpnet, reference, long=False),
-                   "fit_s": time.perf_counter() - start}
-            rows.append(row)
-            if progress:
-                print(line(row), flush=True)
-        figures = [_plot(rows, truth, out_dir)]
-        for r in [*rows, *truth.values()]:  # drawn; the table needs the figures only
-            del r["energy"]
+                t = truth[key]
+                print(f"{key}: heyoka flip at t = {t.flip_time:.3f}, Casimir drift {fmt(t.casimir_drift)}, "
+                      f"max energy increase {fmt(t.max_energy_increase)}", flush=True)
+            for entry in classical():
+                keep(*measure_classical(sc, key, entry, reference))
+            starts = sc.sample(np.random.default_rng(DATA_SEED), P.n_train[key])
+            data = it.ground_truth(system, starts, h=H, n_steps=P.train_steps)
+            learned: list[tuple[AbstractStudyModel, object, float | None]] = [(lpnet(P), data, None)]
+            if sc.noises:
+                times = np.arange(P.train_steps + 1) * H
+                learned += [(noisy_lpnet(P, noise), it.observe(system, starts, times, noise=noise, seed=DATA_SEED + 1),
+                             noise) for noise in P.noises]
+            learned.append((glpnet(P), data, None))
+            for model, observed, noise in learned:
+                begin = time.perf_counter()
+                fitted = model.fit(system, observed, progress=progress and noise is None)
+                fit_seconds = time.perf_counter() - begin
+                row, energy = measure(sc, key, "learned", model, fitted, reference)
+                keep(dataclasses.replace(row, noise=noise, fit_seconds=fit_seconds), energy)
         return {
-            "truth": truth,
-            "rows": rows,
+            "truth": {k: dataclasses.asdict(t) for k, t in truth.items()},
+            "rows": [row_to_json(r) for r in rows],
             "verdict": verdict(rows, truth),
-            "figures": figures,
+            "figures": [_plot(energies, list(truth), out_dir)],
             "h": H, "steps": STEPS,
             "training": {k: {"trajectories": P.n_train[k], "steps": P.train_steps} for k in P.systems},
         }
 
     def rows(self, metrics):
-        return [(f"{r['system']} {r['model']} max energy error / H(t)", "—", fmt(r["energy_error_rel"]), "—")
-                for r in metrics.get("rows", []) if r["kind"] == "learned"]
+        return [(f"{r.system} {r.model} max energy error / H(t)", "—", fmt(r.energy_error_rel), "—")
+                for r in _rows(metrics) if r.kind == "learned"]
 
     def markdown_table(self, metrics):
+        truth = {k: row_from_json(W3Truth, t) for k, t in metrics.get("truth", {}).items()}
         lines = [
             f"# {self.id}: {self.title}",
             "",
@@ -289,24 +342,41 @@ class W3(AbstractExperiment):
             "",
             "## heyoka",
             "",
-            "| system | flip time | Casimir drift | max energy increase between outputs | gamma | gamma-hat of exact steps |",
-            "|---|---|---|---|---|---|",
-            *[f"| {k} | {_time(t['flip_time'])} | {fmt(t['casimir_drift'])} | {fmt(t['max_energy_increase'])} | "
-              f"{t['gamma']:g} | {t['gamma_hat']:.4f} |" for k, t in metrics.get("truth", {}).items()],
+            *table_lines(TRUTH_COLUMNS, truth.items()),
             "",
             "## Every model",
             "",
-            ("| system | model | max energy error / H(t) | / energy dissipated | flip time | Casimir drift (1200 steps) "
-             "| Casimir drift (1e4 steps) | observed order (nominal) | flows per step | us per step | gamma-hat | fit [s] |"),
-            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+            *table_lines(COLUMNS, _rows(metrics)),
         ]
-        for r in metrics.get("rows", []):
-            order = f"{r['order']:.2f} ({r['nominal_order']})" if "order" in r else "—"
-            lines.append(
-                f"| {r['system']} | {r['model']} | {fmt(r['energy_error_rel'])} | {fmt(r['energy_error_span'])} | "
-                f"{_time(r['flip_time'])} | {fmt(r['casimir_drift'])} | {fmt(r.get('casimir_drift_1e4'))} | {order} | "
-                f"{r['exact_flows_per_step']} | {fmt(r.get('step_us'))} | {_number(r['gamma_hat'])} | {fmt(r.get('fit_s'))} |")
         return "\n".join(lines) + "\n"
+
+
+TRUTH_COLUMNS = (
+    Column("system", lambda item: item[0]),
+    Column("flip time", lambda item: _time(item[1].flip_time)),
+    Column("Casimir drift", lambda item: item[1].casimir_drift),
+    Column("max energy increase between outputs", lambda item: item[1].max_energy_increase),
+    Column("gamma", lambda item: f"{item[1].gamma:g}"),
+    Column("gamma-hat of exact steps", lambda item: f"{item[1].gamma_hat:.4f}"),
+)
+COLUMNS = (
+    Column("system", lambda r: r.system),
+    Column("model", lambda r: r.model),
+    Column("max energy error / H(t)", lambda r: r.energy_error_rel),
+    Column("/ energy dissipated", lambda r: r.energy_error_span),
+    Column("flip time", lambda r: _time(r.flip_time)),
+    Column("Casimir drift (1200 steps)", lambda r: r.casimir_drift),
+    Column("Casimir drift (1e4 steps)", lambda r: r.casimir_drift_1e4),
+    Column("observed order (nominal)", lambda r: "—" if r.order is None else f"{r.order:.2f} ({r.nominal_order})"),
+    Column("flows per step", lambda r: str(r.exact_flows_per_step)),
+    Column("us per step", lambda r: None if r.seconds_per_step is None else 1e6 * r.seconds_per_step),
+    Column("gamma-hat", lambda r: _number(r.gamma_hat)),
+    Column("fit [s]", lambda r: r.fit_seconds),
+)
+
+
+def _rows(metrics) -> list[W3Row]:
+    return [row_from_json(W3Row, r) for r in metrics.get("rows", [])]
 
 
 def _time(x) -> str:
@@ -318,48 +388,52 @@ def _number(x) -> str:
     return "—" if x is None or np.isnan(x) else f"{x:.4f}"
 
 
-def line(row) -> str:
-    return (f"{row['system']}, {row['model']}: energy error {fmt(row['energy_error_rel'])} of H(t), "
-            f"{fmt(row['energy_error_span'])} of the energy dissipated, flip at {_time(row['flip_time'])}, "
-            f"Casimir drift {fmt(row['casimir_drift'])}" + (f", order {row['order']:.2f}" if "order" in row else ""))
+def line(row: W3Row) -> str:
+    return (f"{row.system}, {row.model}: energy error {fmt(row.energy_error_rel)} of H(t), "
+            f"{fmt(row.energy_error_span)} of the energy dissipated, flip at {_time(row.flip_time)}, "
+            f"Casimir drift {fmt(row.casimir_drift)}" + (f", order {row.order:.2f}" if row.order is not None else ""))
 
 
-def verdict(rows, truth) -> list[str]:
+def verdict(rows: list[W3Row], truth: dict[str, W3Truth]) -> list[str]:
     out = []
     for key, t in truth.items():
-        out.append(f"{key}: heyoka keeps the Casimirs to {fmt(t['casimir_drift'])} over the relaxation; its energy "
-                   f"never rises by more than {fmt(max(t['max_energy_increase'], 0.0))} between outputs")
-        for r in (r for r in rows if r["system"] == key):
-            missing = r["flip_time"] is None or np.isnan(r["flip_time"])
-            flip = np.nan if missing else abs(r["flip_time"] - t["flip_time"]) / t["flip_time"]
-            text = (f"{key}, {r['model']}: energy within {fmt(r['energy_error_rel'])} of heyoka's "
-                    f"({fmt(r['energy_error_span'])} of the energy dissipated), flip time "
+        out.append(f"{key}: heyoka keeps the Casimirs to {fmt(t.casimir_drift)} over the relaxation; its energy "
+                   f"never rises by more than {fmt(max(t.max_energy_increase, 0.0))} between outputs")
+        for r in (r for r in rows if r.system == key):
+            missing = r.flip_time is None or np.isnan(r.flip_time)
+            flip = np.nan if missing else abs(r.flip_time - t.flip_time) / t.flip_time
+            drift = r.casimir_drift if r.casimir_drift_1e4 is None else r.casimir_drift_1e4
+            text = (f"{key}, {r.model}: energy within {fmt(r.energy_error_rel)} of heyoka's "
+                    f"({fmt(r.energy_error_span)} of the energy dissipated), flip time "
                     + ("never reached" if missing else f"{100 * flip:.2f}% off")
-                    + f", Casimir drift {fmt(r.get('casimir_drift_1e4', r['casimir_drift']))}")
-            if "order" in r:
-                text += f", observed order {r['order']:.2f} (nominal {r['nominal_order']})"
-            if r["kind"] == "learned":
-                text += (f", learned gamma-hat {_number(r['gamma_hat'])} (exact steps: {_number(t['gamma_hat'])}, "
-                         f"gamma {t['gamma']:g})")
+                    + f", Casimir drift {fmt(drift)}")
+            if r.order is not None:
+                text += f", observed order {r.order:.2f} (nominal {r.nominal_order})"
+            if r.kind == "learned":
+                text += (f", learned gamma-hat {_number(r.gamma_hat)} (exact steps: {_number(t.gamma_hat)}, "
+                         f"gamma {t.gamma:g})")
             out.append(text)
     return out
 
 
-def _plot(rows, truth, out_dir: Path) -> str:
+# The models drawn in the figure, beside heyoka.
+DRAWN = ("CF4", "Strang + CF2", "RK4", "LPNet", "G-LPNet", "LPNet, noise 0.01")
+
+
+def _plot(energies: dict[tuple[str, str], np.ndarray], keys: list[str], out_dir: Path) -> str:
     """Per system: the energy against time (top) and its error against heyoka's (bottom, log)."""
-    keys = list(truth)
     fig = figure(figsize=(6 * len(keys), 8))
     axes = np.asarray(fig.subplots(2, len(keys), sharex=True)).reshape(2, len(keys))
     for (top, bottom), key in zip(axes.T, keys):
-        reference = truth[key]["energy"]
+        reference = energies[key, "heyoka"]
         t = np.arange(len(reference)) * H
         top.plot(t, reference, "k-", lw=2.5, label="heyoka")
-        sub = [r for r in rows if r["system"] == key and r["model"] in ("CF4", "Strang + CF2", "RK4", "LPNet", "G-LPNet",
-                                                                         "LPNet, noise 0.01")]
-        for r, style in zip(sub, series_styles(len(sub))):
-            top.plot(t, r["energy"], label=r["model"], color=style["color"], ls=style["ls"], lw=1.2)
-            bottom.semilogy(t[1:], np.abs(r["energy"] - reference)[1:], label=r["model"], color=style["color"],
-                            ls=style["ls"], lw=1.2)
+        drawn = [m for (system, m) in energies if system == key and m in DRAWN]
+        for model, style in zip(drawn, series_styles(len(drawn))):
+            energy = energies[key, model]  # up to its divergence, if it diverged
+            top.plot(t[: len(energy)], energy, label=model, color=style["color"], ls=style["ls"], lw=1.2)
+            bottom.semilogy(t[1: len(energy)], np.abs(energy - reference[: len(energy)])[1:], label=model,
+                            color=style["color"], ls=style["ls"], lw=1.2)
         top.set_ylabel("energy H")
         top.set_title(f"damped {key}")
         top.legend()
