@@ -4,15 +4,9 @@ the coadjoint action (damped systems), diagnostics."""
 import liepoisson as _liepoisson  # noqa: F401  (first: it switches JAX to float64)
 
 from . import splitting as splitting
-from ._compare import (
-    Comparison as Comparison,
-    ComparisonRow as ComparisonRow,
-    Convergence as Convergence,
-    RolloutFigures as RolloutFigures,
-    compare as compare,
-    convergence as convergence,
-    rollout_figures as rollout_figures,
-)
+from ._comparison import Comparison as Comparison, ComparisonRow as ComparisonRow, compare as compare
+from ._convergence import Convergence as Convergence, convergence as convergence
+from ._rollout_figures import RolloutFigures as RolloutFigures, rollout_figures as rollout_figures
 from ._diagnostics import (
     DiagnosticsReport as DiagnosticsReport,
     Divergence as Divergence,
@@ -48,7 +42,13 @@ from ._noise import (
     UniformNoise as UniformNoise,
 )
 from ._runge_kutta import ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
-from ._plots import plot_comparison as plot_comparison, plot_diagnostics as plot_diagnostics
+from ._plots import (
+    plot_comparison as plot_comparison,
+    plot_convergence as plot_convergence,
+    plot_diagnostics as plot_diagnostics,
+    plot_energy as plot_energy,
+    plot_work_precision as plot_work_precision,
+)
 from ._nonfinite import (
     NONFINITE_POLICIES as NONFINITE_POLICIES,
     AbstractNonfinitePolicy as AbstractNonfinitePolicy,

@@ -12,6 +12,8 @@ import numpy as np
 
 from liepoisson.systems import AbstractPoissonSystem
 
+from ._comparison import Comparison
+from ._convergence import Convergence
 from ._diagnostics import DiagnosticsReport
 
 # Line styles by position: the reference first, then the maps compared with it.
@@ -174,3 +176,62 @@ def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, titl
     if title:
         axes[0].set_title(title)
     fig.savefig(os.fspath(path))
+
+
+def plot_work_precision(comparison: Comparison, path: str | os.PathLike) -> None:
+    """Error at the final time against wall time per step (log-log) of a `compare` result, one
+    point per map (a map that diverged has no point, only its legend entry saying where it
+    diverged), written to `path` (any matplotlib format)."""
+    if not isinstance(comparison, Comparison):
+        raise TypeError(f"comparison must be an integrators.Comparison; got {type(comparison).__name__}")
+    rows = comparison.rows
+    fig = figure(figsize=(6, 4), layout="constrained")
+    ax = fig.subplots()
+    for r, style in zip(rows, series_styles(len(rows))):
+        style.pop("ls")
+        if r.divergence is not None:
+            ax.loglog([], [], ls="none", label=f"{r.label} (diverged at step {r.divergence.step})", **style)
+            continue
+        ax.loglog([r.seconds_per_step], [max(r.error_final, _LOG_FLOOR)], ls="none", label=r.label, **style)
+    span_decades(ax, "x")
+    ax.set_xlabel("wall time per step and trajectory [s]")
+    ax.set_ylabel("|y(T) - y_ref(T)|")
+    ax.legend(fontsize=7)
+    fig.savefig(os.fspath(path))
+
+
+def plot_energy(comparison: Comparison, path: str | os.PathLike) -> None:
+    """Relative energy error against time (log axis) of each map of a `compare` result, the
+    largest over trajectories; a map that diverged up to the last output before it did."""
+    if not isinstance(comparison, Comparison):
+        raise TypeError(f"comparison must be an integrators.Comparison; got {type(comparison).__name__}")
+    rows = comparison.rows
+    fig = figure(figsize=(7, 3.5), layout="constrained")
+    ax = fig.subplots()
+    for row, style in zip(rows, series_styles(len(rows))):
+        report = row.report
+        e = np.abs(report.energy_error_relative).reshape(-1, len(report.times)).max(axis=0)
+        label = row.label if row.divergence is None else f"{row.label} (diverged at step {row.divergence.step})"
+        ax.semilogy(report.times, np.maximum(e, _LOG_FLOOR), lw=0.8, label=label, markevery=0.1, ms=3, **style)
+    ax.set_xlabel("t")
+    ax.set_ylabel("|E(t) - E(0)| / <E>")
+    ax.legend(fontsize=7)
+    fig.savefig(os.fspath(path))
+
+
+def plot_convergence(convergence: Convergence, path: str | os.PathLike, *, label: str = "") -> None:
+    """Error against step size (log-log) of a `convergence` result, with the observed order in
+    the legend."""
+    if not isinstance(convergence, Convergence):
+        raise TypeError(f"convergence must be an integrators.Convergence; got {type(convergence).__name__}")
+    fig = figure(figsize=(5, 4), layout="constrained")
+    ax = fig.subplots()
+    ax.loglog(convergence.hs, convergence.errors, "o-",
+              label=f"{label} (observed order {convergence.order:.2f})".strip())
+    ax.set_xticks(convergence.hs, [f"{h:g}" for h in convergence.hs])  # the step sizes, not minor labels
+    ax.minorticks_off()
+    ax.set_xlabel("h")
+    ax.set_ylabel("|y(T) - y_ref(T)|")
+    ax.legend(fontsize=7)
+    fig.savefig(os.fspath(path))
+

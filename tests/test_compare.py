@@ -1,5 +1,6 @@
 """integrators.compare: learned and classical step maps measured side by side against heyoka."""
 
+import dataclasses
 import math
 
 import jax.numpy as jnp
@@ -39,9 +40,18 @@ def test_compare_measures_every_map_against_the_same_reference(tmp_path):
     assert rows["RK4"].casimir_drift_max > 1e-10
     assert all(r.seconds_per_step > 0 and r.flops_per_step > 0 for r in c.rows)
     assert c.table().count("\n") == 2 + len(maps)
-    c.plot_work_precision(tmp_path / "wp.png")
-    c.plot_energy(tmp_path / "energy.png")
+    it.plot_work_precision(c, tmp_path / "wp.png")
+    it.plot_energy(c, tmp_path / "energy.png")
     assert (tmp_path / "wp.png").stat().st_size > 0 and (tmp_path / "energy.png").stat().st_size > 0
+    # A row holds its map's RolloutFigures, not a copy of their fields; the reports are the rows'.
+    strang = rows["Strang h"]
+    assert isinstance(strang.figures, it.RolloutFigures)
+    assert strang.error_final == strang.figures.error_final and strang.divergence is strang.figures.divergence
+    assert c.reports["Strang h"] is strang.figures.report
+    own = {f.name for f in dataclasses.fields(it.ComparisonRow)}
+    assert not own & {f.name for f in dataclasses.fields(it.RolloutFigures)}
+    with pytest.raises(TypeError, match="comparison must be an integrators.Comparison"):
+        it.plot_energy(c.rows, tmp_path / "no.png")
 
 
 class Expanding(it.AbstractStepMap):
@@ -219,7 +229,7 @@ def test_convergence_observes_the_order(make, order, tmp_path):
     assert abs(c.order - order) < 0.05
     # Each halving of h divides the error by about 2^order.
     assert np.all(np.abs(np.log2(c.errors[:-1] / c.errors[1:]) - order) < 0.2)
-    c.plot(tmp_path / "convergence.png", label="method")
+    it.plot_convergence(c, tmp_path / "convergence.png", label="method")
     assert (tmp_path / "convergence.png").stat().st_size > 0
 
 

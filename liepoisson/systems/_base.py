@@ -301,7 +301,7 @@ class AbstractExactlySolvableSystem(AbstractPoissonSystem):
 
     @abc.abstractmethod
     def exact_flow(self, t: ArrayLike, y: ArrayLike) -> jax.Array:
-        """$\varphi_t(y)$, the exact solution at time `t` from `y`, batched over `y` `(..., dim)`."""
+        r"""$\varphi_t(y)$, the exact solution at time `t` from `y`, batched over `y` `(..., dim)`."""
 
 
 class AbstractDissipativeSystem(AbstractLiePoissonSystem):
