@@ -13,12 +13,17 @@ from numpy.typing import ArrayLike
 from liepoisson.internals import check_system, positive_float, states
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._diagnostics import DiagnosticsReport, Divergence
+from ._diagnostics import DiagnosticsReport
 from ._ground_truth import ground_truth
 from ._rollout_figures import RolloutFigures, rollout_figures
 from ._step_map import AbstractStepMap, check_h
 from ._timing import step_timing
 from ._trajectories import Trajectories
+
+
+def _from_figures(name: str) -> property:
+    """A row's read-only view of its figures' field `name` (documented on `RolloutFigures`)."""
+    return property(lambda row: getattr(row.figures, name), doc=f"`RolloutFigures.{name}` of the row's map.")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,40 +44,14 @@ class ComparisonRow:
     seconds_per_step: float
     flops_per_step: float
 
-    @property
-    def error_final(self) -> float:
-        return self.figures.error_final
-
-    @property
-    def error_max(self) -> float:
-        return self.figures.error_max
-
-    @property
-    def energy_error_max(self) -> float:
-        return self.figures.energy_error_max
-
-    @property
-    def casimir_drift_max(self) -> float:
-        return self.figures.casimir_drift_max
-
-    @property
-    def poisson_defect_max(self) -> float:
-        return self.figures.poisson_defect_max
-
-    @property
-    def divergence(self) -> Divergence | None:
-        return self.figures.divergence
-
-    @property
-    def diverged_at_step(self) -> int | None:
-        """The first step of the map at which some trajectory (or its energy, a Casimir or an
-        integral) is not finite, or `None`."""
-        return self.figures.diverged_at_step
-
-    @property
-    def report(self) -> DiagnosticsReport:
-        """The `DiagnosticsReport` of the map's saved states against the reference."""
-        return self.figures.report
+    error_final = _from_figures("error_final")
+    error_max = _from_figures("error_max")
+    energy_error_max = _from_figures("energy_error_max")
+    casimir_drift_max = _from_figures("casimir_drift_max")
+    poisson_defect_max = _from_figures("poisson_defect_max")
+    divergence = _from_figures("divergence")
+    report = _from_figures("report")
+    diverged_at_step = _from_figures("diverged_at_step")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -7,25 +7,16 @@ import abc
 
 import numpy as np
 
+from ._choices import AbstractChoice, by_name
 
-class AbstractNoiseLaw(abc.ABC):
+
+class AbstractNoiseLaw(AbstractChoice):
     """A distribution of zero mean and unit variance; `name` is what `observe` records in the
     metadata (and accepts as a string)."""
-
-    name: str
 
     @abc.abstractmethod
     def sample(self, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
         """Independent draws of the law, of shape `shape`, from `rng`."""
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}()"
-
-    def __eq__(self, other: object) -> bool:
-        return type(self) is type(other)
-
-    def __hash__(self) -> int:
-        return hash(type(self))
 
 
 class GaussianNoise(AbstractNoiseLaw):
@@ -61,8 +52,4 @@ NOISE_LAWS: dict[str, AbstractNoiseLaw] = {law.name: law for law in (GaussianNoi
 
 def noise_law(law: str | AbstractNoiseLaw) -> AbstractNoiseLaw:
     """`law` as an `AbstractNoiseLaw`: an instance, or one of the names of `NOISE_LAWS`."""
-    if isinstance(law, AbstractNoiseLaw):
-        return law
-    if isinstance(law, str) and law in NOISE_LAWS:
-        return NOISE_LAWS[law]
-    raise ValueError(f"law must be one of {tuple(NOISE_LAWS)} or an integrators.AbstractNoiseLaw; got {law!r}")
+    return by_name(law, NOISE_LAWS, AbstractNoiseLaw, "law")

@@ -10,6 +10,8 @@ from typing import Any
 import jax
 import numpy as np
 
+from ._choices import AbstractChoice, by_name
+
 
 class RolloutDivergedError(FloatingPointError):
     """A rollout left the finite range. Attributes: `trajectory` (index into `y0`), `step`
@@ -23,24 +25,13 @@ class RolloutDivergedError(FloatingPointError):
         self.state, self.states = state, states
 
 
-class AbstractNonfinitePolicy(abc.ABC):
+class AbstractNonfinitePolicy(AbstractChoice):
     """What `AbstractStepMap.rollout` does with a trajectory that left the finite range; `name`
     is the string `rollout(nonfinite=...)` also accepts."""
-
-    name: str
 
     @abc.abstractmethod
     def check(self, step_map: Any, out: jax.Array, save_every: int) -> None:
         """Act on the rollout `out` `(N, T, dim)` of `step_map`, saved every `save_every` steps."""
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}()"
-
-    def __eq__(self, other: object) -> bool:
-        return type(self) is type(other)
-
-    def __hash__(self) -> int:
-        return hash(type(self))
 
 
 class ReturnNonfinite(AbstractNonfinitePolicy):
@@ -70,11 +61,7 @@ NONFINITE_POLICIES: dict[str, AbstractNonfinitePolicy] = {p.name: p for p in (Ra
 
 def nonfinite_policy(nonfinite: str | AbstractNonfinitePolicy) -> AbstractNonfinitePolicy:
     """`nonfinite` as an `AbstractNonfinitePolicy`: an instance, or `"raise"` or `"return"`."""
-    if isinstance(nonfinite, AbstractNonfinitePolicy):
-        return nonfinite
-    if isinstance(nonfinite, str) and nonfinite in NONFINITE_POLICIES:
-        return NONFINITE_POLICIES[nonfinite]
-    raise ValueError(f"nonfinite must be 'raise' or 'return' or an integrators.AbstractNonfinitePolicy; got {nonfinite!r}")
+    return by_name(nonfinite, NONFINITE_POLICIES, AbstractNonfinitePolicy, "nonfinite")
 
 
 def _raise_if_nonfinite(step_map: Any, out: jax.Array, save_every: int) -> None:

@@ -178,19 +178,27 @@ def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, titl
     fig.savefig(os.fspath(path))
 
 
+def _comparison_axes(comparison: Comparison, figsize: tuple[float, float]) -> tuple[Any, Any]:
+    if not isinstance(comparison, Comparison):
+        raise TypeError(f"comparison must be an integrators.Comparison; got {type(comparison).__name__}")
+    fig = figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots()
+
+
+def _row_label(row: Any) -> str:
+    """A row's label, saying where its map diverged if it did."""
+    return row.label if row.divergence is None else f"{row.label} (diverged at step {row.divergence.step})"
+
+
 def plot_work_precision(comparison: Comparison, path: str | os.PathLike) -> None:
     """Error at the final time against wall time per step (log-log) of a `compare` result, one
     point per map (a map that diverged has no point, only its legend entry saying where it
     diverged), written to `path` (any matplotlib format)."""
-    if not isinstance(comparison, Comparison):
-        raise TypeError(f"comparison must be an integrators.Comparison; got {type(comparison).__name__}")
-    rows = comparison.rows
-    fig = figure(figsize=(6, 4), layout="constrained")
-    ax = fig.subplots()
-    for r, style in zip(rows, series_styles(len(rows))):
+    fig, ax = _comparison_axes(comparison, (6, 4))
+    for r, style in zip(comparison.rows, series_styles(len(comparison.rows))):
         style.pop("ls")
         if r.divergence is not None:
-            ax.loglog([], [], ls="none", label=f"{r.label} (diverged at step {r.divergence.step})", **style)
+            ax.loglog([], [], ls="none", label=_row_label(r), **style)
             continue
         ax.loglog([r.seconds_per_step], [max(r.error_final, _LOG_FLOOR)], ls="none", label=r.label, **style)
     span_decades(ax, "x")
@@ -203,16 +211,12 @@ def plot_work_precision(comparison: Comparison, path: str | os.PathLike) -> None
 def plot_energy(comparison: Comparison, path: str | os.PathLike) -> None:
     """Relative energy error against time (log axis) of each map of a `compare` result, the
     largest over trajectories; a map that diverged up to the last output before it did."""
-    if not isinstance(comparison, Comparison):
-        raise TypeError(f"comparison must be an integrators.Comparison; got {type(comparison).__name__}")
-    rows = comparison.rows
-    fig = figure(figsize=(7, 3.5), layout="constrained")
-    ax = fig.subplots()
-    for row, style in zip(rows, series_styles(len(rows))):
+    fig, ax = _comparison_axes(comparison, (7, 3.5))
+    for row, style in zip(comparison.rows, series_styles(len(comparison.rows))):
         report = row.report
         e = np.abs(report.energy_error_relative).reshape(-1, len(report.times)).max(axis=0)
-        label = row.label if row.divergence is None else f"{row.label} (diverged at step {row.divergence.step})"
-        ax.semilogy(report.times, np.maximum(e, _LOG_FLOOR), lw=0.8, label=label, markevery=0.1, ms=3, **style)
+        ax.semilogy(report.times, np.maximum(e, _LOG_FLOOR), lw=0.8, label=_row_label(row), markevery=0.1, ms=3,
+                    **style)
     ax.set_xlabel("t")
     ax.set_ylabel("|E(t) - E(0)| / <E>")
     ax.legend(fontsize=7)

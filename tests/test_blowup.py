@@ -41,7 +41,7 @@ def test_a_single_state_and_a_finite_rollout():
 
 
 def test_nonfinite_must_be_raise_or_return():
-    with pytest.raises(ValueError, match="nonfinite must be 'raise' or 'return' or an integrators.AbstractNonfinitePolicy; got 'ignore'"):
+    with pytest.raises(ValueError, match=r"nonfinite must be one of \('raise', 'return'\) or an integrators.AbstractNonfinitePolicy; got 'ignore'"):
         it.RK4(BODY, h=0.1).rollout(np.ones(3), 2, nonfinite="ignore")
 
 

@@ -303,7 +303,7 @@ ARG_CASES = [
     ("rollout-divide", lambda: STRANG.rollout(Y0, 10, save_every=3), ValueError, r"save_every must divide n_steps"),
     ("rollout-y0", lambda: STRANG.rollout(np.ones((2, 4)), 10), ValueError, r"y0"),
     ("rollout-y0-3d", lambda: STRANG.rollout(np.ones((2, 2, 3)), 10), ValueError, r"y0 must have shape \(3,\) or \(n_traj, 3\)"),
-    ("rollout-nonfinite", lambda: STRANG.rollout(Y0, 10, nonfinite="warn"), ValueError, r"nonfinite must be 'raise' or 'return'"),
+    ("rollout-nonfinite", lambda: STRANG.rollout(Y0, 10, nonfinite="warn"), ValueError, r"nonfinite must be one of \('raise', 'return'\)"),
     ("rollout-diverged", lambda: it.RK4(BODY, 20.0).rollout(Y0, 60), it.RolloutDivergedError, r"trajectory \d became non-finite at step \d+"),
     ("with-h", lambda: STRANG.with_h(0.0), ValueError, r"\bh must be"),
     ("defect-shape", lambda: STRANG.poisson_defect(np.ones(4)), ValueError, r"\by\b"),
