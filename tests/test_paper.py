@@ -1,6 +1,7 @@
 """The `python -m paper` pipeline end to end at the smoke profile (seconds, meaningless numbers):
 result files, keys, the structure guarantees that hold whatever the training budget."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -73,7 +74,7 @@ def test_w1_smoke(tmp_path):
 
 def test_hamiltonian_mismatch_is_blind_to_casimir_functions_only():
     import liepoisson as lp
-    from paper.w1_learned_vs_classical import hamiltonian_mismatch
+    from paper._study import hamiltonian_mismatch
 
     body = lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0))
     y = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 2.0]) + np.random.default_rng(3).uniform(-0.3, 0.3, (50, 6))
@@ -92,6 +93,58 @@ def test_hamiltonian_mismatch_is_blind_to_casimir_functions_only():
     scaled = hamiltonian_mismatch(lambda z: 1.01 * body.hamiltonian(z), body, y)
     assert abs(scaled["learned_vector_field_vs_H"] - 0.01) < 1e-12
     assert 1e-3 < scaled["learned_hamiltonian_vs_H_mod_casimirs"] <= scaled["learned_hamiltonian_vs_H"] < 0.02
+
+
+def test_typed_rows_round_trip_through_json_and_render_one_table():
+    """A study's row: optional fields left out of metrics.json while unset, an infinite figure
+    stored as "inf" and read back as a float, one table path for every study."""
+    from paper._experiment import Column, row_from_json, row_to_json, table_lines
+    from paper.w1_learned_vs_classical import W1Row
+
+    row = W1Row(system="rigid body", h=0.1, method="RK4", error_t100=np.inf, energy_error_t100=1e-7,
+                poisson_defect=4e-9, cost_vs_strang=0.5, flops_per_step=178.0, diverged_at_step_t100=7,
+                energy_error_long=np.inf, casimir_drift_long=1e-7, diverged_at_step_long=None)
+    stored = json.loads(json.dumps(row_to_json(row)))
+    assert "train_loss" not in stored and stored["diverged_at_step_long"] is None  # optional vs measured-as-none
+    assert stored["error_t100"] == "inf"
+    assert row_from_json(W1Row, stored) == row
+    learned = dataclasses.replace(row, method="LPNet", train_loss=1e-6, wall_time_s=2.0)
+    assert row_from_json(W1Row, json.loads(json.dumps(row_to_json(learned)))) == learned
+    lines = table_lines((Column("method", lambda r: r.method), Column("error", lambda r: r.error_t100)), [row])
+    assert lines == ["| method | error |", "|---|---|", "| RK4 | inf |"]
+
+
+def test_study_models_fit_and_simulate_through_one_interface():
+    """A classical map and SINDy's flow (a stand-in vector field: pysindy is an extra) simulate
+    through the same interface, and their rollouts are measured by integrators.rollout_figures."""
+    import integrators as it
+    import liepoisson as lp
+    from paper._sindy import SINDyFlow, SINDyModel
+    from paper._study import ClassicalMap, Fitted
+    from paper.w2_observations import figures
+
+    body = lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0))
+
+    class Exact:  # the true vector field, with pysindy's `predict` signature
+        def predict(self, y):
+            return np.asarray(body.vector_field(y))
+
+    y0 = np.array([[0.6, -0.3, 0.74], [0.1, 0.9, -0.4]])
+    reference = it.ground_truth(body, y0, 0.1, 20).states
+    sindy = SINDyModel()
+    flow = Fitted(SINDyFlow(body, 0.1, Exact()))  # fitting needs pysindy: the fitted form is built by hand
+    states = sindy.simulate(flow, y0, 20, 0.1)
+    # LSODA at 1e-12 against heyoka at eps over t = 2: the error is LSODA's, ~1e-10
+    assert np.max(np.abs(states - reference)) < 1e-9
+    stepped = np.asarray(flow.step_map.rollout(y0, 20))  # the step map: one LSODA interval per step
+    assert np.max(np.abs(stepped - reference)) < 1e-9
+    measured = figures(flow, states, reference)
+    assert measured.state_error < 1e-9 and measured.casimir_drift < 1e-9
+    strang = ClassicalMap("Strang", it.splitting.Strang, 0.1)
+    exact = strang.fit(body)
+    y = strang.simulate(exact, y0, 20, 0.1)
+    assert measured.energy_error < figures(exact, y, reference).energy_error
+    assert figures(exact, y, reference).casimir_drift < 1e3 * EPS  # Strang keeps |Pi|^2 to round-off
 
 
 def test_cli_list(capsys):
