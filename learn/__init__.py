@@ -1,5 +1,6 @@
 """LPNets, G-LPNets and unstructured baselines: data-driven Lie-Poisson step maps (JAX), and
-training as a free function (`learn.fit`).
+training as a free function (`learn.fit`): a loss builds the training problem from a map and
+data, solver stages minimise it.
 
 Importing `learn` switches JAX to float64.
 """
@@ -8,30 +9,21 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from ._models._base import AbstractLearnedMap as AbstractLearnedMap
+from ._models._base import (
+    AbstractCasimirConservingMap as AbstractCasimirConservingMap,
+    AbstractLearnedMap as AbstractLearnedMap,
+    AbstractWarmStartableMap as AbstractWarmStartableMap,
+)
 from ._models._baseline import MLPBaseline as MLPBaseline
 from ._models._equivariant import GroupAveraged as GroupAveraged
-from ._training._fit import default_optimiser as default_optimiser, fit as fit
-from ._training._losses import MeanSquares as MeanSquares, alpha_mse as alpha_mse, state_mse as state_mse
-from ._solvers._optimisers import (
-    Adam as Adam,
-    Checkpoint as Checkpoint,
-    LevenbergMarquardt as LevenbergMarquardt,
-    Progress as Progress,
-    QuasiNewton as QuasiNewton,
-)
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
-from ._training._fit_splitting import fit_splitting as fit_splitting
 from ._models._learned_system import LearnedHamiltonian as LearnedHamiltonian
-from ._models._load import load as load
 from ._models._learned_terms import RidgeTerms as RidgeTerms
-from ._training._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
+from ._models._load import load as load
 from ._models._lpnet import LPNet as LPNet
-from ._training._observed import TrajectoryLoss as TrajectoryLoss
-from ._models._parametric import ParametricHamiltonian as ParametricHamiltonian
 from ._models._mlp import AffineMLP as AffineMLP
-from ._models._plus_affine import PlusAffine as PlusAffine
 from ._models._networks import AbstractNetwork as AbstractNetwork, AbstractWrappedNetwork as AbstractWrappedNetwork
+from ._models._parametric import ParametricHamiltonian as ParametricHamiltonian
 from ._models._parametrisation import (
     AbstractInvertibleParametrisation as AbstractInvertibleParametrisation,
     AbstractStepParametrisation as AbstractStepParametrisation,
@@ -39,8 +31,45 @@ from ._models._parametrisation import (
     TestFlowParametrisation as TestFlowParametrisation,
     default_parametrisation as default_parametrisation,
 )
+from ._models._plus_affine import PlusAffine as PlusAffine
 from ._models._reversible import Reversible as Reversible
+from ._solvers._adam import Adam as Adam
+from ._solvers._checkpoint import Checkpoint as Checkpoint
+from ._solvers._levenberg_marquardt import LevenbergMarquardt as LevenbergMarquardt
+from ._solvers._problem import (
+    AbstractLeastSquares as AbstractLeastSquares,
+    AbstractObjective as AbstractObjective,
+    AbstractProblem as AbstractProblem,
+    AbstractStructuredJacobian as AbstractStructuredJacobian,
+)
+from ._solvers._quasi_newton import QuasiNewton as QuasiNewton
 from ._solvers._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
+from ._solvers._stage import (
+    AbstractResumableStage as AbstractResumableStage,
+    AbstractStage as AbstractStage,
+    AbstractWrappedStage as AbstractWrappedStage,
+    Context as Context,
+    KeepIfBetter as KeepIfBetter,
+    Progress as Progress,
+    Restarts as Restarts,
+    Result as Result,
+    WarmStart as WarmStart,
+)
+from ._training._fit import default_optimiser as default_optimiser, fit as fit
+from ._training._fit_splitting import fit_splitting as fit_splitting
+from ._training._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
+from ._training._losses import (
+    AbstractLoss as AbstractLoss,
+    AbstractPairsLoss as AbstractPairsLoss,
+    AlphaLoss as AlphaLoss,
+    MeanSquares as MeanSquares,
+    Pairs as Pairs,
+    StateLoss as StateLoss,
+    alpha_mse as alpha_mse,
+    state_mse as state_mse,
+)
+from ._training._observed import Segments as Segments, TrajectoryLoss as TrajectoryLoss
+from ._training._problem import Fitted as Fitted
 from ._training._sweep import (
     Sweep as Sweep,
     SweepResult as SweepResult,

@@ -41,11 +41,6 @@ def replace_array_leaves(tree: Any, leaves: list[np.ndarray], what: str) -> Any:
     return eqx.combine(jax.tree_util.tree_unflatten(treedef, new), static)
 
 
-def jsonable(value: Any) -> Any:
-    """`value` as `read` returns it after `write` stored it as JSON (tuples as lists)."""
-    return json.loads(json.dumps(value))
-
-
 def write(path: Any, attrs: dict[str, Any], groups: dict[str, Any]) -> None:
     """Write `attrs` (JSON-encoded when not scalar/str) and `groups` = {name: list of arrays or
     dict of arrays} atomically to `path`."""

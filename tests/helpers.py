@@ -3,7 +3,9 @@ not share code with `liepoisson` (numpy/scipy only)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -13,6 +15,7 @@ import scipy.integrate
 import scipy.linalg
 from hypothesis import strategies as st
 
+import learn
 import liepoisson as lp
 
 EPS = np.finfo(np.float64).eps
@@ -176,3 +179,30 @@ def poisson_defect(key, flow, tensor, alpha, t, y):
         _DEFECTS[key] = jax.jit(defect)
     d, s = _DEFECTS[key](jnp.asarray(alpha), jnp.asarray(t, dtype=jnp.float64), jnp.asarray(y))
     return float(d), float(s)
+
+
+@dataclasses.dataclass(frozen=True)
+class ToyProblem(learn.AbstractProblem):
+    """A training problem of the solvers alone (no learned map, no system): `objective(y0,
+    train)` from the start `y0`; restarts add standard normal noise to every leaf."""
+
+    objective: learn.AbstractObjective
+    y0: Any
+    train: Any
+    validation: Any = None
+    name: str = "toy"
+
+    def with_start(self, y0):
+        return dataclasses.replace(self, y0=y0)
+
+    def reinitialised(self, key):
+        return jax.tree_util.tree_map(lambda a: a + jax.random.normal(key, jnp.shape(a)), self.y0)
+
+    def warm_start(self):
+        return None
+
+    def file_attributes(self):
+        return {}
+
+    def read_checkpoint(self, path):
+        raise ValueError("a toy problem has no checkpoints")

@@ -250,7 +250,7 @@ def test_a_sweep_returns_the_numbers_of_sequential_fits_and_saves_every_point(
 
 
 def test_a_rerun_sweep_trains_only_the_points_not_done(tmp_path, monkeypatch):
-    from learn import _sweep
+    from learn._training import _sweep
 
     trained = []
     original = _sweep._train

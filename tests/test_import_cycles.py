@@ -59,3 +59,63 @@ def test_no_cycle_exits_zero(tmp_path):
     result = _run("--root", str(tmp_path), "--packages", "pkg")
     assert result.returncode == 0, result.stdout + result.stderr
     assert result.stdout.strip() == "0 import cycle(s) among 2 modules of pkg"
+
+
+# Each floor imports only the floors below it (data flows one way), and inside `learn` the
+# solvers know nothing of learned maps, the maps nothing of training.
+LAYERS = ["liepoisson", "integrators", "learn", "paper"]
+LEARN_ROOMS = ["_solvers", "_models", "_training"]
+
+
+def _imports(path: Path, package: str) -> set[str]:
+    """Every module an `import`/`from ... import` in `path` names (relative ones resolved
+    against `package`, the file's dotted package)."""
+    import ast
+
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = package.split(".")[: len(package.split(".")) - (node.level - 1)] if node.level else []
+            module = ".".join([*base, *([node.module] if node.module else [])])
+            names.add(module)
+            names |= {f"{module}.{alias.name}" for alias in node.names}
+    return names
+
+
+def _modules(root: Path, package: str):
+    for path in sorted((root / package.replace(".", "/")).rglob("*.py")):
+        dotted = ".".join(path.relative_to(root).with_suffix("").parts)
+        yield path, dotted if path.name == "__init__.py" else dotted.rsplit(".", 1)[0]
+
+
+def test_each_layer_imports_only_the_layers_below_it():
+    root = SCRIPT.parent.parent
+    wrong = []
+    for i, layer in enumerate(LAYERS):
+        above = LAYERS[i + 1 :]
+        for path, package in _modules(root, layer):
+            for name in _imports(path, package):
+                if name.split(".")[0] in above:
+                    wrong.append(f"{path.relative_to(root)} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_learn_solvers_know_no_maps_and_maps_no_training():
+    root = SCRIPT.parent.parent
+    wrong = []
+    for i, room in enumerate(LEARN_ROOMS):
+        above = {f"learn.{r}" for r in LEARN_ROOMS[i + 1 :]}
+        for path, package in _modules(root, f"learn.{room}"):
+            for name in _imports(path, package):
+                if any(name == a or name.startswith(a + ".") for a in above):
+                    wrong.append(f"{path.relative_to(root)} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_layer_check_sees_an_import_running_back_up(tmp_path):
+    (tmp_path / "pkg" / "_low").mkdir(parents=True)
+    (tmp_path / "pkg" / "_low" / "m.py").write_text("from .._high import x\nimport paper\n")
+    names = _imports(tmp_path / "pkg" / "_low" / "m.py", "pkg._low")
+    assert {"pkg._high", "pkg._high.x", "paper"} <= names

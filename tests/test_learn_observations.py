@@ -18,12 +18,20 @@ import integrators as it
 import learn
 import liepoisson as lp
 from integrators.splitting import TripleJump
-from learn._training._observed import information_criterion, observed_objective
+from learn._training._observed import information_criterion
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
 INVERSE_INERTIA = 1.0 / np.array([2.0, 1.0, 2 / 3])
 N_TRAJ, N_OBS = 8, 11
+
+
+def observed_objective(model, data, loss, h, validation_fraction, seed):
+    """The training problem `loss` builds: `(fitted start, segments, held-out, objective,
+    problem)`."""
+    loss = learn.TrajectoryLoss() if loss is None else loss
+    p = loss.problem(model, data, h=h, validation_fraction=validation_fraction, seed=seed, normalise=False)
+    return p.y0, p.train, p.validation, p.objective, p
 
 
 def _quadratic_family(y, d):
@@ -111,9 +119,9 @@ def _small_data() -> it.Observations:
     ("kwargs", "error", "match"),
     [
         pytest.param({"loss": "alpha"}, TypeError,
-                     r"with observations, loss must be a learn\.TrajectoryLoss \(or 'state'.*got 'alpha'",
+                     r"loss must be a learn\.AbstractLoss \(TrajectoryLoss for this data.*\['state'\]; got 'alpha'",
                      id="loss a pair loss"),
-        pytest.param({"loss": 3}, TypeError, r"loss must be a learn\.TrajectoryLoss.*got 3", id="loss a number"),
+        pytest.param({"loss": 3}, TypeError, r"loss must be a learn\.AbstractLoss \(TrajectoryLoss for this data.*got 3", id="loss a number"),
         pytest.param({"normalise": True}, ValueError, r"normalise=True sets an MLP's scalings.*with observations",
                      id="normalise"),
     ],
@@ -171,9 +179,9 @@ def one_step():
 def test_one_step_loss_predicts_each_pair_at_its_own_step(one_step):
     data, fitted, train, loss_fn, settings, by_hand = one_step
     _, y1, dt = data.intervals()
-    assert settings["substeps"] == 1 and settings["loss"] == "window 1, observed starts"
+    assert settings.description.substeps == 1 and settings.description.loss == "observations: window 1, observed starts"
     assert fitted.starts is None  # latent=False: segments start from their observations
-    residuals = np.asarray(loss_fn.residuals(fitted, *train))
+    residuals = np.asarray(loss_fn.residuals(fitted, train))
     assert residuals.shape == (len(dt), 2, 3)  # one segment per pair, in the order of intervals()
     np.testing.assert_array_equal(residuals[:, 0], 0.0)  # the observed start is not predicted
     # The same step in two compiled programs (vmap + scan, and one step): they may round
@@ -186,7 +194,7 @@ def test_one_step_loss_is_the_mean_over_pairs(one_step):
     y1 = data.intervals()[1]
     want = np.mean(np.sum((by_hand - y1) ** 2, axis=-1)) / 3  # |step(y0) - y1|^2 / dim, averaged over pairs
     # residuals of ~0.03, each a few eps off (see above): a relative ~1e-13 at most
-    assert float(loss_fn(fitted, *train)) == pytest.approx(want, rel=1e-10)
+    assert float(loss_fn(fitted, train)) == pytest.approx(want, rel=1e-10)
 
 
 def test_trajectory_loss_of_the_true_hamiltonian_is_round_off():
@@ -198,8 +206,8 @@ def test_trajectory_loss_of_the_true_hamiltonian_is_round_off():
     assert len({t.size for t in data.times}) > 1
     model = learn.ParametricHamiltonian(BODY, _quadratic_family, INVERSE_INERTIA, substeps=1000)
     fitted, train, _, loss_fn, settings = observed_objective(model, data, learn.TrajectoryLoss(), None, 0.0, 0)
-    assert settings["loss"] == "trajectory, latent starts" and fitted.starts.shape == (6, 3)
-    loss = float(loss_fn(fitted, *train))
+    assert settings.description.loss == "observations: trajectory, latent starts" and fitted.starts.shape == (6, 3)
+    loss = float(loss_fn(fitted, train))
     # What is left is rounding: ~10^4 RK4 sub-steps per trajectory, each rounding y by
     # ~eps |y|, add up like a random walk to ~100 eps |y| at most (measured: RMS 12 eps |y|);
     # the heyoka observations are exact to a few eps. A wrong interval or a padded step
@@ -213,8 +221,8 @@ def test_max_step_runs_each_interval_in_equal_sub_steps():
     net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=2, activation="identity"), method=TripleJump)
     loss = learn.TrajectoryLoss(latent=False, max_step=dt_max / 3)
     fitted, train, _, loss_fn, settings = observed_objective(net, data, loss, None, 0.0, 0)
-    assert settings["substeps"] == 3 and loss_fn.substeps == 3 and settings["max_step"] == dt_max / 3
-    predicted = np.asarray(loss_fn.residuals(fitted, *train)) + train[1]
+    assert settings.description.substeps == 3 and train.substeps == 3 and settings.description.max_step == dt_max / 3
+    predicted = np.asarray(loss_fn.residuals(fitted, train)) + np.asarray(train.states)
     model = fitted.model
     for j, (t, y) in enumerate(zip(data.times, data.states)):
         z, by_hand = jnp.asarray(y[0]), [y[0]]
@@ -226,7 +234,7 @@ def test_max_step_runs_each_interval_in_equal_sub_steps():
         # as above, up to 30 sub-steps of 15 flows each, in two compiled programs
         np.testing.assert_allclose(predicted[j, : t.size], np.array(by_hand), rtol=0, atol=256 * EPS)
     # and max_step = dt_max (or more) is one step per interval
-    assert observed_objective(net, data, learn.TrajectoryLoss(max_step=dt_max), None, 0.0, 0)[4]["substeps"] == 1
+    assert observed_objective(net, data, learn.TrajectoryLoss(max_step=dt_max), None, 0.0, 0)[4].description.substeps == 1
 
 
 # -- 4. Casimirs ------------------------------------------------------------------------------------
@@ -360,8 +368,8 @@ def test_redundant_weights_count_once_in_the_information_criterion():
             e = jnp.array([0.3, -0.2, 0.1])
             terms = eqx.tree_at(lambda t: (t.a, t.e), terms, (terms.a - e, e))
         net = learn.GLPNet(BODY, terms=terms, method=TripleJump)
-        fitted, train, _, loss_fn, _ = observed_objective(net, data, None, None, 0.0, 0)
-        criteria[linear_term] = information_criterion(fitted, loss_fn, *train)
+        fitted, _, _, _, problem = observed_objective(net, data, None, None, 0.0, 0)
+        criteria[linear_term] = information_criterion(problem, fitted)
         n_parameters[linear_term] = net.n_parameters
     assert n_parameters == {False: 9, True: 12}
     # With the identity, Phi' = (a + e) x + b: a and e only enter as their sum. And the piece

@@ -9,15 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.optimize
+from helpers import ToyProblem
 
 import integrators as it
 import learn
 import liepoisson as lp
 from integrators.internals import composition_flops
 from integrators.splitting import METHODS, IndexedFlows, Strang, TripleJump
-from learn._solvers._levenberg_marquardt import run_levenberg_marquardt
-from learn._training._losses import MeanSquares
-from learn._training._observed import Fitted, observed_objective
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
@@ -28,22 +26,24 @@ class _Curve(eqx.Module):
 
     theta: jax.Array
 
-    def warm_start(self):
-        return None
 
+class _CurveLoss(learn.AbstractLeastSquares):
+    def residuals(self, y, args):
+        x, target = args
+        a, b, c = y.theta
+        return a * jnp.exp(b * x) + c - target
 
-def _curve_residuals(model, x, y):
-    a, b, c = model.theta
-    return a * jnp.exp(b * x) + c - y
+    def count(self, y, args):
+        return int(args[0].size)
 
-
-CURVE_LOSS = MeanSquares(_curve_residuals, "curve")
+    def __call__(self, y, args):
+        return jnp.mean(self.residuals(y, args) ** 2)
 
 
 def _fit_curve(theta0, y, stage):
     x = jnp.linspace(0.0, 1.0, 40)
-    empty = (jnp.zeros(0), jnp.zeros(0))
-    return run_levenberg_marquardt(stage, _Curve(jnp.asarray(theta0)), (x, y), empty, CURVE_LOSS, 0, False, None)
+    result = stage.run(ToyProblem(_CurveLoss(), _Curve(jnp.asarray(theta0)), (x, y)), learn.Context())
+    return result.y, result.record, result.history
 
 
 def test_levenberg_marquardt_finds_the_exact_minimum_of_a_nonlinear_fit():
@@ -107,12 +107,13 @@ def test_bad_levenberg_marquardt_settings(kwargs, error, match):
 
 
 def test_levenberg_marquardt_needs_a_least_squares_loss():
-    def loss(model, x, y):
-        return jnp.sum(jnp.abs(model.theta))
+    class L1(learn.AbstractObjective):
+        def __call__(self, y, args):
+            return jnp.sum(jnp.abs(y.theta))
 
+    problem = ToyProblem(L1(), _Curve(jnp.ones(3)), (jnp.zeros(3), jnp.zeros(3)))
     with pytest.raises(ValueError, match="needs a least-squares loss"):
-        run_levenberg_marquardt(learn.LevenbergMarquardt(5), _Curve(jnp.ones(3)), (jnp.zeros(3), jnp.zeros(3)),
-                                (jnp.zeros(0), jnp.zeros(0)), loss, 0, False, None)
+        learn.LevenbergMarquardt(5).run(problem, learn.Context())
 
 
 def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observations():
@@ -135,16 +136,17 @@ def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observa
 def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
     data = it.observe(BODY, np.eye(3), it.uneven_times(3, 7, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
     net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True), method=TripleJump)
-    fitted, (X, T), _, loss_fn, _ = observed_objective(net, data, None, None, 0.0, 0)
-    X, T = jnp.asarray(X), jnp.asarray(T)
+    problem = learn.TrajectoryLoss().problem(net, data, h=None, validation_fraction=0.0, seed=0, normalise=False)
+    fitted, segments, objective = problem.y0, problem.train, problem.objective
     params, static = eqx.partition(fitted, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
-    assert isinstance(fitted, Fitted) and fitted.starts.shape == (3, 3)
+    assert isinstance(fitted, learn.Fitted) and fitted.starts.shape == (3, 3)
+    assert isinstance(objective, learn.AbstractStructuredJacobian)
 
     def residuals(x):
-        return loss_fn.residuals(eqx.combine(unravel(x), static), X, T).reshape(-1)
+        return objective.residuals(eqx.combine(unravel(x), static), segments).reshape(-1)
 
-    r, J = loss_fn.jacobian(fitted, X, T)
+    r, J = objective.jacobian(fitted, segments)
     np.testing.assert_array_equal(np.asarray(r), np.asarray(residuals(flat)))
     full = np.asarray(jax.jacfwd(residuals)(flat))
     assert J.shape == full.shape == (r.size, flat.size)

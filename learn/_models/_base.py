@@ -7,7 +7,7 @@ from __future__ import annotations
 import abc
 import os
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any
 
 import equinox as eqx
 import jax
@@ -15,13 +15,13 @@ import numpy as np
 
 import liepoisson as lp
 from integrators import AbstractStepMap
-from liepoisson.internals import check_system
+from liepoisson.internals import check_system, jsonable
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from .. import _files as _checkpoint
+from .._solvers._adam import Adam
+from .._solvers._stage import AbstractStage
 from ._legacy import upgrade_attributes
-from .._training._losses import state_mse
-from .._solvers._optimisers import Adam
 
 if TYPE_CHECKING:  # typing.Self needs Python 3.11
     from typing_extensions import Self
@@ -30,22 +30,14 @@ if TYPE_CHECKING:  # typing.Self needs Python 3.11
 class AbstractLearnedMap(AbstractStepMap):
     r"""A learned one-step map $y_{n+1} = \mathbb T(y_n)$ of a Poisson system: a pure pytree
     (architecture + weights). Train it with `learn.fit`, which returns a new map and a
-    `TrainingRecord`; `fit` asks the map, never its class, for what differs between kinds:
-    `default_optimiser`, `loss_function` and `loss_targets` (the losses it supports),
-    `normalised` (its fixed scalings), `warm_start` and `conserves_casimirs`.
+    `TrainingRecord`; what differs between kinds of map is a method (`default_optimiser`,
+    `normalised`: its fixed scalings) or a capability class (`AbstractCasimirConservingMap`,
+    `AbstractWarmStartableMap`).
 
     Final subclasses return their architecture as JSON values from `hyperparameters()` and
     rebuild themselves from it in `from_hyperparameters`, so that a map is rebuilt from a file
     or re-initialised with a new key.
     """
-
-    #: Whether every step moves on the Casimir leaf: `learn.fit` then refuses data pairs whose
-    #: Casimirs differ, which no such map can connect.
-    conserves_casimirs: ClassVar[bool] = True
-    #: The losses `learn.fit(loss=...)` can train this map on (see `loss_function`).
-    losses: ClassVar[tuple[str, ...]] = ("state",)
-    #: Whether `warm_start` gives a simpler map to fit first (`QuasiNewton(warm_start=True)`).
-    has_warm_start: ClassVar[bool] = False
 
     @abc.abstractmethod
     def hyperparameters(self) -> dict[str, Any]:
@@ -64,37 +56,15 @@ class AbstractLearnedMap(AbstractStepMap):
         equals $y_1$ exactly when the step carries $y_0$ to $y_1$ (`learn.Reversible`)."""
         return self.step(y0)
 
-    def default_optimiser(self) -> tuple[Any, ...]:
+    def default_optimiser(self) -> tuple[AbstractStage, ...]:
         """The optimiser stages `learn.fit` runs when given none: 100,000 epochs of Adam
         (learning rate 1e-3), the paper's for its MLPs."""
         return (Adam(),)
-
-    def loss_function(self, loss: str) -> Callable[[Any, jax.Array, jax.Array], jax.Array]:
-        """`loss_fn(model, inputs, targets)`, a mean over samples, for the loss named `loss`:
-        `"state"` is the MSE of `training_prediction` against $y_1$ (paper eqs. Loss_function,
-        Loss_function_G_LPNets)."""
-        self._check_loss(loss)
-        return state_mse
-
-    def loss_targets(self, loss: str, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:
-        """What `loss_function(loss)` compares with for the pairs `(y0, y1)`: $y_1$ for the
-        state loss."""
-        self._check_loss(loss)
-        return y1
-
-    def _check_loss(self, loss: str) -> None:
-        if loss not in self.losses:
-            raise ValueError(f"a {type(self).__name__} trains on loss in {list(self.losses)}; got loss={loss!r}")
 
     def normalised(self, y0: np.ndarray, y1: np.ndarray, h: float, targets: np.ndarray | None = None) -> Self:
         """The map with its fixed input/output scalings set from training pairs (and the
         loss's `targets` where they are not states). Maps without scalings refuse."""
         raise ValueError(f"normalise=True sets the scalings of an MLP; a {type(self).__name__} has none")
-
-    def warm_start(self) -> tuple[AbstractLearnedMap, Callable[[AbstractLearnedMap, np.ndarray], Self]] | None:
-        """`(simpler, mapped)` for `QuasiNewton(warm_start=True)`: a simpler map to fit first
-        and `mapped(fitted_simpler, inputs)`, this map started from it; `None` if it has none."""
-        return None
 
     @property
     def n_parameters(self) -> int:
@@ -124,7 +94,7 @@ class AbstractLearnedMap(AbstractStepMap):
         splitting method of your own) is refused before anything is written."""
         attrs = self.file_attributes()
         try:
-            type(self).from_hyperparameters(self.system, _checkpoint.jsonable(attrs["hyperparameters"]), key=0,
+            type(self).from_hyperparameters(self.system, jsonable(attrs["hyperparameters"]), key=0,
                                             h=self.h)
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(
@@ -165,6 +135,22 @@ class AbstractLearnedMap(AbstractStepMap):
                 f"path {os.fspath(path)!r} is not a complete {cls.__name__} file ({type(err).__name__}: {err})"
             ) from err
         return _checkpoint.replace_array_leaves(model, weights, f"path {os.fspath(path)!r}")
+
+
+class AbstractCasimirConservingMap(AbstractLearnedMap):
+    """A learned map whose every step moves on the Casimir leaf of its start (a coadjoint
+    orbit for a Lie-Poisson system): `learn.fit` refuses data pairs whose Casimirs differ,
+    which no such map can connect."""
+
+
+class AbstractWarmStartableMap(AbstractLearnedMap):
+    """A learned map that offers a simpler map to fit first (`learn.WarmStart`)."""
+
+    @abc.abstractmethod
+    def warm_start(self) -> tuple[AbstractLearnedMap, Callable[[AbstractLearnedMap, np.ndarray], Self]] | None:
+        """`(simpler, mapped)`: a simpler map to fit first and `mapped(fitted_simpler, states)`,
+        this map started from it (`states` `(N, dim)`: the training states, e.g. to scale the
+        mapping); `None` if this map is already the simpler one."""
 
 
 def check_learned_map(value: Any, name: str = "model must be") -> AbstractLearnedMap:

@@ -33,7 +33,6 @@ class MLPBaseline(AbstractLearnedMap):
     network: AbstractNetwork
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float | None
-    conserves_casimirs = False
 
     def __init__(
         self,

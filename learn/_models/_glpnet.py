@@ -24,11 +24,11 @@ from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._base import AbstractLearnedMap
+from .._solvers._quasi_newton import QuasiNewton
+from ._base import AbstractCasimirConservingMap, AbstractWarmStartableMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
 from ._networks import network_or_default
-from .._solvers._optimisers import QuasiNewton
 
 
 def check_method(method: Any) -> type[AbstractSplittingMethod]:
@@ -46,7 +46,7 @@ def check_method(method: Any) -> type[AbstractSplittingMethod]:
     return cls
 
 
-class GLPNet(AbstractLearnedMap):
+class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
     r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
     $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
     `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$ (paper eqs. G_LPNets_moduli,
@@ -180,8 +180,6 @@ class GLPNet(AbstractLearnedMap):
     def default_optimiser(self):
         """BFGS with the identity warm start (3500 iterations, 4 starts), as the paper."""
         return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
-
-    has_warm_start = True
 
     def warm_start(self):
         """The same network with the identity activation (flows of quadratics, a smooth

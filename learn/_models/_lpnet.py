@@ -13,13 +13,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from integrators.internals import check_state
+from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._base import AbstractLearnedMap
+from ._base import AbstractCasimirConservingMap
 from ._equivariant import check_group_law
-from .._training._losses import alpha_mse
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
 from ._networks import AbstractNetwork, check_network, network_or_default
@@ -30,7 +29,7 @@ from ._parametrisation import (
 )
 
 
-class LPNet(AbstractLearnedMap):
+class LPNet(AbstractCasimirConservingMap):
     r"""Local Lie-Poisson network: $y \mapsto \mathbb T(h, \alpha(y))\,y$, a system, an
     $\alpha$-network and a parametrisation $\mathbb T$ of exact steps.
 
@@ -58,7 +57,6 @@ class LPNet(AbstractLearnedMap):
     parametrisation: AbstractStepParametrisation = eqx.field(static=True)
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float | None
-    losses = ("state", "alpha")
 
     def __init__(
         self,
@@ -110,7 +108,7 @@ class LPNet(AbstractLearnedMap):
         `takes_step`."""
         if not self.takes_step:
             return y
-        h = jnp.broadcast_to(jnp.asarray(self._check_h(), dtype=y.dtype), (*y.shape[:-1], 1))
+        h = jnp.broadcast_to(jnp.asarray(check_h(self), dtype=y.dtype), (*y.shape[:-1], 1))
         return jnp.concatenate([y, h], axis=-1)
 
     def alpha(self, y: jax.Array) -> jax.Array:
@@ -145,20 +143,6 @@ class LPNet(AbstractLearnedMap):
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
         network = network_from_spec(hyperparameters["network"], key)
         return cls(system, parametrisation=hyperparameters["parametrisation"], h=h, network=network)
-
-    # -- what learn.fit asks -------------------------------------------------------------------
-    def loss_function(self, loss):
-        if loss == "alpha":
-            return alpha_mse
-        return super().loss_function(loss)
-
-    def loss_targets(self, loss, y0, y1, h):
-        r"""$y_1$ for the state loss; for `"alpha"` the parameters of the step that carries
-        $y_0$ to $y_1$, `parametrisation.params_from_pair` (paper eqs. Loss_function_alpha,
-        alpha_mod_Casimirs)."""
-        if loss == "alpha":
-            return self.parametrisation.params_from_pair(y0, y1, h)
-        return super().loss_targets(loss, y0, y1, h)
 
     def normalised(self, y0, y1, h, targets=None, *, fraction: float = 1.0):
         r"""Scalings from the data: inputs the mean/std of $y_0$, outputs those of `targets`

@@ -5,7 +5,7 @@ far the data allow a method to go)."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -13,12 +13,12 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_state
+from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
+from .._solvers._quasi_newton import QuasiNewton
 from ._base import AbstractLearnedMap
-from .._solvers._optimisers import QuasiNewton
 
 
 class ParametricHamiltonian(AbstractLearnedMap):
@@ -42,7 +42,6 @@ class ParametricHamiltonian(AbstractLearnedMap):
     substeps: int = eqx.field(static=True)
     h: float | None
 
-    conserves_casimirs: ClassVar[bool] = False
 
     def __init__(self, system: AbstractPoissonSystem, hamiltonian: Callable[[jax.Array, jax.Array], jax.Array],
                  theta: ArrayLike, *, substeps: int = 10, h: float | None = None, key: Any = None):
@@ -71,7 +70,7 @@ class ParametricHamiltonian(AbstractLearnedMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         y = check_state(y, self.system.dim)
-        dt = self._check_h() / self.substeps
+        dt = check_h(self) / self.substeps
         f = self.vector_field
 
         def rk4(_, z):

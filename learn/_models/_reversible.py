@@ -14,12 +14,12 @@ from integrators import AbstractImplicitStepMap
 from liepoisson.internals import positive_int
 from liepoisson.systems import AbstractPoissonSystem, check_reversing_symmetry, reversing_symmetry
 
-from ._base import AbstractLearnedMap
+from ._base import AbstractCasimirConservingMap
 from ._lpnet import LPNet
 from ._parametrisation import AbstractInvertibleParametrisation
 
 
-class Reversible(AbstractImplicitStepMap, AbstractLearnedMap):
+class Reversible(AbstractImplicitStepMap, AbstractCasimirConservingMap):
     r"""The $R$-reversible map $\Phi = R\,\mathbb B^{-1}R\circ\mathbb B$ of an LPNet step
     $\mathbb B(y) = \mathbb T(\alpha(y))\,y$, for a reversing symmetry $R = \mathrm{diag}(r)$ of
     the system (`liepoisson.systems.reversing_symmetries`: anti-Poisson, $H\circ R = H$,

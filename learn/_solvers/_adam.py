@@ -1,4 +1,4 @@
-"""Gradient training (optax Adam) of a learned map, compiled in chunks of epochs.
+"""Gradient training (optax Adam), compiled in chunks of epochs: the `Adam` stage of `learn.fit`.
 
 Each chunk of `CHUNK` epochs is one jitted `lax.scan`; the best-validation weights are
 tracked inside the scan, so no epoch is lost between host synchronisations.
@@ -6,6 +6,7 @@ tracked inside the scan, so no epoch is lost between host synchronisations.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Callable
@@ -19,10 +20,13 @@ import optax
 from tqdm.auto import tqdm
 
 from liepoisson import common_path_first
-from liepoisson.systems import check_system_matches
+from liepoisson.internals import positive_float, positive_int
 
-from .. import _files as _checkpoint
-from .._models._legacy import upgrade_attributes
+from .. import _files
+from ._checkpoint import read_resumable
+from ._problem import AbstractProblem
+from ._record import StageRecord
+from ._stage import AbstractResumableStage, Context, Result
 
 CHUNK = 1000
 
@@ -31,11 +35,71 @@ def _where(cond, new, old):
     return jax.tree_util.tree_map(lambda a, b: jnp.where(cond, a, b), new, old)
 
 
+def _samples(args: Any) -> int:
+    return int(jax.tree_util.tree_leaves(args)[0].shape[0])
+
+
+def _take(args: Any, index: jax.Array) -> Any:
+    """The samples `index` of every leaf of `args` (samples on axis 0)."""
+    return jax.tree_util.tree_map(lambda a: a[index], args)
+
+
+@dataclasses.dataclass(frozen=True)
+class Adam(AbstractResumableStage):
+    r"""Adam (optax) on the training loss, compiled in chunks of epochs; keeps the weights of
+    the lowest validation loss (training loss without a validation set).
+
+    `epochs`; `learning_rate`, and `final_learning_rate` for an exponential decay from one to
+    the other over all steps (constant if `None`); `batch_size` `None` for full batch, else
+    seeded shuffled mini-batches (remainder dropped per epoch); `log_every`: history resolution
+    in epochs (default `epochs // 1000`). Resumable with a `learn.Checkpoint`.
+    """
+
+    epochs: int = 100_000
+    learning_rate: float = 1e-3
+    final_learning_rate: float | None = None
+    batch_size: int | None = None
+    log_every: int | None = None
+
+    def __post_init__(self):
+        positive_int(self.epochs, "Adam.epochs")
+        positive_float(self.learning_rate, "Adam.learning_rate")
+        if self.final_learning_rate is not None:
+            positive_float(self.final_learning_rate, "Adam.final_learning_rate")
+        if self.batch_size is not None:
+            positive_int(self.batch_size, "Adam.batch_size")
+        if self.log_every is not None:
+            positive_int(self.log_every, "Adam.log_every")
+
+    @property
+    def budget(self) -> int:
+        return self.epochs
+
+    def with_budget(self, budget: int) -> Adam:
+        return dataclasses.replace(self, epochs=budget)
+
+    def run(self, problem: AbstractProblem, context: Context) -> Result:
+        log_every = self.log_every if self.log_every is not None else max(1, self.epochs // 1000)
+        settings = {**context.file_settings, **dataclasses.asdict(self), "log_every": log_every}
+        report = context.report
+        best, info = train_adam(
+            problem, epochs=self.epochs, learning_rate=self.learning_rate,
+            final_learning_rate=self.final_learning_rate, batch_size=self.batch_size, seed=context.seed,
+            progress=context.progress, log_every=log_every, checkpoint=context.checkpoint, settings=settings,
+            desc=context.desc or problem.name,
+            on_chunk=None if report is None else lambda done, lt, lv: report(context.offset + done, context.total,
+                                                                             lt, lv),
+        )
+        record = StageRecord(
+            optimiser="Adam", settings=dataclasses.asdict(self), iterations=info["epochs"],
+            train_loss=info["train_loss"], val_loss=info["val_loss"], kept=True, wall_time_s=info["wall_time_s"],
+            details={"best_epoch": info["best_epoch"], "stopped": info["stopped"]},
+        )
+        return Result(best, record, info["history"])
+
+
 def train_adam(
-    model: Any,
-    train: tuple[np.ndarray, np.ndarray],
-    val: tuple[np.ndarray, np.ndarray],
-    loss_fn: Callable[[Any, jax.Array, jax.Array], jax.Array],
+    problem: AbstractProblem,
     *,
     epochs: int,
     learning_rate: float,
@@ -44,23 +108,22 @@ def train_adam(
     seed: int,
     progress: bool,
     log_every: int,
-    checkpoint: str | None,
-    checkpoint_every: int,
-    resume: bool,
+    checkpoint: Any,
     settings: dict[str, Any],
     desc: str,
     on_chunk: Callable[[int, float, float], None] | None = None,
 ):
-    """Minimise `loss_fn(model, inputs, targets)` (a mean over samples) with Adam.
+    """Minimise the problem's objective (a mean over samples) with Adam.
 
     `on_chunk(epochs_done, train_loss, val_loss)` is called after every compiled chunk.
-    Returns `(best_model, info)`: the weights with the lowest validation loss (training loss
-    when there is no validation set) and a dict with the history and timings.
+    Returns `(best, info)`: the `y` with the lowest validation loss (training loss when there
+    is no validation set) and a dict with the history and timings.
     """
-    X, T = (jnp.asarray(a) for a in train)
-    Xv, Tv = (jnp.asarray(a) for a in val)
-    n = X.shape[0]
-    has_val = Xv.shape[0] > 0
+    objective, model = problem.objective, problem.y0
+    train = jax.tree_util.tree_map(jnp.asarray, problem.train)
+    val = jax.tree_util.tree_map(jnp.asarray, problem.validation) if problem.has_validation else train
+    n = _samples(train)
+    has_val = problem.has_validation
     full = batch_size is None or batch_size >= n
     bs = n if full else int(batch_size)
     nb = 1 if full else n // bs
@@ -73,8 +136,8 @@ def train_adam(
     opt = optax.adam(schedule)
     params, static = eqx.partition(model, eqx.is_inexact_array)
 
-    def loss(p, x, t):
-        return loss_fn(eqx.combine(p, static), x, t)
+    def loss(p, args):
+        return objective(eqx.combine(p, static), args)
 
     opt_state = opt.init(params)
     best = params
@@ -83,11 +146,13 @@ def train_adam(
     epoch0, elapsed0 = 0, 0.0
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
-    if checkpoint is not None and resume and os.path.exists(checkpoint):
-        attrs, groups = read_resumable(checkpoint, model, settings)
-        params = eqx.filter(_checkpoint.replace_array_leaves(params, groups["weights"], "weights"), eqx.is_array)
-        best = eqx.filter(_checkpoint.replace_array_leaves(params, groups["best"], "best"), eqx.is_array)
-        opt_state = _checkpoint.replace_array_leaves(opt_state, groups["optimizer"], "optimizer")
+    path = None if checkpoint is None else os.fspath(checkpoint.path)
+    checkpoint_every = 10_000 if checkpoint is None else checkpoint.every
+    if checkpoint is not None and checkpoint.resumable():
+        attrs, groups = read_resumable(path, problem, settings)
+        params = eqx.filter(_files.replace_array_leaves(params, groups["weights"], "weights"), eqx.is_array)
+        best = eqx.filter(_files.replace_array_leaves(params, groups["best"], "best"), eqx.is_array)
+        opt_state = _files.replace_array_leaves(opt_state, groups["optimizer"], "optimizer")
         epoch0 = int(attrs["epoch"])
         best_loss = jnp.asarray(attrs["best_loss"])
         best_epoch = jnp.asarray(int(attrs["best_epoch"]))
@@ -97,27 +162,27 @@ def train_adam(
     base_key = jax.random.PRNGKey(seed)
     chunk = min(CHUNK, epochs)
 
-    def run(carry, epoch_ids, X, T, Xv, Tv):
+    def run(carry, epoch_ids, train, val):
         def body(carry, epoch):
             p, s, bp, bl, be = carry
             active = epoch < epochs
             if full:
-                lt, g = jax.value_and_grad(loss)(p, X, T)
+                lt, g = jax.value_and_grad(loss)(p, train)
                 upd, s2 = opt.update(g, s, p)
                 p2 = optax.apply_updates(p, upd)
             else:
-                lt = loss(p, X, T)
+                lt = loss(p, train)
                 perm = jax.random.permutation(jax.random.fold_in(base_key, epoch), n)
                 batches = perm[: nb * bs].reshape(nb, bs)
 
                 def inner(c, idx):
                     pp, ss = c
-                    g = jax.grad(loss)(pp, X[idx], T[idx])
+                    g = jax.grad(loss)(pp, _take(train, idx))
                     u, ss = opt.update(g, ss, pp)
                     return (optax.apply_updates(pp, u), ss), None
 
                 (p2, s2), _ = jax.lax.scan(inner, (p, s), batches)
-            lv = loss(p, Xv, Tv) if has_val else jnp.asarray(jnp.nan)
+            lv = loss(p, val) if has_val else jnp.asarray(jnp.nan)
             crit = lv if has_val else lt
             better = active & (crit < bl)
             bp = _where(better, p, bp)
@@ -136,13 +201,13 @@ def train_adam(
     )
 
     @jax.jit
-    def evaluate(p, X, T):
-        return loss(p, X, T)
+    def evaluate(p, args):
+        return loss(p, args)
 
     def write_checkpoint(carry, epoch, elapsed):
         p, s, bp, bl, be = carry
-        _checkpoint.write(
-            checkpoint,
+        _files.write(
+            path,
             {
                 **{k: v for k, v in model_attrs.items()},
                 "epoch": int(epoch),
@@ -152,14 +217,14 @@ def train_adam(
                 "fit_settings": settings,
             },
             {
-                "weights": _checkpoint.array_leaves(p),
-                "best": _checkpoint.array_leaves(bp),
-                "optimizer": _checkpoint.array_leaves(s),
+                "weights": _files.array_leaves(p),
+                "best": _files.array_leaves(bp),
+                "optimizer": _files.array_leaves(s),
                 "history": {k: np.asarray(v) for k, v in hist.items()},
             },
         )
 
-    model_attrs = model.file_attributes() if checkpoint is not None else {}
+    model_attrs = problem.file_attributes() if checkpoint is not None else {}
     carry = (params, opt_state, best, best_loss, best_epoch)
     start = time.perf_counter()
     epoch = epoch0
@@ -169,7 +234,7 @@ def train_adam(
     try:
         while epoch < epochs:
             ids = jnp.arange(epoch, epoch + chunk)
-            carry, (lt, lv) = run(carry, ids, X, T, Xv, Tv)
+            carry, (lt, lv) = run(carry, ids, train, val)
             k = min(chunk, epochs - epoch)
             lt, lv = np.asarray(lt)[:k], np.asarray(lv)[:k]
             e = np.arange(epoch, epoch + k)
@@ -194,7 +259,7 @@ def train_adam(
 
     p, s, bp, bl, be = carry
     # The weights after the last update were never scored inside the scan.
-    final_crit = evaluate(p, Xv, Tv) if has_val else evaluate(p, X, T)
+    final_crit = evaluate(p, val) if has_val else evaluate(p, train)
     if bool(final_crit < bl):
         bp, bl, be = p, final_crit, jnp.asarray(epoch)
         carry = (p, s, bp, bl, be)
@@ -206,33 +271,11 @@ def train_adam(
     best_model = eqx.combine(bp, static)
     info = {
         "history": {k: np.asarray(v) for k, v in hist.items()},
-        "train_loss": float(evaluate(bp, X, T)),
-        "val_loss": float(evaluate(bp, Xv, Tv)) if has_val else float("nan"),
+        "train_loss": float(evaluate(bp, train)),
+        "val_loss": float(evaluate(bp, val)) if has_val else float("nan"),
         "wall_time_s": wall,
         "best_epoch": int(be),
         "epochs": int(epoch),
         "stopped": stopped,
     }
     return best_model, info
-
-
-def read_resumable(path: str, model: Any, settings: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """`read_checkpoint` for resuming the fit of `model` with fit `settings`: `ValueError` if
-    the file was written for another system, architecture or settings."""
-    attrs, groups = _checkpoint.read_checkpoint(path, type(model).__name__, upgrade_attributes)
-    try:
-        check_system_matches(model.system, attrs.get("system"), attrs.get("system_params"), f"checkpoint {path!r}")
-    except ValueError as err:
-        raise ValueError(f"cannot resume: {err}") from None
-    if attrs["hyperparameters"] != _checkpoint.jsonable(model.hyperparameters()):
-        raise ValueError(
-            f"checkpoint {path!r} was written for a model with hyperparameters "
-            f"{attrs['hyperparameters']}; this model has {model.hyperparameters()}"
-        )
-    for key, value in _checkpoint.jsonable(settings).items():
-        if attrs["fit_settings"].get(key) != value:
-            raise ValueError(
-                f"checkpoint {path!r} was written with {key}={attrs['fit_settings'].get(key)!r}; "
-                f"resume needs the same value, got {key}={value!r}"
-            )
-    return attrs, groups

@@ -1,9 +1,9 @@
 r"""The `LevenbergMarquardt` stage of `learn.fit`: Levenberg-Marquardt on the residuals $r(x)$
-of a least-squares loss (`loss_fn.residuals(model, inputs, targets)`, whose mean square is the
-loss), over the flat trainable leaves $x$.
+of a least-squares objective (`learn.AbstractLeastSquares`: its `residuals(y, args)`, whose mean
+square is the loss), over the flat trainable leaves $x$ of $y$.
 
 Each step evaluates $r$ and its Jacobian $J$ once (one compiled call: `jax.jacfwd`, or the
-loss's own `jacobian` where it knows a block structure, e.g. fitted starts), then solves the
+objective's own `jacobian` where it knows a block structure (`learn.AbstractStructuredJacobian`), e.g. fitted starts), then solves the
 damped normal equations $(J^TJ + \lambda D)\delta = -J^Tr$, $D = \mathrm{diag}(J^TJ)$ (the
 largest seen: Marquardt's scaling, Moré 1978), by a lineax Cholesky, trying larger $\lambda$ until
 the step lowers $\|r\|^2$; $\lambda$ is updated by Nielsen's rule. The loop runs on the host
@@ -15,8 +15,8 @@ compiling a G-LPNet fit than running it (BENCHMARKS.md, "Learning from observati
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -26,12 +26,22 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from tqdm.auto import tqdm
 
-from .. import _files as _checkpoint
-from .._training._observed import Fitted
-from ._optimisers import LevenbergMarquardt
-from ._quasi_newton import _compiled
+from liepoisson.internals import positive_int
+
+from .. import _files
+from ._checkpoint import read_resumable
+from ._compiled import compiled
+from ._problem import AbstractLeastSquares, AbstractProblem
 from ._record import StageRecord
-from ._adam import read_resumable
+from ._stage import (
+    AbstractResumableStage,
+    AbstractStage,
+    Context,
+    KeepIfBetter,
+    Result,
+    WarmStart,
+    history,
+)
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
 MAX_TRIALS = 30
@@ -51,22 +61,22 @@ WINDOW = 3
 
 
 class _Residuals:
-    r"""The residuals $r(x)$ `(n,)` and Jacobian $J(x)$ `(n, p)` of `loss_fn` for the model whose
-    flat trainable leaves are $x$, compiled. Equal (same hash) for the same loss, structure and
-    layout: compiled once per structure, not once per fit."""
+    r"""The residuals $r(x)$ `(n,)` and Jacobian $J(x)$ `(n, p)` of `objective` for the `y`
+    whose flat trainable leaves are $x$, compiled. Equal (same hash) for the same objective,
+    structure and layout: compiled once per structure, not once per fit."""
 
-    def __init__(self, loss_fn, static, params):
-        self.loss_fn = loss_fn
+    def __init__(self, objective: AbstractLeastSquares, y: Any):
+        params, static = eqx.partition(y, eqx.is_inexact_array)
+        self.objective = objective
         self.static = static
         self.layout = (jax.tree_util.tree_structure(params),
                        tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(params)))
         self.unravel = ravel_pytree(params)[1]
-        self.blocks = isinstance(params, Fitted) and params.starts is not None and hasattr(loss_fn, "jacobian")
         self.residuals = jax.jit(self._residuals)
         self.jacobian = jax.jit(self._jacobian)
 
     def _key(self):
-        return (self.loss_fn, self.static, self.layout)
+        return (self.objective, self.static, self.layout)
 
     def __hash__(self):
         return hash(self._key())
@@ -77,13 +87,16 @@ class _Residuals:
     def model(self, x):
         return eqx.combine(self.unravel(x), self.static)
 
-    def _residuals(self, x, X, T):
-        return self.loss_fn.residuals(self.model(x), X, T).reshape(-1)
+    def _residuals(self, x, args):
+        return self.objective.residuals(self.model(x), args).reshape(-1)
 
-    def _jacobian(self, x, X, T):
-        if self.blocks:
-            return self.loss_fn.jacobian(self.model(x), X, T)
-        return self._residuals(x, X, T), jax.jacfwd(self._residuals)(x, X, T)
+    def _jacobian(self, x, args):
+        return self.objective.jacobian(self.model(x), args)
+
+
+def residuals_of(objective: AbstractLeastSquares, y: Any) -> _Residuals:
+    """The compiled residuals and Jacobian of `objective` at `y`'s structure."""
+    return compiled(("residuals", _Residuals(objective, y)), lambda: _Residuals(objective, y))
 
 
 @jax.jit
@@ -99,116 +112,143 @@ def _damped_step(A, g, D, lam):
     return lx.linear_solve(operator, -g, lx.Cholesky(), throw=False).value
 
 
-def run_levenberg_marquardt(stage: LevenbergMarquardt, model, train, val, loss_fn, seed: int, progress: bool,
-                            report, checkpoint=None, settings=None):
-    """Minimise the loss's residuals from `model` (after the warm start it offers, if asked);
-    the result is kept if it lowers the selection loss (validation, or training without a
-    validation set). With a `learn.Checkpoint`, the state (weights, damping, Marquardt
-    scaling, history, phase) is written every `checkpoint.every` steps and at the end, and a
-    run with `resume` continues from the file, bit-identical to an uninterrupted one."""
-    del seed  # one deterministic start
-    if not hasattr(loss_fn, "residuals"):
-        raise ValueError(f"learn.LevenbergMarquardt needs a least-squares loss (one with residuals); {loss_fn!r} has "
-                         "none: use learn.QuasiNewton")
-    (X, T), (Xv, Tv) = train, val
-    has_val = Xv.shape[0] > 0
-    name = f"{type(getattr(model, 'model', model)).__name__} Levenberg-Marquardt"
-    start = time.perf_counter()
-    evaluate = _compiled(("loss", loss_fn), lambda: eqx.filter_jit(loss_fn))
+@dataclasses.dataclass(frozen=True)
+class _Steps(AbstractStage):
+    """Levenberg-Marquardt steps from the problem's start (no selection: the wrappers do that);
+    resumable from a checkpoint written in the same phase."""
 
-    def losses(m):
-        train_loss = float(evaluate(m, X, T))
-        val_loss = float(evaluate(m, Xv, Tv)) if has_val else float("nan")
-        crit = val_loss if has_val else train_loss
-        return (crit if np.isfinite(crit) else np.inf), train_loss, val_loss
+    iterations: int
+    rtol: float
 
-    settings = {**(settings or {}), **dataclasses.asdict(stage)}
-    saved = _Saved(checkpoint, model, settings) if checkpoint is not None else None
-    resumed = saved.read() if saved is not None and checkpoint.resume and os.path.exists(checkpoint.path) else None
-    iterations = stage.iterations
-    history: list[float] = []
-    current = model
+    @property
+    def budget(self) -> int:
+        return self.iterations
 
-    def on_step(offset):
-        if report is None:
-            return None
-        return lambda done, value: report(offset + done, stage.iterations, value, float("nan"))
+    def with_budget(self, budget: int) -> _Steps:
+        return dataclasses.replace(self, iterations=budget)
 
-    warm = model.warm_start() if stage.warm_start else None
-    if warm is not None:
-        simpler, to_model = warm
-        first = max(1, iterations // 2)
-        if resumed is None or resumed["phase"] == 0:
-            simpler, values = _minimise(stage.rtol, simpler, X, T, loss_fn, first, progress, f"{name} (warm start)",
-                                        saved, 0, resumed, on_step=on_step(0))
-            resumed = None
-            history += values
-            current = to_model(simpler, X)
-        else:
-            history += resumed["warm_history"]
-        iterations = max(1, iterations - first)
-    fitted, values = _minimise(stage.rtol, current, X, T, loss_fn, iterations, progress, name, saved, 1, resumed,
-                               history, on_step(len(history)))
-    history += values
-    crit, train_loss, val_loss = losses(fitted)
-    crit0, train0, val0 = losses(model)
-    kept = bool(np.isfinite(crit) and crit < crit0)
-    if not kept and not np.isfinite(crit0):
-        raise FloatingPointError(f"{name}: the loss is not finite at the start nor at the end; check the weights and "
-                                 "the data")
-    if report is not None:
-        report(len(history), stage.iterations, train_loss, val_loss)
-    hist = {"epoch": np.arange(1, len(history) + 1), "train_loss": np.asarray(history),
-            "val_loss": np.full(len(history), np.nan)}
-    rec = StageRecord(
-        optimiser="LevenbergMarquardt", settings=dataclasses.asdict(stage), iterations=len(history),
-        train_loss=train_loss if kept else train0, val_loss=val_loss if kept else val0, kept=kept,
-        wall_time_s=time.perf_counter() - start, details={"train_loss_before": train0, "val_loss_before": val0},
-    )
-    return (fitted if kept else model), rec, hist
+    def run(self, problem: AbstractProblem, context: Context) -> Result:
+        start = time.perf_counter()
+        saved = resumed = None
+        if context.checkpoint is not None:
+            saved = _Saved(context.checkpoint, context.owner or problem, context.file_settings, context.earlier)
+            if context.checkpoint.resumable():
+                read = saved.read()
+                resumed = read if read["phase"] == context.phase else None
+        y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
+                              context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
+                              context.phase, resumed, context.earlier, context.on_step())
+        record = StageRecord(optimiser="LevenbergMarquardt", settings={}, iterations=len(values),
+                             train_loss=float("nan"), val_loss=float("nan"), kept=True,
+                             wall_time_s=time.perf_counter() - start)
+        return Result(y, record, history(values))
+
+
+@dataclasses.dataclass(frozen=True)
+class LevenbergMarquardt(AbstractResumableStage):
+    r"""Levenberg-Marquardt on the residuals $r$ of a least-squares objective
+    (`learn.AbstractLeastSquares`: the state and alpha losses, `learn.TrajectoryLoss`). Each
+    step evaluates $r$ and its Jacobian $J$ once and solves
+    $(J^TJ + \lambda D)\delta = -J^Tr$ by a lineax Cholesky, $D$ the largest
+    $\mathrm{diag}(J^TJ)$ seen (Marquardt's scaling), $\lambda$ by Nielsen's rule; the loop
+    runs on the host between two compiled functions (`learn/_solvers/_levenberg_marquardt.py`
+    says why not optimistix).
+
+    For a few dozen to a few hundred unknowns it reaches the minimum of a least-squares loss
+    in tens of steps where BFGS takes hundreds (BENCHMARKS.md, "Learning from observations");
+    each step costs $p$ forward passes for $p$ weights ($p + d$ with fitted starts: a
+    structured Jacobian), so for the thousands of weights of an MLP use `QuasiNewton` (a step
+    that would hold more than 2000 passes is refused).
+
+    `iterations`: steps at most; `rtol`: stop once the loss has fallen by less than `rtol` of
+    its value over the last 3 steps (0: only when no damping lowers it); `warm_start`: as
+    `QuasiNewton`'s (half the steps on the simpler problem a G-LPNet offers, then the rest
+    from its fit: `learn.WarmStart`). The result is kept only if it lowers the selection loss
+    (validation, or training without a validation set: `learn.KeepIfBetter`). Deterministic;
+    resumable with a `learn.Checkpoint`.
+    """
+
+    iterations: int = 200
+    rtol: float = 1e-10
+    warm_start: bool = False
+
+    def __post_init__(self):
+        positive_int(self.iterations, "LevenbergMarquardt.iterations")
+        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
+            raise ValueError(f"LevenbergMarquardt.rtol must be a number in [0, 1); got {self.rtol!r}")
+        if not isinstance(self.warm_start, (bool, np.bool_)):
+            raise TypeError(f"LevenbergMarquardt.warm_start must be True or False; got {self.warm_start!r}")
+
+    @property
+    def budget(self) -> int:
+        return self.iterations
+
+    def with_budget(self, budget: int) -> LevenbergMarquardt:
+        return dataclasses.replace(self, iterations=budget)
+
+    def composed(self) -> AbstractStage:
+        """The stage as wrappers around the steps: keep-if-better, after the warm start if
+        asked."""
+        steps: AbstractStage = _Steps(self.iterations, self.rtol)
+        return KeepIfBetter(WarmStart(steps) if self.warm_start else steps)
+
+    def check(self, problem: AbstractProblem, context: Context) -> None:
+        super().check(problem, context)
+        if not isinstance(problem.objective, AbstractLeastSquares):
+            raise ValueError(f"learn.LevenbergMarquardt needs a least-squares loss (a learn.AbstractLeastSquares, "  # noqa: TRY004
+                             f"with residuals); {problem.objective!r} is not one: use learn.QuasiNewton")
+        check_size(problem.objective, problem.y0, problem.train)
+
+    def run(self, problem: AbstractProblem, context: Context) -> Result:
+        self.check(problem, context)
+        context = dataclasses.replace(context, total=self.iterations,
+                                      file_settings={**context.file_settings, **dataclasses.asdict(self)})
+        result = self.composed().run(problem, context)
+        record = dataclasses.replace(result.record, optimiser="LevenbergMarquardt",
+                                     settings=dataclasses.asdict(self))
+        return Result(result.y, record, result.history)
 
 
 class _Saved:
     r"""A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` the
     current weights, `best` the same after the warm start (every accepted step lowers the
-    training loss) and the model's starting weights during it, `optimizer` the damping
+    training loss) and the owner's starting weights during it, `optimizer` the damping
     $\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
     `phase` 0 while fitting the warm start's simpler map, 1 after."""
 
-    def __init__(self, checkpoint, model, settings):
-        self.path = os.fspath(checkpoint.path)
+    def __init__(self, checkpoint, owner: AbstractProblem, settings: dict[str, Any], earlier=()):
+        self.path = str(checkpoint.path)
         self.every = checkpoint.every
-        self.model = model
+        self.owner = owner
         self.settings = settings
-        self.attrs = model.file_attributes()
+        self.attrs = owner.file_attributes()
 
     def read(self) -> dict:
-        attrs, groups = read_resumable(self.path, self.model, self.settings)
+        attrs, groups = read_resumable(self.path, self.owner, self.settings)
         lam, nu, D = groups["optimizer"]
         losses = list(np.asarray(groups["history"]["train_loss"]))
         phase = int(attrs.get("phase", 1))
         done = int(attrs["epoch"])
         return {"phase": phase, "weights": groups["weights"], "lam": float(lam), "nu": float(nu), "D": np.asarray(D),
                 "values": losses[len(losses) - done:] if phase == 1 else losses,
-                "warm_history": losses[: len(losses) - done] if phase == 1 else [],
                 "elapsed": float(attrs["elapsed_s"])}
 
     def write(self, phase, model, lam, nu, D, values, earlier, elapsed):
-        leaves = _checkpoint.array_leaves(model)
+        leaves = _files.array_leaves(model)
         # `best` is what loading the file as a model gives: during the warm start (the simpler
-        # map's weights in `weights`) the model's own starting weights
-        best = leaves if phase == 1 else _checkpoint.array_leaves(self.model)
+        # map's weights in `weights`) the owner's own starting weights
+        best = leaves if phase == 1 else _files.array_leaves(self.owner.y0)
         losses = np.asarray([*earlier, *values])
-        _checkpoint.write(self.path, {**self.attrs, "epoch": len(values), "best_epoch": len(losses),
-                                      "best_loss": float(losses[-1]) if losses.size else float("nan"),
-                                      "elapsed_s": float(elapsed), "fit_settings": self.settings, "phase": phase},
-                          {"weights": leaves, "best": best,
-                           "optimizer": [np.asarray(lam), np.asarray(nu), np.asarray(D)],
-                           "history": {"epoch": np.arange(1, losses.size + 1), "train_loss": losses,
-                                       "val_loss": np.full(losses.size, np.nan)}})
+        _files.write(self.path, {**self.attrs, "epoch": len(values), "best_epoch": len(losses),
+                                 "best_loss": float(losses[-1]) if losses.size else float("nan"),
+                                 "elapsed_s": float(elapsed), "fit_settings": self.settings, "phase": phase},
+                     {"weights": leaves, "best": best,
+                      "optimizer": [np.asarray(lam), np.asarray(nu), np.asarray(D)],
+                      "history": {"epoch": np.arange(1, losses.size + 1), "train_loss": losses,
+                                  "val_loss": np.full(losses.size, np.nan)}})
 
 
-def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None, phase=1, resumed=None,
+def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=None, phase=1, resumed=None,
               earlier=(), on_step=None):
     """`(model, losses)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
     once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
@@ -217,16 +257,15 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
     `on_step(steps done, loss)` after every step."""
     start = time.perf_counter()
     if resumed is not None:
-        model = _checkpoint.replace_array_leaves(model, resumed["weights"], "weights")
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    fn = _compiled(("residuals", _Residuals(loss_fn, static, params)), lambda: _Residuals(loss_fn, static, params))
-    x = ravel_pytree(params)[0]
-    check_size(model, loss_fn, X, T)
-    r, J = fn.jacobian(x, X, T)
+        model = _files.replace_array_leaves(model, resumed["weights"], "weights")
+    fn = residuals_of(objective, model)
+    x = ravel_pytree(eqx.filter(model, eqx.is_inexact_array))[0]
+    check_size(objective, model, args)
+    r, J = fn.jacobian(x, args)
     cost = float(r @ r)  # always from the Jacobian's call: a resumed run starts from the same number
     if not np.isfinite(cost):
         raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
-    scale = float(loss_fn.count(model, X, T)) if hasattr(loss_fn, "count") else float(r.size)  # sum r^2 -> loss
+    scale = float(objective.count(model, args))  # sum r^2 -> loss
     D, lam, nu = None, 1e-3, 2.0
     values: list[float] = []
     elapsed0 = 0.0
@@ -257,7 +296,7 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
                 delta = _damped_step(A, g, D, lam)
                 if bool(jnp.all(jnp.isfinite(delta))):
                     x_new = x + delta
-                    r_new = fn.residuals(x_new, X, T)
+                    r_new = fn.residuals(x_new, args)
                     cost_new = float(r_new @ r_new)
                     predicted = -float(2 * g @ delta + delta @ (A @ delta))  # model decrease of sum r^2
                     if np.isfinite(cost_new) and cost_new < cost and predicted > 0:
@@ -271,7 +310,7 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
             if not accepted:  # no damping lowers the loss: a minimum to round-off
                 break
             x = x_new
-            r, J = fn.jacobian(x, X, T)
+            r, J = fn.jacobian(x, args)
             cost = float(r @ r)
             values.append(cost / scale)
             bar.update(1)
@@ -288,14 +327,14 @@ def _minimise(rtol, model, X, T, loss_fn, iterations, progress, desc, saved=None
     return fn.model(x), values
 
 
-def check_size(model, loss_fn, X, T) -> None:
-    """`ValueError` if a Levenberg-Marquardt step on `model` would hold a Jacobian too large
-    for memory (`MAX_JACOBIAN` entries or `MAX_PASSES` forward passes)."""
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    fn = _Residuals(loss_fn, static, params)
-    n_unknowns = ravel_pytree(params)[0].size
-    n_residuals = jax.eval_shape(fn.residuals, ravel_pytree(params)[0], X, T).shape[0]
-    passes = n_unknowns - (params.starts.size - params.starts.shape[-1] if fn.blocks else 0)
+def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> None:
+    """`ValueError` if a Levenberg-Marquardt step on `y` would hold a Jacobian too large for
+    memory (`MAX_JACOBIAN` entries or `MAX_PASSES` forward passes)."""
+    fn = _Residuals(objective, y)
+    x = ravel_pytree(eqx.filter(y, eqx.is_inexact_array))[0]
+    n_unknowns = x.size
+    n_residuals = jax.eval_shape(fn.residuals, x, args).shape[0]
+    passes = objective.forward_passes(y)
     if n_residuals * n_unknowns > MAX_JACOBIAN or passes > MAX_PASSES:
         raise ValueError(
             f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {n_unknowns} unknowns, "

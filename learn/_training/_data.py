@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import Trajectories
+from integrators.internals import validation_split
 from liepoisson.internals import check_casimirs_agree, fraction, pairs, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -27,15 +28,8 @@ class PairData:
 
 
 def _split(y0, y1, validation_fraction, seed):
-    n = y0.shape[0]
-    n_val = round(validation_fraction * n)  # as integrators.Trajectories.split
-    if n - n_val < 1:
-        raise ValueError(
-            f"validation_fraction={validation_fraction} leaves no training pairs out of {n}"
-        )
-    perm = np.random.default_rng(seed).permutation(n)
-    tr, va = np.sort(perm[n_val:]), np.sort(perm[:n_val])
-    return (y0[tr], y1[tr]), (y0[va], y1[va])
+    train, val = validation_split(y0.shape[0], validation_fraction, seed, "pairs")
+    return (y0[train], y1[train]), (y0[val], y1[val])
 
 
 # Pairs whose Casimirs differ by more than this (relative to |grad C| |y|) cannot be joined by a

@@ -5,6 +5,7 @@ then composed by a higher-order method and fitted again."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -13,14 +14,17 @@ from numpy.typing import ArrayLike
 
 from integrators import Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
+from liepoisson.internals import show_progress
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._fit import fit, fit_observations, training_record
 from .._models._glpnet import GLPNet, check_method
 from .._models._learned_terms import RidgeTerms
-from ._observed import TrajectoryLoss, information_criterion
-from .._solvers._optimisers import LevenbergMarquardt, QuasiNewton
+from .._solvers._levenberg_marquardt import LevenbergMarquardt
+from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
+from .._solvers._stage import Context
+from ._fit import fit, resolve_loss, solve, training_record
+from ._observed import TrajectoryLoss, information_criterion
 
 
 def fit_splitting(
@@ -72,10 +76,12 @@ def fit_splitting(
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
-    if isinstance(data, Observations):
-        method = Strang if method is None else method
-        iterations = LM_ITERATIONS if iterations is None else iterations
-        return _fit_observed(system, data, method, loss, activation, iterations, key, common)
+    return _recipe(data, system, method, loss, activation, iterations, key, common)
+
+
+@functools.singledispatch
+def _recipe(data, system, method, loss, activation, iterations, key, common):
+    """Pairs and trajectories: Strang, then the same pieces composed by `method`, by BFGS."""
     iterations = BFGS_ITERATIONS if iterations is None else iterations
     if loss is not None:
         raise ValueError("loss= is for observations (integrators.Observations); pairs and Trajectories are fitted on "
@@ -107,8 +113,16 @@ FAMILIES = {
 }
 
 
-def _fit_observed(system, data, method, loss, activation, iterations, key, common):
-    """Fit each family (or the one of `activation`) to the observations; the lowest BIC wins."""
+@_recipe.register
+def _(data: Observations, system, method, loss, activation, iterations, key, common):
+    """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
+    through `method`; the lowest BIC wins."""
+    method = Strang if method is None else method
+    iterations = LM_ITERATIONS if iterations is None else iterations
+    loss = resolve_loss(loss, data)
+    context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
+    split = {"h": common["h"], "validation_fraction": common["validation_fraction"], "seed": common["seed"],
+             "normalise": False}
     families = FAMILIES if activation is None else {
         activation: {"activation": activation, "linear_term": activation != "identity", "bias": True}}
     fits = []
@@ -118,17 +132,16 @@ def _fit_observed(system, data, method, loss, activation, iterations, key, commo
         # Each family from its own fit to the one-step loss (a nearly convex start for the
         # rollouts; starting a family from the fit of the one it contains can stall in the
         # smaller family's basin: BENCHMARKS.md).
-        first, *_ = fit_observations(
-            net, data, (LevenbergMarquardt(iterations, RTOL, warm_start=settings["activation"] != "identity"),),
-            TrajectoryLoss(window=1, latent=False), common["h"], common["validation_fraction"], common["seed"],
-            common["progress"], None)
-        fitted, records, history, fit_settings, (loss_fn, train) = fit_observations(
-            first.model, data, (LevenbergMarquardt(iterations, RTOL),), loss, common["h"],
-            common["validation_fraction"], common["seed"], common["progress"], None)
-        criterion = information_criterion(fitted, loss_fn, *train)
-        records[-1] = dataclasses.replace(records[-1], details={**records[-1].details, **criterion, "family": name})
-        record = training_record(fitted.model, fit_settings, records, history, f"observations: {fit_settings['loss']}")
-        fits.append((criterion["bic"], len(fits), fitted.model, record))
+        one_step = TrajectoryLoss(window=1, latent=False).problem(net, data, **split)
+        first, _ = solve(one_step, (LevenbergMarquardt(iterations, RTOL, warm_start=settings["activation"] != "identity"),),
+                         context)
+        problem, results = solve(loss.problem(first.map(first.y0), data, **split),
+                                 (LevenbergMarquardt(iterations, RTOL),), context)
+        criterion = information_criterion(problem, problem.y0)
+        last = results[-1]
+        results[-1] = dataclasses.replace(last, record=dataclasses.replace(
+            last.record, details={**last.record.details, **criterion, "family": name}))
+        fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
     best = min(fits, key=lambda f: (f[0], f[1]))
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
 

@@ -14,7 +14,6 @@ their Casimirs, and each trajectory's leaf is estimated from all its observation
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Any
 
@@ -25,7 +24,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from integrators import Observations
-from liepoisson.internals import positive_float, positive_int
+from liepoisson.internals import casimir_scale, positive_float, positive_int
+
+from .._models._base import AbstractCasimirConservingMap
+from .._solvers._problem import AbstractLeastSquares, AbstractStructuredJacobian
+from ._losses import AbstractLoss
+from ._problem import Description, Fitted, FittedProblem
 
 #: A trajectory whose observations' Casimirs spread (standard deviation) by more than this
 #: fraction of their scale |grad C| |y| fits no common leaf: the noise is of the order of the
@@ -33,8 +37,7 @@ from liepoisson.internals import positive_float, positive_int
 LEAF_SPREAD_MAX = 0.1
 
 
-@dataclasses.dataclass(frozen=True)
-class TrajectoryLoss:
+class TrajectoryLoss(AbstractLoss):
     r"""How `learn.fit` compares a map with `integrators.Observations`.
 
     - `window`: intervals per segment (the map is rolled out `window` observations ahead from
@@ -49,11 +52,11 @@ class TrajectoryLoss:
     with its own $\Delta t$.
     """
 
-    window: int | None = None
-    latent: bool = True
-    max_step: float | None = None
+    window: int | None = eqx.field(static=True, default=None)
+    latent: bool = eqx.field(static=True, default=True)
+    max_step: float | None = eqx.field(static=True, default=None)
 
-    def __post_init__(self):
+    def __check_init__(self):
         if self.window is not None:
             positive_int(self.window, "TrajectoryLoss.window")
         if not isinstance(self.latent, (bool, np.bool_)):
@@ -65,6 +68,38 @@ class TrajectoryLoss:
     def name(self) -> str:
         window = "trajectory" if self.window is None else f"window {self.window}"
         return f"{window}, {'latent starts' if self.latent else 'observed starts'}"
+
+    def problem(self, model, data: Observations, *, h, validation_fraction, seed, normalise) -> FittedProblem:
+        """Training and held-out trajectories cut into segments; the map's `h` set (given `h`,
+        its own, or the median interval of the data)."""
+        if normalise:
+            raise ValueError("normalise=True sets an MLP's scalings from pairs at one step; with observations, "
+                             "build the map with its scalings (input_scaling=, output_scaling=) instead")
+        if not isinstance(data, Observations):
+            raise TypeError(f"learn.TrajectoryLoss compares a map with integrators.Observations; got "
+                            f"{type(data).__name__} (pairs and Trajectories are fitted with the state loss)")
+        if data.system.dim != model.system.dim:
+            raise ValueError(f"data has states of dimension {data.system.dim} ({data.system!r}); the "
+                             f"model is for {model.system!r} (dimension {model.system.dim})")
+        if isinstance(model, AbstractCasimirConservingMap):
+            check_leaves(data, "data")
+        train, val = data.split(validation_fraction, seed)
+        substeps = substeps_for(data, self.max_step)
+        if h is not None:
+            h = positive_float(h, "h")
+        elif model.h is not None:
+            h = float(model.h)
+        else:
+            h = float(np.median(data.intervals()[2]))
+        model = eqx.tree_at(lambda m: m.h, model, h, is_leaf=lambda v: v is None)
+        seg = segments(train, self, substeps)
+        held_out = None if val is None else segments(val, self, substeps, held_out=True)
+        y0 = Fitted(model, seg.states[:, 0] if self.latent else None)
+        description = Description(
+            loss=f"observations: {self.name}", h=h, n_train=int(train.n_observations),
+            n_val=0 if val is None else int(val.n_observations), seed=int(seed),
+            validation_fraction=float(validation_fraction), max_step=self.max_step, substeps=substeps)
+        return FittedProblem(SegmentsObjective(), y0, seg, held_out, description)
 
 
 class Segments(eqx.Module):
@@ -88,7 +123,7 @@ def check_leaves(observations: Observations, what: str = "observations") -> None
     for j, y in enumerate(observations.states):
         c = np.asarray(system.casimirs(y)).reshape(y.shape[0], -1)
         g = np.asarray(system.casimir_gradients(y)).reshape(y.shape[0], -1, y.shape[1])
-        scale = np.mean(np.linalg.norm(g, axis=-1) * np.linalg.norm(y, axis=-1)[:, None], axis=0)
+        scale = np.mean(casimir_scale(g, y), axis=0)
         spread = np.std(c, axis=0) / np.maximum(scale, np.finfo(float).tiny)
         if np.any(spread > LEAF_SPREAD_MAX):
             i = int(np.argmax(spread))
@@ -120,45 +155,14 @@ def segments(observations: Observations, loss: TrajectoryLoss, substeps: int, he
         states[s, : y.shape[0]] = y
         states[s, y.shape[0] :] = y[-1]
     index = np.full(len(pieces), -1) if held_out else np.arange(len(pieces))
-    return Segments(jnp.asarray(index), jnp.asarray(dt), jnp.asarray(mask), jnp.asarray(states), substeps)
+    return Segments(jnp.asarray(index, dtype=jnp.int32), jnp.asarray(dt), jnp.asarray(mask), jnp.asarray(states),
+                    substeps)
 
 
 def substeps_for(observations: Observations, max_step: float | None) -> int:
     if max_step is None:
         return 1
     return max(1, math.ceil(float(np.max(observations.intervals()[2])) / max_step - 1e-12))
-
-
-class Fitted(eqx.Module):
-    """What the observation loss optimises: the map and, with errors in variables, the fitted
-    start of every training segment `(S, dim)`."""
-
-    model: Any
-    starts: jax.Array | None
-
-    @property
-    def system(self):
-        return self.model.system
-
-    def hyperparameters(self):
-        return self.model.hyperparameters()
-
-    def reinitialised(self, key):
-        return Fitted(self.model.reinitialised(key), self.starts)
-
-    def warm_start(self):
-        warm = self.model.warm_start()
-        if warm is None:
-            return None
-        simpler, mapped = warm
-
-        def to_this(fitted: Fitted, inputs: jax.Array) -> Fitted:
-            # the map's warm start is mapped with the observed states, which `inputs` carries
-            _, _, mask, states = unpack(inputs, self.model.system.dim)
-            present = np.asarray(mask).reshape(-1) > 0
-            return Fitted(mapped(fitted.model, states.reshape(-1, states.shape[-1])[present]), fitted.starts)
-
-        return Fitted(simpler, self.starts), to_this
 
 
 def advance(model: Any, y: jax.Array, dt: jax.Array, substeps: int) -> jax.Array:
@@ -182,44 +186,47 @@ def segment_predictions(model: Any, start: jax.Array, dt: jax.Array, mask: jax.A
     return jnp.concatenate([start[None], ys])
 
 
-@dataclasses.dataclass(frozen=True)
-class ObservationLoss:
-    """`loss(fitted, inputs, targets)`: the mean squared difference over every present
-    observation of the segments packed in `inputs` (`pack`), `targets` their observed states
-    `(S, L, dim)`."""
+class SegmentsObjective(AbstractStructuredJacobian):
+    """`f(fitted, segments)`: the mean squared difference over every present observation of the
+    segments (a `Segments`) between the map rolled out from each segment's start (fitted, or
+    observed) and the observed states."""
 
-    substeps: int
+    def __call__(self, fitted: Fitted, args: Segments) -> jax.Array:
+        squared, mask = self._squared(fitted, args)
+        return jnp.sum(squared) / (jnp.sum(mask) * args.states.shape[-1])
 
-    def __call__(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> jax.Array:
-        squared, mask = self.squared(fitted, inputs, targets)
-        return jnp.sum(squared) / (jnp.sum(mask) * targets.shape[-1])
-
-    def count(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> int:
+    def count(self, fitted: Fitted, args: Segments) -> int:
         """How many residual components the loss averages: the present observations that are
         predictions (a start taken as observed is not), times the dimension."""
-        index, _, mask, _ = unpack(jnp.asarray(inputs), targets.shape[-1])
-        observed = np.ones(index.shape, bool) if fitted.starts is None else np.asarray(index) < 0
-        present = np.asarray(mask).copy()
+        observed = np.ones(args.index.shape, bool) if fitted.starts is None else np.asarray(args.index) < 0
+        present = np.asarray(args.mask).copy()
         present[:, 0] = np.where(observed, 0.0, present[:, 0])
-        return round(float(np.sum(present))) * targets.shape[-1]
+        return round(float(np.sum(present))) * args.states.shape[-1]
 
-    def residuals(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> jax.Array:
+    def residuals(self, fitted: Fitted, args: Segments) -> jax.Array:
         """Predicted minus observed states, every component of every segment `(S, L, dim)`,
         zero where no observation is."""
-        return self.squared(fitted, inputs, targets, residuals=True)
+        return self._differences(fitted, args)[0]
 
-    def jacobian(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array) -> tuple[jax.Array, jax.Array]:
+    def forward_passes(self, fitted: Fitted) -> int:
+        """The map's weights and one pass per state direction (not per fitted start)."""
+        weights = sum(a.size for a in jax.tree_util.tree_leaves(eqx.filter(fitted.model, eqx.is_inexact_array)))
+        return int(weights + (0 if fitted.starts is None else fitted.starts.shape[-1]))
+
+    def jacobian(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array]:
         r"""`(residuals (n,), Jacobian (n, p + S d))` with respect to the flat trainable leaves
         of `fitted` (the map's $p$ weights, then its $S$ starts of dimension $d$), built from
         its blocks: segment $s$ depends on the weights and on its own start only (training
         segments: `index` is their row), so $p + d$ forward passes (the same $d$ directions
-        pushed into every start at once) instead of $p + Sd$ (`learn.LevenbergMarquardt`).
-        Each start belongs to one segment, as `observed_objective` builds them."""
+        pushed into every start at once) instead of $p + Sd$. Each start belongs to one
+        segment, as `TrajectoryLoss.problem` builds them; without fitted starts, `jax.jacfwd`."""
+        if fitted.starts is None:
+            return AbstractLeastSquares.jacobian(self, fitted, args)
         params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
         flat, unravel = jax.flatten_util.ravel_pytree(params)
 
         def residuals(w, s):
-            return self.residuals(Fitted(eqx.combine(unravel(w), static), s), inputs, targets)
+            return self.residuals(Fitted(eqx.combine(unravel(w), static), s), args)
 
         r = residuals(flat, fitted.starts)
         by_weight = jax.jacfwd(residuals)(flat, fitted.starts)  # (S, L, dim, p)
@@ -230,17 +237,14 @@ class ObservationLoss:
 
         by_start = jax.vmap(push, out_axes=-1)(jnp.eye(dim, dtype=flat.dtype))  # (S, L, dim, d)
         # segment s moves with the start of its row `index[s]` (none for a held-out one, -1)
-        index = unpack(jnp.asarray(inputs), dim)[0].astype(jnp.int32)
-        rows_of = jax.nn.one_hot(index, n_seg, dtype=flat.dtype)  # (S, n_starts), zero row for -1
+        rows_of = jax.nn.one_hot(args.index.astype(jnp.int32), n_seg, dtype=flat.dtype)  # zero row for -1
         blocks = by_start[:, :, :, None, :] * rows_of[:, None, None, :, None]
         rows = r.size
         return r.reshape(-1), jnp.concatenate([by_weight.reshape(rows, -1), blocks.reshape(rows, -1)], axis=1)
 
-    def squared(self, fitted: Fitted, inputs: jax.Array, targets: jax.Array, residuals: bool = False):
-        """`(squared differences (S, L), mask (S, L))`, or the differences `(S, L, dim)`."""
-        inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)
-        index, dt, mask, _ = unpack(inputs, targets.shape[-1])
-        index = index.astype(jnp.int32)
+    def _differences(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array]:
+        """`(differences (S, L, dim), mask (S, L))`: zero where no prediction is compared."""
+        index, dt, mask, targets = args.index.astype(jnp.int32), args.dt, args.mask, args.states
         if fitted.starts is None:
             observed = jnp.ones(index.shape, bool)
             start = targets[:, 0]
@@ -248,92 +252,34 @@ class ObservationLoss:
             observed = index < 0
             start = jnp.where(observed[:, None], targets[:, 0], fitted.starts[jnp.clip(index, 0)])
         predicted = jax.vmap(segment_predictions, in_axes=(None, 0, 0, 0, None))(
-            fitted.model, start, dt, mask, self.substeps)
+            fitted.model, start, dt, mask, args.substeps)
         # a start taken as observed is not a prediction: it is left out of the mean
         mask = mask.at[:, 0].set(jnp.where(observed, 0.0, mask[:, 0]))
-        difference = (predicted - targets) * mask[..., None]
-        if residuals:
-            return difference
+        return (predicted - targets) * mask[..., None], mask
+
+    def _squared(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array]:
+        """`(squared differences (S, L), mask (S, L))`."""
+        difference, mask = self._differences(fitted, args)
         return jnp.sum(difference**2, axis=-1), mask
 
 
-def unpack(inputs: jax.Array, dim: int) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
-    """`(index (S,), dt (S, L-1), mask (S, L), states (S, L, dim))` from `pack`'s inputs."""
-    length = inputs.shape[1] // (dim + 2)
-    return (inputs[:, 0], inputs[:, 1:length], inputs[:, length : 2 * length],
-            inputs[:, 2 * length :].reshape(inputs.shape[0], length, dim))
-
-
-def pack(seg: Segments) -> tuple[np.ndarray, np.ndarray]:
-    """`(inputs, targets)` arrays of the segments for the optimisers (samples on axis 0):
-    inputs `[index, dt (L-1), mask (L), states (L dim)]` per segment (the states for a warm
-    start's mapping), targets the states `(S, L, dim)`."""
-    states = np.asarray(seg.states)
-    inputs = np.concatenate([np.asarray(seg.index, dtype=np.float64)[:, None], np.asarray(seg.dt),
-                             np.asarray(seg.mask), states.reshape(states.shape[0], -1)], axis=1)
-    return inputs, states
-
-
-def observed_objective(model: Any, observations: Observations, loss: Any, h: float | None,
-                       validation_fraction: float, seed: int):
-    """`(fitted, (inputs, targets), (inputs_val, targets_val), loss_fn, settings)` for
-    `learn.fit` on observations: training and held-out trajectories cut into segments; the
-    map's `h` set (given `h`, its own, or the median interval of the data)."""
-    if loss is None:
-        loss = TrajectoryLoss()
-    elif loss == "state":
-        loss = TrajectoryLoss(window=1, latent=False)
-    if not isinstance(loss, TrajectoryLoss):
-        raise TypeError(f"with observations, loss must be a learn.TrajectoryLoss (or 'state', the one-step loss); "
-                        f"got {loss!r}")
-    if observations.system.dim != model.system.dim:
-        raise ValueError(f"data has states of dimension {observations.system.dim} ({observations.system!r}); the "
-                         f"model is for {model.system!r} (dimension {model.system.dim})")
-    if model.conserves_casimirs:
-        check_leaves(observations, "data")
-    train, val = observations.split(validation_fraction, seed)
-    substeps = substeps_for(observations, loss.max_step)
-    dt = observations.intervals()[2]
-    if h is not None:
-        h = positive_float(h, "h")
-    elif model.h is not None:
-        h = float(model.h)
-    else:
-        h = float(np.median(dt))
-    model = eqx.tree_at(lambda m: m.h, model, h, is_leaf=lambda v: v is None)
-    seg = segments(train, loss, substeps)
-    inputs, targets = pack(seg)
-    if val is None:
-        val_inputs, val_targets = np.zeros((0, inputs.shape[1])), np.zeros((0, *targets.shape[1:]))
-    else:
-        val_inputs, val_targets = pack(segments(val, loss, substeps, held_out=True))
-    fitted = Fitted(model, jnp.asarray(targets[:, 0]) if loss.latent else None)
-    settings = {
-        "validation_fraction": float(validation_fraction), "seed": int(seed), "loss": loss.name,
-        "max_step": loss.max_step, "substeps": substeps, "h": h,
-        "n_train": int(train.n_observations), "n_val": 0 if val is None else int(val.n_observations),
-    }
-    return fitted, (inputs, targets), (val_inputs, val_targets), ObservationLoss(substeps), settings
-
-
-def information_criterion(fitted: Fitted, loss_fn: ObservationLoss, inputs: np.ndarray, targets: np.ndarray
-                          ) -> dict[str, float]:
+def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, float]:
     r"""The Bayesian information criterion of a map fitted to observations,
     $n\log(\mathrm{SSR}/n) + k\log n$: $n$ observed components, SSR the sum of squared
     residuals, $k$ the map's effective parameters (the numerical rank of the residuals'
     Jacobian with respect to its weights: redundant weights count once; the fitted starts,
     common to the maps compared, are left out). Lower is better."""
-    inputs, targets = jnp.asarray(inputs), jnp.asarray(targets)
+    objective, args = problem.objective, problem.train
     params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
 
     def residuals(x):
         model = eqx.combine(unravel(x), static)
-        return loss_fn.residuals(Fitted(model, fitted.starts), inputs, targets).reshape(-1)
+        return objective.residuals(Fitted(model, fitted.starts), args).reshape(-1)
 
     r = residuals(flat)
     J = np.asarray(jax.jacfwd(residuals)(flat))
-    n = int(np.sum(loss_fn.squared(fitted, inputs, targets)[1])) * targets.shape[-1]  # fitted components
+    n = int(np.sum(objective._squared(fitted, args)[1])) * args.states.shape[-1]  # fitted components
     ssr = float(jnp.sum(r**2))
     singular = np.linalg.svd(J, compute_uv=False)
     # A direction of the weights that moves the residuals 1e8 times less than the best

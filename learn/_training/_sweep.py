@@ -20,10 +20,12 @@ from integrators.internals import atomic_write_text, check_client, map_unordered
 from liepoisson.internals import positive_int, progress_bar, show_progress
 
 from .._models._base import AbstractLearnedMap, check_learned_map
-from ._fit import fit
 from .._models._load import load
-from .._solvers._optimisers import Adam, Checkpoint, QuasiNewton
+from .._solvers._adam import Adam
+from .._solvers._checkpoint import Checkpoint
+from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
+from ._fit import fit
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
 FIT_KEYS = ("seed", "epochs", "optimiser", "loss", "normalise", "validation_fraction")
