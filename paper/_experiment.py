@@ -127,11 +127,16 @@ def row_to_json(row: Any) -> dict[str, Any]:
 
 def row_from_json(cls: type, values: dict[str, Any]) -> Any:
     """The typed row of class `cls` that `row_to_json` wrote as `values` (an infinite figure,
-    stored as the string "inf", is a float again)."""
+    stored as the string "inf", is a float again; a figure that may be `None` and that an
+    older file does not record is `None`)."""
     def value(v: Any) -> Any:
         return float(v) if v in ("inf", "-inf") else v
 
-    return cls(**{f.name: value(values[f.name]) for f in dataclasses.fields(cls) if f.name in values})
+    def absent(f: dataclasses.Field) -> bool:  # a figure an older file did not record, where None is allowed
+        return f.name not in values and f.default is dataclasses.MISSING and "None" in str(f.type)
+
+    return cls(**{f.name: value(values[f.name]) if f.name in values else None
+                  for f in dataclasses.fields(cls) if f.name in values or absent(f)})
 
 
 @dataclasses.dataclass(frozen=True)
