@@ -103,7 +103,7 @@ def _diamond_family(y, theta):
 
 @dataclasses.dataclass(frozen=True)
 class Protocol:
-    """A study's system, its observations (trajectories x observations from `initial`), the
+    r"""A study's system, its observations (trajectories x observations from `initial`), the
     true model family `family(y, theta)` with its true parameters, and whether the differences
     of the diagonal of $H$ are reported (`diagonal_differences`: the rigid body, whose
     Hamiltonian is identified only modulo $|\Pi|^2$, so by its $1/I_i - 1/I_j$)."""
@@ -145,7 +145,7 @@ def test_set(protocol: Protocol, n: int = N_TEST, steps: int = STEPS_TEST) -> tu
 
 @dataclasses.dataclass(frozen=True)
 class RolloutFigures:
-    """The study's figures of rollouts against heyoka: `state_error`, the mean over initial
+    r"""The study's figures of rollouts against heyoka: `state_error`, the mean over initial
     conditions of the error at the end; `energy_error`, the max relative error of the true $H$
     against its initial value; `casimir_drift`, max $|C(t) - C(0)|$ in units of
     $|\nabla C|\,|y|$ at the start (a Casimir may vanish on the data; `None` for a system without

@@ -140,7 +140,7 @@ def dissipation_rate(system, states: np.ndarray, images: np.ndarray, h: float = 
 
 @dataclasses.dataclass(frozen=True)
 class W3Truth:
-    """heyoka's relaxation: Casimir drift, the largest rise of the energy between outputs, the
+    r"""heyoka's relaxation: Casimir drift, the largest rise of the energy between outputs, the
     flip time, the energy at the start and the end, $\gamma$ and the $\hat\gamma$ of its exact
     steps (the estimate's $O(h^2)$ bias)."""
 
@@ -155,7 +155,7 @@ class W3Truth:
 
 @dataclasses.dataclass(frozen=True)
 class W3Row:
-    """One model on one system, against heyoka over `STEPS` steps: max energy error relative to
+    r"""One model on one system, against heyoka over `STEPS` steps: max energy error relative to
     $H(t)$ and to the energy dissipated, flip time, Casimir drift, exact flows per step, the
     learned $\hat\gamma$; a classical map's Casimir drift over `LONG_STEPS` steps, cost per step
     (`integrators.step_timing`), observed and nominal order (`integrators.convergence`); a
