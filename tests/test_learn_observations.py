@@ -118,7 +118,7 @@ def _small_data() -> it.Observations:
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        pytest.param({"loss": "alpha"}, TypeError,
+        pytest.param({"loss": "alpha"}, ValueError,
                      r"loss must be a learn\.AbstractLoss \(TrajectoryLoss for this data.*\['state'\]; got 'alpha'",
                      id="loss a pair loss"),
         pytest.param({"loss": 3}, TypeError, r"loss must be a learn\.AbstractLoss \(TrajectoryLoss for this data.*got 3", id="loss a number"),

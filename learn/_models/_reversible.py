@@ -87,14 +87,6 @@ class Reversible(AbstractImplicitStepMap, AbstractCasimirConservingMap):
         r = jnp.asarray(self.symmetry)
         return r * self.lpnet.parametrisation.inverse_step(self.lpnet.alpha(r * w), r * m, self.h)
 
-    def _check_loss(self, loss):
-        if loss == "alpha":
-            raise ValueError(
-                "loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two per "
-                "step, whose parameters no pair determines: use loss='state'"
-            )
-        super()._check_loss(loss)
-
     def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
         return self.iterate(self.lpnet.step(y0), y1)
 

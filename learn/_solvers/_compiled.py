@@ -49,10 +49,18 @@ class FlatObjective:
         return (self.objective, self.static, self.layout)
 
     def __hash__(self):
-        return hash(self._key())
+        try:
+            return hash(self._key())
+        except TypeError:  # an objective holding arrays: equal only to itself, compiled per fit
+            return id(self)
 
     def __eq__(self, other):
-        return isinstance(other, FlatObjective) and self._key() == other._key()
+        if self is other:
+            return True
+        try:
+            return isinstance(other, FlatObjective) and bool(self._key() == other._key())
+        except TypeError:
+            return False
 
     def ravel(self, y: Any) -> tuple[jax.Array, jax.Array]:
         """`(x, h)` of `y` (`h` 0 when `y` has no step size)."""

@@ -171,7 +171,8 @@ def resolve_loss(loss: str | AbstractLoss | None, data: Any) -> AbstractLoss:
     named = named_losses(data)
     if loss is None or (isinstance(loss, str) and loss in named):
         return named[loss]
-    raise TypeError(f"loss must be a learn.AbstractLoss ({', '.join(type(v).__name__ for k, v in named.items() if k is None)}"
+    error = ValueError if isinstance(loss, str) else TypeError
+    raise error(f"loss must be a learn.AbstractLoss ({', '.join(type(v).__name__ for k, v in named.items() if k is None)}"
                     f" for this data, or learn.StateLoss(), learn.AlphaLoss(), learn.TrajectoryLoss(), ...) or one of "
                     f"{[k for k in named if k]}; got {loss!r}")
 

@@ -20,6 +20,7 @@ from liepoisson import vmap_samples
 
 from .._models._base import AbstractCasimirConservingMap, AbstractLearnedMap
 from .._models._lpnet import LPNet
+from .._models._reversible import Reversible
 from .._solvers._problem import AbstractLeastSquares
 from ._data import PairData, prepare
 from ._problem import Description, MapProblem
@@ -127,6 +128,11 @@ class AlphaLoss(AbstractPairsLoss):
     $y_1$ (`parametrisation.params_from_pair`), in units of the network's output scale."""
 
     def check_model(self, model):
+        if isinstance(model, Reversible):
+            raise ValueError(
+                "loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two per "
+                "step, whose parameters no pair determines: use loss='state'"
+            )
         if not isinstance(model, LPNet):
             raise ValueError(f"the alpha loss trains an LPNet's alpha; a {type(model).__name__} trains on loss in "  # noqa: TRY004
                              "['state']")
