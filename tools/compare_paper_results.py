@@ -4,7 +4,7 @@
 
 Walks each experiment's `metrics.json` in both folders and prints every number that differs by
 more than `rtol` (relative), every string that differs and every key found in one only. Timings
-(keys with `time`, `seconds` or `wall`, and W1's `cost_vs_strang`) are left out. W1's `rows` are
+(keys with `time`, `seconds` or `wall`, `fit_s`, `..._us`, and W1's `cost_vs_strang`) are left out. W1's `rows` are
 matched by (system, h, method), so runs with different sets of maps compare on the rows they
 share. Exit status 1 if anything differs. Standard library only.
 """
@@ -18,7 +18,7 @@ import re
 import sys
 from pathlib import Path
 
-TIMING = re.compile(r"(time|seconds|wall|cost_vs_strang)", re.IGNORECASE)
+TIMING = re.compile(r"(time|seconds|wall|cost_vs_strang|^fit_s$|_us$)", re.IGNORECASE)
 
 
 def _rows_by_key(rows: list) -> dict | list:

@@ -30,37 +30,52 @@ def compiled(key: Any, build: Callable[[], Any]) -> Any:
         return build()
 
 
-class FlatObjective:
-    r"""`f(x, (args, h))`: the objective at the `y` whose flat trainable leaves are `x`, with the
-    step size `h` of `y` traced (when `y` has one): equal (same hash) for the same objective,
-    structure and parameter layout whatever the step size, so that `jax.jit` caches and the
-    solvers compile once per structure, not once per fit."""
+class AbstractAtStructure:
+    """A function of the flat trainable leaves `x` of a `y` of one structure: the objective,
+    the fixed (non-trainable) part of `y`, and the layout of its leaves. Equal (same hash) for
+    the same objective, fixed part and layout, so that what is compiled for it is compiled once
+    per structure, not once per fit; an objective holding arrays is equal only to itself."""
 
-    def __init__(self, objective: Any, y: Any, has_h: bool):
+    def __init__(self, objective: Any, y: Any):
         params, static = eqx.partition(y, eqx.is_inexact_array)
         self.objective = objective
-        self.has_h = has_h
-        self.static = eqx.tree_at(lambda m: m.h, static, 0.0, is_leaf=lambda v: v is None) if has_h else static
+        self.static = static
         self.layout = (jax.tree_util.tree_structure(params),
                        tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(params)))
         self.unravel = ravel_pytree(params)[1]
 
     def _key(self):
-        return (self.objective, self.static, self.layout)
+        return (type(self), self.objective, self.static, self.layout)
 
     def __hash__(self):
         try:
             return hash(self._key())
-        except TypeError:  # an objective holding arrays: equal only to itself, compiled per fit
+        except TypeError:  # an objective holding arrays: compiled per fit
             return id(self)
 
     def __eq__(self, other):
         if self is other:
             return True
         try:
-            return isinstance(other, FlatObjective) and bool(self._key() == other._key())
+            return isinstance(other, AbstractAtStructure) and bool(self._key() == other._key())
         except TypeError:
             return False
+
+    def model(self, x: jax.Array) -> Any:
+        """The `y` whose flat trainable leaves are `x`."""
+        return eqx.combine(self.unravel(x), self.static)
+
+
+class FlatObjective(AbstractAtStructure):
+    r"""`f(x, (args, h))`: the objective at the `y` whose flat trainable leaves are `x`, with the
+    step size `h` of `y` traced (when `y` has one), so that one compilation serves every step
+    size."""
+
+    def __init__(self, objective: Any, y: Any, has_h: bool):
+        super().__init__(objective, y)
+        self.has_h = has_h
+        if has_h:
+            self.static = eqx.tree_at(lambda m: m.h, self.static, 0.0, is_leaf=lambda v: v is None)
 
     def ravel(self, y: Any) -> tuple[jax.Array, jax.Array]:
         """`(x, h)` of `y` (`h` 0 when `y` has no step size)."""
@@ -68,16 +83,12 @@ class FlatObjective:
         h = y.h if self.has_h and y.h is not None else 0.0
         return x, jnp.asarray(h, dtype=jnp.float64)
 
-    def unflatten(self, x: jax.Array, h: Any = None) -> Any:
-        """The `y` of flat leaves `x` (and step size `h`)."""
-        y = eqx.combine(self.unravel(x), self.static)
-        if self.has_h:
-            y = eqx.tree_at(lambda m: m.h, y, h)
-        return y
-
     def __call__(self, x: jax.Array, args_h: tuple[Any, jax.Array]) -> jax.Array:
         args, h = args_h
-        return self.objective(self.unflatten(x, h), args)
+        y = self.model(x)
+        if self.has_h:
+            y = eqx.tree_at(lambda m: m.h, y, h)
+        return self.objective(y, args)
 
 
 def flat_objective(objective: Any, y: Any, has_h: bool) -> FlatObjective:

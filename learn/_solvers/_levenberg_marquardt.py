@@ -30,7 +30,7 @@ from liepoisson.internals import positive_int
 
 from .. import _files
 from ._checkpoint import read_resumable
-from ._compiled import compiled
+from ._compiled import AbstractAtStructure, compiled
 from ._problem import AbstractLeastSquares, AbstractProblem
 from ._record import StageRecord
 from ._stage import (
@@ -60,40 +60,14 @@ LAMBDA_RANGE = (1e-16, 1e16)
 WINDOW = 3
 
 
-class _Residuals:
+class _Residuals(AbstractAtStructure):
     r"""The residuals $r(x)$ `(n,)` and Jacobian $J(x)$ `(n, p)` of `objective` for the `y`
-    whose flat trainable leaves are $x$, compiled. Equal (same hash) for the same objective,
-    structure and layout: compiled once per structure, not once per fit."""
+    whose flat trainable leaves are $x$, compiled once per structure."""
 
     def __init__(self, objective: AbstractLeastSquares, y: Any):
-        params, static = eqx.partition(y, eqx.is_inexact_array)
-        self.objective = objective
-        self.static = static
-        self.layout = (jax.tree_util.tree_structure(params),
-                       tuple((a.shape, str(a.dtype)) for a in jax.tree_util.tree_leaves(params)))
-        self.unravel = ravel_pytree(params)[1]
+        super().__init__(objective, y)
         self.residuals = jax.jit(self._residuals)
         self.jacobian = jax.jit(self._jacobian)
-
-    def _key(self):
-        return (self.objective, self.static, self.layout)
-
-    def __hash__(self):
-        try:
-            return hash(self._key())
-        except TypeError:  # an objective holding arrays: equal only to itself, compiled per fit
-            return id(self)
-
-    def __eq__(self, other):
-        if self is other:
-            return True
-        try:
-            return isinstance(other, _Residuals) and bool(self._key() == other._key())
-        except TypeError:
-            return False
-
-    def model(self, x):
-        return eqx.combine(self.unravel(x), self.static)
 
     def _residuals(self, x, args):
         return self.objective.residuals(self.model(x), args).reshape(-1)

@@ -129,7 +129,7 @@ class AlphaLoss(AbstractPairsLoss):
 
     def check_model(self, model):
         if isinstance(model, Reversible):
-            raise ValueError(
+            raise ValueError(  # noqa: TRY004
                 "loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two per "
                 "step, whose parameters no pair determines: use loss='state'"
             )
