@@ -5,6 +5,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 
@@ -125,9 +126,11 @@ def test_study_models_fit_and_simulate_through_one_interface():
 
     body = lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0))
 
+    vector_field = jax.jit(body.vector_field)  # LSODA calls it thousands of times: compiled once, not op by op
+
     class Exact:  # the true vector field, with pysindy's `predict` signature
         def predict(self, y):
-            return np.asarray(body.vector_field(y))
+            return np.asarray(vector_field(y))
 
     y0 = np.array([[0.6, -0.3, 0.74], [0.1, 0.9, -0.4]])
     reference = it.ground_truth(body, y0, 0.1, 20).states
