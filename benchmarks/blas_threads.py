@@ -27,7 +27,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from learn import _quasi_newton
+from learn._solvers import _quasi_newton
 from paper import e5_kirchhoff as e5
 
 from ._report import add_output_arguments, saved_results, write_json

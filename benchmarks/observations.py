@@ -3,25 +3,45 @@ regularly or unevenly sampled trajectories of a system whose Hamiltonian the lea
 given; the G-LPNet beside SINDy, the unstructured MLP and the parametric limit.
 
     python -m benchmarks.observations [--systems "rigid body" Kirchhoff diamond] [--noise 0 1e-3 1e-2]
-        [--sampling regular uneven] [--models G-LPNet limit SINDy MLP] [--data-seed 1] [--seed 0]
+        [--sampling regular uneven] [--models G-LPNet limit SINDy MLP] [--data-seed 1]
         [--activation identity|sigmoid] [--window K] [--observed-starts] [--bootstrap N]
         [--out benchmarks/results/observations.json]
 
 The protocols, models and figures are `paper.w2_observations`'s (its docstring says what each
 is). `--window` and `--observed-starts` set the G-LPNet's `learn.TrajectoryLoss` (default:
 whole trajectories, fitted starts); `--activation` fixes the G-LPNet's family of H~ instead of choosing it by BIC; the data
-seed draws initial states, times and noise; the seed the training.
+seed draws initial states, times and noise; the models train with W2's seed.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 import numpy as np
 
 import learn
 from benchmarks._report import default_out, write_json
 from paper import w2_observations as w2
+from paper._experiment import row_to_json
+from paper._study import SplittingModel
+
+MODELS = ("G-LPNet", "limit", "SINDy", "MLP")
+
+
+def _models(protocol: w2.Protocol, args: argparse.Namespace) -> dict:
+    """W2's models by label, with this run's settings (iterations, the G-LPNet's family and loss)."""
+    steps = 200 if args.iterations is None else args.iterations
+    mlp_iterations = 1000 if args.iterations is None else args.iterations
+    profile = w2.Profile((), (), (), iterations=mlp_iterations, steps=steps)
+    models = {model.label: model for model in w2.models(protocol, profile)}
+    loss = None
+    if args.window or args.observed_starts or args.max_step:
+        loss = learn.TrajectoryLoss(window=args.window, latent=not args.observed_starts, max_step=args.max_step)
+    glpnet = models["G-LPNet"]
+    assert isinstance(glpnet, SplittingModel)
+    models["G-LPNet"] = dataclasses.replace(glpnet, activation=args.activation, loss=loss)
+    return models
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -29,9 +49,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--systems", nargs="+", choices=list(w2.protocols()), default=["rigid body"])
     parser.add_argument("--noise", nargs="+", type=float, default=[0.0, 1e-3, 1e-2])
     parser.add_argument("--sampling", nargs="+", choices=["regular", "uneven"], default=["regular"])
-    parser.add_argument("--models", nargs="+", choices=list(w2.MODELS), default=["G-LPNet", "limit", "SINDy"])
+    parser.add_argument("--models", nargs="+", choices=list(MODELS), default=["G-LPNet", "limit", "SINDy"])
     parser.add_argument("--data-seed", type=int, default=w2.DATA_SEED)
-    parser.add_argument("--seed", type=int, default=w2.TRAIN_SEED)
     parser.add_argument("--activation", default=None, help="fix the G-LPNet's family of H~ (default: chosen by BIC)")
     parser.add_argument("--iterations", type=int, default=None,
                         help="Levenberg-Marquardt steps per stage of the G-LPNet and the limit (default 200), "
@@ -50,26 +69,20 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     for system in args.systems:
         protocol = protocols[system]
+        models = _models(protocol, args)
         y0, reference = w2.test_set(protocol)
         for sampling in args.sampling:
             for noise in args.noise:
                 data = w2.observations(protocol, noise, sampling, seed=args.data_seed)
                 for name in args.models:
-                    if not w2.applies(name, sampling):
+                    model = models.get(name)
+                    if model is None or not model.accepts(data):  # SINDy without pysindy; the MLP on uneven data
                         continue
-                    kwargs = {}
-                    if name != "SINDy" and args.iterations is not None:
-                        kwargs["iterations"] = args.iterations
-                    if name == "G-LPNet" and args.activation:
-                        kwargs["activation"] = args.activation
-                    if name == "G-LPNet" and (args.window or args.observed_starts or args.max_step):
-                        kwargs["loss"] = learn.TrajectoryLoss(window=args.window, latent=not args.observed_starts,
-                                                              max_step=args.max_step)
-                    row = {"system": system, "noise": noise, "sampling": sampling, "data_seed": args.data_seed,
-                           **w2.evaluate(protocol, name, data, y0, reference, seed=args.seed, **kwargs)}
-                    rows.append(row)
+                    row = w2.evaluate(protocol, model, data, y0, reference, system=system, noise=noise,
+                                      sampling=sampling)
+                    rows.append({**row_to_json(row), "data_seed": args.data_seed})
                     print(w2.line(row), flush=True)
-                if args.bootstrap and protocol.system.name == "RigidBody":
+                if args.bootstrap and protocol.diagonal_differences:
                     d = w2.bootstrap_differences(protocol, data, args.bootstrap, iterations=args.iterations)
                     true = w2.differences(protocol.true_theta)
                     rows.append({"system": system, "noise": noise, "sampling": sampling, "model": "G-LPNet bootstrap",

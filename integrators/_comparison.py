@@ -88,12 +88,12 @@ class Comparison:
 
 
 def _labelled(maps: list[AbstractStepMap]) -> dict[str, AbstractStepMap]:
-    """Label a sequence of maps by class and step size (numbered where that repeats)."""
+    """Label a sequence of maps by their `label` and step size (numbered where that repeats)."""
     out: dict[str, AbstractStepMap] = {}
     for i, m in enumerate(maps):
         if not isinstance(m, AbstractStepMap):
             raise TypeError(f"maps[{i}] must be an integrators.AbstractStepMap; got {type(m).__name__}")
-        label = type(m).__name__ if m.h is None else f"{type(m).__name__} h={m.h:g}"
+        label = m.label if m.h is None else f"{m.label} h={m.h:g}"
         out[label if label not in out else f"{label} ({i})"] = m
     return out
 

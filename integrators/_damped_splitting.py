@@ -13,7 +13,7 @@ from liepoisson.internals import positive_float
 from liepoisson.systems import AbstractExactTerm, DoubleBracket
 
 from ._lie_group import AbstractLieGroupMethod, CommutatorFree2
-from ._splitting._base import AbstractSplittingMethod, Flow, composition_flops, default_terms
+from ._splitting._base import AbstractSplittingMethod, Flow, composition_flops, default_terms, splitting_method
 from ._splitting._strang import Strang
 from ._step_map import AbstractStepMap, check_state
 
@@ -40,13 +40,14 @@ class DampedSplitting(AbstractStepMap):
     backward, which is harmless for $|\gamma h| \ll 1$.
 
     **Arguments:** `system`, a `DoubleBracket`; `h` > 0; `method`, an
-    `integrators.splitting` method class (default `Strang`); `dissipation`, a Lie-group method
-    class (default `CommutatorFree2`).
+    `integrators.splitting` method (default `Strang()`; a class stands for its instance; an
+    `ordering` orders the $N + 1$ pieces); `dissipation`, a Lie-group method class (default
+    `CommutatorFree2`).
     """
 
     system: DoubleBracket = eqx.field(static=True)
     h: float
-    method: type[AbstractSplittingMethod] = eqx.field(static=True)
+    method: AbstractSplittingMethod = eqx.field(static=True)
     dissipation: type[AbstractLieGroupMethod] = eqx.field(static=True)
     pieces: tuple[AbstractExactTerm, ...] = eqx.field(static=True)
 
@@ -54,7 +55,7 @@ class DampedSplitting(AbstractStepMap):
         self,
         system: DoubleBracket,
         h: float,
-        method: type[AbstractSplittingMethod] = Strang,
+        method: AbstractSplittingMethod | type[AbstractSplittingMethod] = Strang,
         dissipation: type[AbstractLieGroupMethod] = CommutatorFree2,
     ):
         if not isinstance(system, DoubleBracket):
@@ -62,8 +63,7 @@ class DampedSplitting(AbstractStepMap):
                 "system must be a liepoisson.systems.DoubleBracket (a damped Lie-Poisson system); got "
                 f"{type(system).__name__}. An undamped system is split by integrators.splitting's methods"
             )
-        if not (isinstance(method, type) and issubclass(method, AbstractSplittingMethod)) or not _final(method):
-            raise TypeError(f"method must be a splitting method class (integrators.splitting.Strang, ...); got {method!r}")
+        method = splitting_method(method)
         if not (isinstance(dissipation, type) and issubclass(dissipation, AbstractLieGroupMethod)) or not _final(
             dissipation
         ):

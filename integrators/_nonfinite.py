@@ -75,7 +75,7 @@ def _raise_if_nonfinite(step_map: Any, out: jax.Array, save_every: int) -> None:
     last = y[i, k - 1]
     when = f"at step {k}" if save_every == 1 else f"between steps {(k - 1) * save_every} and {k * save_every}"
     raise RolloutDivergedError(
-        f"{type(step_map).__name__} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
+        f"{step_map.label} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
         f"{when}; its last finite state (step {(k - 1) * save_every}) is {np.round(last, 6).tolist()}. "
         f"{step_map.divergence_hint}; pass nonfinite='return' to get the states with their non-finite tail",
         trajectory=i, step=k * save_every, last_finite_step=(k - 1) * save_every, state=last, states=y,

@@ -59,6 +59,12 @@ class AbstractStepMap(eqx.Module):
         """How many exact sub-flows (test flows) one step evaluates."""
 
     # -- shared ------------------------------------------------------------------------------
+    @property
+    def label(self) -> str:
+        """A short name for tables and messages (the class name; a bound splitting method
+        says its method's)."""
+        return type(self).__name__
+
     def with_h(self, h: float) -> AbstractStepMap:
         r"""The same map at step size `h` (> 0), everything else unchanged: $\Phi_h$ of a
         splitting method at another step, or a learned map run at a step it was not trained

@@ -4,7 +4,9 @@ these names may change with the library.
 
 - `check_state(y, dim)`: one float64 state `(dim,)` (works on traced values); `check_h(step_map)`:
   its step size, or a `ValueError` for a map that has none yet.
-- `composition_flops(step_map, method)`: XLA's flops of a step composed by a splitting method.
+- `composition_flops(step_map, method)`: XLA's flops of a step composed by a splitting method;
+  `splitting_method(method, name)`: a method instance from an instance or a class (`TypeError` naming
+  `name` otherwise).
 - `traced_h(step_map)`: the map with its step size as a traced array (one compiled program for
   every h); `xla_flops(fn, *args)`: XLA's flop count of `fn` compiled.
 - `atomic_path(path)`, `atomic_write_text(path, text)`: write to a temporary file renamed into
@@ -37,6 +39,7 @@ from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
 from ._splitting._base import composition_flops as composition_flops
+from ._splitting._base import splitting_method as splitting_method
 from ._observations import rms_size as rms_size
 from ._step_map import check_h as check_h
 from ._step_map import check_state as check_state

@@ -1,7 +1,11 @@
-"""Classical splitting methods: exact sub-flows of `system.hamiltonian_splitting()` composed
-by coefficient tables; each is a step map (`Strang(system, h=0.1).rollout(y0, n_steps)`)."""
+"""Classical splitting methods: stateless rules composing the exact sub-flows of
+`system.hamiltonian_splitting()` by coefficient tables (`Strang()`, `TripleJump()`,
+`Strang(ordering=(2, 0, 1))`), bound to a system and a step size by `Splitting`
+(`Splitting(system, 0.1, Strang()).rollout(y0, n_steps)`, or `Strang(system, h=0.1)`)."""
 
+from ._splitting._base import AbstractFlows as AbstractFlows
 from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
+from ._splitting._base import FlowList as FlowList
 from ._splitting._base import IndexedFlows as IndexedFlows
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
 from ._splitting._composition import (
@@ -20,7 +24,9 @@ from ._splitting._composition import (
     Yoshida6 as Yoshida6,
 )
 from ._splitting._lie_trotter import LieTrotter as LieTrotter
+from ._splitting._step import Splitting as Splitting
 from ._splitting._strang import Strang as Strang
 
-#: Every splitting method, for parametrised tests and sweeps.
+#: Every splitting method (the classes: `cls()` is the method, `cls(system, h)` its step map),
+#: for parametrised tests and sweeps.
 METHODS = (LieTrotter, Strang, TripleJump, Suzuki, McLachlan4, Yoshida6, BlanesMoan4)

@@ -36,6 +36,7 @@ from ._models._reversible import Reversible as Reversible
 from ._solvers._adam import Adam as Adam
 from ._solvers._checkpoint import Checkpoint as Checkpoint
 from ._solvers._levenberg_marquardt import LevenbergMarquardt as LevenbergMarquardt
+from ._solvers._optimistix import Optimistix as Optimistix
 from ._solvers._problem import (
     AbstractLeastSquares as AbstractLeastSquares,
     AbstractObjective as AbstractObjective,

@@ -79,7 +79,7 @@ def noisy_fit():
 # -- 1. a map trained on uneven steps runs at steps it never saw -------------------------------------
 def test_glpnet_fitted_on_uneven_steps_has_its_order_at_unseen_steps(exact_fit):
     data, model, _ = exact_fit
-    assert isinstance(model, learn.GLPNet) and model.method is TripleJump  # order 4
+    assert isinstance(model, learn.GLPNet) and model.method == TripleJump()  # order 4
     assert model.activation == "identity"
     steps = data.intervals()[2]
     assert not data.is_regular() and steps.min() >= 0.05 and steps.max() <= 0.3

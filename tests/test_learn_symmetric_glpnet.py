@@ -46,7 +46,7 @@ def test_network_with_a_method_is_that_method_on_its_learned_system(method, syst
     assert g.n_modules == 2 * system.dim and g.activation == "sigmoid"
     y = np.random.default_rng(1).normal(size=(6, system.dim))
     ours = np.asarray(jax.vmap(g.step)(y))
-    theirs = np.asarray(method(g.learned_system(), 0.1).rollout(y, 1))[:, -1]
+    theirs = np.asarray(it.splitting.Splitting(g.learned_system(), 0.1, g.method).rollout(y, 1))[:, -1]
     # The same flows in the same order; each flow's rate differs by a few roundings (sigmoid
     # against the derivative of softplus, w q against q / M), which moves its output by a few
     # eps |y|, and later flows carry that along (near-isometries at |h alpha| ~ 0.1): 8 eps |y|
@@ -55,7 +55,7 @@ def test_network_with_a_method_is_that_method_on_its_learned_system(method, syst
     tol = 8 * g.exact_flows_per_step * EPS * size
     assert np.abs(ours - theirs).max() <= tol, (np.abs(ours - theirs).max(), tol)
     assert np.abs(ours - y).max() > 1e4 * tol  # a real step, not the identity on both sides
-    assert g.exact_flows_per_step == method.flows_per_step(2 * system.dim)
+    assert g.exact_flows_per_step == method().flows_per_step(2 * system.dim)
 
 
 @pytest.mark.parametrize("linear_term", [False, True])
@@ -155,7 +155,7 @@ def test_composed_network_is_the_composition_of_its_strang_steps(method, n_modul
     c = learn.GLPNet(RB, terms=g.terms, method=method, h=g.h)
     r = len(method.coefficients)
     # the same learned pieces, composed by another method
-    assert c.terms is g.terms and c.method is method and c.h == g.h
+    assert c.terms is g.terms and c.method == method() and c.h == g.h
     assert c.exact_flows_per_step == r * (2 * n_modules - 1)
     # Independent: r Strang steps of g at gamma_j h in sequence (negative gammas included).
     expected = Y
@@ -215,12 +215,58 @@ def test_method_and_terms_arguments():
         net(method=learn.GLPNet)
     with pytest.raises(ValueError, match="BlanesMoan4 needs a two-part splitting.*6 modules"):
         net(method=it.splitting.BlanesMoan4)
-    # an instance stands for its class
-    assert net(method=it.splitting.Strang(RB, 0.1)).method is it.splitting.Strang
+    # a class stands for its instance without ordering; a step map is not a method
+    assert net(method=it.splitting.Strang).method == it.splitting.Strang()
+    with pytest.raises(TypeError, match="step map bound to a system: pass its method"):
+        net(method=it.splitting.Strang(RB, 0.1))
+    with pytest.raises(ValueError, match=r"ordering must be a permutation of range\(6\) \(the 6 pieces of a GLPNet"):
+        net(method=it.splitting.Strang(ordering=(2, 1, 0)))
     with pytest.raises(TypeError, match="terms must be a learn.RidgeTerms"):
         learn.GLPNet(RB, terms="pieces")
     with pytest.raises(ValueError, match="terms are for states of dimension 3"):
         learn.GLPNet(lp.systems.Kirchhoff(), terms=net().terms)
+
+
+def test_a_network_composes_its_modules_in_its_method_ordering():
+    # A method is a stateless object: Strang(ordering=p) in a G-LPNet applies the modules in
+    # order p, as the same method bound to the learned system's pieces does (the classical
+    # side integrates the CollectiveTerms of H~, by autodiff of the potentials: a few roundings
+    # per flow, carried along by the later flows, as in the test above).
+    p = (3, 0, 5, 1, 4, 2)
+    assert it.splitting.Strang(ordering=p) != it.splitting.Strang(ordering=(0, 1, 2, 3, 4, 5))
+    assert it.splitting.Strang(ordering=p) != it.splitting.Strang()
+    assert it.splitting.Strang(ordering=p) == it.splitting.Strang(ordering=list(p))
+    assert hash(it.splitting.Strang(ordering=p)) == hash(it.splitting.Strang(ordering=list(p)))
+    g = with_linear_term(net(method=it.splitting.Strang(ordering=p), linear_term=True))
+    assert g.method.ordering == p
+    ours = np.asarray(jax.vmap(g.step)(Y))
+    bound = it.splitting.Splitting(g.learned_system(), 0.1, it.splitting.Strang(ordering=p))
+    assert bound.terms == tuple(bound.pieces[k] for k in p)
+    theirs = np.asarray(bound.rollout(Y, 1))[:, -1]
+    tol = 8 * g.exact_flows_per_step * EPS * max(np.abs(Y).max(), np.abs(ours).max())
+    assert np.abs(ours - theirs).max() <= tol, (np.abs(ours - theirs).max(), tol)
+    # and the ordering matters: the modules' own order gives another step
+    plain = np.asarray(jax.vmap(learn.GLPNet(RB, terms=g.terms, method=it.splitting.Strang(), h=g.h).step)(Y))
+    assert np.abs(plain - theirs).max() > 1e4 * tol
+
+
+def test_method_ordering_survives_save_and_load_and_older_files_name_the_method(tmp_path):
+    p = (5, 4, 3, 2, 1, 0)
+    g = net(method=it.splitting.TripleJump(ordering=p))
+    assert g.hyperparameters()["method"] == {"name": "TripleJump", "ordering": list(p)}
+    g.save(tmp_path / "g.h5")
+    back = learn.GLPNet.load(tmp_path / "g.h5", RB)
+    assert back.method == it.splitting.TripleJump(ordering=p)
+    assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(g.step)(Y)))
+    # a file written before the ordering was recorded names the method alone
+    old = net(method=it.splitting.Strang)
+    old.save(tmp_path / "old.h5")
+    with h5py.File(tmp_path / "old.h5", "r+") as f:
+        hp = json.loads(f.attrs["hyperparameters_json"])
+        f.attrs["hyperparameters_json"] = json.dumps({**hp, "method": "Strang"})
+    back = learn.GLPNet.load(tmp_path / "old.h5", RB)
+    assert back.method == it.splitting.Strang()
+    assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(old.step)(Y)))
 
 
 @pytest.mark.parametrize("linear_term", [False, True])
@@ -230,7 +276,7 @@ def test_method_survives_save_and_load(tmp_path, linear_term, method):
     g = with_linear_term(g) if linear_term else g
     g.save(tmp_path / "g.h5")
     back = learn.GLPNet.load(tmp_path / "g.h5", lp.systems.RigidBody())
-    assert back.method is method and back.terms.linear_term == linear_term
+    assert back.method == g.method and back.terms.linear_term == linear_term
     assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(g.step)(Y)))
 
 
@@ -257,7 +303,7 @@ def test_version_1_file_of_a_glpnet_loads_with_its_method(tmp_path, symmetric, m
         for i, array in enumerate((t.a, t.c, t.b, t.e)):
             weights.create_dataset(f"{i:04d}", data=np.asarray(array))
     back = learn.GLPNet.load(tmp_path / "v1.h5")
-    assert back.method is method and back.h == 0.1 and back.terms.linear_term
+    assert back.method == method() and back.h == 0.1 and back.terms.linear_term
     assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(g.step)(Y)))
 
 
@@ -267,13 +313,13 @@ def test_warm_start_of_a_linear_term_network_is_exact():
     g = with_linear_term(net(linear_term=True))
     lin = eqx.tree_at(lambda m: m.terms, g, g.terms.with_activation("identity"))
     mapped = learn.linear_to_activation(g, lin, Y)
-    assert mapped.activation == "sigmoid" and mapped.method is g.method
+    assert mapped.activation == "sigmoid" and mapped.method == g.method
     assert np.allclose(np.asarray(jax.vmap(mapped.step)(Y)), np.asarray(jax.vmap(lin.step)(Y)),
                        rtol=0, atol=64 * EPS * np.abs(Y).max())
     assert not np.allclose(np.asarray(jax.vmap(g.step)(Y)), np.asarray(jax.vmap(lin.step)(Y)))
     # the warm start learn.fit asks the network for is that identity-activation network
     simpler, _ = g.warm_start()
-    assert simpler.activation == "identity" and simpler.method is g.method and simpler.terms.a is g.terms.a
+    assert simpler.activation == "identity" and simpler.method == g.method and simpler.terms.a is g.terms.a
 
 
 @pytest.mark.slow  # 28 s
@@ -339,10 +385,10 @@ def test_fit_splitting_recipe():
     y0 = np.random.default_rng(3).uniform(-1.0, 1.0, size=(6, 3))
     data = it.ground_truth(system, y0, h=0.2, n_steps=10, progress=False)
     strang, (r1,) = learn.fit_splitting(system, data, None, iterations=60, progress=False)
-    assert strang.method is it.splitting.Strang and strang.terms.linear_term
+    assert strang.method == it.splitting.Strang() and strang.terms.linear_term
     assert strang.n_modules == 3 and strang.h == 0.2
     tj, (r1b, r2) = learn.fit_splitting(system, data, iterations=60, progress=False)
-    assert tj.method is it.splitting.TripleJump and tj.n_modules == 3
+    assert tj.method == it.splitting.TripleJump() and tj.n_modules == 3
     assert r1b.train_loss == r1.train_loss  # same seed, same first stage
     # The refit starts at TripleJump of the Strang fit's pieces and keeps only an improvement.
     (X, T), _ = data.split(0.2, 0)  # fit's training pairs

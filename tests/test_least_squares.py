@@ -168,7 +168,7 @@ def test_scanned_glpnet_step_is_the_unrolled_composition(method):
     assert isinstance(flows, IndexedFlows) and len(flows) == 4
     y = jnp.asarray([0.3, -0.8, 0.5])
     scanned = net.step(y)
-    unrolled = method.compose(list(flows), y, net.h)
+    unrolled = net.method.compose(list(flows), y, net.h)
     # the same flows with the same times (0.5 * h against a traced weight 0.5 times h: equal):
     # XLA may fuse differently, so a few eps
     np.testing.assert_allclose(np.asarray(scanned), np.asarray(unrolled), rtol=0, atol=8 * EPS)
@@ -179,7 +179,7 @@ def test_flop_count_counts_every_scanned_flow():
     one = learn.GLPNet(BODY, 1, key=3, method=Strang, h=0.1)
     # Strang over 4 modules evaluates 7 flows, over 1 module one: XLA counts a scan body once,
     # so a count that saw the scan would give ~1x, not ~7x
-    assert 5 < composition_flops(net, Strang) / composition_flops(one, Strang) < 9
+    assert 5 < composition_flops(net, Strang()) / composition_flops(one, Strang()) < 9
 
 
 def test_indexed_flows_is_a_sequence_of_flows():
@@ -259,3 +259,30 @@ def test_levenberg_marquardt_refuses_a_jacobian_too_large_for_memory(glpnet_pair
     with pytest.raises(ValueError, match=r"the Jacobian would be 144 residuals x \d+ unknowns, \d+ forward passes "
                                          r"\(at most 2000.* use learn.QuasiNewton"):
         learn.fit(net, glpnet_pairs, optimiser=learn.LevenbergMarquardt(5), validation_fraction=0.0, progress=False)
+
+
+def test_an_optimistix_solver_is_a_stage_on_the_same_problems():
+    """Any optimistix solver runs behind the stage interface: its Levenberg-Marquardt on the
+    residuals of the curve fit reaches the exact minimum, its BFGS on the loss too."""
+    import optimistix as optx
+
+    x = jnp.linspace(0.0, 1.0, 40)
+    truth = np.array([2.0, -1.5, 0.3])
+    y = truth[0] * jnp.exp(truth[1] * x) + truth[2]
+    problem = ToyProblem(_CurveLoss(), _Curve(jnp.asarray([1.0, 0.0, 0.0])), (x, y))
+    for solver in (optx.LevenbergMarquardt(rtol=1e-14, atol=1e-14), optx.BFGS(rtol=1e-14, atol=1e-14)):
+        result = learn.Optimistix(solver, max_steps=500).run(problem, learn.Context())
+        assert result.record.kept and result.record.optimiser == "Optimistix"
+        # exact data, as for learn.LevenbergMarquardt above: BFGS stops on the gradient's size,
+        # so the parameters to ~sqrt(eps) of a loss scale of 1 (1e-6 is generous)
+        np.testing.assert_allclose(np.asarray(result.y.theta), truth, rtol=0, atol=1e-6)
+    with pytest.raises(TypeError, match="Optimistix.solver must be an optimistix"):
+        learn.Optimistix("bfgs")
+
+    class L1(learn.AbstractObjective):
+        def __call__(self, y, args):
+            return jnp.sum(jnp.abs(y.theta))
+
+    with pytest.raises(ValueError, match="least-squares solver"):
+        learn.Optimistix(optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)).run(
+            ToyProblem(L1(), _Curve(jnp.ones(3)), (x, y)), learn.Context())

@@ -113,13 +113,13 @@ def test_bad_input(damped):
         it.DampedSplitting(system("RigidBody"), 0.1)
     with pytest.raises(TypeError, match="dissipation must be a Lie-group method class"):
         it.DampedSplitting(damped, 0.1, sp.Strang, it.RK4)
-    with pytest.raises(TypeError, match="method must be a splitting method class"):
+    with pytest.raises(TypeError, match="method must be a splitting method"):
         it.DampedSplitting(damped, 0.1, it.LieEuler)
     with pytest.raises(ValueError, match="BlanesMoan4"):
         it.DampedSplitting(damped, 0.1, sp.BlanesMoan4)
     with pytest.raises(TypeError, match="dissipation must be a Lie-group method class"):
         it.DampedSplitting(damped, 0.1, sp.Strang, it.AbstractLieGroupMethod)
-    with pytest.raises(TypeError, match="method must be a splitting method class"):
+    with pytest.raises(TypeError, match="method must be a splitting method"):
         it.DampedSplitting(damped, 0.1, sp.AbstractCompositionMethod)
 
 

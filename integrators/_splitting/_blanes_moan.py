@@ -32,20 +32,18 @@ class BlanesMoan4(AbstractSplittingMethod):
     a: ClassVar[np.ndarray] = _A_FULL
     b: ClassVar[np.ndarray] = _B_FULL
 
-    @classmethod
-    def check_terms(cls, n_terms: int, what: str) -> None:
+    def check_terms(self, n_terms: int, what: str) -> None:
         if n_terms != 2:
             raise ValueError(
                 f"BlanesMoan4 needs a two-part splitting H = H_A + H_B; {what} has {n_terms} pieces"
             )
+        super().check_terms(n_terms, what)
 
-    @classmethod
-    def compose(cls, flows, y, h):
-        for k in range(len(cls.b)):
-            y = flows[0](float(cls.a[k]) * h, y)
-            y = flows[1](float(cls.b[k]) * h, y)
-        return flows[0](float(cls.a[-1]) * h, y)
+    def compose_in_order(self, flows, y, h):
+        indices = np.arange(len(self.a) + len(self.b)) % 2  # A, B, A, ..., A
+        weights = np.empty(len(indices))
+        weights[0::2], weights[1::2] = self.a, self.b
+        return flows.chain(indices, weights, h, y)
 
-    @classmethod
-    def flows_per_step(cls, n_terms: int) -> int:
-        return len(cls.a) + len(cls.b)
+    def flows_per_step(self, n_terms: int) -> int:
+        return len(self.a) + len(self.b)

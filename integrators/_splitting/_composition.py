@@ -5,7 +5,7 @@ table."""
 
 from __future__ import annotations
 
-from typing import ClassVar
+import abc
 
 import jax
 import jax.numpy as jnp
@@ -17,27 +17,31 @@ from ._strang import Strang
 
 class AbstractCompositionMethod(AbstractSplittingMethod):
     r"""$\Phi_h = S_{\gamma_s h}\circ\cdots\circ S_{\gamma_1 h}$, $\sum_i\gamma_i = 1$, with a
-    symmetric table ($\gamma_i = \gamma_{s+1-i}$) so that only odd-order conditions remain."""
+    symmetric table ($\gamma_i = \gamma_{s+1-i}$) so that only odd-order conditions remain.
+    Final subclasses give `order` and the table `coefficients` (class attributes); `ordering`
+    orders the pieces of every Strang step."""
 
-    coefficients: ClassVar[np.ndarray]
+    @property
+    @abc.abstractmethod
+    def coefficients(self) -> np.ndarray:
+        r"""The table $\gamma_1, \dots, \gamma_s$ (a class attribute of final methods)."""
 
-    @classmethod
-    def compose(cls, flows, y, h):
+    def compose_in_order(self, flows, y, h):
         # A scan over the table, not a Python loop: one Strang step is traced and compiled
         # once (7x less code for Yoshida6, and for its Jacobian in `poisson_defect`).
-        def body(y, gamma):
-            return Strang.compose(flows, y, gamma * h), None
+        strang = Strang()
 
-        y, _ = jax.lax.scan(body, y, jnp.asarray(cls.coefficients))
+        def body(y, gamma):
+            return strang.compose_in_order(flows, y, gamma * h), None
+
+        y, _ = jax.lax.scan(body, y, jnp.asarray(self.coefficients))
         return y
 
-    @classmethod
-    def flows_per_step(cls, n_terms: int) -> int:
-        return len(cls.coefficients) * Strang.flows_per_step(n_terms)
+    def flows_per_step(self, n_terms: int) -> int:
+        return len(self.coefficients) * Strang().flows_per_step(n_terms)
 
-    @classmethod
-    def stages(cls):
-        return Strang, len(cls.coefficients)
+    def stages(self):
+        return Strang(ordering=self.ordering), len(self.coefficients)
 
 
 _CBRT2 = 2.0 ** (1.0 / 3.0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import AbstractSplittingMethod, IndexedFlows
+from ._base import AbstractSplittingMethod
 
 
 class LieTrotter(AbstractSplittingMethod):
@@ -13,14 +13,8 @@ class LieTrotter(AbstractSplittingMethod):
 
     order = 1
 
-    @classmethod
-    def compose(cls, flows, y, h):
-        if isinstance(flows, IndexedFlows):
-            return flows.scan(np.arange(len(flows)), np.ones(len(flows)), h, y)
-        for flow in flows:
-            y = flow(h, y)
-        return y
+    def compose_in_order(self, flows, y, h):
+        return flows.chain(np.arange(len(flows)), np.ones(len(flows)), h, y)
 
-    @classmethod
-    def flows_per_step(cls, n_terms: int) -> int:
+    def flows_per_step(self, n_terms: int) -> int:
         return n_terms

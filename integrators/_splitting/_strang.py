@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._base import AbstractSplittingMethod, IndexedFlows
+from ._base import AbstractSplittingMethod
 
 
 class Strang(AbstractSplittingMethod):
@@ -16,19 +16,10 @@ class Strang(AbstractSplittingMethod):
 
     order = 2
 
-    @classmethod
-    def compose(cls, flows, y, h):
+    def compose_in_order(self, flows, y, h):
         n = len(flows)
-        if isinstance(flows, IndexedFlows):
-            order = np.r_[np.arange(n - 1), n - 1, np.arange(n - 2, -1, -1)]
-            return flows.scan(order, np.where(order == n - 1, 1.0, 0.5), h, y)
-        for k in range(n - 1):
-            y = flows[k](0.5 * h, y)
-        y = flows[n - 1](h, y)
-        for k in reversed(range(n - 1)):
-            y = flows[k](0.5 * h, y)
-        return y
+        indices = np.r_[np.arange(n - 1), n - 1, np.arange(n - 2, -1, -1)]
+        return flows.chain(indices, np.where(indices == n - 1, 1.0, 0.5), h, y)
 
-    @classmethod
-    def flows_per_step(cls, n_terms: int) -> int:
+    def flows_per_step(self, n_terms: int) -> int:
         return 2 * n_terms - 1

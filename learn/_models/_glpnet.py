@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_state, composition_flops
+from integrators.internals import check_state, composition_flops, splitting_method
 from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
 from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float
@@ -31,19 +31,10 @@ from ._mlp import ACTIVATIONS, activation_antiderivative
 from ._networks import network_or_default
 
 
-def check_method(method: Any) -> type[AbstractSplittingMethod]:
-    """A splitting method class of `integrators.splitting`; an instance stands for its class
-    when it composes its pieces in their own order (its `h` is not used)."""
-    cls = method if isinstance(method, type) else type(method)
-    if not issubclass(cls, AbstractSplittingMethod):
-        raise TypeError(
-            "method must be a splitting method of integrators.splitting (LieTrotter, Strang, TripleJump, "
-            f"Yoshida6, ...), class or instance; got {method!r}"
-        )
-    if not isinstance(method, type) and method.ordering != tuple(range(len(method.ordering))):
-        raise ValueError(f"method: a G-LPNet composes its modules in their order; got {cls.__name__} with "
-                         f"ordering={method.ordering} (pass the class, and order the modules with order=)")
-    return cls
+def check_method(method: Any) -> AbstractSplittingMethod:
+    """A splitting method instance of `integrators.splitting` (`Strang()`,
+    `Strang(ordering=...)`); a class stands for its instance without ordering."""
+    return splitting_method(method)
 
 
 class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
@@ -57,20 +48,22 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
     $h/M$, i.e. $w = 1/M$, order 1; `Strang` applies modules $1..M-1$ over $h/2$, module $M$ over
     $h$, then $M-1..1$ over $h/2$, symmetric and of order 2, with $w = 1$; `TripleJump`,
     `Yoshida6`, ... compose Strang steps to order 4 and 6 ($w = 1$). The network IS
-    `method(net.learned_system(), h)`: a symmetric one runs at other step sizes (`with_h`).
+    `integrators.splitting.Splitting(net.learned_system(), h, net.method)`, its `ordering`
+    included: a symmetric one runs at other step sizes (`with_h`).
     Exactly Poisson and Casimir-conserving for any parameters; trained by default with BFGS
     and the identity warm start (`learn.fit(gnet, data)`, see `learn.QuasiNewton`).
 
     **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$: each
     basis direction twice, the paper's 6 for so(3)), `order`, `key`, `activation` (paper:
     sigmoid), `full_vectors`, `linear_term`: the pieces, `learn.RidgeTerms`, or `terms`, such
-    pieces given whole (then none of those); `method` (class); `h` (`None`: set by
-    `learn.fit`).
+    pieces given whole (then none of those); `method`, a method instance (`Strang()`,
+    `Strang(ordering=...)`: the order in which the modules are applied) or class (its
+    instance without ordering); `h` (`None`: set by `learn.fit`).
     """
 
     terms: RidgeTerms
     system: AbstractPoissonSystem = eqx.field(static=True)
-    method: type[AbstractSplittingMethod] = eqx.field(static=True)
+    method: AbstractSplittingMethod = eqx.field(static=True)
     h: float | None
 
     def __init__(
@@ -114,7 +107,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
     def _time_divisor(self) -> int:
         # the paper's Lie-Trotter network runs each module over h/M (w = 1/M), written as a
         # division of the time so that its arithmetic is the paper's
-        return self.n_modules if self.method is LieTrotter else 1
+        return self.n_modules if isinstance(self.method, LieTrotter) else 1
 
     @property
     def hamiltonian_weight(self) -> float:
@@ -131,7 +124,8 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
 
     def flows(self) -> IndexedFlows:
         r"""The flows of the pieces of $\widetilde H$, as `flow(t, y)`, in module order: one
-        function of the module index (`integrators.splitting.IndexedFlows`), which the method scans."""
+        function of the module index (`integrators.splitting.IndexedFlows`), which the method
+        scans (in its `ordering`)."""
         return IndexedFlows(self.module_flow, self.n_modules)
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -159,13 +153,14 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
         r"""The Poisson system $\dot y = \mathbb B(y)\nabla\widetilde H$ with this network's
         learned Hamiltonian and the system's bracket, split into its pieces (one
         `CollectiveTerm` per module): every method of `integrators.splitting` runs on it, and
-        `self.method(gnet.learned_system(), h)` is this network at step `h`."""
+        `integrators.splitting.Splitting(gnet.learned_system(), h, gnet.method)` is this network
+        at step `h`."""
         from ._learned_system import LearnedHamiltonian
 
         return LearnedHamiltonian(self)
 
     def hyperparameters(self) -> dict[str, Any]:
-        return {**self.terms.spec(), "method": self.method.__name__}
+        return {**self.terms.spec(), "method": method_record(self.method)}
 
     def reinitialised(self, key):
         return eqx.tree_at(lambda m: m.terms, self, self.terms.reinitialised(key))
@@ -173,7 +168,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
         hp = dict(hyperparameters)
-        method = _method_from_name(hp.pop("method"))
+        method = method_from_record(hp.pop("method"))
         return cls(system, h=h, method=method, terms=RidgeTerms(system.dim, key=key, **hp))
 
     # -- what learn.fit asks -------------------------------------------------------------------
@@ -195,12 +190,21 @@ def default_terms(dim: int, n_modules: int | None = None, **kwargs: Any) -> Ridg
     return RidgeTerms(dim, 2 * dim if n_modules is None else n_modules, **kwargs)
 
 
-def _method_from_name(name: str) -> type[AbstractSplittingMethod]:
+def method_record(method: AbstractSplittingMethod) -> dict[str, Any]:
+    """`method` as JSON values for a file: its class name and its ordering (`None`: the
+    modules' own order)."""
+    return {"name": type(method).__name__, "ordering": None if method.ordering is None else list(method.ordering)}
+
+
+def method_from_record(record: Any) -> AbstractSplittingMethod:
+    """The method of `method_record`, or of a bare class name (files written before the
+    ordering was recorded)."""
     from integrators.splitting import METHODS
 
+    name, ordering = (record, None) if isinstance(record, str) else (record["name"], record["ordering"])
     for cls in METHODS:
         if cls.__name__ == name:
-            return cls
+            return cls(ordering=ordering)
     raise ValueError(f"unknown splitting method {name!r}; known: {[c.__name__ for c in METHODS]}")
 
 

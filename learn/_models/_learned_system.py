@@ -22,9 +22,9 @@ class LearnedHamiltonian(AbstractPoissonSystem):
     r"""$\dot y = \mathbb B(y)\nabla\widetilde H(y)$ with the bracket, Casimirs and test flows of
     `net.system` and $\widetilde H$ the network's learned Hamiltonian (its parameters frozen,
     as numpy). `hamiltonian_splitting()` is one `CollectiveTerm` per module, in module order,
-    so `net.method(LearnedHamiltonian(net), h)` reproduces the network's step and the other
-    methods of `integrators.splitting` run on the same learned Hamiltonian. The heyoka right-hand side
-    works too (`ground_truth` of the learned dynamics).
+    so `integrators.splitting.Splitting(LearnedHamiltonian(net), h, net.method)` reproduces the
+    network's step and the other methods of `integrators.splitting` run on the same learned
+    Hamiltonian. The heyoka right-hand side works too (`ground_truth` of the learned dynamics).
 
     Built by `GLPNet.learned_system()`.
     """

@@ -14,7 +14,7 @@ def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
     form; `ValueError` naming the version for a file this code cannot read."""
     version = attrs.get("format_version", 1)
     if version == FORMAT_VERSION:
-        return attrs
+        return _method_with_ordering(attrs)
     if version != 1:
         raise ValueError(
             f"{where} has model format version {version!r}; this liepoisson reads versions 1 to {FORMAT_VERSION}: "
@@ -30,7 +30,7 @@ def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
             cls, hp = _lpnet_v1(hp)
         elif cls == "GLPNet":
             symmetric = hp.pop("symmetric", False)
-            hp["method"] = "Strang" if symmetric else "LieTrotter"
+            hp["method"] = {"name": "Strang" if symmetric else "LieTrotter", "ordering": None}
         elif cls == "MLPBaseline":
             hp = {"network": _affine_mlp(hp)}
     except (KeyError, TypeError, IndexError) as err:
@@ -39,6 +39,16 @@ def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
             f"({type(err).__name__}: {err}); train the model anew"
         ) from err
     return {**attrs, "class": cls, "hyperparameters": hp, "format_version": FORMAT_VERSION, "upgraded_from": old}
+
+
+def _method_with_ordering(attrs: dict[str, Any]) -> dict[str, Any]:
+    """A G-LPNet written before its method's ordering was recorded (`"method"`: a class name)
+    as written today (`{"name": ..., "ordering": None}`): a checkpoint compares equal to the
+    model it resumes."""
+    hp = attrs.get("hyperparameters")
+    if attrs.get("class") != "GLPNet" or not isinstance(hp, dict) or not isinstance(hp.get("method"), str):
+        return attrs
+    return {**attrs, "hyperparameters": {**hp, "method": {"name": hp["method"], "ordering": None}}}
 
 
 def _affine_mlp(hp: dict[str, Any]) -> dict[str, Any]:

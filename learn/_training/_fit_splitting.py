@@ -30,7 +30,7 @@ from ._observed import TrajectoryLoss, information_criterion
 def fit_splitting(
     system: AbstractPoissonSystem,
     data: Trajectories | Observations | tuple[ArrayLike, ArrayLike],
-    method: Any = TripleJump,
+    method: Any = TripleJump(),
     *,
     iterations: int | None = None,
     loss: TrajectoryLoss | None = None,
@@ -44,15 +44,16 @@ def fit_splitting(
     r"""A G-LPNet for any Poisson system with test flows, as a data-driven splitting method;
     returns `(network, records)`, one `TrainingRecord` per fit.
 
-    1. **Strang.** `GLPNet(system, n, method=Strang, linear_term=True)`: one module per basis
+    1. **Strang.** `GLPNet(system, n, method=Strang(), linear_term=True)`: one module per basis
        direction $e_k$ ($n$ = `system.dim`), $\Phi_k' = a_k\sigma(x) + e_kx + b_k$, whose step
        is the Strang splitting of $\widetilde H = \sum_k\Phi_k(c_ky_k)$, order 2. Fitted by
        BFGS (`iterations`, default 1000) from the identity warm start
        (`QuasiNewton(..., warm_start=True)`).
-    2. **Refit by `method`** (default `integrators.splitting.TripleJump`; `None` stops at
+    2. **Refit by `method`** (default `integrators.splitting.TripleJump()`; `None` stops at
        step 1): the same learned pieces composed by `method`, fitted again by BFGS from there:
        the pieces move from the modified Hamiltonian of the Strang fit to that of the method.
-       Both stages are exact Poisson maps for any weights.
+       Both stages are exact Poisson maps for any weights; `method`'s `ordering`, if it has
+       one, orders the modules of both.
 
     With `integrators.Observations` (noisy states at uneven times) the G-LPNet is composed by
     `method` from the start and fitted by Levenberg-Marquardt (`learn.LevenbergMarquardt`,
@@ -71,7 +72,7 @@ def fit_splitting(
     """
     if method is not None:  # a wrong method fails before the first fit
         method = check_method(method)
-        if method is LieTrotter:
+        if isinstance(method, LieTrotter):
             raise ValueError("method=LieTrotter would not continue from the Strang fit: the paper's Lie-Trotter "
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
@@ -86,7 +87,9 @@ def _recipe(data, system, method, loss, activation, iterations, key, common):
     if loss is not None:
         raise ValueError("loss= is for observations (integrators.Observations); pairs and Trajectories are fitted on "
                          "the one-step state loss")
-    net = GLPNet(system, system.dim, key=key, method=Strang, linear_term=True,
+    # the Strang stage applies the pieces in the order the refit will
+    strang_method = Strang(ordering=None if method is None else method.ordering)
+    net = GLPNet(system, system.dim, key=key, method=strang_method, linear_term=True,
                  activation="sigmoid" if activation is None else activation)
     strang, first = fit(net, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=True), **common)
     if method is None:
@@ -117,7 +120,7 @@ FAMILIES = {
 def _(data: Observations, system, method, loss, activation, iterations, key, common):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
     through `method`; the lowest BIC wins."""
-    method = Strang if method is None else method
+    method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
     loss = resolve_loss(loss, data)
     context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
