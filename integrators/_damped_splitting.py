@@ -13,7 +13,13 @@ from liepoisson.internals import positive_float
 from liepoisson.systems import AbstractExactTerm, DoubleBracket
 
 from ._lie_group import AbstractLieGroupMethod, CommutatorFree2
-from ._splitting._base import AbstractSplittingMethod, Flow, composition_flops, default_terms, splitting_method
+from ._splitting._base import (
+    AbstractSplittingMethod,
+    Flow,
+    composition_flops,
+    default_terms,
+    splitting_method,
+)
 from ._splitting._strang import Strang
 from ._step_map import AbstractStepMap, check_state
 

@@ -10,10 +10,21 @@ import equinox as eqx
 import jax
 
 from liepoisson.internals import check_system, positive_float
-from liepoisson.systems import AbstractDissipativeSystem, AbstractExactTerm, AbstractPoissonSystem, check_splitting
+from liepoisson.systems import (
+    AbstractDissipativeSystem,
+    AbstractExactTerm,
+    AbstractPoissonSystem,
+    check_splitting,
+)
 
 from .._step_map import AbstractStepMap, check_state
-from ._base import AbstractSplittingMethod, FlowList, composition_flops, default_terms, splitting_method
+from ._base import (
+    AbstractSplittingMethod,
+    FlowList,
+    composition_flops,
+    default_terms,
+    splitting_method,
+)
 
 
 class Splitting(AbstractStepMap):
@@ -49,7 +60,7 @@ class Splitting(AbstractStepMap):
     ):
         self.system = check_system(system)
         if isinstance(system, AbstractDissipativeSystem):
-            raise ValueError(
+            raise ValueError(  # noqa: TRY004 (a system of the wrong kind, not of the wrong type)
                 f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
                 "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"
             )

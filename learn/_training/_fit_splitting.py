@@ -30,7 +30,7 @@ from ._observed import TrajectoryLoss, information_criterion
 def fit_splitting(
     system: AbstractPoissonSystem,
     data: Trajectories | Observations | tuple[ArrayLike, ArrayLike],
-    method: Any = TripleJump(),
+    method: Any = TripleJump,
     *,
     iterations: int | None = None,
     loss: TrajectoryLoss | None = None,
