@@ -167,15 +167,30 @@ def _tree(folder):
     return {(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*") if p.is_file()}
 
 
-def test_cli_run_writes_only_to_out(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def e5_run_by_the_cli_without_its_baseline(tmp_path_factory):
+    """One E5 smoke run through the CLI with its default --out, without its baseline (the quick
+    profile trains none): the files of the paper package before and after, and the results folder.
+    Shared by the CLI test and the no-baseline test (one compilation of E5's pipeline, ~15 s)."""
+    from paper import e5_kirchhoff
+
     package = REFERENCE_DIR.parent
     before = _tree(package)
-    monkeypatch.chdir(tmp_path)  # the default --out is relative to the working directory
-    assert main(["run", "E4", "--profile", "smoke", "--no-progress"]) == 0
-    metrics = json.loads((tmp_path / "paper-results" / "E4" / "metrics.json").read_text())
+    work = tmp_path_factory.mktemp("cli")
+    with pytest.MonkeyPatch.context() as patch:
+        smoke = dataclasses.replace(e5_kirchhoff.PROFILES["smoke"], baseline=False)
+        patch.setitem(e5_kirchhoff.PROFILES, "smoke", smoke)
+        patch.chdir(work)  # the default --out is relative to the working directory
+        assert main(["run", "E5", "--profile", "smoke", "--no-progress"]) == 0
+    return before, _tree(package), work / "paper-results"
+
+
+def test_cli_run_writes_only_to_out(e5_run_by_the_cli_without_its_baseline):
+    before, after, results = e5_run_by_the_cli_without_its_baseline
+    metrics = json.loads((results / "E5" / "metrics.json").read_text())
     assert metrics["profile"] == "smoke"
-    assert "E4 (smoke)" in (tmp_path / "paper-results" / "summary.md").read_text()
-    after = {entry for entry in _tree(package) if "__pycache__" not in entry[0]}
+    assert "E5 (smoke)" in (results / "summary.md").read_text()
+    after = {entry for entry in after if "__pycache__" not in entry[0]}
     assert after == {entry for entry in before if "__pycache__" not in entry[0]}
 
 
@@ -491,24 +506,18 @@ def test_w3_smoke_measures_dissipation(tmp_path):
     assert (tmp_path / "W3" / "energy.png").exists()
 
 
-def test_e5_without_its_baseline(tmp_path, monkeypatch):
+def test_e5_without_its_baseline(e5_run_by_the_cli_without_its_baseline):
     """E5's quick profile trains no baseline: the smoke run without one writes the LPNet's
     figures, a table whose baseline column is empty, and says why in the notes."""
-    import dataclasses
-
-    from paper import e5_kirchhoff
-
-    smoke = dataclasses.replace(e5_kirchhoff.PROFILES["smoke"], baseline=False)
-    monkeypatch.setitem(e5_kirchhoff.PROFILES, "smoke", smoke)
-    on_disk_metrics = EXPERIMENTS["E5"].execute(profile="smoke", progress=False, out_dir=tmp_path)
-    on_disk = json.loads((tmp_path / "metrics.json").read_text())
+    _, _, results = e5_run_by_the_cli_without_its_baseline
+    on_disk = json.loads((results / "E5" / "metrics.json").read_text())
     assert "baseline" not in on_disk and on_disk["baseline_model"] == "none in this profile"
     assert np.isfinite(on_disk["error_growth_rate"]) and on_disk["casimir_rel_drift_max"] < 1e-12
     assert any("No baseline in this profile" in n for n in on_disk["notes"])
-    rows = EXPERIMENTS["E5"].rows(on_disk_metrics)
+    rows = EXPERIMENTS["E5"].rows(on_disk)
     assert rows and all(base == "—" for _, _, _, base in rows)
     for fig in on_disk["figures"]:
-        assert (tmp_path / fig).stat().st_size > 0
+        assert (results / "E5" / fig).stat().st_size > 0
 
 
 def test_an_error_inside_a_run_is_not_reported_as_a_scheduler_error(monkeypatch, capsys):
