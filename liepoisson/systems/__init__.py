@@ -2,6 +2,7 @@
 double-bracket dissipation of any Lie-Poisson system."""
 
 from ._base import (
+    AbstractDefinedByParams as AbstractDefinedByParams,
     AbstractDissipativeSystem as AbstractDissipativeSystem,
     AbstractExactlySolvableSystem as AbstractExactlySolvableSystem,
     AbstractLiePoissonSystem as AbstractLiePoissonSystem,

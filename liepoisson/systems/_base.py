@@ -73,21 +73,12 @@ class AbstractPoissonSystem(abc.ABC):
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
         return f"{type(self).__name__}({args})"
 
-    #: Whether `name` and `params` describe the system completely (the library's systems):
-    #: then two systems of the same class, name and params are equal (`==`, same hash), so
-    #: that what was compiled for one (a JAX training loss, a heyoka integrator) serves the
-    #: other, e.g. a copy unpickled on a Dask worker. Otherwise systems are equal only to
-    #: themselves: a subclass of your own whose params leave something out keeps this False.
-    equal_by_params: bool = False
-
     def value_key(self) -> tuple[Any, ...] | None:
-        """`(class, name, params as JSON)` if `equal_by_params`, else None (compared by
-        identity). Computed once: a system does not change after construction."""
-        cached = self.__dict__.get("_value_key")
-        if cached is None:
-            cached = (type(self), self.name, json.dumps(self.params, sort_keys=True)) if self.equal_by_params else ()
-            self.__dict__["_value_key"] = cached
-        return cached or None
+        """What the system is, as a hashable value (equal systems: `==`, same hash), or `None`:
+        equal only to itself. `None` here, for a system of your own whose params may leave
+        something out; a system its name and params define completely is an
+        `AbstractDefinedByParams`."""
+        return None
 
     def __eq__(self, other: object) -> bool:
         if self is other:
@@ -253,6 +244,22 @@ def check_system(system: Any) -> AbstractPoissonSystem:
             f"system must be a liepoisson.systems.AbstractPoissonSystem; got {type(system).__name__}"
         )
     return system
+
+
+class AbstractDefinedByParams(AbstractPoissonSystem):
+    """A system that its class, `name` and `params` define completely (the library's systems):
+    two of the same class, name and params are equal (`==`, same hash), so that what was
+    compiled for one (a JAX training loss, a heyoka integrator) serves the other, e.g. a copy
+    unpickled on a Dask worker."""
+
+    def value_key(self) -> tuple[Any, ...] | None:
+        """`(class, name, params as JSON)`, computed once (a system does not change after
+        construction)."""
+        cached = self.__dict__.get("_value_key")
+        if cached is None:
+            cached = (type(self), self.name, json.dumps(self.params, sort_keys=True))
+            self.__dict__["_value_key"] = cached
+        return cached
 
 
 class AbstractLiePoissonSystem(AbstractPoissonSystem):

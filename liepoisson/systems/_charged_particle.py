@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._validation import as_state, positive_float
-from ._base import AbstractPoissonSystem
+from ._base import AbstractDefinedByParams
 from ._terms import CollectiveTerm
 
 # Below this |alpha_x| the field integral uses its a -> 0 limit, Phi = |x0| t (exact at 0;
@@ -80,7 +80,7 @@ def segment_field_integral(x0: jnp.ndarray, a: jnp.ndarray, t: jnp.ndarray) -> j
     return jnp.where(moving, phi_moving, phi_still)
 
 
-class ChargedParticle(AbstractPoissonSystem):
+class ChargedParticle(AbstractDefinedByParams):
     r"""Planar charged particle, $y = (p_1, p_2, x_1, x_2)$:
     $\dot p = q\,v\times B - q\nabla\varphi$, $\dot x = v = p/m$, with
     $B = b_0\,r\,e_3$ and $\varphi = k/r$, $r = |x|$ (paper defaults $q = m = b_0 = 1$,
@@ -93,7 +93,6 @@ class ChargedParticle(AbstractPoissonSystem):
     """
 
     name = "ChargedParticle"
-    equal_by_params = True  # name and params are the whole definition
     dim = 4
 
     def __init__(self, charge=1.0, mass=1.0, field_strength=1.0, potential_strength=0.01):

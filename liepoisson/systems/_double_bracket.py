@@ -13,7 +13,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._namespace import HEYOKA
-from ._base import AbstractDissipativeSystem, AbstractLiePoissonSystem, AbstractPoissonSystem, matvec
+from ._base import (
+    AbstractDefinedByParams,
+    AbstractDissipativeSystem,
+    AbstractLiePoissonSystem,
+    AbstractPoissonSystem,
+    matvec,
+)
 
 #: Relative asymmetry of a metric accepted as symmetric (a matrix typed or computed in
 #: float64 is symmetric to a few roundings of its largest entry).
@@ -64,7 +70,7 @@ def check_metric(metric: Any, dim: int, name: str = "metric") -> np.ndarray:
     return 0.5 * (K + K.T)
 
 
-class DoubleBracket(AbstractDissipativeSystem):
+class DoubleBracket(AbstractDissipativeSystem, AbstractDefinedByParams):
     r"""A Lie-Poisson system with double-bracket dissipation:
 
     $$\dot\mu = \mathbb B(\mu)\nabla H(\mu) + \gamma\,\mathbb B(\mu)\,K\,\mathbb B(\mu)\nabla H(\mu)
@@ -89,7 +95,6 @@ of $H$ there). The flow is not Poisson: no
     """
 
     name = "DoubleBracket"
-    equal_by_params = True
 
     def __init__(self, system: AbstractLiePoissonSystem, gamma: float, metric: ArrayLike | None = None):
         if isinstance(system, DoubleBracket):
@@ -110,7 +115,10 @@ of $H$ there). The flow is not Poisson: no
         self.gamma = check_gamma(gamma)
         self.metric = check_metric(metric, system.dim)
         self._identity = bool(np.array_equal(self.metric, np.eye(system.dim)))  # None and I are one system
-        self.equal_by_params = bool(system.equal_by_params)
+
+    def value_key(self) -> tuple[Any, ...] | None:
+        """Defined by its params when the damped system is (else equal only to itself)."""
+        return AbstractDefinedByParams.value_key(self) if self.system.value_key() is not None else None
 
     def __repr__(self) -> str:
         metric = "" if self._identity else f", metric={self.metric.tolist()}"

@@ -6,12 +6,12 @@ import numpy as np
 
 from .._catalogue import se3
 from .._validation import finite_vector, positive_float, positive_vector
-from ._base import AbstractLiePoissonSystem
+from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem
 from ._rigid_body import _axis_term
 from ._terms import CollectiveTerm
 
 
-class HeavyTop(AbstractLiePoissonSystem):
+class HeavyTop(AbstractLiePoissonSystem, AbstractDefinedByParams):
     r"""Heavy top, $y = (\Pi, \Gamma)$ with $\Gamma$ the vertical in the body frame:
     $H = \tfrac12\Pi\cdot\mathbb{I}^{-1}\Pi + mgl\,\chi\cdot\Gamma$,
     $\dot\Pi = \Pi\times\Omega + mgl\,\Gamma\times\chi$, $\dot\Gamma = \Gamma\times\Omega$.
@@ -22,7 +22,6 @@ class HeavyTop(AbstractLiePoissonSystem):
     """
 
     name = "HeavyTop"
-    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 3.0), mgl=1.0, center_of_mass=(0.0, 0.0, 1.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)

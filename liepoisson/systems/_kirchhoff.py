@@ -6,12 +6,12 @@ import numpy as np
 
 from .._catalogue import se3
 from .._validation import positive_vector
-from ._base import AbstractLiePoissonSystem
+from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem
 from ._rigid_body import _axis_term
 from ._terms import CollectiveTerm
 
 
-class Kirchhoff(AbstractLiePoissonSystem):
+class Kirchhoff(AbstractLiePoissonSystem, AbstractDefinedByParams):
     r"""Neutrally buoyant body (centres of gravity and buoyancy coincide):
     $H = \tfrac12\Pi\cdot\mathbb{I}^{-1}\Pi + \tfrac12 p\cdot\mathbb{M}^{-1}p$ on se(3)*,
     $\dot\Pi = \Pi\times\Omega + p\times v$, $\dot p = p\times\Omega$
@@ -21,7 +21,6 @@ class Kirchhoff(AbstractLiePoissonSystem):
     """
 
     name = "Kirchhoff"
-    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)

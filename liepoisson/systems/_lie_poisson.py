@@ -20,7 +20,7 @@ from .._symbolic import (
     trace,
 )
 from ._automatic_splitting import automatic_splitting
-from ._base import AbstractLiePoissonSystem
+from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem
 from ._free_rigid_body import FreeRigidBodyTerm
 from ._splitting_check import check_splitting
 from ._terms import AbstractExactTerm, CollectiveTerm
@@ -75,7 +75,7 @@ def _piece_from_definition(d: dict[str, Any], n_casimirs: int) -> AbstractExactT
     return CollectiveTerm(forms, fn, str(d["name"]), uses_casimirs=bool(d["uses_casimirs"]))
 
 
-class LiePoissonSystem(AbstractLiePoissonSystem):
+class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
     r"""$\dot\mu = \mathbb{B}(\mu)\nabla H(\mu)$ on $\mathfrak g^*$ for a user algebra and Hamiltonian.
 
     **Arguments:**
@@ -129,10 +129,12 @@ class LiePoissonSystem(AbstractLiePoissonSystem):
     def __repr__(self) -> str:
         return f"LiePoissonSystem(name={self.name!r}, algebra={self.algebra.name!r}, dim={self.dim})"
 
-    @property
-    def equal_by_params(self) -> bool:  # type: ignore[override]
-        """The definition is complete unless a splitting piece could not be saved."""
-        return not self._splitting or self.params["splitting"] is not None
+    def value_key(self) -> tuple[Any, ...] | None:
+        """The definition is complete unless a splitting piece could not be saved: then
+        `None` (equal only to itself)."""
+        if self._splitting and self.params["splitting"] is None:
+            return None
+        return AbstractDefinedByParams.value_key(self)
 
     @property
     def hamiltonian_expression(self) -> Any:

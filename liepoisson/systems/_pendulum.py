@@ -7,11 +7,11 @@ import numpy as np
 
 from .._coadjoint import rotation_coefficients
 from .._polynomial import Polynomial
-from ._base import AbstractPoissonSystem
+from ._base import AbstractDefinedByParams
 from ._terms import CollectiveTerm
 
 
-class ExtendedPendulum(AbstractPoissonSystem):
+class ExtendedPendulum(AbstractDefinedByParams):
     r"""Pendulum extended by a constant $c$ and written in $y = (u, v, r) = (p, q, p^2+q^2+c)$:
 
     $\mathbb{B}(y) = \begin{pmatrix}0&-1&-2v\\1&0&2u\\2v&-2u&0\end{pmatrix}$,
@@ -20,7 +20,6 @@ class ExtendedPendulum(AbstractPoissonSystem):
     """
 
     name = "ExtendedPendulum"
-    equal_by_params = True  # name and params are the whole definition
     dim = 3
     _casimir = Polynomial(3, ((1.0, (0, 0, 1)), (-1.0, (2, 0, 0)), (-1.0, (0, 2, 0))))
 

@@ -8,7 +8,7 @@ from numpy.typing import ArrayLike
 
 from .._catalogue import so3
 from .._validation import positive_vector
-from ._base import AbstractExactlySolvableSystem, AbstractLiePoissonSystem
+from ._base import AbstractDefinedByParams, AbstractExactlySolvableSystem, AbstractLiePoissonSystem
 from ._free_rigid_body import free_rigid_body_flow
 from ._terms import CollectiveTerm
 
@@ -19,7 +19,7 @@ def _axis_term(axis: int, weight: float, dim: int, name: str) -> CollectiveTerm:
     return CollectiveTerm(form, lambda s, w=weight: 0.5 * w * s[0] ** 2, name=name)
 
 
-class RigidBody(AbstractLiePoissonSystem, AbstractExactlySolvableSystem):
+class RigidBody(AbstractLiePoissonSystem, AbstractExactlySolvableSystem, AbstractDefinedByParams):
     r"""Free rigid body: $H(\Pi) = \tfrac12 \Pi\cdot\mathbb{I}^{-1}\Pi$ on so(3)*,
     $\dot\Pi = \Pi\times\Omega$ with $\Omega = \mathbb{I}^{-1}\Pi$ (Euler's equations).
 
@@ -27,7 +27,6 @@ class RigidBody(AbstractLiePoissonSystem, AbstractExactlySolvableSystem):
     """
 
     name = "RigidBody"
-    equal_by_params = True  # name and params are the whole definition
 
     def __init__(self, inertia=(1.0, 2.0, 3.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)
