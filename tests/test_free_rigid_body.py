@@ -176,9 +176,10 @@ def test_elliptic_flow_as_a_splitting_sub_step_has_the_method_order(method):
     T = 4.0
     ref = np.asarray(it.ground_truth(system, y0, h=T, n_steps=1, progress=False).states)[0, -1]
     steps = np.array([20, 40, 80, 160])
+    # save_every=n: only the state at T, by one compiled program for every n (n is traced)
     errors = [
         np.linalg.norm(
-            np.asarray(method(system, T / n, terms=pieces).rollout(y0, int(n)))[-1] - ref
+            np.asarray(method(system, T / n, terms=pieces).rollout(y0, int(n), save_every=int(n)))[-1] - ref
         )
         for n in steps
     ]
