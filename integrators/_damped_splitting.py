@@ -10,7 +10,7 @@ import equinox as eqx
 import jax
 
 from liepoisson.internals import positive_float
-from liepoisson.systems import AbstractExactTerm, DoubleBracket
+from liepoisson.systems import AbstractDissipativeSystem, AbstractExactTerm
 
 from ._lie_group import AbstractLieGroupMethod, CommutatorFree2
 from ._splitting._base import (
@@ -31,8 +31,8 @@ def _final(cls: type) -> bool:
 
 class DampedSplitting(AbstractStepMap):
     r"""$\dot\mu = \mathbb B\nabla H + \gamma\,\mathbb B K\mathbb B\nabla H$ (a
-    `liepoisson.systems.DoubleBracket`) split into the pieces $H_1, \dots, H_N$ of the undamped
-    system's `hamiltonian_splitting()`, each moved by its exact flow, and the dissipation
+    `liepoisson.systems.DoubleBracket`, or any `AbstractDissipativeSystem`) split into the pieces
+    $H_1, \dots, H_N$ of its conservative part's `hamiltonian_splitting()`, each moved by its exact flow, and the dissipation
     $\dot\mu = \mathbb B(\mu)\,\gamma K\mathbb B(\mu)\nabla H(\mu)$, a coadjoint motion with a
     state-dependent generator, moved by a Lie-group method (`dissipation.advance` on
     `system.dissipative_generator`). `method.compose` composes the $N + 1$ pieces, the
@@ -45,13 +45,13 @@ class DampedSplitting(AbstractStepMap):
     `CommutatorFree4` of order 4. The compositions' negative sub-steps run the dissipation
     backward, which is harmless for $|\gamma h| \ll 1$.
 
-    **Arguments:** `system`, a `DoubleBracket`; `h` > 0; `method`, an
+    **Arguments:** `system`, a dissipative system (`DoubleBracket`); `h` > 0; `method`, an
     `integrators.splitting` method (default `Strang()`; a class stands for its instance; an
     `ordering` orders the $N + 1$ pieces); `dissipation`, a Lie-group method class (default
     `CommutatorFree2`).
     """
 
-    system: DoubleBracket = eqx.field(static=True)
+    system: AbstractDissipativeSystem = eqx.field(static=True)
     h: float
     method: AbstractSplittingMethod = eqx.field(static=True)
     dissipation: type[AbstractLieGroupMethod] = eqx.field(static=True)
@@ -59,14 +59,15 @@ class DampedSplitting(AbstractStepMap):
 
     def __init__(
         self,
-        system: DoubleBracket,
+        system: AbstractDissipativeSystem,
         h: float,
         method: AbstractSplittingMethod | type[AbstractSplittingMethod] = Strang,
         dissipation: type[AbstractLieGroupMethod] = CommutatorFree2,
     ):
-        if not isinstance(system, DoubleBracket):
+        if not isinstance(system, AbstractDissipativeSystem):
             raise TypeError(
-                "system must be a liepoisson.systems.DoubleBracket (a damped Lie-Poisson system); got "
+                "system must be a dissipative system (a liepoisson.systems.AbstractDissipativeSystem, e.g. a "
+                "DoubleBracket: a damped Lie-Poisson system); got "
                 f"{type(system).__name__}. An undamped system is split by integrators.splitting's methods"
             )
         method = splitting_method(method)
@@ -81,8 +82,8 @@ class DampedSplitting(AbstractStepMap):
         self.h = positive_float(h, "h")
         self.method = method
         self.dissipation = dissipation
-        self.pieces = default_terms(system.system)  # the same objects each time: compiled code is reused
-        method.check_terms(len(self.pieces) + 1, f"the splitting of {system.system!r} and the dissipation")
+        self.pieces = default_terms(system.conservative)  # the same objects each time: compiled code is reused
+        method.check_terms(len(self.pieces) + 1, f"the splitting of {system.conservative!r} and the dissipation")
 
     @property
     def order(self) -> int:
@@ -93,7 +94,7 @@ class DampedSplitting(AbstractStepMap):
 
     def flows(self) -> list[Flow]:
         r"""The exact flows of $H_1, \dots, H_N$, then the Lie-group step of the dissipation."""
-        undamped = self.system.system
+        undamped = self.system.conservative
         return [functools.partial(term.flow, undamped) for term in self.pieces] + [self._dissipate]
 
     def step(self, y: jax.Array) -> jax.Array:

@@ -109,7 +109,7 @@ def test_bad_input(damped):
         it.LieEuler(system("ExtendedPendulum"), 0.1)
     with pytest.raises(ValueError, match="h must be finite and > 0"):
         it.CommutatorFree4(damped, 0.0)
-    with pytest.raises(TypeError, match="must be a liepoisson.systems.DoubleBracket"):
+    with pytest.raises(TypeError, match="must be a dissipative system .a liepoisson.systems.AbstractDissipativeSystem"):
         it.DampedSplitting(system("RigidBody"), 0.1)
     with pytest.raises(TypeError, match="dissipation must be a Lie-group method class"):
         it.DampedSplitting(damped, 0.1, sp.Strang, it.RK4)

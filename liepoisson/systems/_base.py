@@ -319,6 +319,12 @@ class AbstractDissipativeSystem(AbstractLiePoissonSystem):
     integrates it, so the splitting methods refuse it (`integrators.DampedSplitting` and the
     Lie-group methods integrate it)."""
 
+    @property
+    @abc.abstractmethod
+    def conservative(self) -> AbstractLiePoissonSystem:
+        r"""The system without its dissipation ($\dot\mu = \mathbb B\nabla H$): its pieces
+        are what `integrators.DampedSplitting` splits."""
+
     @abc.abstractmethod
     def dissipative_generator(self, y: ArrayLike) -> jax.Array:
         r"""$\eta(\mu)$: the dissipative part of the velocity is $\mathbb B(\mu)\,\eta(\mu)$."""

@@ -116,6 +116,11 @@ of $H$ there). The flow is not Poisson: no
         self.metric = check_metric(metric, system.dim)
         self._identity = bool(np.array_equal(self.metric, np.eye(system.dim)))  # None and I are one system
 
+    @property
+    def conservative(self) -> AbstractLiePoissonSystem:
+        """The undamped system, `system`."""
+        return self.system
+
     def value_key(self) -> tuple[Any, ...] | None:
         """Defined by its params when the damped system is (else equal only to itself)."""
         return AbstractDefinedByParams.value_key(self) if self.system.value_key() is not None else None
