@@ -4,6 +4,7 @@ ground truth of the damped rigid body, files, and bad input."""
 
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
@@ -17,6 +18,7 @@ import liepoisson as lp
 from liepoisson.systems import DoubleBracket, LiePoissonSystem
 
 
+@functools.cache  # one system per algebra: its compiled functions serve every example
 def _quadratic_system(name: str) -> LiePoissonSystem:
     """H = 1/2 mu^T A mu + b.mu with A positive definite (seeded), on algebra `name`."""
     g = algebra(name)
