@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import datetime
 import json
-import math
 import os
 import platform
 import shlex
@@ -15,32 +14,15 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from integrators.internals import json_values
 
 #: Where the benchmarks write by default; BENCHMARKS.md quotes the files committed here.
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def jsonable(value: Any) -> Any:
-    """`value` as JSON values: numpy scalars and arrays as numbers and lists, tuples as lists,
-    paths as strings, and a non-finite float as the string "inf", "-inf" or "nan" (strict JSON
-    has no such numbers; a diverged rollout has infinite errors)."""
-    if isinstance(value, Mapping):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    return value
+    """`value` as JSON values (`integrators.internals.json_values`), a NaN as the string "nan"."""
+    return json_values(value, nan="nan")
 
 
 def _commit() -> str | None:

@@ -18,6 +18,8 @@ these names may change with the library.
   of `n` items (pairs of `Trajectories`, trajectories of `Observations`), as sorted indices.
 - `rms_size(states)`: sqrt(mean |y|^2) over a list of arrays of states, the
   size `observe`'s noise is relative to.
+- `json_values(value, nan=None)`: results as JSON values (numpy as numbers, infinities as
+  strings, NaN as `nan`): the paper's metrics and the benchmarks' result files.
 - `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
   library's style.
 """
@@ -35,6 +37,7 @@ from ._files import atomic_path as atomic_path
 from ._files import atomic_write_text as atomic_write_text
 from ._files import open_hdf5 as open_hdf5
 from ._ground_truth import integrate_chunk as integrate_chunk
+from ._json_values import json_values as json_values
 from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from integrators.internals import atomic_write_text
+from integrators.internals import atomic_write_text, json_values
 
 # The committed results of `python -m paper run ... --full`, quoted by the README and
 # BENCHMARKS.md: read by `python -m paper table --reference`, never written by a run.
@@ -61,19 +61,7 @@ class PaperValue:
 
 
 def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if hasattr(x, "item") and getattr(x, "ndim", 1) == 0:
-        x = x.item()
-    if hasattr(x, "tolist"):
-        return _jsonable(x.tolist())
-    if isinstance(x, float) and math.isnan(x):
-        return None  # JSON null: "not measured" (e.g. no validation set)
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    return x
+    return json_values(x)  # NaN as JSON null: "not measured" (e.g. no validation set)
 
 
 def metric_value(metrics: dict[str, Any], key: str) -> Any:
