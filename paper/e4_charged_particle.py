@@ -105,7 +105,7 @@ class E4(AbstractExperiment):
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
                         P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True,
                         integrals=integrals,
-                        method=it.splitting.Strang if P.glpnet_symmetric else it.splitting.LieTrotter)
+                        method=it.splitting.Strang() if P.glpnet_symmetric else it.splitting.LieTrotter())
                   if P.glpnet_iterations else None)
         lpnet = start_training(learn.fit, learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=0,
                                              parametrisation=learn.TestFlowParametrisation(system)), data, **fit)

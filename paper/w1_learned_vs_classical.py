@@ -13,7 +13,6 @@ Also: the symmetric G-LPNet trained at h = 0.1 run at h/2 and h/4 (step-size tra
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import math
 from pathlib import Path
@@ -123,10 +122,15 @@ class W1Row:
         return self.method in LEARNED
 
 
+def _splitting(method: it.splitting.AbstractSplittingMethod):
+    """`make(system, h)` of a classical splitting: `method` bound to the system's pieces and `h`."""
+    return lambda system, h: it.Splitting(system, h, method)
+
+
 def _classical_maps(setting: Setting, h: float, every: bool = True, orderings: bool = True) -> list[ClassicalMap]:
     n = len(setting.system.hamiltonian_splitting())
     if not every:
-        return [ClassicalMap("Strang", it.splitting.Strang, h), ClassicalMap("RK4", it.RK4, h)]
+        return [ClassicalMap("Strang", _splitting(it.splitting.Strang()), h), ClassicalMap("RK4", it.RK4, h)]
     # Every ordering of the Strang splitting (Fasso 2003): 3! for the rigid body; for the four
     # pieces of Kirchhoff the cyclic shifts (4 of the 24).
     if not orderings:
@@ -138,12 +142,12 @@ def _classical_maps(setting: Setting, h: float, every: bool = True, orderings: b
     maps = []
     for p in chosen:
         label = "Strang" if tuple(p) == tuple(range(n)) else f"Strang{''.join(str(k + 1) for k in p)}"
-        maps.append(ClassicalMap(label, functools.partial(it.splitting.Strang, ordering=p), h))
-    for cls in (it.splitting.LieTrotter, it.splitting.TripleJump, it.splitting.Suzuki,
-                it.splitting.McLachlan4, it.splitting.Yoshida6):
-        maps.append(ClassicalMap(cls.__name__, cls, h))
+        maps.append(ClassicalMap(label, _splitting(it.splitting.Strang(ordering=p)), h))
+    for method in (it.splitting.LieTrotter(), it.splitting.TripleJump(), it.splitting.Suzuki(),
+                   it.splitting.McLachlan4(), it.splitting.Yoshida6()):
+        maps.append(ClassicalMap(type(method).__name__, _splitting(method), h))
     if n == 2:
-        maps.append(ClassicalMap("BlanesMoan4", it.splitting.BlanesMoan4, h))
+        maps.append(ClassicalMap("BlanesMoan4", _splitting(it.splitting.BlanesMoan4()), h))
     maps.append(ClassicalMap("RK4", it.RK4, h))
     maps.append(ClassicalMap("ImplicitMidpoint", it.ImplicitMidpoint, h))
     if setting.exact_flow:
@@ -160,7 +164,7 @@ def _learned_models(P: Profile) -> list[AbstractStudyModel]:
         GLPNetModel("G-LPNet (sym.)", (Training(learn.QuasiNewton(P.glpnet_iterations, "bfgs",
                                                                   restarts=P.glpnet_restarts, warm_start=True),
                                                 validation_fraction=0.0, seed=0),),
-                    method=it.splitting.Strang),
+                    method=it.splitting.Strang()),
     ]
 
 

@@ -114,8 +114,8 @@ def classical() -> tuple[Classical, ...]:
         Classical(ClassicalMap("Lie-Euler", it.LieEuler, H), 1),
         Classical(ClassicalMap("CF2", it.CommutatorFree2, H), 2),
         Classical(ClassicalMap("CF4", it.CommutatorFree4, H), 4),
-        Classical(ClassicalMap("Strang + CF2", _damped(sp.Strang, it.CommutatorFree2), H), 2),
-        Classical(ClassicalMap("TripleJump + CF4", _damped(sp.TripleJump, it.CommutatorFree4), H), 4),
+        Classical(ClassicalMap("Strang + CF2", _damped(sp.Strang(), it.CommutatorFree2), H), 2),
+        Classical(ClassicalMap("TripleJump + CF4", _damped(sp.TripleJump(), it.CommutatorFree4), H), 4),
         Classical(ClassicalMap("RK4", it.RK4, H), 4),
     )
 
