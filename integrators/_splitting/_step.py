@@ -25,6 +25,7 @@ from ._base import (
     default_terms,
     splitting_method,
 )
+from ._strang import Strang
 
 
 class Splitting(AbstractStepMap):
@@ -64,11 +65,7 @@ class Splitting(AbstractStepMap):
                 f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
                 "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"
             )
-        if method is None:
-            from ._strang import Strang
-
-            method = Strang()
-        self.method = splitting_method(method)
+        self.method = Strang() if method is None else splitting_method(method)
         self.pieces = default_terms(system) if terms is None else check_splitting(system, terms, "terms")
         self.h = positive_float(h, "h")
 
