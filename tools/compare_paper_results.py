@@ -4,7 +4,8 @@
 
 Walks each experiment's `metrics.json` in both folders and prints every number that differs by
 more than `rtol` (relative), every string that differs and every key found in one only. Timings
-(keys with `time`, `seconds` or `wall`, `fit_s`, `..._us`, and W1's `cost_vs_strang`) are left out. W1's `rows` are
+(keys with `time`, `seconds` or `wall`, `fit_s`, `..._us`, W1's `cost_vs_strang`, and the
+cost ratios "(N.Nx Strang)" inside W1's verdict text) are left out. W1's `rows` are
 matched by (system, h, method), so runs with different sets of maps compare on the rows they
 share. Exit status 1 if anything differs. Standard library only.
 """
@@ -18,6 +19,8 @@ import re
 import sys
 from pathlib import Path
 
+#: A measured cost ratio written inside a text (W1's verdicts: "at <= its cost (4.6x Strang)").
+COST_RATIO = re.compile(r"\(\d+(\.\d+)?x Strang\)")
 TIMING = re.compile(r"(time|seconds|wall|cost_vs_strang|^fit_s$|_us$)", re.IGNORECASE)
 
 
@@ -57,6 +60,9 @@ def walk(x, y, path: str, rtol: float, out: list[str]) -> None:
         rel = abs(x - y) / max(abs(x), abs(y))
         if not rel <= rtol:
             out.append(f"{path}: {x!r} -> {y!r} (relative {rel:.1e})")
+    elif isinstance(x, str) and isinstance(y, str):
+        if COST_RATIO.sub("(cost)", x) != COST_RATIO.sub("(cost)", y):
+            out.append(f"{path}: {x!r} -> {y!r}")
     elif x != y:
         out.append(f"{path}: {x!r} -> {y!r}")
 
