@@ -32,6 +32,11 @@ if os.environ.get("PYTEST_XDIST_WORKER") is None:
 jax.config.update("jax_compilation_cache_dir", os.environ[_CACHE_VAR])
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+# The same for the processes the tests spawn (the paper's worker processes, a Dask cluster):
+# JAX reads its options from these variables when it is imported.
+os.environ["JAX_COMPILATION_CACHE_DIR"] = os.environ[_CACHE_VAR]
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "0"
 
 
 def pytest_sessionfinish(session, exitstatus):
