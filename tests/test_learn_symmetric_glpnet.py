@@ -127,7 +127,7 @@ def test_order_against_heyoka_on_the_learned_hamiltonian(method, order):
     y0, T = Y[0], 2.0
     ref = np.asarray(it.ground_truth(system, y0, h=T, n_steps=1, progress=False).states)[0, -1]
     steps = np.array([20, 40, 80, 160])
-    errors = [np.linalg.norm(np.asarray(g.with_h(T / n).rollout(y0, int(n)))[-1] - ref) for n in steps]
+    errors = [np.linalg.norm(np.asarray(g.with_h(T / n).rollout(y0, int(n), save_every=int(n)))[-1] - ref) for n in steps]
     observed = -np.polyfit(np.log(steps), np.log(errors), 1)[0]
     assert abs(observed - order) < 0.1, (errors, observed)
 
@@ -139,7 +139,7 @@ def test_compositions_of_the_learned_splitting_raise_the_order():
     ref = np.asarray(it.ground_truth(system, y0, h=T, n_steps=1, progress=False).states)[0, -1]
     steps = np.array([10, 20, 40])
     errors = [
-        np.linalg.norm(np.asarray(it.splitting.TripleJump(system, T / n).rollout(y0, int(n)))[-1] - ref) for n in steps
+        np.linalg.norm(np.asarray(it.splitting.TripleJump(system, T / n).rollout(y0, int(n), save_every=int(n)))[-1] - ref) for n in steps
     ]
     observed = -np.polyfit(np.log(steps), np.log(errors), 1)[0]
     assert abs(observed - 4) < 0.15, (errors, observed)
@@ -189,7 +189,7 @@ def test_composed_network_has_the_composition_order_at_other_steps():
     y0, T = Y[2], 2.0
     ref = np.asarray(it.ground_truth(g.learned_system(), y0, h=T, n_steps=1, progress=False).states)[0, -1]
     steps = np.array([10, 20, 40])
-    errors = [np.linalg.norm(np.asarray(c.with_h(T / n).rollout(y0, int(n)))[-1] - ref) for n in steps]
+    errors = [np.linalg.norm(np.asarray(c.with_h(T / n).rollout(y0, int(n), save_every=int(n)))[-1] - ref) for n in steps]
     observed = -np.polyfit(np.log(steps), np.log(errors), 1)[0]
     assert abs(observed - 4) < 0.15, (errors, observed)
 

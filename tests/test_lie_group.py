@@ -28,7 +28,7 @@ def reference(damped):
 
 
 def observed_order(make, reference, hs):
-    errors = [np.linalg.norm(np.asarray(make(h).rollout(Y0, round(T / h)))[-1] - reference) for h in hs]
+    errors = [np.linalg.norm(np.asarray(make(h).rollout(Y0, round(T / h), save_every=round(T / h)))[-1] - reference) for h in hs]
     return np.log2(errors[-2] / errors[-1])
 
 
