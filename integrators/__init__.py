@@ -14,7 +14,7 @@ from ._diagnostics import (
     error_growth_rate as error_growth_rate,
 )
 from ._damped_splitting import DampedSplitting as DampedSplitting
-from ._splitting._step import Splitting as Splitting
+from ._splitting._base import Splitting as Splitting
 from ._exact import ExactFlow as ExactFlow
 from ._implicit import AbstractImplicitStepMap as AbstractImplicitStepMap
 from ._ground_truth import (

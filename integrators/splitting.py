@@ -7,6 +7,7 @@ from ._splitting._base import AbstractFlows as AbstractFlows
 from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
 from ._splitting._base import FlowList as FlowList
 from ._splitting._base import IndexedFlows as IndexedFlows
+from ._splitting._base import Splitting as Splitting
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
 from ._splitting._composition import (
     AbstractCompositionMethod as AbstractCompositionMethod,
@@ -24,7 +25,6 @@ from ._splitting._composition import (
     Yoshida6 as Yoshida6,
 )
 from ._splitting._lie_trotter import LieTrotter as LieTrotter
-from ._splitting._step import Splitting as Splitting
 from ._splitting._strang import Strang as Strang
 
 #: Every splitting method (the classes: `cls()` is the method, `cls(system, h)` its step map),

@@ -6,7 +6,8 @@ A method is a stateless solver object (`Strang()`, `Strang(ordering=(2, 0, 1))`,
 a known Hamiltonian's pieces (bound to a system and $h$ by `integrators.splitting.Splitting`)
 or the learned pieces of a `learn.GLPNet`. One engine for both: the flows carry their own way
 of being chained (`AbstractFlows.chain`), a Python loop over separate functions (`FlowList`) or
-one `jax.lax.scan` over stacked parameters (`IndexedFlows`)."""
+one `jax.lax.scan` over stacked parameters (`IndexedFlows`). `Splitting` binds a method to a
+system's pieces and a step size (here beside the methods: `Strang(system, h)` builds it)."""
 
 from __future__ import annotations
 
@@ -17,13 +18,20 @@ import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson.systems import AbstractExactTerm, AbstractPoissonSystem
+from liepoisson.internals import check_system, positive_float
+from liepoisson.systems import (
+    AbstractDissipativeSystem,
+    AbstractExactTerm,
+    AbstractPoissonSystem,
+    check_splitting,
+)
 
-from .._step_map import AbstractStepMap, traced_h, xla_flops
+from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops
 
 #: A flow $\varphi_t(y)$ as `flow(t, y)` on one state.
 Flow = Callable[[float, jax.Array], jax.Array]
@@ -202,8 +210,6 @@ class AbstractSplittingMethod(abc.ABC):
 
 def _bound(cls: type[AbstractSplittingMethod], system: AbstractPoissonSystem, h: float,
            ordering: Sequence[int] | None = None, *, terms: Sequence[AbstractExactTerm] | None = None):
-    from ._step import Splitting
-
     return Splitting(system, h, cls(ordering=ordering), terms=terms)
 
 
@@ -261,3 +267,81 @@ def symmetric_coefficients(half: tuple[float, ...]) -> np.ndarray:
     """The palindrome `half + reversed(half[:-1])` as float64 (symmetric composition tables)."""
     half_arr = np.asarray(half, dtype=np.float64)
     return np.concatenate([half_arr, half_arr[-2::-1]])
+
+
+class Splitting(AbstractStepMap):
+    r"""The splitting method `method` on the exact flows $\varphi^{[k]}_t$ of the pieces of
+    `system`'s Hamiltonian, at step size `h`: $y_{n+1} = \Phi_h(y_n)$.
+
+    Every sub-flow is exact, Poisson and Casimir-preserving (a frozen-parameter test flow),
+    so $\Phi_h$ is a Poisson map that conserves every Casimir to round-off, whatever its order.
+
+    **Arguments:** `system`, an `AbstractPoissonSystem` whose `hamiltonian_splitting()` gives
+    the pieces; `h` > 0, the step size; `method`, an `integrators.splitting` method
+    (`Strang()`, `TripleJump()`, `Strang(ordering=(2, 0, 1))`, ...; a class stands
+    for its instance without ordering); `terms`, your own exact pieces instead of
+    `hamiltonian_splitting()` (e.g. `[FreeRigidBodyTerm(I), CollectiveTerm(...)]`), checked to
+    sum to $H$ at sample points.
+
+    `Strang(system, h, ordering=p)` builds the same map as `Splitting(system, h,
+    Strang(ordering=p))`.
+    """
+
+    system: AbstractPoissonSystem = eqx.field(static=True)
+    h: float
+    method: AbstractSplittingMethod = eqx.field(static=True)
+    pieces: tuple[AbstractExactTerm, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        system: AbstractPoissonSystem,
+        h: float,
+        method: AbstractSplittingMethod | type[AbstractSplittingMethod],
+        *,
+        terms: Sequence[AbstractExactTerm] | None = None,
+    ):
+        self.system = check_system(system)
+        if isinstance(system, AbstractDissipativeSystem):
+            raise ValueError(  # noqa: TRY004 (a system of the wrong kind, not of the wrong type)
+                f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
+                "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"
+            )
+        self.method = splitting_method(method)
+        self.pieces = default_terms(system) if terms is None else check_splitting(system, terms, "terms")
+        self.h = positive_float(h, "h")
+
+    def __check_init__(self):
+        self.method.check_terms(len(self.pieces), f"the splitting of {self.system!r}")
+
+    @property
+    def order(self) -> int:
+        return self.method.order
+
+    @property
+    def ordering(self) -> tuple[int, ...]:
+        """The order in which the pieces are applied (the method's `ordering`, or their own)."""
+        return tuple(range(len(self.pieces))) if self.method.ordering is None else self.method.ordering
+
+    @property
+    def terms(self) -> tuple[AbstractExactTerm, ...]:
+        r"""The pieces $H_1, \dots, H_N$ in `ordering` (their flows are applied in this order)."""
+        return tuple(self.pieces[k] for k in self.ordering)
+
+    @property
+    def label(self) -> str:
+        return type(self.method).__name__
+
+    def flows(self) -> FlowList:
+        r"""The exact flows $\varphi^{[k]}_t$ of the pieces, as `flow(t, y)`, in the order of
+        `pieces` (`method.compose` applies its `ordering`)."""
+        return FlowList([functools.partial(term.flow, self.system) for term in self.pieces])
+
+    def step(self, y: jax.Array) -> jax.Array:
+        return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return self.method.flows_per_step(len(self.pieces))
+
+    def step_flops(self) -> float:
+        return composition_flops(self, self.method)
