@@ -13,7 +13,7 @@ Two problems, each fitted from the same start by both:
   `learn.Optimistix(optx.BFGS(rtol=0, atol=0))` (the whole solve compiled).
 - **W2 (observations, Levenberg-Marquardt).** W2's rigid body, 30 trajectories x 21
   observations, noise 1e-3, the quadratic G-LPNet (TripleJump) on whole trajectories with
-  fitted starts (about 100 unknowns), from its one-step fit; `--steps` steps of
+  fitted starts (6 weights and 90 start components), from its one-step fit; `--steps` steps of
   `learn.LevenbergMarquardt` (the block Jacobian, lineax Cholesky, the loop on the host)
   against `learn.Optimistix(optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12))`.
 
