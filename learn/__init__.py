@@ -12,6 +12,7 @@ _jax.config.update("jax_enable_x64", True)
 from ._models._base import (
     AbstractCasimirConservingMap as AbstractCasimirConservingMap,
     AbstractLearnedMap as AbstractLearnedMap,
+    AbstractOneFlowMap as AbstractOneFlowMap,
     AbstractWarmStartableMap as AbstractWarmStartableMap,
 )
 from ._models._baseline import MLPBaseline as MLPBaseline

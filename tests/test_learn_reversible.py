@@ -261,7 +261,7 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match="iterations must be an integer >= 1; got 0"):
         learn.Reversible(learn.LPNet(RB), iterations=0)
     data = it.ground_truth(RB, Y, h=0.1, n_steps=3, progress=False)
-    with pytest.raises(ValueError, match=r"loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two"):
+    with pytest.raises(ValueError, match=r"loss='alpha' fits alpha to the parameters of one test flow per pair.*a Reversible is not one .a Reversible makes two"):
         learn.fit(reversible(), data, loss="alpha", epochs=1, progress=False)
 
 

@@ -153,6 +153,26 @@ class AbstractWarmStartableMap(AbstractLearnedMap):
         mapping); `None` if this map is already the simpler one."""
 
 
+class AbstractOneFlowMap(AbstractLearnedMap):
+    r"""A learned map whose step is one exact step $\mathbb T(h, \alpha(y))\,y$ of a
+    parametrisation, at the parameters $\alpha(y)$ of a network (an LPNet): each data pair
+    determines the parameters of its step, so the map can be fitted on them
+    (`learn.AlphaLoss`)."""
+
+    @abc.abstractmethod
+    def alpha(self, y: jax.Array) -> jax.Array:
+        r"""$\alpha(y)$ `(n_params,)` for one state."""
+
+    @property
+    @abc.abstractmethod
+    def output_scales(self) -> jax.Array:
+        """The scale of each parameter the network outputs (1 without scalings)."""
+
+    @abc.abstractmethod
+    def params_from_pair(self, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:
+        """The parameters `(N, n_params)` of the exact step that carries each `y0` to `y1`."""
+
+
 def check_learned_map(value: Any, name: str = "model must be") -> AbstractLearnedMap:
     """`value` if it is a learned map, else `TypeError` saying what `name` (e.g. "model must
     be") should have been."""

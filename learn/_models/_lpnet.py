@@ -17,7 +17,7 @@ from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._base import AbstractCasimirConservingMap
+from ._base import AbstractCasimirConservingMap, AbstractOneFlowMap
 from ._equivariant import check_group_law
 from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
@@ -29,7 +29,7 @@ from ._parametrisation import (
 )
 
 
-class LPNet(AbstractCasimirConservingMap):
+class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
     r"""Local Lie-Poisson network: $y \mapsto \mathbb T(h, \alpha(y))\,y$, a system, an
     $\alpha$-network and a parametrisation $\mathbb T$ of exact steps.
 
@@ -135,6 +135,14 @@ class LPNet(AbstractCasimirConservingMap):
 
     def hyperparameters(self) -> dict[str, Any]:
         return {"network": self.network.spec(), "parametrisation": type(self.parametrisation).__name__}
+
+    @property
+    def output_scales(self) -> jax.Array:
+        return jnp.asarray(self.network.output_scales())
+
+    def params_from_pair(self, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:
+        """`parametrisation.params_from_pair` (paper eqs. Loss_function_alpha, alpha_mod_Casimirs)."""
+        return self.parametrisation.params_from_pair(y0, y1, h)
 
     def reinitialised(self, key):
         return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))

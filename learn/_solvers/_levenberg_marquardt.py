@@ -32,8 +32,8 @@ from .. import _files
 from ._checkpoint import read_resumable
 from ._compiled import AbstractAtStructure, compiled
 from ._problem import AbstractLeastSquares, AbstractProblem
-from ._record import StageRecord
 from ._stage import (
+    AbstractIterationsStage,
     AbstractResumableStage,
     AbstractStage,
     Context,
@@ -41,6 +41,7 @@ from ._stage import (
     Result,
     WarmStart,
     history,
+    unselected_record,
 )
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
@@ -95,19 +96,12 @@ def _damped_step(A, g, D, lam):
 
 
 @dataclasses.dataclass(frozen=True)
-class _Steps(AbstractStage):
+class _Steps(AbstractIterationsStage):
     """Levenberg-Marquardt steps from the problem's start (no selection: the wrappers do that);
     resumable from a checkpoint written in the same phase."""
 
     iterations: int
     rtol: float
-
-    @property
-    def budget(self) -> int:
-        return self.iterations
-
-    def with_budget(self, budget: int) -> _Steps:
-        return dataclasses.replace(self, iterations=budget)
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         start = time.perf_counter()
@@ -120,14 +114,12 @@ class _Steps(AbstractStage):
         y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
                               context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
                               context.phase, resumed, context.earlier, context.on_step())
-        record = StageRecord(optimiser="LevenbergMarquardt", settings={}, iterations=len(values),
-                             train_loss=float("nan"), val_loss=float("nan"), kept=True,
-                             wall_time_s=time.perf_counter() - start)
+        record = unselected_record("LevenbergMarquardt", len(values), start)
         return Result(y, record, history(values))
 
 
 @dataclasses.dataclass(frozen=True)
-class LevenbergMarquardt(AbstractResumableStage):
+class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     r"""Levenberg-Marquardt on the residuals $r$ of a least-squares objective
     (`learn.AbstractLeastSquares`: the state and alpha losses, `learn.TrajectoryLoss`). Each
     step evaluates $r$ and its Jacobian $J$ once and solves
@@ -160,13 +152,6 @@ class LevenbergMarquardt(AbstractResumableStage):
             raise ValueError(f"LevenbergMarquardt.rtol must be a number in [0, 1); got {self.rtol!r}")
         if not isinstance(self.warm_start, (bool, np.bool_)):
             raise TypeError(f"LevenbergMarquardt.warm_start must be True or False; got {self.warm_start!r}")
-
-    @property
-    def budget(self) -> int:
-        return self.iterations
-
-    def with_budget(self, budget: int) -> LevenbergMarquardt:
-        return dataclasses.replace(self, iterations=budget)
 
     def composed(self) -> AbstractStage:
         """The stage as wrappers around the steps: keep-if-better, after the warm start if

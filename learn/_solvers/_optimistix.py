@@ -15,8 +15,7 @@ import optimistix as optx
 from liepoisson.internals import positive_int
 
 from ._problem import AbstractLeastSquares, AbstractProblem
-from ._record import StageRecord
-from ._stage import AbstractStage, Context, KeepIfBetter, Result, history
+from ._stage import AbstractStage, Context, KeepIfBetter, Result, history, unselected_record
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,9 +51,8 @@ class _Solve(AbstractStage):
         y = eqx.combine(solution.value, static)
         steps = int(solution.stats["num_steps"])
         loss = float(objective(y, problem.train))
-        record = StageRecord(optimiser="Optimistix", settings={}, iterations=steps, train_loss=loss,
-                             val_loss=float("nan"), kept=True, wall_time_s=time.perf_counter() - start,
-                             details={"result": str(solution.result)})
+        record = dataclasses.replace(unselected_record("Optimistix", steps, start), train_loss=loss,
+                                     details={"result": str(solution.result)})
         return Result(y, record, history([loss], [steps]))
 
 

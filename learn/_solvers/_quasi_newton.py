@@ -43,8 +43,17 @@ from liepoisson.internals import positive_int
 
 from ._compiled import compiled
 from ._problem import AbstractProblem
-from ._record import StageRecord
-from ._stage import AbstractStage, Context, KeepIfBetter, Restarts, Result, WarmStart, history
+from ._stage import (
+    AbstractIterationsStage,
+    AbstractStage,
+    Context,
+    KeepIfBetter,
+    Restarts,
+    Result,
+    WarmStart,
+    history,
+    unselected_record,
+)
 
 _SCIPY = {"bfgs": "BFGS", "lbfgsb": "L-BFGS-B"}
 _LBFGS_CHUNK = 100
@@ -168,19 +177,12 @@ def _optax_lbfgs(loss):
 
 
 @dataclasses.dataclass(frozen=True)
-class _OneStart(AbstractStage):
+class _OneStart(AbstractIterationsStage):
     """One quasi-Newton run from the problem's start (no selection: the wrappers do that)."""
 
     iterations: int
     method: str
     rtol: float
-
-    @property
-    def budget(self) -> int:
-        return self.iterations
-
-    def with_budget(self, budget: int) -> _OneStart:
-        return dataclasses.replace(self, iterations=budget)
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         flat = problem.flat()
@@ -191,14 +193,12 @@ class _OneStart(AbstractStage):
                            context.desc or f"{problem.name} {self.method}", self.rtol, context.on_step())
         params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
         y = eqx.combine(ravel_pytree(params)[1](jnp.asarray(x)), static)
-        record = StageRecord(optimiser="QuasiNewton", settings={}, iterations=len(hist["train_loss"]),
-                             train_loss=float("nan"), val_loss=float("nan"), kept=True,
-                             wall_time_s=time.perf_counter() - start)
+        record = unselected_record("QuasiNewton", len(hist["train_loss"]), start)
         return Result(y, record, history(hist["train_loss"], hist["epoch"]))
 
 
 @dataclasses.dataclass(frozen=True)
-class QuasiNewton(AbstractStage):
+class QuasiNewton(AbstractIterationsStage):
     r"""Full-batch quasi-Newton minimisation with JAX gradients, for every learned map.
 
     `iterations` per start; `method`: `"lbfgsb"` (SciPy L-BFGS-B, 50 correction pairs: thousands
@@ -232,13 +232,6 @@ class QuasiNewton(AbstractStage):
         if not isinstance(self.warm_start, (bool, np.bool_)):
             raise TypeError(f"QuasiNewton.warm_start must be True or False; got {self.warm_start!r}")
         positive_int(self.restarts, "QuasiNewton.restarts")
-
-    @property
-    def budget(self) -> int:
-        return self.iterations
-
-    def with_budget(self, budget: int) -> QuasiNewton:
-        return dataclasses.replace(self, iterations=budget)
 
     def composed(self) -> AbstractStage:
         """The stage as wrappers around one run: keep-if-better of the best of `restarts`

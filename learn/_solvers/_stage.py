@@ -115,6 +115,26 @@ class AbstractStage(abc.ABC):
         """`ValueError` (before any stage runs) if this stage cannot solve `problem`."""
 
 
+class AbstractIterationsStage(AbstractStage):
+    """A stage whose budget is its field `iterations`."""
+
+    iterations: int
+
+    @property
+    def budget(self) -> int:
+        return self.iterations
+
+    def with_budget(self, budget: int) -> AbstractIterationsStage:
+        return dataclasses.replace(self, iterations=budget)
+
+
+def unselected_record(optimiser: str, iterations: int, started: float) -> StageRecord:
+    """The record of one run before any selection (its losses are the wrappers' to fill in,
+    `KeepIfBetter`, `Restarts`): `started` the `time.perf_counter()` at its start."""
+    return StageRecord(optimiser=optimiser, settings={}, iterations=iterations, train_loss=float("nan"),
+                       val_loss=float("nan"), kept=True, wall_time_s=time.perf_counter() - started)
+
+
 class AbstractResumableStage(AbstractStage):
     """A stage that writes its state to the fit's `learn.Checkpoint` and resumes from it."""
 

@@ -18,9 +18,7 @@ from numpy.typing import ArrayLike
 from integrators import Trajectories
 from liepoisson import vmap_samples
 
-from .._models._base import AbstractCasimirConservingMap, AbstractLearnedMap
-from .._models._lpnet import LPNet
-from .._models._reversible import Reversible
+from .._models._base import AbstractCasimirConservingMap, AbstractLearnedMap, AbstractOneFlowMap
 from .._solvers._problem import AbstractLeastSquares
 from ._data import PairData, prepare
 from ._problem import Description, MapProblem
@@ -128,23 +126,21 @@ class AlphaLoss(AbstractPairsLoss):
     $y_1$ (`parametrisation.params_from_pair`), in units of the network's output scale."""
 
     def check_model(self, model):
-        if isinstance(model, Reversible):
-            raise ValueError(  # noqa: TRY004
-                "loss='alpha' fits alpha to the parameters of one test flow per pair; a Reversible makes two per "
-                "step, whose parameters no pair determines: use loss='state'"
+        if not isinstance(model, AbstractOneFlowMap):
+            raise ValueError(  # noqa: TRY004 (a map of the wrong kind for this loss)
+                "loss='alpha' fits alpha to the parameters of one test flow per pair, the step of a "
+                f"learn.AbstractOneFlowMap (an LPNet); a {type(model).__name__} is not one (a Reversible makes two "
+                "flows per step, whose parameters no pair determines): use loss='state'"
             )
-        if not isinstance(model, LPNet):
-            raise ValueError(f"the alpha loss trains an LPNet's alpha; a {type(model).__name__} trains on loss in "  # noqa: TRY004
-                             "['state']")
 
     def targets(self, model, y0, y1, h):
-        return model.parametrisation.params_from_pair(y0, y1, h)
+        return model.params_from_pair(y0, y1, h)
 
     def normalised(self, model, pairs, targets):
         return model.normalised(pairs.y0, pairs.y1, pairs.h, targets)
 
     def pair_residuals(self, model, y0, targets):
-        scale = jnp.asarray(model.network.output_scales())
+        scale = jnp.asarray(model.output_scales)
         return (jax.vmap(model.alpha)(y0) - targets) / scale
 
     @property
