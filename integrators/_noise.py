@@ -4,6 +4,8 @@ and unit standard deviation (`observe` scales it to the standard deviation asked
 from __future__ import annotations
 
 import abc
+import numbers
+from typing import Any
 
 import numpy as np
 
@@ -53,3 +55,25 @@ NOISE_LAWS: dict[str, AbstractNoiseLaw] = {law.name: law for law in (GaussianNoi
 def noise_law(law: str | AbstractNoiseLaw) -> AbstractNoiseLaw:
     """`law` as an `AbstractNoiseLaw`: an instance, or one of the names of `NOISE_LAWS`."""
     return by_name(law, NOISE_LAWS, AbstractNoiseLaw, "law")
+
+
+def noise_level(noise: Any, name: str = "noise") -> float:
+    """`noise` as a float: a finite real number >= 0 (a Python or NumPy number, or a 0-d
+    array), or a `TypeError` naming `name` for text and booleans (`"0.01"` and `True` are not
+    noise levels) and a `ValueError` for a negative or non-finite one."""
+    if isinstance(noise, (bool, np.bool_, str, bytes)):
+        kind = None
+    elif isinstance(noise, numbers.Real):
+        kind = "f"
+    else:  # a 0-d array (NumPy, JAX) of a real type
+        try:
+            kind = np.asarray(noise).dtype.kind if np.ndim(noise) == 0 else None
+        except (TypeError, ValueError):
+            kind = None
+    if kind not in ("i", "u", "f"):
+        raise TypeError(f"{name} must be a number >= 0 (relative to the states' RMS size); got "
+                        f"{type(noise).__name__} {noise!r}")
+    value = float(noise)
+    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a finite number >= 0 (relative to the states' RMS size); got {value}")
+    return value

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import numbers
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -19,29 +20,77 @@ from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
 from ._ground_truth import taylor_integrator
-from ._noise import AbstractNoiseLaw, noise_law
+from ._noise import AbstractNoiseLaw, noise_law, noise_level
 from ._validation_split import validation_split
 
 FORMAT = "liepoisson-observations"
 FORMAT_VERSION = 1
 
 
-def _per_trajectory(value: Any, name: str, n: int | None) -> list[np.ndarray]:
-    """`value` as a list of float64 arrays, one per trajectory: a sequence of arrays, or an
-    array whose first axis runs over trajectories (`n`, if known, trajectories)."""
-    if isinstance(value, np.ndarray) or not isinstance(value, Sequence) or isinstance(value, (str, bytes)):
-        try:
-            arr = np.array(value, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise TypeError(f"{name} must be a real array or a list of arrays; got {type(value).__name__}") from err
-        return list(arr) if arr.ndim >= 1 else [arr]
-    out = []
+def _ragged_where(value: Any, name: str) -> str:
+    """Where the nested sequence `value` stops being rectangular: the first entry whose shape
+    differs from that of the entry before it."""
+    shapes = []
     for j, item in enumerate(value):
         try:
-            out.append(np.array(item, dtype=np.float64))
-        except (TypeError, ValueError) as err:
-            raise TypeError(f"{name}[{j}] must be a real array; got {type(item).__name__}") from err
-    return out
+            shapes.append(np.shape(item))
+        except ValueError:
+            return _ragged_where(item, f"{name}[{j}]")
+    for j in range(1, len(shapes)):
+        if shapes[j] != shapes[j - 1]:
+            return f"{name}[{j}] has shape {shapes[j]} and {name}[{j - 1}] shape {shapes[j - 1]}"
+    return f"{name} is not rectangular"
+
+
+def _real_array(value: Any, name: str) -> np.ndarray:
+    """`value` as a float64 array, or a `TypeError`/`ValueError` naming `name`: nothing
+    (`None`), text, booleans and complex numbers are refused (never converted, nor their
+    imaginary part dropped), and so is a ragged nesting of lists."""
+    if value is None:
+        raise TypeError(f"{name} is required: a real array or a list of arrays; got None")
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name} must be a real array or a list of arrays; got {type(value).__name__} {value!r}")
+    try:
+        arr = np.asarray(value)
+    except ValueError:
+        raise ValueError(f"{name} is ragged: {_ragged_where(value, name)}") from None
+    if arr.dtype == object:  # e.g. a list holding None or other objects: convert element by element
+        try:
+            arr = np.asarray(arr.tolist(), dtype=np.float64)
+        except (TypeError, ValueError):
+            bad = next((v for v in arr.flat if not isinstance(v, numbers.Real) or isinstance(v, bool)), arr.flat[0])
+            raise TypeError(f"{name} must hold real numbers; got {type(bad).__name__} {bad!r} in it") from None
+    if arr.dtype.kind == "c":
+        nonreal = np.argwhere(np.imag(arr) != 0)
+        k = tuple(int(i) for i in nonreal[0]) if nonreal.size else (0,) * arr.ndim
+        where = f"{name}[{', '.join(map(str, k))}]" if k else name
+        raise TypeError(f"{name} must be real; got complex values ({where} = {arr[k]}); the imaginary part is not "
+                        "dropped silently: pass the real part if that is what you mean")
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must hold real numbers; got {_values(arr)}")
+    return arr.astype(np.float64)
+
+
+def _values(arr: np.ndarray) -> str:
+    """What `arr` holds instead of numbers, for error messages: `text values such as 'a'`."""
+    kind = {"U": "text", "S": "text", "b": "boolean", "c": "complex", "O": "object"}.get(arr.dtype.kind, arr.dtype.name)
+    if not arr.size:
+        return f"{kind} values"
+    sample = arr.flat[0]
+    return f"{kind} values such as {(sample.item() if isinstance(sample, np.generic) else sample)!r}"
+
+
+def _per_trajectory(value: Any, name: str) -> np.ndarray | list[np.ndarray]:
+    """`value` as one float64 array, or, for nested lists of different lengths (trajectories
+    of their own lengths), as a list of float64 arrays, one per entry."""
+    if value is None or isinstance(value, np.ndarray) or not isinstance(value, Sequence) \
+            or isinstance(value, (str, bytes)):
+        return _real_array(value, name)
+    try:
+        np.asarray(value)
+    except ValueError:
+        return [_real_array(item, f"{name}[{j}]") for j, item in enumerate(value)]
+    return _real_array(value, name)
 
 
 def rms_size(states: Sequence[np.ndarray]) -> float:
@@ -51,11 +100,12 @@ def rms_size(states: Sequence[np.ndarray]) -> float:
 
 
 def times_per_trajectory(times: Any, n: int) -> list[np.ndarray]:
-    """One array of times per trajectory (`n` of them): a single 1-D array is shared by all."""
-    ts = _per_trajectory(times, "times", n)
-    if len(ts) and np.ndim(ts[0]) == 0:
-        ts = [np.asarray(ts, dtype=np.float64)] * n
-    return ts
+    """One array of times per trajectory (`n` of them): a single 1-D array (even an empty
+    one) is shared by all."""
+    ts = _per_trajectory(times, "times")
+    if isinstance(ts, list):
+        return ts
+    return [ts] * n if ts.ndim <= 1 else list(ts)
 
 
 def check_times(t: np.ndarray, name: str) -> np.ndarray:
@@ -76,6 +126,26 @@ def check_times(t: np.ndarray, name: str) -> np.ndarray:
             f"{name}[{k - 1}] = {t[k - 1]} ({what} time: sort the observations by time and merge repeated ones)"
         )
     return t
+
+
+def _trajectories_of(ys: np.ndarray | list[np.ndarray], dim: int) -> list[np.ndarray]:
+    """The trajectories of `states`: an `(n, dim)` array is one, an `(n_traj, n, dim)` array
+    or a list of `(n_j, dim)` arrays several; a list of rows of different lengths is refused."""
+    if isinstance(ys, np.ndarray):
+        if ys.ndim == 2:
+            return [ys]  # one trajectory (n, dim)
+        if ys.ndim == 3 or (ys.ndim == 1 and ys.size == 0):
+            if not len(ys):
+                raise ValueError("states must hold at least one trajectory; got none")
+            return list(ys)
+        raise ValueError(f"states must be one trajectory (n_observations, {dim}), an array (n_trajectories, "
+                         f"n_observations, {dim}) or a list of (n_j, {dim}) arrays; got shape {ys.shape}")
+    if ys and all(y.ndim == 1 for y in ys):  # rows of one trajectory, of different lengths
+        j = next((j for j, y in enumerate(ys) if y.shape != ys[0].shape), 0)
+        raise ValueError(f"states is ragged: its rows are observations of one trajectory (n_observations, {dim}) "
+                         f"but states[{j}] has {ys[j].size} component(s) and states[0] {ys[0].size}; every state has "
+                         f"{dim} components (missing values are not masked: drop that observation and its time)")
+    return ys
 
 
 class Observations:
@@ -103,11 +173,7 @@ class Observations:
         if not isinstance(system, AbstractPoissonSystem):
             raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
         dim = system.dim
-        ys = _per_trajectory(states, "states", None)
-        if not ys:
-            raise ValueError("states must hold at least one trajectory; got none")
-        if all(np.ndim(y) == 1 for y in ys) and np.ndim(states) == 2:
-            ys = [np.asarray(states, dtype=np.float64)]  # one trajectory (n, dim)
+        ys = _trajectories_of(_per_trajectory(states, "states"), dim)
         ts = times_per_trajectory(times, len(ys))
         if len(ts) != len(ys):
             raise ValueError(f"times has {len(ts)} trajectories and states {len(ys)}; give one time array per "
@@ -127,6 +193,9 @@ class Observations:
                     f"component {i} is {y[k, i]}. Missing values are not masked: drop that observation and its time"
                 )
             check_times(t, f"times[{j}]")
+            if t.shape[0] < 2:
+                raise ValueError(f"times[{j}] has {t.shape[0]} time(s); a trajectory needs at least 2 observation "
+                                 f"times (a motion between two times), got {t.shape[0]}")
             if t.shape[0] != y.shape[0]:
                 raise ValueError(f"times[{j}] has {t.shape[0]} entries and states[{j}] {y.shape[0]} observations; "
                                  "give one time per observation")
@@ -226,9 +295,13 @@ class Observations:
         """From the long format (one row per observation): the trajectory label of each row
         (any integers), its time and its state `(N, dim)`; rows in any order (sorted by time
         within each trajectory; repeated times are refused)."""
-        label = np.asarray(trajectory)
-        t = np.asarray(t, dtype=np.float64)
-        y = np.asarray(states, dtype=np.float64)
+        columns = []
+        for name, value in (("trajectory", trajectory), ("t", t), ("states", states)):
+            try:
+                columns.append(_real_array(value, name))
+            except (TypeError, ValueError) as err:
+                raise type(err)(f"{source}: {err}") from None
+        label, t, y = columns
         if y.ndim != 2 or label.shape != (y.shape[0],) or t.shape != (y.shape[0],):
             raise ValueError(f"{source}: trajectory, t and states must have N, N and (N, dim) entries; got shapes "
                              f"{label.shape}, {t.shape}, {y.shape}")
@@ -272,19 +345,63 @@ class Observations:
                 if f.attrs.get("format") != FORMAT:
                     raise ValueError(f"{path!r} is not a liepoisson observations file (attribute format is "
                                      f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
-                version = int(f.attrs["format_version"])
+                version = format_version(f.attrs["format_version"], path)
                 if version != FORMAT_VERSION:
                     raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads "
                                      f"{FORMAT_VERSION}")
-                columns = (f["trajectory"][...], f["t"][...], f["states"][...])
-                name, params = str(f.attrs["system"]), json.loads(str(f.attrs["system_params"]))
-                metadata = json.loads(str(f.attrs.get("metadata", "{}")))
+                columns = tuple(_column(f[key][...], key, path) for key in ("trajectory", "t", "states"))
+                name = _text(f.attrs["system"])
+                params = _json_attribute(f.attrs["system_params"], "system_params", path)
+                metadata = _json_attribute(f.attrs.get("metadata", "{}"), "metadata", path)
         except ValueError:
             raise
         except (OSError, KeyError, TypeError) as err:
             raise ValueError(f"{path!r} is damaged or lacks a field of an observations file: {err}") from err
         system = system_for_file(name, params, system, f"the file {path!r}")
         return cls.from_columns(system, *columns, metadata=metadata, source=repr(path))
+
+
+def _text(value: Any) -> str:
+    """An HDF5 string attribute as `str` (h5py gives `bytes` for fixed-length strings)."""
+    return value.decode("utf-8", "replace") if isinstance(value, bytes) else str(value)
+
+
+def _shown(value: Any) -> Any:
+    """An attribute's value as Python shows it (text decoded, NumPy scalars as Python's)."""
+    if isinstance(value, bytes):
+        return _text(value)
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def format_version(value: Any, path: str) -> int:
+    """The `format_version` attribute of the file `path` as an int, or a `ValueError` naming
+    the file and what it holds instead."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
+        raise ValueError(  # noqa: TRY004 (a damaged file, not a wrong argument type)
+            f"{path!r}: the attribute format_version is {_shown(value)!r}; expected an integer "
+            f"({FORMAT_VERSION} for this liepoisson): the file is damaged or was not written by liepoisson")
+    return int(value)
+
+
+def _json_attribute(value: Any, key: str, path: str) -> Any:
+    """The JSON text of attribute `key` of the file `path`, parsed; a `ValueError` naming the
+    file and the attribute if it is not JSON."""
+    text = _text(value)
+    try:
+        return json.loads(text)
+    except ValueError as err:
+        shown = text if len(text) <= 80 else text[:77] + "..."
+        raise ValueError(f"{path!r}: the attribute {key} is not JSON ({err}); got {shown!r}") from None
+
+
+def _column(value: Any, key: str, path: str) -> np.ndarray:
+    """The array `key` of an observations file as read, or a `ValueError` naming the file and
+    the array if it does not hold real numbers (text labels, complex states)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":
+        what = "trajectory labels (integers)" if key == "trajectory" else "real numbers"
+        raise ValueError(f"{path!r}: the array {key!r} must hold {what}; got {_values(arr)}")
+    return arr
 
 
 def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -296,7 +413,7 @@ def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             if missing:
                 raise ValueError(f"{path!r} lacks the array(s) {missing}; an observations .npz holds trajectory, t "
                                  "and states (N, dim)")
-            return z["trajectory"], z["t"], z["states"]
+            return tuple(_column(z[key], key, path) for key in ("trajectory", "t", "states"))
     except ValueError as err:
         if str(err).startswith(repr(path)):
             raise
@@ -308,7 +425,7 @@ def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _read_csv(path: str, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     expected = ["trajectory", "t", *(f"y{i}" for i in range(dim))]
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, encoding="utf-8-sig") as f:  # a byte-order mark (spreadsheets write one) is skipped
             header = [h.strip() for h in f.readline().split(",")]
             if header != expected:
                 raise ValueError(f"{path!r} has the header {','.join(header)!r}; expected {','.join(expected)!r}")
@@ -369,12 +486,7 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     y0 = np.array(system.check_regular(y0, "y0"), dtype=np.float64).reshape(-1, system.dim)
-    try:
-        noise = float(noise)
-    except (TypeError, ValueError):
-        raise TypeError(f"noise must be a number >= 0 (relative to the states' RMS size); got {noise!r}") from None
-    if not np.isfinite(noise) or noise < 0:
-        raise ValueError(f"noise must be a finite number >= 0 (relative to the states' RMS size); got {noise}")
+    noise = noise_level(noise)
     law = noise_law(law)
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)

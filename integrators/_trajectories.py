@@ -64,6 +64,18 @@ def write_attributes(f: Any, metadata: dict[str, Any]) -> None:
     f.attrs["format_version"] = np.int64(FORMAT_VERSION)
 
 
+def _integer_attribute(value: Any, key: str, path: str) -> int:
+    """The integer attribute `key` of the file `path`, or a `ValueError` naming the file, the
+    attribute and what it holds instead (a damaged file, or not one of liepoisson's)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
+        shown = value.decode("utf-8", "replace") if isinstance(value, bytes) else value
+        raise ValueError(  # noqa: TRY004 (a damaged file, not a wrong argument type)
+            f"{path!r}: the attribute {key} is {shown!r}; expected an integer (the file is damaged or was not "
+            "written by liepoisson)"
+        )
+    return int(value)
+
+
 def _selection(select: Any, n_traj: int) -> Any:
     """`select` of `Trajectories.load` as an h5py index that keeps the array 3-D."""
     if select is None:
@@ -302,7 +314,7 @@ class Trajectories:
                     raise ValueError(
                         f"{path!r} is not a liepoisson trajectory file: missing {', '.join(missing)}"
                     )
-                version = int(f.attrs["format_version"])
+                version = _integer_attribute(f.attrs["format_version"], "format_version", path)
                 if version != FORMAT_VERSION:
                     raise ValueError(
                         f"{path!r} has format_version {version}; this liepoisson reads "
@@ -325,7 +337,7 @@ class Trajectories:
         except ValueError as err:
             raise ValueError(f"{path!r}: the system parameters are not JSON: {err}") from err
         system = system_for_file(text(attrs["system"]), params, system, f"the file {path!r}")
-        seed = int(attrs["seed"])
+        seed = _integer_attribute(attrs["seed"], "seed", path)
         try:
             return cls(
                 states,

@@ -1,0 +1,157 @@
+"""Bad input on observations (issue 40): each is refused by the library with an error naming the
+argument or the file, what was expected and what was given, or handled correctly."""
+
+import re
+
+import h5py
+import numpy as np
+import pytest
+
+import integrators as it
+import liepoisson as lp
+
+BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
+T = np.array([0.0, 0.1, 0.25, 0.3])
+Y = np.random.default_rng(0).normal(size=(4, 3))
+
+
+# -- construction ----------------------------------------------------------------------------------
+def test_ragged_states_name_the_short_row():
+    with pytest.raises(ValueError, match=r"states is ragged: .*\(n_observations, 3\) but states\[1\] has 2 "
+                                         r"component\(s\) and states\[0\] 3"):
+        it.Observations(BODY, [0, 0.1, 0.2], [[1, 2, 3], [1, 2], [3, 4, 5]])
+    # Ragged within one trajectory of a list of trajectories: that trajectory and row are named.
+    with pytest.raises(ValueError, match=r"states\[1\] is ragged: states\[1\]\[1\] has shape \(2,\) and "
+                                         r"states\[1\]\[0\] shape \(3,\)"):
+        it.Observations(BODY, [T[:2], T[:2], T], [Y[:2], [[1, 2, 3], [1, 2]], Y])
+
+
+def test_times_none_is_required_not_nan():
+    with pytest.raises(TypeError, match=r"times is required: a real array or a list of arrays; got None"):
+        it.Observations(BODY, None, Y)
+    with pytest.raises(TypeError, match=r"times\[1\] is required.*got None"):
+        it.Observations(BODY, [T[:3], None], [Y[:3], Y])
+    with pytest.raises(TypeError, match=r"states is required.*got None"):
+        it.Observations(BODY, T, None)
+
+
+@pytest.mark.parametrize("states", [Y, np.zeros((1, 0, 3))], ids=["four states", "no state"])
+def test_an_empty_trajectory_needs_two_times(states):
+    with pytest.raises(ValueError, match=r"(times\[0\] has 0 time\(s\); a trajectory needs at least 2 observation "
+                                         r"times.*got 0)|(trajectory 0 has 0 observation\(s\); a trajectory needs "
+                                         r"at least two)"):
+        it.Observations(BODY, np.zeros(0), states)
+
+
+def test_an_empty_time_array_is_shared_like_any_1d_one():
+    # times=zeros(0) is one (empty) time array shared by the trajectories, not "0 trajectories".
+    with pytest.raises(ValueError, match=r"times\[0\] has 0 time\(s\)") as info:
+        it.Observations(BODY, np.zeros(0), Y)
+    assert "trajectories" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("times", "states", "match"),
+    [
+        (T, Y + 1e-3j, r"states must be real; got complex values \(states\[0, 0\] = "),
+        (T + 0j, Y.astype(complex), r"states must be real"),  # zero imaginary part: still refused
+        (T + 1j, Y, r"times must be real; got complex values \(times\[0\] = 1j\)"),
+        ([T[:3], T + 1j], [Y[:3], Y], r"times\[1\] must be real"),
+    ],
+)
+def test_complex_values_are_refused_not_truncated(times, states, match):
+    with pytest.raises(TypeError, match=match):
+        it.Observations(BODY, times, states)
+
+
+def test_text_times_are_refused():
+    with pytest.raises(TypeError, match=r"times must hold real numbers; got text values such as '0'"):
+        it.Observations(BODY, ["0", "0.1", "0.25", "0.3"], Y)
+
+
+# -- observe's noise level -----------------------------------------------------------------------
+def test_noise_level_is_a_real_number_not_text_nor_a_bool():
+    for noise in ("0.01", True, np.bool_(False), b"0", None, [0.01]):
+        with pytest.raises(TypeError, match=r"noise must be a number >= 0 .*got " + re.escape(type(noise).__name__)):
+            it.observe(BODY, np.ones(3), T, noise=noise)
+    # Numbers of any real type (Python, NumPy scalar, 0-d array) are the same level.
+    a = it.observe(BODY, np.ones(3), T, noise=0.01, seed=1)
+    for noise in (np.float64(0.01), np.array(0.01)):
+        b = it.observe(BODY, np.ones(3), T, noise=noise, seed=1)
+        np.testing.assert_array_equal(a.states[0], b.states[0])
+    assert it.observe(BODY, np.ones(3), T, noise=0).metadata["noise"] == 0.0
+
+
+# -- files ---------------------------------------------------------------------------------------
+@pytest.fixture
+def saved(tmp_path):
+    obs = it.Observations(BODY, [T, T[:3]], [Y, Y[:3]], metadata={"run": 1})
+    path = tmp_path / "o.h5"
+    obs.save(path)
+    return obs, path
+
+
+@pytest.mark.parametrize(
+    ("attribute", "value", "match"),
+    [
+        ("format_version", "one", r"the attribute format_version is 'one'; expected an integer \(1"),
+        ("format_version", 1.5, r"the attribute format_version is 1.5; expected an integer"),
+        ("metadata", "{run: 1", r"the attribute metadata is not JSON \(.*\); got '\{run: 1'"),
+        ("system_params", "inertia=(1, 2, 3)", r"the attribute system_params is not JSON"),
+    ],
+)
+def test_hdf5_attributes_that_are_not_what_they_should_be(saved, attribute, value, match):
+    _, path = saved
+    with h5py.File(path, "a") as f:
+        f.attrs[attribute] = value
+    with pytest.raises(ValueError, match=re.escape(repr(str(path))) + ": " + match):
+        it.Observations.load(path)
+
+
+def test_trajectories_file_with_a_text_format_version_names_the_file(tmp_path):
+    path = tmp_path / "t.h5"
+    it.Trajectories(np.ones((1, 3, 3)), 0.1, BODY).save(path)
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = "one"
+    with pytest.raises(ValueError, match=re.escape(repr(str(path))) + r": the attribute format_version is 'one'"):
+        it.Trajectories.load(path)
+
+
+@pytest.mark.parametrize(
+    ("column", "value", "match"),
+    [
+        ("trajectory", np.array(["a"] * 7),
+         r"the array 'trajectory' must hold trajectory labels \(integers\); got text values such as 'a'"),
+        ("t", np.array(["0"] * 7), r"the array 't' must hold real numbers; got text values"),
+        ("states", np.ones((7, 3)) * 1j, r"the array 'states' must hold real numbers; got complex values"),
+    ],
+)
+def test_npz_arrays_of_the_wrong_kind_name_the_file_and_array(saved, tmp_path, column, value, match):
+    obs, _ = saved
+    label, t, y = obs._long()
+    arrays = {"trajectory": label, "t": t, "states": y}
+    arrays[column] = value
+    path = tmp_path / "o.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match=re.escape(repr(str(path))) + ": " + match):
+        it.Observations.load(path, system=BODY)
+
+
+def test_from_columns_with_text_labels():
+    with pytest.raises(TypeError, match=r"the data: trajectory must hold real numbers; got text values"):
+        it.Observations.from_columns(BODY, ["a"] * 4, T, Y)
+
+
+def test_csv_with_a_byte_order_mark_loads_as_without(saved, tmp_path):
+    obs, _ = saved
+    label, t, y = obs._long()
+    text = "trajectory,t,y0,y1,y2\n" + "".join(
+        f"{j},{s!r},{a!r},{b!r},{c!r}\n" for j, s, (a, b, c) in zip(label.tolist(), t.tolist(), y.tolist()))
+    plain, marked = tmp_path / "plain.csv", tmp_path / "marked.csv"
+    plain.write_text(text, encoding="utf-8")
+    marked.write_text(text, encoding="utf-8-sig")  # as a spreadsheet writes it
+    assert marked.read_bytes().startswith(b"\xef\xbb\xbf")
+    a, b = it.Observations.load(plain, system=BODY), it.Observations.load(marked, system=BODY)
+    assert len(a) == len(b) == 2
+    for u, v in zip(a.times + a.states, b.times + b.states):
+        np.testing.assert_array_equal(u, v)
