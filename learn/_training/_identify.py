@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from liepoisson.internals import states
 from liepoisson.systems import AbstractPoissonSystem
 
 
@@ -79,31 +80,105 @@ def quadratic_casimir_hessians(system: AbstractPoissonSystem, samples: np.ndarra
     return np.asarray(out).reshape(-1, system.dim, system.dim)
 
 
+#: Relative size (to the largest) below which a singular value of the column-scaled feature
+#: matrix counts as zero: the samples satisfy a quadratic relation to that accuracy.
+_RANK_RTOL = 1e-8
+
+
+def _check_samples(samples: ArrayLike, dim: int) -> np.ndarray:
+    """`samples` as a finite float64 `(N, dim)` array; `TypeError`/`ValueError` naming `samples`."""
+    if isinstance(samples, (str, bytes)) or samples is None:
+        raise TypeError(f"samples must be an array of states (N, {dim}); got {type(samples).__name__}")
+    try:
+        raw = np.asarray(samples)
+    except (TypeError, ValueError) as err:  # ragged lists
+        raise TypeError(f"samples must be an array of states (N, {dim}); got {type(samples).__name__} that is "
+                        f"not one array ({err})") from None
+    if raw.ndim != 2 or raw.shape[1] != dim:
+        raise ValueError(f"samples must have shape (N, {dim}); got {raw.shape}")
+    return states(raw, "samples", dim)
+
+
+def _feature_rank(features: np.ndarray, casimir_hessians: np.ndarray) -> tuple[int, int, np.ndarray]:
+    r"""The numerical rank of `features` (its columns scaled to unit norm), the number of
+    independent relations $\sum_k \lambda_k C_k(y) + c = 0$ the samples satisfy (samples on
+    one leaf of the quadratic Casimirs $C_k = \tfrac12 y^T Q_k y$), and the column scales."""
+    scale = np.linalg.norm(features, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    scaled = features / scale
+    singular = np.linalg.svd(scaled, compute_uv=False)
+    cutoff = _RANK_RTOL * singular[0]
+    rank = int(np.sum(singular > cutoff))
+    # The directions (A = sum_k lambda_k Q_k, b = 0, c) in the scaled coordinates.
+    n = casimir_hessians.shape[-1]
+    i, j = np.triu_indices(n)
+    directions = np.zeros((features.shape[1], casimir_hessians.shape[0] + 1))
+    directions[: i.size, :-1] = casimir_hessians[:, i, j].T
+    directions[-1, -1] = 1.0
+    basis, _ = np.linalg.qr(scale[:, None] * directions)
+    on_leaves = np.linalg.svd(scaled @ basis, compute_uv=False)
+    casimir_relations = int(np.sum(on_leaves <= cutoff))
+    return rank, casimir_relations, scale
+
+
 def quadratic_part(hamiltonian: Callable[[np.ndarray], ArrayLike], system: AbstractPoissonSystem,
                    samples: ArrayLike) -> QuadraticPart:
     r"""The least-squares quadratic of `hamiltonian` (a function of states `(N, dim)` to
     `(N,)`, e.g. `gnet.hamiltonian`) over `samples` `(N, dim)` (e.g. the observed states: the
-    region the data cover), with the system's quadratic Casimirs for `identifiable`."""
-    y = np.asarray(samples, dtype=np.float64)
-    if y.ndim != 2 or y.shape[1] != system.dim:
-        raise ValueError(f"samples must have shape (N, {system.dim}); got {y.shape}")
+    region the data cover), with the system's quadratic Casimirs for `identifiable`.
+
+    The samples must determine a quadratic in `dim` variables up to the system's quadratic
+    Casimirs: samples on one Casimir leaf (all $|\Pi| = 1$) are fine, since $A$ is identified
+    only modulo $\operatorname{span}\{Q_k\}$ anyway (the fit is then the minimum-norm one and
+    `identifiable` is unchanged); samples on any other quadric (one energy level, one
+    repeated state) are refused with a `ValueError`.
+    """
+    if not callable(hamiltonian):
+        raise TypeError(f"hamiltonian must be a function of states (N, dim) -> (N,), e.g. gnet.hamiltonian; "
+                        f"got {type(hamiltonian).__name__} {hamiltonian!r}")
+    if not isinstance(system, AbstractPoissonSystem):
+        raise TypeError(f"system must be a liepoisson.systems.AbstractPoissonSystem (e.g. RigidBody(...)), whose "
+                        f"Casimirs say what is identified; got {type(system).__name__} {system!r}")
+    y = _check_samples(samples, system.dim)
     n = system.dim
     i, j = np.triu_indices(n)
     n_features = i.size + n + 1
     if y.shape[0] < n_features:
         raise ValueError(f"a quadratic in {n} variables has {n_features} coefficients; give at least that many samples "
                          f"(got {y.shape[0]})")
-    values = np.asarray(hamiltonian(y), dtype=np.float64).reshape(-1)
-    if values.shape != (y.shape[0],) or not np.all(np.isfinite(values)):
-        raise ValueError("hamiltonian(samples) must return one finite value per sample")
     # 1/2 y^T A y = sum_i A_ii y_i^2 / 2 + sum_{i<j} A_ij y_i y_j
     weight = np.where(i == j, 0.5, 1.0)
     features = np.concatenate([weight * y[:, i] * y[:, j], y, np.ones((y.shape[0], 1))], axis=1)
-    coefficients, *_ = np.linalg.lstsq(features, values, rcond=None)
+    hessians = quadratic_casimir_hessians(system, y)
+    rank, casimir_relations, scale = _feature_rank(features, hessians)
+    if n_features - rank > casimir_relations:
+        open_ = n_features - rank
+        raise ValueError(
+            f"samples do not determine a quadratic in {n} variables ({n_features} coefficients): the rank of their "
+            f"quadratic features is {rank} (relative tolerance {_RANK_RTOL:g}), so {open_} combinations of the "
+            f"coefficients are left open, and the system's Casimirs explain only {casimir_relations} of them (samples "
+            f"on one Casimir leaf); the {y.shape[0]} samples lie on another quadric (e.g. one energy level, or the "
+            f"same state repeated). Give samples whose features have rank at least {n_features - casimir_relations}, "
+            f"e.g. the states of several trajectories at different energies"
+        )
+    try:
+        values = np.asarray(hamiltonian(y))
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"hamiltonian(samples) must return one real value per sample; calling it raised "
+                        f"{type(err).__name__}: {err}") from err
+    if values.dtype == object or not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
+        raise TypeError(f"hamiltonian(samples) must return one real value per sample; got dtype {values.dtype}")
+    values = values.astype(np.float64).reshape(-1)
+    if values.shape != (y.shape[0],) or not np.all(np.isfinite(values)):
+        raise ValueError(f"hamiltonian(samples) must return one finite value per sample ({y.shape[0]}); got "
+                         f"{values.size} values, {int(np.sum(~np.isfinite(values)))} of them not finite")
+    # In the scaled coordinates, cut at the tolerance of the rank: the directions the samples
+    # leave open (the Casimir relations only) get the minimum-norm coefficient.
+    scaled_coefficients, *_ = np.linalg.lstsq(features / scale, values, rcond=_RANK_RTOL)
+    coefficients = scaled_coefficients / scale
     A = np.zeros((n, n))
     A[i, j] = coefficients[: i.size]
     A[j, i] = coefficients[: i.size]
     spread = float(np.sqrt(np.mean((values - values.mean()) ** 2)))
     residual = float(np.sqrt(np.mean((features @ coefficients - values) ** 2))) / max(spread, np.finfo(float).tiny)
-    return QuadraticPart(A, coefficients[i.size : i.size + n], float(coefficients[-1]), residual,
-                         quadratic_casimir_hessians(system, y))
+    return QuadraticPart(A, coefficients[i.size : i.size + n], float(coefficients[-1]), residual, hessians)
