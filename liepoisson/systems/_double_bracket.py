@@ -33,6 +33,8 @@ def check_gamma(gamma: Any, name: str = "gamma") -> float:
         isinstance(gamma, numbers.Real) or getattr(gamma, "ndim", None) == 0
     ):
         raise TypeError(f"{name} must be a real number >= 0; got {type(gamma).__name__} {gamma!r}")
+    if np.iscomplexobj(gamma):
+        raise TypeError(f"{name} must be a real number >= 0, not complex; got {type(gamma).__name__} {gamma!r}")
     try:
         value = float(gamma)
     except (TypeError, ValueError):
@@ -50,7 +52,13 @@ def check_metric(metric: Any, dim: int, name: str = "metric") -> np.ndarray:
     if metric is None:
         return np.eye(dim)
     try:
-        K = np.asarray(metric, dtype=np.float64)
+        K = np.asarray(metric)
+    except (TypeError, ValueError) as err:  # ragged lists
+        raise TypeError(f"{name} must be a ({dim}, {dim}) real matrix; got {metric!r}") from err
+    if np.iscomplexobj(K):
+        raise TypeError(f"{name} must be a ({dim}, {dim}) real matrix, not complex; got {K.dtype}")
+    try:
+        K = K.astype(np.float64)
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name} must be a ({dim}, {dim}) real matrix; got {metric!r}") from err
     if K.shape != (dim, dim):
