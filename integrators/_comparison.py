@@ -143,7 +143,7 @@ def compare(
     for label, m in maps.items():
         if not isinstance(m, AbstractStepMap):
             raise TypeError(f"maps[{label!r}] must be an integrators.AbstractStepMap; got {type(m).__name__}")
-        if m.system is not system:
+        if m.system != system:
             raise ValueError(f"maps[{label!r}] is a map of {m.system!r}, not of the system compared, {system!r}")
         h = check_h(m)
         per_output = round(interval / h)

@@ -54,7 +54,7 @@ def convergence(
         if n < 1 or not math.isclose(n * h, t_final, rel_tol=1e-9):
             raise ValueError(f"hs[{i}] = {h:g} must divide t_final = {t_final:g}")
         m = make(float(h))
-        if not isinstance(m, AbstractStepMap) or m.system is not system:
+        if not isinstance(m, AbstractStepMap) or m.system != system:
             raise TypeError(f"make({h:g}) must return an integrators.AbstractStepMap of {system!r}; got {m!r}")
         y = np.asarray(m.rollout(y0s, n, save_every=n, nonfinite="return"))[:, -1]
         errors.append(float(np.max(np.linalg.norm(y - truth, axis=-1))))
