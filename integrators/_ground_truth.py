@@ -21,6 +21,7 @@ from liepoisson.internals import positive_float, positive_int, progress_bar, sho
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._distributed import check_client, map_unordered
+from ._step_map import check_fits_in_memory
 from ._trajectories import Trajectories, _check_seed, write_attributes
 
 log = logging.getLogger("liepoisson")
@@ -90,21 +91,6 @@ def _progress_bar(total: int, progress: bool | None):
     # Auto: on a terminal, and only for a run that is still going after a few seconds.
     return progress_bar(total, "ground truth", "traj", progress, delay=3.0 if progress is None else 0.0,
                         unit_scale=True)
-
-
-def check_fits_in_memory(shape: tuple[int, ...], what: str) -> None:
-    """`ValueError` (before allocating) if a float64 array of `shape` is larger than the
-    machine's available physical memory."""
-    need = 8 * int(np.prod(shape, dtype=np.float64))
-    try:
-        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # not available on this platform
-        return
-    if need > free:
-        raise ValueError(
-            f"{what} of shape {shape} need {need / 2**30:.3g} GiB, more than the {free / 2**30:.3g} GiB "
-            "of memory available; ask for fewer trajectories or steps, or save in chunks"
-        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,7 +225,10 @@ def ground_truth(
     """
     job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size)
     client = check_client(client)
-    check_fits_in_memory(job.shape, "the requested trajectories (n_traj, n_steps + 1, dim)")
+    check_fits_in_memory(job.shape, "the requested trajectories (n_traj, n_steps + 1, dim)",
+                         "ask for fewer trajectories or output times (a larger sampling step h and fewer n_steps for "
+                         "the same final time: heyoka's own step is adaptive), or write them to a file chunk by "
+                         "chunk with save_ground_truth")
     out = np.empty(job.shape)
     with _progress_bar(job.shape[0], progress) as bar:
         for k, states in map_unordered(integrate_chunk, job.chunks(), client=client, shared=(job.system,)):

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import math
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -109,6 +111,11 @@ class AbstractStepMap(eqx.Module):
         y0 = states(y0, "y0", dim)
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
+        n_traj = 1 if y0.ndim == 1 else y0.shape[0]
+        check_fits_in_memory((n_traj, n_steps // save_every + 1, dim),
+                             "the rollout's states (n_traj, n_steps // save_every + 1, dim)",
+                             "save fewer states with save_every= (a divisor of n_steps: every save_every-th "
+                             "state is kept), or roll out fewer trajectories or steps at a time")
         every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32 if save_every < 2**31 else jnp.int64)
         out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, every)
         nonfinite.check(self, out, save_every)
@@ -141,6 +148,40 @@ class AbstractStepMap(eqx.Module):
         `fori_loop`) once, so maps that loop inside `step` override this with the count per
         iteration times the number of iterations."""
         return xla_flops(lambda m, y: m.step(y), traced_h(self), jnp.zeros(self.system.dim))
+
+
+#: The largest share of the machine's physical memory one output array may take.
+MEMORY_FRACTION = 0.5
+#: The physical memory assumed where the operating system does not report it (`os.sysconf`).
+_FALLBACK_MEMORY = 2**40
+
+
+def physical_memory() -> tuple[int, bool]:
+    """The machine's physical memory in bytes (`os.sysconf`), and whether it was reported
+    (else `_FALLBACK_MEMORY`, 1 TiB, is assumed)."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not available on this platform
+        return _FALLBACK_MEMORY, False
+    return (int(total), True) if total > 0 else (_FALLBACK_MEMORY, False)
+
+
+def check_fits_in_memory(shape: tuple[int, ...], what: str, remedy: str) -> None:
+    """`ValueError` (before anything is allocated) if a float64 array of `shape` is larger than
+    `MEMORY_FRACTION` (half) of the machine's physical memory: the size `what` needs, the
+    memory, and `remedy`, how to ask for less. The one size check of every rollout and
+    ground-truth request."""
+    need = 8 * math.prod(int(k) for k in shape)
+    total, reported = physical_memory()
+    limit = int(MEMORY_FRACTION * total)
+    if need > limit:
+        memory = (f"the machine's {total / 2**30:.3g} GiB of physical memory" if reported else
+                  f"the {total / 2**30:.3g} GiB of physical memory assumed (the system does not report it)")
+        raise ValueError(
+            f"{what} of shape {tuple(int(k) for k in shape)} need {need:,} bytes = {need / 2**30:.3g} GiB, more than "
+            f"the {limit / 2**30:.3g} GiB of memory available to one request ({MEMORY_FRACTION:.0%} of {memory}); "
+            f"{remedy}"
+        )
 
 
 _FLOPS: dict[Any, float] = {}
