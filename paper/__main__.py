@@ -91,11 +91,6 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
     if unknown:
         print(f"unknown experiment(s) {unknown}; available: {', '.join(EXPERIMENTS)}", file=sys.stderr)
         return 2
-    try:
-        check_out_dir(out)
-    except ValueError as err:
-        print(err, file=sys.stderr)
-        return 2
     results = {}
     t0 = time.perf_counter()
     for exp_id in ids:
@@ -171,6 +166,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--full and --profile {args.profile} disagree")
     profile = args.profile or ("full" if args.full else "quick")
     ids = args.ids if args.command == "run" else list(PAPER_EXPERIMENTS)
+    try:  # before the scheduler starts and any experiment runs: the folder and each experiment's
+        for out in (args.out, *(args.out / i for i in ids)):
+            check_out_dir(out, "--out")
+    except ValueError as err:  # argparse's parser.error, on one line
+        print(f"{parser.prog}: error: {err}", file=sys.stderr)
+        return 2
     with contextlib.ExitStack() as stack:
         try:
             where = stack.enter_context(scheduler(args.scheduler))

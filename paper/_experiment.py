@@ -6,6 +6,7 @@ import abc
 import dataclasses
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -143,14 +144,26 @@ def table_lines(columns: Sequence[Column], rows: Iterable[Any]) -> list[str]:
     return lines
 
 
-def check_out_dir(out_dir: Path) -> None:
-    """ValueError if `out_dir` lies inside the committed reference results."""
+def check_out_dir(out_dir: Path, name: str = "out_dir") -> None:
+    """`ValueError` naming `out_dir` (as `name`) and why, if a run cannot write into it: it lies
+    inside the committed reference results, it (or a folder above it) exists and is not a
+    folder, or the nearest existing folder is not writable. Creates nothing."""
     resolved = Path(out_dir).resolve()
     if resolved == REFERENCE_DIR or REFERENCE_DIR in resolved.parents:
         raise ValueError(
-            f"out_dir {str(out_dir)!r} is inside {REFERENCE_DIR}, the committed reference results, "
+            f"{name} {str(out_dir)!r} is inside {REFERENCE_DIR}, the committed reference results, "
             "which a run never overwrites; write elsewhere (python -m paper --out DIR)"
         )
+    existing = resolved
+    while not os.path.exists(existing) and existing != existing.parent:
+        existing = existing.parent
+    where = "" if existing == resolved else f"cannot be created: {str(existing)!r} "
+    if not os.path.isdir(existing):
+        raise ValueError(f"{name} {str(out_dir)!r} {where}exists and is not a folder; give a folder for the "
+                         "results (python -m paper --out DIR)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{name} {str(out_dir)!r} {where}is not writable (permission denied); give a folder you "
+                         "can write to (python -m paper --out DIR)")
 
 
 class AbstractExperiment(abc.ABC):
@@ -180,7 +193,10 @@ class AbstractExperiment(abc.ABC):
         into `out_dir` (default `./paper-results/<id>`); returns the metrics."""
         out_dir = Path(DEFAULT_OUT / self.id if out_dir is None else out_dir)
         check_out_dir(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:  # made unwritable or a file since the check
+            raise ValueError(f"out_dir {str(out_dir)!r}: cannot create the folder ({err.strerror})") from err
         t0 = time.perf_counter()
         metrics = self.run(profile, out_dir, progress)
         metrics["experiment"] = self.id
