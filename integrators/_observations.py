@@ -128,6 +128,54 @@ def check_times(t: np.ndarray, name: str) -> np.ndarray:
     return t
 
 
+#: Two systems have the same Poisson structure when their Poisson tensors agree to this
+#: fraction of the largest entry, and their Casimir gradients span the same space (singular
+#: values below this fraction of the largest are zero), at the states compared.
+STRUCTURE_RTOL = 1e-9
+
+
+def poisson_structure_difference(a: AbstractPoissonSystem, b: AbstractPoissonSystem) -> str | None:
+    r"""How the Poisson structures of `a` and `b` differ, or `None` if they are the same: the
+    same bracket $\mathbb B(y)$ and Casimirs whose gradients span the same space (the same
+    leaves, whatever their normalisation). Only the structure is compared, not the
+    Hamiltonians: a rigid body of other inertia has the same structure.
+
+    Equal systems (`==`) are the same. Otherwise $\mathbb B$ is compared at the basis vectors
+    $e_d$ (for a Lie-Poisson system, linear in $y$, that is comparing the structure constants
+    and sign: $\mathbb B(e_d)_{ab} = \mp C_{abd}$) and at four seeded random states, and the
+    Casimir gradients at the random states, to `STRUCTURE_RTOL`."""
+    if a is b or a == b:
+        return None
+    if a.dim != b.dim:
+        return f"the dimensions differ ({a.dim} and {b.dim})"
+    random = np.random.default_rng(0).standard_normal((4, a.dim))
+    ys = np.concatenate([np.eye(a.dim), random])
+    Ba, Bb = np.asarray(a.poisson_tensor(ys)), np.asarray(b.poisson_tensor(ys))
+    scale = max(float(np.nanmax(np.abs(Ba), initial=0.0)), float(np.nanmax(np.abs(Bb), initial=0.0)), 1e-300)
+    same = np.isclose(Ba, Bb, rtol=0.0, atol=STRUCTURE_RTOL * scale, equal_nan=True)
+    if not np.all(same):
+        k, i, j = (int(v) for v in np.argwhere(~same)[0])
+        return (f"their Poisson tensors differ: at y = {np.round(ys[k], 4).tolist()}, B[{i}, {j}] is {Ba[k, i, j]:.6g} "
+                f"for {a!r} and {Bb[k, i, j]:.6g} for {b!r}")
+    if a.n_casimirs != b.n_casimirs:
+        return f"their brackets agree but {a!r} declares {a.n_casimirs} Casimir(s) and {b!r} {b.n_casimirs}"
+    if a.n_casimirs:
+        Ga = np.asarray(a.casimir_gradients(random)).reshape(len(random), a.n_casimirs, a.dim)
+        Gb = np.asarray(b.casimir_gradients(random)).reshape(len(random), b.n_casimirs, b.dim)
+        for y, ga, gb in zip(random, Ga, Gb):
+            both = np.concatenate([ga, gb])
+            cut = STRUCTURE_RTOL * max(float(np.linalg.norm(both, 2)), 1e-300)
+            if not _rank(ga, cut) == _rank(gb, cut) == _rank(both, cut):
+                return (f"their Casimirs differ: at y = {np.round(y, 4).tolist()} the gradients of one are not "
+                        "combinations of the other's (other symplectic leaves)")
+    return None
+
+
+def _rank(m: np.ndarray, cut: float) -> int:
+    """The number of singular values of `m` above `cut`."""
+    return int(np.sum(np.linalg.svd(m, compute_uv=False) > cut))
+
+
 def _trajectories_of(ys: np.ndarray | list[np.ndarray], dim: int) -> list[np.ndarray]:
     """The trajectories of `states`: an `(n, dim)` array is one, an `(n_traj, n, dim)` array
     or a list of `(n_j, dim)` arrays several; a list of rows of different lengths is refused."""
@@ -256,6 +304,21 @@ class Observations:
             raise IndexError(f"indices {idx.tolist()} out of range for {len(self)} trajectories")
         return Observations(self.system, [self.times[i] for i in idx], [self.states[i] for i in idx],
                             metadata=self.metadata)
+
+    def check_system(self, system: AbstractPoissonSystem, what: str = "system") -> AbstractPoissonSystem:
+        """`system` if it has the Poisson structure of the observations' system (equal, or the
+        same bracket and Casimirs: `poisson_structure_difference`; its Hamiltonian may differ,
+        it is what is learned), else a `ValueError` naming both (`what` names `system`)."""
+        if not isinstance(system, AbstractPoissonSystem):
+            raise TypeError(f"{what} must be an AbstractPoissonSystem; got {type(system).__name__}")
+        reason = poisson_structure_difference(self.system, system)
+        if reason is not None:
+            raise ValueError(
+                f"{what} {system!r} has another Poisson structure than the observations, which are of "
+                f"{self.system!r}: {reason}. A map for one bracket cannot follow motions of the other; use a system "
+                "with the observations' bracket and Casimirs (its Hamiltonian may differ: it is what is learned)"
+            )
+        return system
 
     def split(self, validation_fraction: float, seed: int = 0) -> tuple[Observations, Observations | None]:
         """`(training, validation)` by whole trajectories (random, seeded): a held-out

@@ -155,3 +155,67 @@ def test_csv_with_a_byte_order_mark_loads_as_without(saved, tmp_path):
     assert len(a) == len(b) == 2
     for u, v in zip(a.times + a.states, b.times + b.states):
         np.testing.assert_array_equal(u, v)
+
+
+# -- the system a fit is given -------------------------------------------------------------------
+def _on_a_leaf(n_trajectories: int, seed: int = 0) -> np.ndarray:
+    """States `(n_trajectories, 4, 3)` of norm 1: each trajectory on one Casimir leaf of so(3)."""
+    y = np.random.default_rng(seed).normal(size=(n_trajectories, len(T), 3))
+    return y / np.linalg.norm(y, axis=-1, keepdims=True)
+
+
+def test_a_fit_with_another_poisson_structure_is_refused_naming_both():
+    import learn
+
+    guess = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+    uv = np.random.default_rng(1).normal(size=(3, 4, 2))
+    on_leaves = np.concatenate([uv, 0.5 + np.sum(uv**2, axis=-1, keepdims=True)], axis=-1)  # Casimir r - u^2 - v^2
+    pendulum = it.Observations(lp.systems.ExtendedPendulum(), T, on_leaves)
+    match = (r"the model's system RigidBody\(inertia=\[1.0, 2.0, 3.0\]\) has another Poisson structure than the "
+             r"observations, which are of ExtendedPendulum\(\): their Poisson tensors differ")
+    with pytest.raises(ValueError, match=match):
+        learn.fit_splitting(guess, pendulum, iterations=1, progress=False)
+    with pytest.raises(ValueError, match=match):
+        learn.fit(learn.LPNet(guess, hidden=(4,)), pendulum, optimiser=learn.Adam(1), progress=False)
+    # Rigid-body data and a guess body of other inertia: the same bracket and Casimir, another
+    # Hamiltonian (what fitting learns): accepted, the problem of learn.fit / fit_splitting builds.
+    rigid = it.Observations(BODY, T, _on_a_leaf(3))
+    problem = learn.TrajectoryLoss().problem(learn.GLPNet(guess, 3), rigid, h=None, validation_fraction=0.0, seed=0,
+                                             normalise=False)
+    assert problem.description.n_train == rigid.n_observations
+
+
+@pytest.mark.parametrize(
+    "system",
+    [
+        lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0)),
+        lp.systems.DoubleBracket(BODY, 0.1),  # damped: the same bracket and Casimir
+        lp.systems.LiePoissonSystem(lp.so3(), lambda m, xp: m[0] ** 2 + m[2], name="so(3) quartic"),
+    ],
+    ids=["other inertia", "damped", "so(3) of another Hamiltonian"],
+)
+def test_a_system_of_the_same_structure_is_accepted(system):
+    assert it.Observations(BODY, T, _on_a_leaf(2)).check_system(system) is system
+
+
+def test_systems_of_one_algebra_with_other_hamiltonians_are_the_same_structure():
+    top = it.Observations(lp.systems.HeavyTop(), T, np.random.default_rng(2).normal(size=(2, 4, 6)))
+    kirchhoff = lp.systems.Kirchhoff()  # se(3) as well
+    assert top.check_system(kirchhoff) is kirchhoff
+
+
+@pytest.mark.parametrize(
+    ("algebra", "match"),
+    [
+        (lp.LieAlgebra(lp.so3().structure_constants, "so3 spatial", sign=+1),
+         r"their Poisson tensors differ: at y = \[1.0, 0.0, 0.0\], B\[1, 2\] is -1 for RigidBody.* and 1 for Lie"),
+        (lp.LieAlgebra(lp.so3().structure_constants, "so3 bare", casimirs=()),
+         r"their brackets agree but RigidBody.* declares 1 Casimir\(s\) and LiePoissonSystem.* 0"),
+    ],
+    ids=["other sign", "no Casimir"],
+)
+def test_a_system_of_another_structure_is_refused(algebra, match):
+    other = lp.systems.LiePoissonSystem(algebra, lambda m, xp: m[0] ** 2)
+    with pytest.raises(ValueError, match=r"system LiePoissonSystem.* has another Poisson structure than the "
+                                         r"observations, which are of RigidBody.*: " + match):
+        it.Observations(BODY, T, _on_a_leaf(2)).check_system(other)
