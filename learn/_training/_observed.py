@@ -282,10 +282,7 @@ def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, f
     J = np.asarray(jax.jacfwd(residuals)(flat))
     n = int(np.sum(objective._squared(fitted, args)[1])) * args.states.shape[-1]  # fitted components
     ssr = float(jnp.sum(r**2))
-    # Each weight's column at unit norm: the rank does not depend on the weights' units (a
-    # time in ms scales the rates' columns by 1e3; docs/conventions.md, "Units").
-    norms = np.linalg.norm(J, axis=0)
-    singular = np.linalg.svd(J[:, norms > 0] / norms[norms > 0], compute_uv=False)
+    singular = np.linalg.svd(J, compute_uv=False)
     # A direction of the weights that moves the residuals 1e8 times less than the best
     # determined one is not fitted by the data (redundant weights give 0 to round-off).
     k = int(np.sum(singular > 1e-8 * singular[0])) if singular.size else 0
