@@ -130,3 +130,22 @@ def test_the_size_check_without_the_machines_memory(monkeypatch):
     with pytest.raises(ValueError, match=r"of the 1\.02e\+03 GiB of physical memory assumed \(the system does not "
                                          r"report it\)"):
         it.LieEuler(damped_rigid_body(), 0.1).rollout(Y0, 10**12)
+
+
+# -- a map that ignores h, at uneven steps --------------------------------------------------------
+def test_a_map_at_one_fixed_step_refuses_uneven_steps():
+    from learn._models._baseline import check_one_step  # called where learn.fit meets observations
+
+    mlp = learn.MLPBaseline(BODY, hidden=(4,), key=0)
+    y = np.array([0.3, -0.2, 0.9])
+    # its step ignores h: the same output at 0.05 and at 0.3
+    np.testing.assert_array_equal(np.asarray(mlp.with_h(0.05).step(y)), np.asarray(mlp.with_h(0.3).step(y)))
+    uneven = it.Observations(BODY, [[0.0, 0.05, 0.35, 0.45]], [np.tile(y, (4, 1))])
+    with pytest.raises(ValueError, match=r"data has uneven steps, from 0\.05 to 0\.3; MLPBaseline maps a state to the "
+                                         r"next at one fixed step \(its step ignores h\)"):
+        check_one_step(mlp, uneven.intervals()[2], None, "data")
+    even = it.Observations(BODY, [0.1 * np.arange(4)], [np.tile(y, (4, 1))])
+    check_one_step(mlp, even.intervals()[2], 0.1, "data")  # one step, the map's h
+    with pytest.raises(ValueError, match=r"h = 0\.2, but data has steps of 0\.1; .* give h=0\.1 or leave h unset"):
+        check_one_step(mlp, even.intervals()[2], 0.2, "data")
+    check_one_step(learn.LPNet(BODY, key=0), uneven.intervals()[2], 0.1, "data")  # its step takes h

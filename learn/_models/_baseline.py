@@ -9,6 +9,8 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import numpy as np
+from numpy.typing import ArrayLike
 
 from integrators.internals import check_state
 from liepoisson.internals import check_system, positive_float
@@ -19,12 +21,47 @@ from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
 from ._networks import AbstractNetwork, check_network, network_or_default
 
+#: Relative spread of steps that still count as one step (as `Observations.is_regular`).
+STEP_RTOL = 1e-9
 
-class MLPBaseline(AbstractLearnedMap):
+
+class AbstractFixedStepMap(AbstractLearnedMap):
+    r"""A learned map defined at one step only: its `step` ignores $h$ (an `MLPBaseline` maps a
+    state to the next at the step of its training data, whatever $h$ says). It can be fitted
+    only to data at one step, the $h$ it is labelled with (`check_one_step`)."""
+
+
+def check_one_step(model: AbstractLearnedMap, steps: ArrayLike, h: float | None = None, what: str = "data") -> None:
+    r"""`ValueError` if `model` is an `AbstractFixedStepMap` and the `steps` it would be trained
+    at (observations' intervals, divided by any sub-steps) are not one step (to `STEP_RTOL`),
+    giving their range, or are not `h`, the step the fitted map is labelled with; nothing for
+    any other map (their step takes $h$ as an input)."""
+    if not isinstance(model, AbstractFixedStepMap):
+        return
+    steps = np.asarray(steps, dtype=np.float64).reshape(-1)
+    if steps.size == 0:
+        return
+    low, high = float(np.min(steps)), float(np.max(steps))
+    name = type(model).__name__
+    if high - low > STEP_RTOL * high:
+        raise ValueError(
+            f"{what} has uneven steps, from {low:g} to {high:g}; {name} maps a state to the next at one fixed "
+            f"step (its step ignores h), so it cannot follow observations at several steps. Resample them at one "
+            f"step, or fit a map that takes the step as an input (LPNet, GLPNet, learn.fit_splitting)"
+        )
+    if h is not None and abs(float(h) - high) > STEP_RTOL * high:
+        raise ValueError(
+            f"h = {float(h):g}, but {what} has steps of {high:g}; {name} maps a state to the next at one fixed step "
+            f"(its step ignores h), which is the data's: give h={high:g} or leave h unset"
+        )
+
+
+class MLPBaseline(AbstractFixedStepMap):
     r"""$y \mapsto y + s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$,
     with fixed scalings (`learn.fit(normalise=True)` sets them from the data: inputs $y_0$,
     outputs $y_1 - y_0$). Trained on the state MSE only; it conserves no Casimir, so `learn.fit`
-    takes any pairs for it.
+    takes any pairs for it. Its step ignores $h$: it is the map at the one step of its training
+    data (an `AbstractFixedStepMap`).
 
     **Arguments:** as `LPNet`'s default network (`hidden`, `activation`, `key`, scalings), or
     `network`, any `learn.AbstractNetwork` from `dim` to `dim`; `h`.
