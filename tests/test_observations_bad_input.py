@@ -219,3 +219,15 @@ def test_a_system_of_another_structure_is_refused(algebra, match):
     with pytest.raises(ValueError, match=r"system LiePoissonSystem.* has another Poisson structure than the "
                                          r"observations, which are of RigidBody.*: " + match):
         it.Observations(BODY, T, _on_a_leaf(2)).check_system(other)
+
+
+def test_a_fixed_step_map_is_refused_on_observations_at_uneven_steps():
+    # The MLP baseline's step ignores h: trained on intervals of 0.05 and 0.3 alike it would learn
+    # neither; learn.fit refuses before any training.
+    import learn
+
+    body = lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0))
+    uneven = it.Observations(body, [[0.0, 0.05, 0.35, 0.45]], [np.tile([0.3, -0.2, 0.9], (4, 1))])
+    with pytest.raises(ValueError, match=r"data has uneven steps, from 0\.05 to 0\.3; MLPBaseline"):
+        learn.fit(learn.MLPBaseline(body, hidden=(4,), key=0), uneven, optimiser=learn.Adam(1),
+                  loss=learn.TrajectoryLoss(window=1, latent=False), validation_fraction=0.0, progress=False)

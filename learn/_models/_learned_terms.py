@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson.internals import positive_int
+from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._mlp import ACTIVATIONS, as_key, check_activation
@@ -124,6 +124,25 @@ class RidgeTerms(eqx.Module):
         """The same family of pieces with fresh parameters from `key`."""
         return RidgeTerms(self.dim, self.n_modules, self.order, key, activation=self.activation,
                           full_vectors=self.full_vectors, linear_term=self.linear_term, bias=self.bias)
+
+    def in_units(self, time: float, size: float) -> RidgeTerms:
+        r"""The pieces that move states of size `size` over times in units `time` as these
+        move unit states over unit times: $(a_s, b_s, e_s) \cdot$ `size`/`time`,
+        $\alpha_s/$`size`.
+
+        On a Lie-Poisson system (a bracket linear in $y$) the G-LPNet of the result maps
+        $\text{size}\cdot z$ over a step $\text{time}\cdot\tau$ to $\text{size}$ times what
+        this one maps $z$ to over $\tau$: the inputs $\langle\alpha_s, y\rangle$ are
+        unchanged and the rates $q_s\alpha_s$ scale by 1/`time`. On any Poisson system with
+        `size` = 1 it is the change of the unit of time (docs/conventions.md, "Units")."""
+        time, size = positive_float(time, "time"), positive_float(size, "size")
+        rate = size / time
+        new = eqx.tree_at(lambda m: (m.a, m.c), self, (self.a * rate, self.c / size))
+        if self.b is not None:
+            new = eqx.tree_at(lambda m: m.b, new, self.b * rate)
+        if self.e is not None:
+            new = eqx.tree_at(lambda m: m.e, new, self.e * rate)
+        return new
 
     def with_activation(self, activation: str) -> RidgeTerms:
         r"""The same pieces with another activation $\sigma$ (a static field: a copy)."""

@@ -25,6 +25,7 @@ from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
+from ._units import observation_units
 
 
 def fit_splitting(
@@ -128,9 +129,11 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
              "normalise": False}
     families = FAMILIES if activation is None else {
         activation: {"activation": activation, "linear_term": activation != "identity", "bias": True}}
+    # the start in the data's units: the same motion learned in any unit of time or state
+    units = observation_units(system, data)
     fits = []
     for name, settings in families.items():
-        terms = RidgeTerms(system.dim, system.dim, key=key, **settings)
+        terms = RidgeTerms(system.dim, system.dim, key=key, **settings).in_units(*units)
         net = GLPNet(system, terms=terms, method=method)
         # Each family from its own fit to the one-step loss (a nearly convex start for the
         # rollouts; starting a family from the fit of the one it contains can stall in the

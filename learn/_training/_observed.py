@@ -27,6 +27,7 @@ from integrators import Observations
 from liepoisson.internals import casimir_scale, positive_float, positive_int
 
 from .._models._base import AbstractCasimirConservingMap
+from .._models._baseline import check_one_step
 from .._solvers._problem import AbstractLeastSquares, AbstractStructuredJacobian
 from ._losses import AbstractLoss
 from ._problem import Description, Fitted, FittedProblem
@@ -92,7 +93,10 @@ class TrajectoryLoss(AbstractLoss):
             h = float(model.h)
         else:
             h = float(np.median(data.intervals()[2]))
-        model = eqx.tree_at(lambda m: m.h, model, h, is_leaf=lambda v: v is None)
+        check_one_step(model, data.intervals()[2] / substeps, h if model.h is None else None, "data")
+        # No step while fitting (each interval sets its own), so that data in other units
+        # reuse what was compiled; `FittedProblem.map` gives the fitted map `h`.
+        model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)
         seg = segments(train, self, substeps)
         held_out = None if val is None else segments(val, self, substeps, held_out=True)
         y0 = Fitted(model, seg.states[:, 0] if self.latent else None)
@@ -282,7 +286,10 @@ def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, f
     J = np.asarray(jax.jacfwd(residuals)(flat))
     n = int(np.sum(objective._squared(fitted, args)[1])) * args.states.shape[-1]  # fitted components
     ssr = float(jnp.sum(r**2))
-    singular = np.linalg.svd(J, compute_uv=False)
+    # Each weight's column at unit norm: the rank does not depend on the weights' units (a
+    # time in ms scales the rates' columns by 1e3; docs/conventions.md, "Units").
+    norms = np.linalg.norm(J, axis=0)
+    singular = np.linalg.svd(J[:, norms > 0] / norms[norms > 0], compute_uv=False)
     # A direction of the weights that moves the residuals 1e8 times less than the best
     # determined one is not fitted by the data (redundant weights give 0 to round-off).
     k = int(np.sum(singular > 1e-8 * singular[0])) if singular.size else 0

@@ -112,7 +112,9 @@ class FittedProblem(MapProblem):
     (`learn.Segments`); the step size varies per interval, so none is traced."""
 
     def map(self, y: Fitted) -> AbstractLearnedMap:
-        return y.model
+        """The fitted map, at the step `h` of the description (none while fitting: every
+        interval runs at its own)."""
+        return eqx.tree_at(lambda m: m.h, y.model, self.description.h, is_leaf=lambda v: v is None)
 
     def step_size(self, y: Any) -> Any:
         return None
