@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from integrators import Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.internals import show_progress
-from liepoisson.systems import AbstractPoissonSystem
+from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
 
 from .._models._glpnet import GLPNet, check_method
 from .._models._learned_terms import RidgeTerms
@@ -71,6 +71,7 @@ def fit_splitting(
     trajectories; `"identity"`: a quadratic $\widetilde H$). The other arguments are
     `learn.fit`'s.
     """
+    check_conservative(system, "system")
     if method is not None:  # a wrong method fails before the first fit
         method = check_method(method)
         if isinstance(method, LieTrotter):
@@ -79,6 +80,17 @@ def fit_splitting(
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
     return _recipe(data, system, method, loss, activation, iterations, key, common)
+
+
+def check_conservative(system: AbstractPoissonSystem, what: str) -> None:
+    """`ValueError` for a dissipative system: a G-LPNet is a Poisson map and cannot follow
+    energy decay."""
+    if isinstance(system, AbstractDissipativeSystem):  # a system of the right type, unsuitable data
+        raise ValueError(  # noqa: TRY004
+            f"{what} is dissipative ({system!r}): a G-LPNet is a Poisson map and keeps the energy up to its error, "
+            "so it cannot follow energy decay on the orbit. Fit an LPNet (learn.fit(learn.LPNet(system), data)), "
+            "whose steps keep the Casimirs and can lose energy, or fit_splitting with the conservative part "
+            "(system.conservative) to data without dissipation; docs/conventions.md, 'Dissipation on the orbit'")
 
 
 @functools.singledispatch
@@ -121,6 +133,7 @@ FAMILIES = {
 def _(data: Observations, system, method, loss, activation, iterations, key, common):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
     through `method`; the lowest BIC wins."""
+    check_conservative(data.system, "the observations' system")
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
     loss = resolve_loss(loss, data)
