@@ -18,11 +18,11 @@ from liepoisson.internals import show_progress
 from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
 
 from .._models._glpnet import GLPNet, check_method
-from .._models._learned_terms import RidgeTerms
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
+from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
 from ._units import observation_units
@@ -120,15 +120,6 @@ BFGS_ITERATIONS, LM_ITERATIONS = 1000, 200
 #: exact data keep lowering it by more (BENCHMARKS.md, "Learning from observations").
 RTOL = 1e-10
 
-#: The nested families of learned Hamiltonians `fit_splitting` chooses from on observations:
-#: name -> RidgeTerms settings (one module per basis direction).
-FAMILIES = {
-    "quadratic, even": {"activation": "identity", "linear_term": False, "bias": False},
-    "quadratic": {"activation": "identity", "linear_term": False, "bias": True},
-    "general": {"activation": "sigmoid", "linear_term": True, "bias": True},
-}
-
-
 @_recipe.register
 def _(data: Observations, system, method, loss, activation, iterations, key, common):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
@@ -140,26 +131,25 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
     split = {"h": common["h"], "validation_fraction": common["validation_fraction"], "seed": common["seed"],
              "normalise": False}
-    families = FAMILIES if activation is None else {
-        activation: {"activation": activation, "linear_term": activation != "identity", "bias": True}}
+    families = FAMILIES if activation is None else (
+        Family(activation, activation, linear_term=activation != "identity", bias=True),)
     # the start in the data's units: the same motion learned in any unit of time or state
     units = observation_units(system, data)
     fits = []
-    for name, settings in families.items():
-        terms = RidgeTerms(system.dim, system.dim, key=key, **settings).in_units(*units)
-        net = GLPNet(system, terms=terms, method=method)
+    for family in families:
+        net = GLPNet(system, terms=family.start(system, data, key, units), method=method)
         # Each family from its own fit to the one-step loss (a nearly convex start for the
         # rollouts; starting a family from the fit of the one it contains can stall in the
         # smaller family's basin: BENCHMARKS.md).
         one_step = TrajectoryLoss(window=1, latent=False).problem(net, data, **split)
-        first, _ = solve(one_step, (LevenbergMarquardt(iterations, RTOL, warm_start=settings["activation"] != "identity"),),
+        first, _ = solve(one_step, (LevenbergMarquardt(iterations, RTOL, warm_start=family.warm_start),),
                          context)
         problem, results = solve(loss.problem(first.map(first.y0), data, **split),
                                  (LevenbergMarquardt(iterations, RTOL),), context)
         criterion = information_criterion(problem, problem.y0)
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": name}))
+            last.record, details={**last.record.details, **criterion, "family": family.name}))
         fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
     best = min(fits, key=lambda f: (f[0], f[1]))
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
