@@ -60,7 +60,11 @@ from ._solvers._stage import (
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import FAMILIES as FAMILIES, Family as Family, quadratic_estimate as quadratic_estimate
 from ._training._fit_splitting import fit_splitting as fit_splitting
-from ._training._identify import QuadraticPart as QuadraticPart, quadratic_part as quadratic_part
+from ._training._identify import (
+    PrincipalAxes as PrincipalAxes,
+    QuadraticPart as QuadraticPart,
+    quadratic_part as quadratic_part,
+)
 from ._training._losses import (
     AbstractLoss as AbstractLoss,
     AbstractPairsLoss as AbstractPairsLoss,

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
 
 from liepoisson.internals import states
 from liepoisson.systems import AbstractPoissonSystem
@@ -44,12 +45,48 @@ class QuadraticPart:
         have the same identifiable matrix."""
         return project_out(self.matrix, self.casimir_hessians)
 
+    def principal_axes(self) -> PrincipalAxes:
+        r"""The eigen-decomposition of `identifiable()`, $\sum_k\lambda_kv_kv_k^T$: for the rigid
+        body ($Q = I$: $A = \mathbb I^{-1}$ up to a multiple of $I$) its principal axes in the
+        axes of the data, with $\lambda_k$ the $1/I_k$ less their mean. Adding a Casimir Hessian
+        that commutes with $A$ moves no axis, so the axes are identified where the $1/I_k$ differ."""
+        values, vectors = np.linalg.eigh(self.identifiable())
+        if np.linalg.det(vectors) < 0:  # right-handed: a rotation from the data's axes
+            vectors[:, -1] = -vectors[:, -1]
+        return PrincipalAxes(values, vectors)
+
     def diagonal_differences(self) -> np.ndarray:
         r"""$A_{ii} - A_{jj}$ for $i < j$ (row-major order): for the rigid body, the identified
         $1/I_i - 1/I_j$."""
         d = np.diag(self.matrix)
         i, j = np.triu_indices(d.size, 1)
         return d[i] - d[j]
+
+
+@dataclasses.dataclass(frozen=True)
+class PrincipalAxes:
+    r"""`values` $\lambda_k$ (ascending) and `axes` (the columns $v_k$, a rotation matrix) of a
+    symmetric matrix."""
+
+    values: np.ndarray
+    axes: np.ndarray
+
+    def rotation_vector(self) -> np.ndarray:
+        r"""The rotation vector (radians) that turns the data's axes onto the principal axes
+        (dimension 3). The axes' order and signs are conventions (ascending $\lambda$,
+        right-handed); `angles_to` compares axes without them."""
+        if self.axes.shape != (3, 3):
+            raise ValueError(f"a rotation vector needs 3 axes; these are {self.axes.shape[0]}")
+        return Rotation.from_matrix(self.axes).as_rotvec()
+
+    def angles_to(self, axes: ArrayLike) -> np.ndarray:
+        r"""The angle (radians) between each axis and the column of `axes` in the same place,
+        as lines (a sign flip is no error): $\arccos|v_k\cdot w_k|$."""
+        other = np.asarray(axes, dtype=np.float64)
+        if other.shape != self.axes.shape:
+            raise ValueError(f"axes must have shape {self.axes.shape}; got {other.shape}")
+        cosines = np.abs(np.sum(self.axes * other, axis=0)) / np.linalg.norm(other, axis=0)
+        return np.arccos(np.clip(cosines, 0.0, 1.0))
 
 
 def project_out(matrix: np.ndarray, hessians: np.ndarray) -> np.ndarray:
