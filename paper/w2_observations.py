@@ -45,6 +45,7 @@ from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 import integrators as it
 import learn
@@ -97,6 +98,78 @@ def _diagonal(y, theta):
     return 0.5 * jnp.sum(theta * y**2)
 
 
+def _symmetric(theta, n: int):
+    """The symmetric matrix whose upper triangle (row-major) is `theta`."""
+    upper = jnp.zeros((n, n)).at[jnp.triu_indices(n)].set(theta)
+    return upper + upper.T - jnp.diag(jnp.diag(upper))
+
+
+def _quadratic_form(n: int) -> Callable[[Any, Any], Any]:
+    r"""$\tfrac12 y^TAy$ with the upper triangle of $A$ unknown: a quadratic in any axes."""
+    return lambda y, theta: 0.5 * y @ _symmetric(theta, n) @ y
+
+
+def _heavy_top_family(y, theta):
+    return 0.5 * jnp.sum(theta[:3] * y[:3] ** 2) + jnp.dot(theta[3:], y[3:])
+
+
+def _logarithmic_family(y, theta):
+    return 0.5 * jnp.sum(theta[:3] * y[:3] ** 2) + theta[3] * jnp.log1p(jnp.dot(theta[4:], y) ** 2)
+
+
+#: The rotated rigid body: I = (2, 1, 2/3) with its principal axes turned by this rotation
+#: vector (0.95 rad) from the sensor axes.
+ROTATION = (0.4, -0.7, 0.5)
+
+
+def quadratic_body(algebra: lp.LieAlgebra, A: np.ndarray, name: str) -> lp.systems.LiePoissonSystem:
+    r"""The Lie-Poisson system of $H = \tfrac12 y^TAy$ on `algebra`, written as a user would."""
+    A = np.asarray(A, dtype=np.float64)
+    n = A.shape[0]
+    return lp.systems.LiePoissonSystem(
+        algebra, lambda m, xp: 0.5 * sum(float(A[i, j]) * m[i] * m[j] for i in range(n) for j in range(n)), name=name)
+
+
+def rotated_inverse_inertia() -> np.ndarray:
+    r"""$R\,\mathrm{diag}(1/I)\,R^T$: the rigid body's inverse inertia in sensor axes."""
+    R = Rotation.from_rotvec(ROTATION).as_matrix()
+    return R @ np.diag([0.5, 1.0, 1.5]) @ R.T
+
+
+def coupled_kirchhoff_matrix() -> np.ndarray:
+    r"""Kirchhoff's body with an added-mass matrix coupling rotation and translation: the
+    generalised mass $\begin{pmatrix}\mathbb I & C\\ C^T & \mathbb M\end{pmatrix}$ with
+    $\mathbb I = \mathbb M = \mathrm{diag}(1, 2, 1)$ and
+    $C = \begin{pmatrix}0 & 0.3 & 0\\ 0.2 & 0 & 0\\ 0 & 0 & 0.25\end{pmatrix}$; $H$ is half the
+    momenta against its inverse."""
+    mass = np.zeros((6, 6))
+    mass[:3, :3] = mass[3:, 3:] = np.diag([1.0, 2.0, 1.0])
+    mass[:3, 3:] = [[0.0, 0.3, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.25]]
+    mass[3:, :3] = mass[:3, 3:].T
+    return np.linalg.inv(mass)
+
+
+#: The non-polynomial rigid body: H = sum Pi_i^2 / (2 I_i) + KAPPA log(1 + (V . Pi)^2).
+KAPPA, V = 0.2, (0.6, 0.0, 0.8)
+
+
+def logarithmic_body() -> lp.systems.LiePoissonSystem:
+    """A rigid body I = (2, 1, 2/3) with the energy term `KAPPA log(1 + (V . Pi)^2)`, outside
+    every polynomial library."""
+    v = [float(c) for c in V]
+
+    def hamiltonian(m, xp):
+        along = v[0] * m[0] + v[1] * m[1] + v[2] * m[2]
+        return 0.25 * m[0] ** 2 + 0.5 * m[1] ** 2 + 0.75 * m[2] ** 2 + KAPPA * xp.log(1.0 + along * along)
+
+    return lp.systems.LiePoissonSystem(lp.so3(), hamiltonian, name="logarithmic rigid body")
+
+
+def _heavy_top_initial(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Angular momenta in the cube [-1, 1]^3, the vertical a unit vector."""
+    return np.concatenate([rng.uniform(-1.0, 1.0, size=(n, 3)), _sphere(n, rng)], axis=1)
+
+
 def _diamond_family(y, theta):
     return 0.5 * (theta[0] * y[0] ** 2 + theta[1] * y[1] ** 2 + theta[2] * y[3] ** 2) + theta[3] * jnp.exp(-y[2] ** 2)
 
@@ -115,6 +188,7 @@ class Protocol:
     family: Callable[[Any, Any], Any]
     true_theta: tuple[float, ...]
     diagonal_differences: bool = False
+    theta0: tuple[float, ...] | None = None  # the limit's start (default: ones)
 
 
 def protocols() -> dict[str, Protocol]:
@@ -124,7 +198,27 @@ def protocols() -> dict[str, Protocol]:
         "Kirchhoff": Protocol(lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)), 40, 21, _cube(6),
                               _diagonal, (1.0, 0.5, 1.0, 1.0, 0.5, 1.0)),
         "diamond": Protocol(diamond(), 40, 21, _cube(4), _diamond_family, (1.0, 1.0, 1.0, 0.1)),
+        # Hamiltonians real bodies have: principal axes off the sensor axes, coupled added mass,
+        # a linear term, a non-polynomial energy (the limits start from the identity or 10% off)
+        "rotated rigid body": Protocol(
+            quadratic_body(lp.so3(), rotated_inverse_inertia(), "rotated rigid body"), 30, 21, _sphere,
+            _quadratic_form(3), tuple(rotated_inverse_inertia()[np.triu_indices(3)]),
+            theta0=tuple(np.eye(3)[np.triu_indices(3)])),
+        "coupled Kirchhoff": Protocol(
+            quadratic_body(lp.se3(), coupled_kirchhoff_matrix(), "coupled Kirchhoff"), 40, 21, _cube(6),
+            _quadratic_form(6), tuple(coupled_kirchhoff_matrix()[np.triu_indices(6)]),
+            theta0=tuple(np.eye(6)[np.triu_indices(6)])),
+        "heavy top": Protocol(
+            lp.systems.HeavyTop(inertia=(2.0, 1.0, 2.0 / 3.0), mgl=0.5, center_of_mass=(0.3, -0.2, 0.93)), 30, 21,
+            _heavy_top_initial, _heavy_top_family, HEAVY_TOP_THETA, theta0=tuple(1.1 * np.asarray(HEAVY_TOP_THETA))),
+        "logarithmic rigid body": Protocol(
+            logarithmic_body(), 30, 21, _sphere, _logarithmic_family, (0.5, 1.0, 1.5, KAPPA, *V),
+            theta0=tuple(1.1 * np.asarray((0.5, 1.0, 1.5, KAPPA, *V)))),
     }
+
+
+#: The heavy top's true family parameters: 1/I_i and mgl chi.
+HEAVY_TOP_THETA = (0.5, 1.0, 1.5, *(0.5 * np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93])))
 
 
 def observations(protocol: Protocol, noise: float, sampling: str, seed: int = DATA_SEED,
@@ -216,7 +310,8 @@ def models(protocol: Protocol, profile: Profile) -> list[AbstractStudyModel]:
         SplittingModel("G-LPNet", iterations=profile.steps, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0),
         ParametricModel("limit", (Training(learn.LevenbergMarquardt(profile.steps, rtol=1e-12),
                                            loss=learn.TrajectoryLoss(), validation_fraction=0.0, seed=TRAIN_SEED),),
-                        family=protocol.family, theta0=(1.0,) * len(protocol.true_theta)),
+                        family=protocol.family,
+                        theta0=protocol.theta0 or (1.0,) * len(protocol.true_theta)),
     ]
     if sindy_available():
         out.append(SINDyModel("SINDy"))
