@@ -159,13 +159,17 @@ class Identified:
     $\\widetilde H$ chosen by BIC and the criterion of each family (`learn.fit_splitting`), its
     fitted coefficients `theta` (a parametric model), `hamiltonian_mismatch` against $H$, and the
     differences of the diagonal of its quadratic part (for the rigid body the identified
-    $1/I_i - 1/I_j$). `None`: not measured for this model."""
+    $1/I_i - 1/I_j$); for a quadratic $H$, the relative (Frobenius) error of the identifiable
+    part of its matrix (`learn.QuadraticPart.identifiable`) and, in dimension 3, the largest
+    angle between the learned and the true principal axes. `None`: not measured for this model."""
 
     family: str | None = None
     bic: dict[str, float] | None = None
     theta: np.ndarray | None = None
     mismatch: dict[str, float] | None = None
     differences: np.ndarray | None = None
+    identifiable_error: float | None = None
+    axes_error_degrees: float | None = None
 
 
 class AbstractHamiltonianModel(AbstractStudyModel):
@@ -200,11 +204,23 @@ class SplittingModel(AbstractStepMapModel, AbstractHamiltonianModel):
         family = fitted.records[-1].stages[-1].details.get("family")
         bic = {r.stages[-1].details.get("family"): r.stages[-1].details.get("bic") for r in fitted.records}
         hamiltonian = fitted.step_map.hamiltonian
-        differences = None
-        if diagonal:
-            differences = learn.quadratic_part(hamiltonian, system, states).diagonal_differences()
+        learned = learn.quadratic_part(hamiltonian, system, states)
         return Identified(family=family, bic=bic, mismatch=hamiltonian_mismatch(hamiltonian, system, states),
-                          differences=differences)
+                          differences=learned.diagonal_differences() if diagonal else None,
+                          **quadratic_errors(learned, learn.quadratic_part(system.hamiltonian, system, states)))
+
+
+def quadratic_errors(learned: learn.QuadraticPart, true: learn.QuadraticPart) -> dict[str, float]:
+    """`identifiable_error` and (dimension 3) `axes_error_degrees` of `learned` against the
+    quadratic part of a true Hamiltonian that is quadratic (nothing otherwise)."""
+    if true.residual > 1e-9:  # the true H is not quadratic: no matrix to compare
+        return {}
+    reference = true.identifiable()
+    out = {"identifiable_error": float(np.linalg.norm(learned.identifiable() - reference) / np.linalg.norm(reference))}
+    if reference.shape == (3, 3):
+        angles = learned.principal_axes().angles_to(true.principal_axes().axes)
+        out["axes_error_degrees"] = float(np.degrees(np.max(angles)))
+    return out
 
 
 @dataclasses.dataclass(frozen=True)

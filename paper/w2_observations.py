@@ -297,6 +297,8 @@ class W2Row:
     learned_vector_field_vs_H: float | None = optional()
     differences: Any = optional()
     difference_error: Any = optional()
+    identifiable_error: float | None = optional()
+    axes_error_degrees: float | None = optional()
 
     @property
     def condition(self) -> tuple[str, str, float]:
@@ -351,6 +353,7 @@ def evaluate(protocol: Protocol, model: AbstractStudyModel, data: it.Observation
         learned_hamiltonian_vs_H_mod_casimirs=mismatch.get("learned_hamiltonian_vs_H_mod_casimirs"),
         learned_vector_field_vs_H=mismatch.get("learned_vector_field_vs_H"),
         differences=identified.differences, difference_error=error,
+        identifiable_error=identified.identifiable_error, axes_error_degrees=identified.axes_error_degrees,
     )
 
 
@@ -463,6 +466,8 @@ COLUMNS = (
     Column("H~ family", lambda r: r.family or "—"),
     Column("H~ - H mod Casimirs", lambda r: r.learned_hamiltonian_vs_H_mod_casimirs),
     Column("max error of 1/I_i - 1/I_j", lambda r: None if r.difference_error is None else max(r.difference_error)),
+    Column("identifiable A, rel. error", lambda r: r.identifiable_error),
+    Column("principal axes, max error [deg]", lambda r: r.axes_error_degrees),
 )
 
 
@@ -484,6 +489,10 @@ def line(row: W2Row) -> str:
     extra = ""
     if row.difference_error is not None:
         extra = f", max |error of 1/I_i - 1/I_j| {np.max(row.difference_error):.1e}"
+    if row.identifiable_error is not None:
+        extra += f", identifiable A within {fmt(row.identifiable_error)}"
+    if row.axes_error_degrees is not None:
+        extra += f", principal axes within {row.axes_error_degrees:.2g} deg"
     if row.family:
         extra += f", H~ {row.family}"
     if row.learned_hamiltonian_vs_H_mod_casimirs is not None:
