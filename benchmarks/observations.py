@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="the G-LPNet's loss: segments start from their first observation (no errors in variables)")
     parser.add_argument("--bootstrap", type=int, default=0,
                         help="rigid body: also refit the G-LPNet to N resamples of the trajectories and print the "
-                             "spread of the identified 1/I_i - 1/I_j")
+                             "spread of the identified 1/I_i - 1/I_j; rotated rigid body: of its principal axes")
     parser.add_argument("--out", default=default_out("observations"))
     args = parser.parse_args(argv)
     protocols = w2.protocols()
@@ -82,7 +82,19 @@ def main(argv: list[str] | None = None) -> None:
                                       sampling=sampling)
                     rows.append({**row_to_json(row), "data_seed": args.data_seed})
                     print(w2.line(row), flush=True)
-                if args.bootstrap and protocol.diagonal_differences:
+                if args.bootstrap and system == "rotated rigid body":
+                    b = w2.bootstrap_axes(protocol, data, args.bootstrap, iterations=args.iterations)
+                    rows.append({"system": system, "noise": noise, "sampling": sampling, "model": "G-LPNet bootstrap",
+                                 **b})
+                    angles = np.degrees(b["angles"])
+                    print(f"{system}, {sampling}, noise {noise:g}: over {args.bootstrap} resamples, principal axes "
+                          f"within {np.round(angles.mean(0), 3).tolist()} +- {np.round(angles.std(0, ddof=1), 3).tolist()} "
+                          f"deg of the true ones (rotation vector {np.round(b['true_rotation_vector'], 4).tolist()}, "
+                          f"learned {np.round(b['rotation_vectors'].mean(0), 4).tolist()} +- "
+                          f"{np.round(b['rotation_vectors'].std(0, ddof=1), 4).tolist()}); 1/I_k less their mean "
+                          f"{np.round(b['values'].mean(0), 5).tolist()} +- {np.round(b['values'].std(0, ddof=1), 5).tolist()} "
+                          f"(true {np.round(b['true_values'], 5).tolist()})", flush=True)
+                elif args.bootstrap and protocol.diagonal_differences:
                     d = w2.bootstrap_differences(protocol, data, args.bootstrap, iterations=args.iterations)
                     true = w2.differences(protocol.true_theta)
                     rows.append({"system": system, "noise": noise, "sampling": sampling, "model": "G-LPNet bootstrap",

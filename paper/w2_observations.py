@@ -552,16 +552,36 @@ def _plots(rows: list[W2Row], out_dir: Path) -> list[str]:
 EXPERIMENT = W2()
 
 
-def bootstrap_differences(protocol: Protocol, data: it.Observations, n: int, seed: int = 0,
-                          iterations: int | None = None) -> np.ndarray:
-    """The rigid body's identified 1/I_i - 1/I_j from `n` G-LPNets, each fitted to the
-    trajectories of `data` resampled with replacement (seeded): `(n, 3)`, their spread the
-    uncertainty of the recovered differences."""
+def bootstrap_quadratic(protocol: Protocol, data: it.Observations, n: int, seed: int = 0,
+                        iterations: int | None = None) -> list[learn.QuadraticPart]:
+    """The quadratic parts (`learn.quadratic_part` over the resample's states) of `n` G-LPNets,
+    each fitted to the trajectories of `data` resampled with replacement (seeded): their spread
+    is the uncertainty of what the G-LPNet identifies."""
     model = SplittingModel("G-LPNet", iterations=iterations, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0)
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
         sample = data.select(rng.integers(0, len(data), len(data)))
         fitted = model.fit(protocol.system, sample)
-        out.append(model.identify(fitted, protocol.system, np.concatenate(sample.states), diagonal=True).differences)
-    return np.asarray(out)
+        out.append(learn.quadratic_part(fitted.step_map.hamiltonian, protocol.system, np.concatenate(sample.states)))
+    return out
+
+
+def bootstrap_differences(protocol: Protocol, data: it.Observations, n: int, seed: int = 0,
+                          iterations: int | None = None) -> np.ndarray:
+    """The rigid body's identified 1/I_i - 1/I_j from `bootstrap_quadratic`: `(n, 3)`."""
+    return np.asarray([q.diagonal_differences() for q in bootstrap_quadratic(protocol, data, n, seed, iterations)])
+
+
+def bootstrap_axes(protocol: Protocol, data: it.Observations, n: int, seed: int = 0,
+                   iterations: int | None = None) -> dict[str, np.ndarray]:
+    """A body in dimension 3 with a quadratic Hamiltonian: the principal axes from
+    `bootstrap_quadratic` against the true ones: `values` `(n, 3)` (the $1/I_k$ less their
+    mean), `angles` `(n, 3)` (radians, each learned axis to the true one), and the true
+    `true_values`, `true_rotation_vector`."""
+    true = learn.quadratic_part(protocol.system.hamiltonian, protocol.system, np.concatenate(data.states))
+    axes = true.principal_axes()
+    parts = [q.principal_axes() for q in bootstrap_quadratic(protocol, data, n, seed, iterations)]
+    return {"values": np.asarray([p.values for p in parts]), "angles": np.asarray([p.angles_to(axes.axes) for p in parts]),
+            "rotation_vectors": np.asarray([p.rotation_vector() for p in parts]),
+            "true_values": axes.values, "true_rotation_vector": axes.rotation_vector()}

@@ -1,0 +1,32 @@
+"""W2's protocols: each true family at its true parameters is the system's Hamiltonian, so the
+parametric limit fits the right family; the rotated body is the rigid body in other axes."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import learn
+from paper import w2_observations as w2
+
+EPS = np.finfo(float).eps
+PROTOCOLS = w2.protocols()
+
+
+@pytest.mark.parametrize("name", list(PROTOCOLS))
+def test_the_true_family_at_the_true_parameters_is_the_hamiltonian(name):
+    protocol = PROTOCOLS[name]
+    y = protocol.initial(5, np.random.default_rng(0))
+    family = jax.vmap(lambda z: protocol.family(z, jnp.asarray(protocol.true_theta)))(jnp.asarray(y))
+    # sums of a few dozen O(1) terms (a log for one body) in another order: a few hundred ulps
+    np.testing.assert_allclose(np.asarray(family), np.asarray(protocol.system.hamiltonian(y)), rtol=0, atol=200 * EPS)
+
+
+def test_the_rotated_body_has_the_principal_axes_it_is_built_with():
+    protocol = PROTOCOLS["rotated rigid body"]
+    y = protocol.initial(30, np.random.default_rng(1))
+    axes = learn.quadratic_part(protocol.system.hamiltonian, protocol.system, y).principal_axes()
+    R = Rotation.from_rotvec(w2.ROTATION).as_matrix()  # its columns: the axes of 1/I = 0.5, 1, 1.5
+    np.testing.assert_allclose(axes.angles_to(R), 0.0, atol=1e-6)  # arccos near 1: sqrt of ~1e-13
+    np.testing.assert_allclose(np.diff(axes.values), [0.5, 0.5], atol=300 * EPS)
