@@ -189,6 +189,7 @@ class Protocol:
     true_theta: tuple[float, ...]
     diagonal_differences: bool = False
     theta0: tuple[float, ...] | None = None  # the limit's start (default: ones)
+    leaf_circle: tuple[tuple[float, ...], tuple[float, ...]] | None = None  # see `leaf_profile`
 
 
 def protocols() -> dict[str, Protocol]:
@@ -213,7 +214,7 @@ def protocols() -> dict[str, Protocol]:
             _heavy_top_initial, _heavy_top_family, HEAVY_TOP_THETA, theta0=tuple(1.1 * np.asarray(HEAVY_TOP_THETA))),
         "logarithmic rigid body": Protocol(
             logarithmic_body(), 30, 21, _sphere, _logarithmic_family, (0.5, 1.0, 1.5, KAPPA, *V),
-            theta0=tuple(1.1 * np.asarray((0.5, 1.0, 1.5, KAPPA, *V)))),
+            theta0=tuple(1.1 * np.asarray((0.5, 1.0, 1.5, KAPPA, *V))), leaf_circle=(V, (0.8, 0.0, -0.6))),
     }
 
 
@@ -273,6 +274,21 @@ def figures(fitted: Fitted, states: np.ndarray, reference: np.ndarray) -> Rollou
     )
 
 
+#: Points of a `leaf_profile` around its circle.
+PROFILE_POINTS = 73
+
+
+def leaf_profile(hamiltonian: Callable[[np.ndarray], Any], circle: tuple[Any, Any]) -> list[float]:
+    r"""`hamiltonian` around the great circle $\cos\theta\,u + \sin\theta\,w$ (`circle`
+    $= (u, w)$ orthonormal, on the leaf $|y| = 1$), $\theta$ at `PROFILE_POINTS` points of
+    $[0, 2\pi]$, less its mean: on one leaf a Hamiltonian is identified up to a constant, so
+    this is the shape the motion sees."""
+    theta = np.linspace(0.0, 2.0 * np.pi, PROFILE_POINTS)
+    u, w = (np.asarray(v, dtype=np.float64) for v in circle)
+    values = np.asarray(hamiltonian(np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * w), dtype=np.float64)
+    return (values - values.mean()).tolist()
+
+
 @dataclasses.dataclass(frozen=True)
 class W2Row:
     """One model fitted to one condition (system, sampling, noise): its `RolloutFigures`, fit
@@ -299,6 +315,7 @@ class W2Row:
     difference_error: Any = optional()
     identifiable_error: float | None = optional()
     axes_error_degrees: float | None = optional()
+    leaf_profile: Any = optional()  # the learned H~ around the protocol's leaf circle
 
     @property
     def condition(self) -> tuple[str, str, float]:
@@ -335,10 +352,12 @@ def evaluate(protocol: Protocol, model: AbstractStudyModel, data: it.Observation
     """Fit `model` to `data` and measure its rollouts against `reference`."""
     start = time.perf_counter()
     fitted = model.fit(protocol.system, data)
-    identified = Identified()
+    identified, profile = Identified(), None
     if isinstance(model, AbstractHamiltonianModel):
         identified = model.identify(fitted, protocol.system, np.concatenate(data.states),
                                     protocol.diagonal_differences)
+        if protocol.leaf_circle is not None:
+            profile = leaf_profile(fitted.step_map.hamiltonian, protocol.leaf_circle)
     fit_seconds = time.perf_counter() - start
     measured = figures(fitted, model.simulate(fitted, y0, reference.shape[1] - 1, H_TEST), reference)
     error = None
@@ -354,6 +373,7 @@ def evaluate(protocol: Protocol, model: AbstractStudyModel, data: it.Observation
         learned_vector_field_vs_H=mismatch.get("learned_vector_field_vs_H"),
         differences=identified.differences, difference_error=error,
         identifiable_error=identified.identifiable_error, axes_error_degrees=identified.axes_error_degrees,
+        leaf_profile=profile,
     )
 
 
@@ -544,6 +564,34 @@ def _plots(rows: list[W2Row], out_dir: Path) -> list[str]:
             span_decades(ax, "y")
             ax.legend()
         name = f"state_error_{system.replace(' ', '_')}.png"
+        fig.savefig(out_dir / name, dpi=120)
+        names.append(name)
+    names.extend(_profile_plots(rows, out_dir))
+    return names
+
+
+def _profile_plots(rows: list[W2Row], out_dir: Path) -> list[str]:
+    """Per system with a leaf circle: the true and the learned Hamiltonians around it, one panel
+    per condition (a non-polynomial term's shape against the truth)."""
+    all_protocols = protocols()
+    names = []
+    for system in dict.fromkeys(r.system for r in rows if r.leaf_profile is not None):
+        circle = all_protocols[system].leaf_circle
+        truth = leaf_profile(all_protocols[system].system.hamiltonian, circle)
+        conditions = list(dict.fromkeys(r.condition for r in rows if r.system == system and r.leaf_profile))
+        fig = figure(figsize=(5.0 * len(conditions), 4.0))
+        axes = np.atleast_1d(fig.subplots(1, len(conditions)))
+        theta = np.linspace(0.0, 2.0 * np.pi, PROFILE_POINTS)
+        for ax, condition in zip(axes, conditions):
+            ax.plot(theta, truth, color="k", lw=3, alpha=0.35, label="true H")
+            sub = [r for r in rows if r.condition == condition and r.leaf_profile]
+            for r, style in zip(sub, series_styles(len(sub))):
+                ax.plot(theta, r.leaf_profile, label=f"{r.model} H~", **style)
+            ax.set_xlabel("angle around the circle through V on |Pi| = 1 [rad]")
+            ax.set_ylabel("H less its mean on the circle")
+            ax.set_title(f"{system}, {condition[1]}, noise {condition[2]:g}")
+            ax.legend()
+        name = f"leaf_profile_{system.replace(' ', '_')}.png"
         fig.savefig(out_dir / name, dpi=120)
         names.append(name)
     return names
