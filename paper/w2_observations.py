@@ -3,14 +3,18 @@ whose Hamiltonian the learner is not given.
 
 For the rigid body I = (2, 1, 2/3) on so(3)*, Kirchhoff's body (the paper's E5) on se(3)* and
 a body on the 4-dimensional "diamond" algebra outside the catalogue (given by its structure
-constants): trajectories observed with Gaussian noise of standard deviation 0, 1e-3 and 1e-2
-times the states' RMS size, at a regular h = 0.1 or at steps drawn from [0.05, 0.3]
-(`integrators.observe`). Fitted to the same observations:
+constants), and the Hamiltonians real bodies have: the rigid body with its principal axes
+turned by the rotation vector (0.4, -0.7, 0.5) from the sensor axes, Kirchhoff's body with an
+added mass coupling rotation and translation, the heavy top (a linear term), and a rigid body
+with the energy term 0.2 log(1 + (V . Pi)^2) outside every polynomial library: trajectories
+observed with Gaussian noise of standard deviation 0, 1e-3 and 1e-2 times the states' RMS
+size, at a regular h = 0.1 or at steps drawn from [0.05, 0.3] (`integrators.observe`). Fitted
+to the same observations:
 
 - **G-LPNet**: `learn.fit_splitting(system, observations)`: a TripleJump G-LPNet (one module
-  per basis direction) fitted by trajectory least squares with the initial states (errors in
-  variables), the family of its learned Hamiltonian chosen by the Bayesian information
-  criterion (quadratic even, quadratic, general);
+  per basis direction or learned direction) fitted by trajectory least squares with the initial
+  states (errors in variables), the family of its learned Hamiltonian chosen by the Bayesian
+  information criterion (`learn.FAMILIES`);
 - **limit**: the true model family (`learn.ParametricHamiltonian`: the Hamiltonian's form
   with its coefficients unknown, RK4 with 10 sub-steps) fitted the same way: what the data
   allow at best;
@@ -394,8 +398,8 @@ PROFILES = {
     "smoke": Profile(("rigid body",), (1e-3,), ("regular",), iterations=30, steps=20, n_trajectories=6,
                      n_observations=6, test_steps=50),
     "quick": Profile(("rigid body",), (0.0, 1e-3, 1e-2), ("regular", "uneven"), iterations=1000),
-    "full": Profile(("rigid body", "Kirchhoff", "diamond"), (0.0, 1e-3, 1e-2), ("regular", "uneven"),
-                    iterations=1000),
+    "full": Profile(("rigid body", "Kirchhoff", "diamond", "rotated rigid body", "coupled Kirchhoff", "heavy top",
+                     "logarithmic rigid body"), (0.0, 1e-3, 1e-2), ("regular", "uneven"), iterations=1000),
 }
 
 
