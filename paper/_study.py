@@ -224,6 +224,16 @@ def quadratic_errors(learned: learn.QuadraticPart, true: learn.QuadraticPart) ->
 
 
 @dataclasses.dataclass(frozen=True)
+class ConservativePartModel(SplittingModel):
+    """A G-LPNet fitted by `learn.fit_splitting` with the conservative part of a dissipative
+    system (its bracket; `fit_splitting` refuses the dissipative system itself): an exactly
+    Poisson map fitted to data it cannot follow, to show what the structure cannot do."""
+
+    def fit(self, system, data, *, progress=False) -> Fitted:
+        return super().fit(system.conservative, data, progress=progress)
+
+
+@dataclasses.dataclass(frozen=True)
 class ParametricModel(AbstractTrainedModel, AbstractHamiltonianModel):
     """The true model family `family(y, theta)` with unknown coefficients
     (`learn.ParametricHamiltonian`, RK4 with `substeps` sub-steps), from `theta0`."""

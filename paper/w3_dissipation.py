@@ -52,7 +52,7 @@ from integrators import splitting as sp
 from integrators.internals import figure, series_styles
 
 from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
-from ._study import AbstractStudyModel, ClassicalMap, Fitted, LPNetModel, SplittingModel, Training
+from ._study import AbstractStudyModel, ClassicalMap, ConservativePartModel, Fitted, LPNetModel, Training
 
 H, STEPS, LONG_STEPS = 0.1, 1200, 10_000
 ORDER_T, ORDER_H = 4.0, (0.025, 0.0125)
@@ -257,9 +257,10 @@ def noisy_lpnet(P: Profile, noise: float) -> LPNetModel:
     ), key=TRAIN_SEED, h=H)
 
 
-def glpnet(P: Profile) -> SplittingModel:
-    """A G-LPNet (`learn.fit_splitting`): an exactly Poisson map, which cannot follow the decay."""
-    return SplittingModel("G-LPNet", iterations=P.glpnet_iterations)
+def glpnet(P: Profile) -> ConservativePartModel:
+    """A G-LPNet (`learn.fit_splitting` with the undamped bracket): an exactly Poisson map, which
+    cannot follow the decay."""
+    return ConservativePartModel("G-LPNet", iterations=P.glpnet_iterations)
 
 
 class W3(AbstractExperiment):

@@ -34,7 +34,13 @@ def test_a_loss_that_is_not_a_loss_is_refused_before_the_first_family_is_fitted(
 
 def test_a_dissipative_system_is_refused_with_where_to_go(no_fitting):
     damped = damped_rigid_body()
-    data = observations(damped)
-    for system in (damped, BODY):  # the damped system, or its conservative part with damped data
-        with pytest.raises(ValueError, match=r"dissipative .* LPNet .*Dissipation on the orbit"):
-            learn.fit_splitting(system, data, progress=False)
+    with pytest.raises(ValueError, match=r"dissipative .* LPNet .*system\.conservative.*Dissipation on the orbit"):
+        learn.fit_splitting(damped, observations(damped), progress=False)
+
+
+def test_observations_of_a_dissipative_system_with_its_conservative_part_are_fitted_with_a_warning(no_fitting):
+    damped = damped_rigid_body()
+    # the user chose the bracket: the fit goes on (to the stubbed solver), after the warning
+    with (pytest.warns(UserWarning, match=r"dissipative .* cannot follow their energy decay; an LPNet can"),
+          pytest.raises(AssertionError, match="a fit ran")):
+        learn.fit_splitting(damped.conservative, observations(damped), progress=False)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -71,7 +72,7 @@ def fit_splitting(
     trajectories; `"identity"`: a quadratic $\widetilde H$). The other arguments are
     `learn.fit`'s.
     """
-    check_conservative(system, "system")
+    check_conservative(system)
     if method is not None:  # a wrong method fails before the first fit
         method = check_method(method)
         if isinstance(method, LieTrotter):
@@ -82,15 +83,26 @@ def fit_splitting(
     return _recipe(data, system, method, loss, activation, iterations, key, common)
 
 
-def check_conservative(system: AbstractPoissonSystem, what: str) -> None:
-    """`ValueError` for a dissipative system: a G-LPNet is a Poisson map and cannot follow
-    energy decay."""
-    if isinstance(system, AbstractDissipativeSystem):  # a system of the right type, unsuitable data
+def check_conservative(system: AbstractPoissonSystem) -> None:
+    """`ValueError` for a dissipative `system`: a G-LPNet is a Poisson map, built on a
+    Hamiltonian system's bracket."""
+    if isinstance(system, AbstractDissipativeSystem):  # a system of the right type, unsuitable
         raise ValueError(  # noqa: TRY004
-            f"{what} is dissipative ({system!r}): a G-LPNet is a Poisson map and keeps the energy up to its error, "
-            "so it cannot follow energy decay on the orbit. Fit an LPNet (learn.fit(learn.LPNet(system), data)), "
-            "whose steps keep the Casimirs and can lose energy, or fit_splitting with the conservative part "
-            "(system.conservative) to data without dissipation; docs/conventions.md, 'Dissipation on the orbit'")
+            f"system is dissipative ({system!r}): a G-LPNet is a Poisson map and keeps the energy up to its error, "
+            f"so it cannot follow energy decay on the orbit. Fit an LPNet (learn.fit(learn.LPNet(system), data)), "
+            f"whose steps keep the Casimirs and can lose energy; to fit a G-LPNet to these data anyway (to see what "
+            f"it misses), pass the conservative part, system.conservative. docs/conventions.md, 'Dissipation on the "
+            f"orbit'")
+
+
+def warn_dissipative_data(data: Observations) -> None:
+    """A `UserWarning` when the observations come from a dissipative system: the G-LPNet fitted
+    with a conservative bracket cannot follow their energy decay."""
+    if isinstance(data.system, AbstractDissipativeSystem):
+        warnings.warn(
+            f"the observations are of a dissipative system ({data.system!r}): a G-LPNet is a Poisson map and cannot "
+            f"follow their energy decay; an LPNet can (learn.fit(learn.LPNet(system), data); docs/conventions.md, "
+            f"'Dissipation on the orbit')", UserWarning, stacklevel=4)
 
 
 @functools.singledispatch
@@ -124,7 +136,7 @@ RTOL = 1e-10
 def _(data: Observations, system, method, loss, activation, iterations, key, common):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
     through `method`; the lowest BIC wins."""
-    check_conservative(data.system, "the observations' system")
+    warn_dissipative_data(data)
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
     loss = resolve_loss(loss, data)
