@@ -13,7 +13,6 @@ with $b_s$, every linear term $\sum_s b_s\alpha_s$); each module is still solved
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -41,38 +40,41 @@ class Family:
         """Whether the fit starts from the same pieces with the identity activation."""
         return self.activation != "identity"
 
-    def start(self, system: AbstractPoissonSystem, data: Observations, key: Any, units: tuple[float, float]
-              ) -> RidgeTerms:
-        r"""The starting pieces. On the axes: random weights drawn for unit-free data, carried to
-        the data's `units` (`RidgeTerms.in_units`). In any axes: the quadratic
-        $\tfrac12y^TAy + b^Ty$ estimated from the observations (`quadratic_estimate`), split
-        along the eigenvectors of $A$: $\alpha_k = v_k$, $a_k = \lambda_k$, $b_k = v_k^Tb$
-        (the general family starts with its sigmoids at zero, from this quadratic)."""
-        terms = RidgeTerms(system.dim, system.dim, key=key, activation=self.activation, full_vectors=self.any_axes,
+    def start(self, system: AbstractPoissonSystem, data: Observations, size: float) -> RidgeTerms:
+        r"""The starting pieces: the family's quadratic $\tfrac12y^TAy + b^Ty$ fitted to the
+        observations' finite differences (`quadratic_estimate`; $A$ diagonal on the axes, $b = 0$
+        without `bias`), split along the eigenvectors $v_k$ of $A$ (the axes $e_k$ on the axes):
+        $\alpha_k = v_k/s$, $a_k = \lambda_ks^2$, $b_k = s\,v_k^Tb$ with $s$ = `size`, the
+        states' scale, so that the pieces' inputs $\langle\alpha_k, y\rangle$ are of order one.
+        The general family starts from this quadratic with its sigmoids at zero (its warm start).
+        The estimate is covariant: the same start in any units of time and state."""
+        A, b = quadratic_estimate(system, data, linear=self.bias, diagonal=not self.any_axes)
+        if self.any_axes:
+            values, vectors = np.linalg.eigh(A)
+        else:
+            values, vectors = np.diag(A).copy(), np.eye(system.dim)
+        terms = RidgeTerms(system.dim, system.dim, activation=self.activation, full_vectors=self.any_axes,
                            linear_term=self.linear_term, bias=self.bias)
-        if not self.any_axes:
-            return terms.in_units(*units)
-        A, b = quadratic_estimate(system, data, linear=self.bias)
-        eigenvalues, vectors = np.linalg.eigh(A)
-        terms = eqx.tree_at(lambda t: (t.a, t.c), terms,
-                            (jnp.asarray(eigenvalues), jnp.asarray(vectors.T)))
+        c = vectors.T / size if self.any_axes else np.full(system.dim, 1.0 / size)
+        terms = eqx.tree_at(lambda t: (t.a, t.c), terms, (jnp.asarray(values * size**2), jnp.asarray(c)))
         if self.bias:
-            terms = eqx.tree_at(lambda t: t.b, terms, jnp.asarray(vectors.T @ b))
+            terms = eqx.tree_at(lambda t: t.b, terms, jnp.asarray(size * (vectors.T @ b)))
         return terms
 
 
-def quadratic_estimate(system: AbstractPoissonSystem, data: Observations, linear: bool = True
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    r"""`(A, b)`: the least-squares $\nabla H = Ay + b$ ($A$ symmetric) of the observations'
-    finite differences, $(y_1 - y_0)/\Delta t \approx \mathbb B(\bar y)(A\bar y + b)$ at the
-    midpoints $\bar y$ of consecutive observations: linear in $(A, b)$. The motion does not see
-    $\nabla H$ along the Casimirs' gradients; the minimum-norm solution leaves them out."""
+def quadratic_estimate(system: AbstractPoissonSystem, data: Observations, linear: bool = True,
+                       diagonal: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(A, b)`: the least-squares $\nabla H = Ay + b$ ($A$ symmetric, or diagonal with
+    `diagonal`; $b = 0$ unless `linear`) of the observations' finite differences,
+    $(y_1 - y_0)/\Delta t \approx \mathbb B(\bar y)(A\bar y + b)$ at the midpoints $\bar y$ of
+    consecutive observations: linear in $(A, b)$. The motion does not see $\nabla H$ along the
+    Casimirs' gradients; the minimum-norm solution leaves them out."""
     y0, y1, dt = data.intervals()
     mid = 0.5 * (y0 + y1)
     velocity = ((y1 - y0) / dt[:, None]).reshape(-1)
     B = np.asarray(system.poisson_tensor(mid))  # (N, n, n)
     n = system.dim
-    i, j = np.triu_indices(n)
+    i, j = np.diag_indices(n) if diagonal else np.triu_indices(n)
     # d/dA_ij of B(y) A y: B(y) (E_ij + E_ji) y (E_ii once)
     columns = []
     for a, c in zip(i, j, strict=True):

@@ -145,19 +145,13 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
              "normalise": False}
     families = FAMILIES if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
-    # the start in the data's units: the same motion learned in any unit of time or state
-    units = observation_units(system, data)
+    # each family from the least-squares quadratic of the finite differences, in the data's units
+    size = observation_units(system, data)[1]
     fits = []
     for family in families:
-        net = GLPNet(system, terms=family.start(system, data, key, units), method=method)
-        # Each family from its own fit to the one-step loss (a nearly convex start for the
-        # rollouts; starting a family from the fit of the one it contains can stall in the
-        # smaller family's basin: BENCHMARKS.md).
-        one_step = TrajectoryLoss(window=1, latent=False).problem(net, data, **split)
-        first, _ = solve(one_step, (LevenbergMarquardt(iterations, RTOL, warm_start=family.warm_start),),
-                         context)
-        problem, results = solve(loss.problem(first.map(first.y0), data, **split),
-                                 (LevenbergMarquardt(iterations, RTOL),), context)
+        net = GLPNet(system, terms=family.start(system, data, size), method=method)
+        problem, results = solve(loss.problem(net, data, **split),
+                                 (LevenbergMarquardt(iterations, RTOL, warm_start=family.warm_start),), context)
         criterion = information_criterion(problem, problem.y0)
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
