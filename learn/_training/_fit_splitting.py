@@ -61,9 +61,10 @@ def fit_splitting(
     `method` from the start and fitted by Levenberg-Marquardt (`learn.LevenbergMarquardt`,
     `iterations` steps at most, default 200) with `loss` (default `learn.TrajectoryLoss()`:
     whole trajectories rolled out at their own intervals, initial states fitted with the map).
-    Without `activation`, three nested families of $\widetilde H$ are fitted, each from the
-    last: quadratic and even ($\Phi_k' = a_k x$), quadratic ($+ b_k$), and general (sigmoid,
-    linear term and bias); the one with the lowest Bayesian information criterion
+    Without `activation`, the nested families `learn.FAMILIES` of $\widetilde H$ are fitted,
+    on the basis axes and along learned directions (any symmetric quadratic form, linear terms,
+    sigmoid pieces), each from its least-squares quadratic of the observations' finite
+    differences (`learn.Family.start`); the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned: with noisy data, parameters the data do not need
     cost accuracy (docs/conventions.md, "Observations"). The records are those of every
     family fitted, the chosen one last; each last stage's `details` hold its criterion.
