@@ -21,7 +21,8 @@ to the same observations:
 - **SINDy** (pysindy, extra `peers`; skipped without it): polynomial library of degree 2,
   STLSQ, derivatives by smoothed finite differences (regular sampling; BENCHMARKS.md compares
   them with plain ones) or finite differences (uneven: the smoother assumes even spacing),
-  integrated by LSODA;
+  integrated by LSODA; **weak SINDy**: the same library and STLSQ in weak form (pysindy's
+  `WeakPDELibrary` on each trajectory's own times: no derivatives of the noisy data);
 - **MLP**: the unstructured residual MLP (3x16) on consecutive pairs, Adam then L-BFGS-B
   (regular sampling only: its step has no step-size input).
 
@@ -58,7 +59,7 @@ from integrators.internals import atomic_write_text, figure, series_styles, span
 from liepoisson.internals import casimir_scale
 
 from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
-from ._sindy import SINDyModel, sindy_available
+from ._sindy import SINDyModel, WeakSINDyModel, sindy_available
 from ._study import (
     AbstractHamiltonianModel,
     AbstractStudyModel,
@@ -328,7 +329,7 @@ class W2Row:
 
 def models(protocol: Protocol, profile: Profile) -> list[AbstractStudyModel]:
     """The study's models for `protocol`: the G-LPNet (`learn.fit_splitting`), the parametric
-    limit, SINDy (if pysindy is installed) and the MLP, fitted with `TRAIN_SEED`."""
+    limit, SINDy and weak SINDy (if pysindy is installed) and the MLP, fitted with `TRAIN_SEED`."""
     out: list[AbstractStudyModel] = [
         SplittingModel("G-LPNet", iterations=profile.steps, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0),
         ParametricModel("limit", (Training(learn.LevenbergMarquardt(profile.steps, rtol=1e-12),
@@ -337,7 +338,7 @@ def models(protocol: Protocol, profile: Profile) -> list[AbstractStudyModel]:
                         theta0=protocol.theta0 or (1.0,) * len(protocol.true_theta)),
     ]
     if sindy_available():
-        out.append(SINDyModel("SINDy"))
+        out += [SINDyModel("SINDy"), WeakSINDyModel("weak SINDy")]
     out.append(mlp(profile.iterations))
     return out
 
@@ -540,9 +541,10 @@ def verdict(rows: list[W2Row]) -> list[str]:
         elif limit:
             parts.append(f"{r.state_error / limit.state_error:.2f}x the limit's ({fmt(limit.state_error)}), "
                          f"energy error {r.energy_error / limit.energy_error:.2f}x")
-        if sindy:
-            below = r.state_error < sindy.state_error
-            parts.append(f"{'below' if below else 'ABOVE'} SINDy's {fmt(sindy.state_error)}")
+        for peer in (sindy, _peer(rows, r, "weak SINDy")):
+            if peer:
+                below = r.state_error < peer.state_error
+                parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(peer.state_error)}")
         parts.append(f"Casimir drift {fmt(r.casimir_drift)}")
         out.append("; ".join(parts))
     return out
