@@ -58,20 +58,27 @@ def _assert_same_weights(a, b):
         assert x.dtype == y.dtype and np.array_equal(x, y)
 
 
+# The Adam stages of this file come in few settings (network, epochs, learning rate, batches): a
+# compiled chunk of epochs is a program of these, and the same program is not compiled twice
+# (JAX's compilation cache, shared by the test workers).
+ADAM_200 = learn.Adam(200, learning_rate=1e-2, log_every=1)  # LPNet(8, 8), MLPBaseline(8, 8)
+ADAM_20 = learn.Adam(20, log_every=1)  # LPNet(4,); the default learning rate, as `epochs=20` has
+
+
 @pytest.fixture(scope="module")
 def fitted(rb, pairs):
     net = learn.LPNet(rb, hidden=(8, 8), key=0)
-    return learn.fit(net, pairs, h=H, optimiser=learn.Adam(300, learning_rate=2e-2, log_every=1), progress=False)
+    return learn.fit(net, pairs, h=H, optimiser=ADAM_200, progress=False)
 
 
 def test_lpnet_fit_decreases_loss_and_keeps_best(rb, fitted):
     model, record = fitted
     hist = record.history
-    assert len(hist["epoch"]) == 300
+    assert len(hist["epoch"]) == 200
     assert hist["train_loss"][-1] < 0.1 * hist["train_loss"][0]
     assert model.h == record.h == H and record.wall_time_s > 0
     assert record.model == "LPNet" and record.loss == "state" and record.n_train + record.n_val == 120
-    assert [s.optimiser for s in record.stages] == ["Adam"] and record.stages[0].iterations == 300
+    assert [s.optimiser for s in record.stages] == ["Adam"] and record.stages[0].iterations == 200
     # the kept weights are the best-validation ones (not the last)
     assert record.val_loss <= np.min(hist["val_loss"]) * (1 + 1e-12)
     assert np.isfinite(record.train_loss)
@@ -155,7 +162,7 @@ def test_fit_accepts_trajectories(rb, pairs):
     integrators = pytest.importorskip("integrators")
     states = np.concatenate([pairs[0], pairs[1][-1:]])
     data = integrators.Trajectories(states, H, rb)
-    kwargs = {"optimiser": learn.Adam(20, learning_rate=1e-2), "progress": False}
+    kwargs = {"optimiser": ADAM_20, "progress": False}
     net = learn.LPNet(rb, hidden=(4,), key=3)
     a, record = learn.fit(net, data, **kwargs)
     b, _ = learn.fit(net, pairs, h=H, **kwargs)  # same seeded split of the same pairs
@@ -237,7 +244,7 @@ def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, method):
 
 def test_baseline_fit_and_casimir_drift(tmp_path, rb, pairs):
     base = learn.MLPBaseline(rb, hidden=(8, 8), key=0)
-    f, record = learn.fit(base, pairs, h=H, optimiser=learn.Adam(200, learning_rate=1e-2), progress=False)
+    f, record = learn.fit(base, pairs, h=H, optimiser=ADAM_200, progress=False)
     assert record.history["train_loss"][-1] < 0.1 * record.history["train_loss"][0]
     y = np.asarray(f.rollout(pairs[0][0], 500))
     C = np.sum(y**2, -1)
@@ -250,7 +257,7 @@ def test_baseline_fit_and_casimir_drift(tmp_path, rb, pairs):
 @pytest.mark.parametrize("cls", [learn.LPNet, learn.MLPBaseline])
 def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     net = cls(rb, hidden=(8, 8), key=0)
-    stages = (learn.Adam(200, learning_rate=1e-2, log_every=1), learn.QuasiNewton(150))
+    stages = (ADAM_200, learn.QuasiNewton(150))
     _, record = learn.fit(net, pairs, h=H, optimiser=stages, progress=False)
     adam, refine = record.stages
     assert (adam.optimiser, refine.optimiser) == ("Adam", "QuasiNewton")
@@ -271,7 +278,7 @@ def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
 
 
 def test_refinement_iterations_numbered_after_adam_epochs(rb, pairs):
-    stages = (learn.Adam(20, learning_rate=1e-2, log_every=1), learn.QuasiNewton(5))
+    stages = (ADAM_20, learn.QuasiNewton(5))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)
     n = record.stages[-1].iterations
     # Adam's entry e is the loss after e updates; iteration k of the refinement comes after all
@@ -343,7 +350,7 @@ def test_refine_only_continues_from_the_current_weights(rb, pairs, fitted):
 
 
 def test_training_record_round_trip(tmp_path, rb, pairs):
-    stages = (learn.Adam(20, learning_rate=1e-2, log_every=1), learn.QuasiNewton(5))
+    stages = (ADAM_20, learn.QuasiNewton(5))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)
     record.save(tmp_path / "record.h5")
     loaded = learn.TrainingRecord.load(tmp_path / "record.h5")
@@ -363,7 +370,7 @@ def test_callback_follows_every_stage_as_it_runs(rb, pairs, method):
     chunk (optax), every Levenberg-Marquardt step; the iteration counts rise within a stage,
     and the losses reported inside a second-order stage are its history's."""
     seen: list[learn.Progress] = []
-    stages = (learn.Adam(20, learning_rate=1e-2, log_every=1), learn.QuasiNewton(12, method))
+    stages = (ADAM_20, learn.QuasiNewton(12, method))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False,
                           callback=seen.append)
     assert {p.stage for p in seen} == {0, 1}

@@ -146,9 +146,10 @@ def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
     def residuals(x):
         return objective.residuals(eqx.combine(unravel(x), static), segments).reshape(-1)
 
-    r, J = objective.jacobian(fitted, segments)
-    np.testing.assert_array_equal(np.asarray(r), np.asarray(residuals(flat)))
-    full = np.asarray(jax.jacfwd(residuals)(flat))
+    # compiled (as the solver runs them): eagerly, every scan and primitive is compiled on its own
+    r, J = eqx.filter_jit(objective.jacobian)(fitted, segments)
+    np.testing.assert_array_equal(np.asarray(r), np.asarray(jax.jit(residuals)(flat)))
+    full = np.asarray(jax.jit(jax.jacfwd(residuals))(flat))
     assert J.shape == full.shape == (r.size, flat.size)
     # the same derivatives, summed in another order: round-off relative to the largest entry
     np.testing.assert_allclose(np.asarray(J), full, rtol=0, atol=100 * EPS * np.max(np.abs(full)))
