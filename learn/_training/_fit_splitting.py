@@ -133,6 +133,12 @@ BFGS_ITERATIONS, LM_ITERATIONS = 1000, 200
 #: exact data keep lowering it by more (BENCHMARKS.md, "Learning from observations").
 RTOL = 1e-10
 
+#: ... or by less than this change of the information criterion $n\log(\mathrm{SSR}/n)$ over
+#: those steps ($n$ the observed components): a decrease the criterion cannot tell from none,
+#: while the weights creep along directions the data barely fix (learned directions of equal
+#: eigenvalues rotating into each other). A relative decrease of `BIC_RESOLUTION`/$n$.
+BIC_RESOLUTION = 0.1
+
 @_recipe.register
 def _(data: Observations, system, method, loss, activation, iterations, key, common):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
@@ -148,11 +154,12 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
     # each family from the least-squares quadratic of the finite differences, in the data's units
     size = observation_units(system, data)[1]
+    rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
     fits = []
     for family in families:
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
         problem, results = solve(loss.problem(net, data, **split),
-                                 (LevenbergMarquardt(iterations, RTOL, warm_start=family.warm_start),), context)
+                                 (LevenbergMarquardt(iterations, rtol, warm_start=family.warm_start),), context)
         criterion = information_criterion(problem, problem.y0)
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
