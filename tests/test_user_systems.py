@@ -110,15 +110,13 @@ def test_data_set_round_trip_rebuilds_the_user_system(name, tmp_path):
     assert np.max(np.abs(again.states - data.states)) <= 1e3 * EPS * np.max(np.abs(data.states))
 
 
-@pytest.mark.parametrize(
-    "name", [pytest.param(n, marks=pytest.mark.slow) if n == "so4" else n for n in sorted(SYSTEMS)]  # ~17 s each
-)
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
 def test_model_round_trip_without_the_system(name, tmp_path):
     system = SYSTEMS[name]()
     y0 = np.random.default_rng(1).normal(size=(4, system.dim))
-    data = it.ground_truth(system, y0, h=0.1, n_steps=4, seed=0)
-    model, _ = learn.fit(learn.GLPNet(system, n_modules=system.dim, key=0), data,
-                         optimiser=learn.QuasiNewton(5, "bfgs"), validation_fraction=0.0, seed=0, progress=False)
+    # seeded random weights and a step: what a fit would leave (the file does not know the
+    # difference), without compiling a training on this algebra (~5 s)
+    model = learn.GLPNet(system, n_modules=system.dim, key=0, h=0.1)
     model.save(tmp_path / "m.h5")
     back = learn.GLPNet.load(tmp_path / "m.h5")
     assert isinstance(back.system, LiePoissonSystem) and back.system.name == system.name
