@@ -184,7 +184,8 @@ def test_casimirs_exact_and_save_load_roundtrip(tmp_path):
 def test_training_keeps_the_symmetry_and_fits():
     data = it.ground_truth(RB, Y, h=0.1, n_steps=20, progress=False)
     net = equivariant(RB, key=0, h=None)
-    fitted, record = learn.fit(net, data, epochs=1500, progress=False, validation_fraction=0.0)
+    # 1000 epochs: one compiled chunk (a second chunk compiles again; measured loss ratio 3e-4)
+    fitted, record = learn.fit(net, data, epochs=1000, progress=False, validation_fraction=0.0)
     y0 = jnp.asarray(data.states[:, :-1].reshape(-1, 3))
     y1 = jnp.asarray(data.states[:, 1:].reshape(-1, 3))
     assert record.train_loss < 1e-2 * float(learn.state_mse(net.with_h(0.1), y0, y1))

@@ -87,7 +87,7 @@ def test_rollout_shapes(lpnet, glpnet, rb):
         assert jax.vmap(jax.vmap(net.step))(np.ones((2, 4, 3))).shape == (2, 4, 3)
         with pytest.raises(ValueError, match="one state"):
             net.step(np.ones((2, 4, 3)))
-        one = np.asarray(net.rollout(np.array([0.3, 0.2, 0.1]), 3))
+        one = np.asarray(net.rollout(np.array([0.3, 0.2, 0.1]), 5))  # the program of the first rollout
         np.testing.assert_allclose(one[1], np.asarray(net.step(one[0])), rtol=4 * EPS, atol=0)
 
 

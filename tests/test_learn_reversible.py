@@ -268,7 +268,9 @@ def test_bad_arguments():
 def test_training_on_the_residual_trains_the_step():
     data = it.ground_truth(RB, Y, h=0.1, n_steps=20, progress=False)
     net = learn.Reversible(learn.LPNet(RB, hidden=(8, 8), key=0), symmetry=reversing_symmetry(RB))
-    fitted, record = learn.fit(net, data, epochs=1500, progress=False, validation_fraction=0.0, normalise=True)
+    # 1000 epochs: one compiled chunk of Adam (a second chunk compiles again); measured loss
+    # ratio 1.1e-3, step error / loss 0.996
+    fitted, record = learn.fit(net, data, epochs=1000, progress=False, validation_fraction=0.0, normalise=True)
     assert isinstance(fitted, learn.Reversible) and fitted.h == 0.1 and fitted.symmetry == net.symmetry
     y0 = data.states[:, :-1].reshape(-1, 3)
     y1 = data.states[:, 1:].reshape(-1, 3)
