@@ -578,27 +578,40 @@ def _plots(rows: list[W2Row], out_dir: Path) -> list[str]:
     return names
 
 
+def non_quadratic_part(profile: Any) -> np.ndarray:
+    r"""A `leaf_profile` less its least-squares $c_0 + c_1\cos2\theta + c_2\sin2\theta$: on a
+    great circle of the leaf every quadratic form is of that shape, so what is left is the part
+    of the Hamiltonian no quadratic one has."""
+    theta = np.linspace(0.0, 2.0 * np.pi, PROFILE_POINTS)
+    basis = np.stack([np.ones_like(theta), np.cos(2 * theta), np.sin(2 * theta)], axis=1)
+    values = np.asarray(profile, dtype=np.float64)
+    return values - basis @ np.linalg.lstsq(basis, values, rcond=None)[0]
+
+
 def _profile_plots(rows: list[W2Row], out_dir: Path) -> list[str]:
-    """Per system with a leaf circle: the true and the learned Hamiltonians around it, one panel
-    per condition (a non-polynomial term's shape against the truth)."""
+    """Per system with a leaf circle: the true and the learned Hamiltonians around it (top) and
+    their parts no quadratic has (bottom), one column per condition: a non-polynomial term's
+    shape against the truth."""
     all_protocols = protocols()
     names = []
     for system in dict.fromkeys(r.system for r in rows if r.leaf_profile is not None):
         circle = all_protocols[system].leaf_circle
         truth = leaf_profile(all_protocols[system].system.hamiltonian, circle)
         conditions = list(dict.fromkeys(r.condition for r in rows if r.system == system and r.leaf_profile))
-        fig = figure(figsize=(5.0 * len(conditions), 4.0))
-        axes = np.atleast_1d(fig.subplots(1, len(conditions)))
+        fig = figure(figsize=(6.0 * len(conditions), 7.5), layout="constrained")
+        axes = np.asarray(fig.subplots(2, len(conditions), squeeze=False))
         theta = np.linspace(0.0, 2.0 * np.pi, PROFILE_POINTS)
-        for ax, condition in zip(axes, conditions):
-            ax.plot(theta, truth, color="k", lw=3, alpha=0.35, label="true H")
+        for column, condition in enumerate(conditions):
             sub = [r for r in rows if r.condition == condition and r.leaf_profile]
-            for r, style in zip(sub, series_styles(len(sub))):
-                ax.plot(theta, r.leaf_profile, label=f"{r.model} H~", **style)
-            ax.set_xlabel("angle around the circle through V on |Pi| = 1 [rad]")
-            ax.set_ylabel("H less its mean on the circle")
-            ax.set_title(f"{system}, {condition[1]}, noise {condition[2]:g}")
-            ax.legend()
+            for ax, part in zip(axes[:, column], (np.asarray, non_quadratic_part)):
+                ax.plot(theta, part(truth), color="k", lw=3, alpha=0.35, label="true H")
+                for r, style in zip(sub, series_styles(len(sub))):
+                    ax.plot(theta, part(r.leaf_profile), label=f"{r.model} H~", **style)
+                ax.legend(fontsize="small")
+            axes[0, column].set_title(f"{system}, {condition[1]}, noise {condition[2]:g}")
+            axes[0, column].set_ylabel("H less its mean on the circle")
+            axes[1, column].set_ylabel("its part no quadratic H has")
+            axes[1, column].set_xlabel("angle around the great circle through V on |Pi| = 1 [rad]")
         name = f"leaf_profile_{system.replace(' ', '_')}.png"
         fig.savefig(out_dir / name, dpi=120)
         names.append(name)
