@@ -1,3 +1,4 @@
+import gc
 import os
 import shutil
 import tempfile
@@ -37,6 +38,19 @@ jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = os.environ[_CACHE_VAR]
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
 os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "0"
+
+
+# Tracing and compiling create many short-lived objects (jaxprs, MLIR, pytrees): Python's cyclic
+# collector ran ~20 times a second, its full collections walking everything the run keeps
+# alive (modules, compiled functions). Young objects are collected less often (gen0 at 10,000
+# allocations instead of 700) and what collection built is left out of full collections:
+# measured ~2% of a worker's time, the same peak memory.
+gc.set_threshold(10_000, 10, 10)
+
+
+def pytest_collection_finish(session):
+    gc.collect()
+    gc.freeze()
 
 
 def pytest_sessionfinish(session, exitstatus):
