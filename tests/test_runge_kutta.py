@@ -2,7 +2,6 @@
 against heyoka, what each conserves, and their input checks."""
 
 import functools
-import itertools
 
 import numpy as np
 import pytest
@@ -60,11 +59,14 @@ def test_every_ordering_has_order_two(ordering):
 def test_orderings_of_the_rigid_body_splitting():
     body = system("RigidBody")
     energy = []
-    for p in itertools.permutations(range(3)):
+    # Each ordering is its own compiled rollout: the two extremes of the six (measured over
+    # 2000 steps: 3.6e-5 for (0, 1, 2), 7.1e-5 for (0, 2, 1) and (1, 2, 0), 3.6e-4 for
+    # (1, 0, 2) and (2, 1, 0), 4.8e-4 for (2, 0, 1)).
+    for p in [(0, 1, 2), (2, 0, 1)]:
         y = np.asarray(it.splitting.Strang(body, h=0.1, ordering=p).rollout(PI0, 2000))
         energy.append(it.diagnostics(y, body).max_energy_error)
     # The orderings are different methods (Fasso 2003): their energy errors differ by a factor
-    # of ~13 here (3.6e-5 for (0, 1, 2), 4.8e-4 for (2, 0, 1) over 10^4 steps).
+    # of ~13 here.
     assert max(energy) / min(energy) > 5
     assert it.splitting.Strang(body, h=0.1).ordering == (0, 1, 2)
 
