@@ -20,6 +20,9 @@ SMALLER_BUDGETS = {
     "optimiser=(learn.Adam(3000), learn.QuasiNewton(1000))": (
         "optimiser=(learn.Adam(20), learn.QuasiNewton(5)), progress=False"
     ),
+    # the timing of each map in the comparison: one short run, not the fastest of five runs of
+    # at least 0.05 s (step_timing is tested in test_compare.py)
+    "t_final=100.0)": "t_final=100.0, timing_seconds=0.005, timing_repeats=1)",
     # BFGS as the default, without the warm start (a second compilation, ~5 s; the warm start
     # is tested in test_learn_warm_start.py)
     "learn.fit(learn.GLPNet(body, n_modules=6), data)": (
