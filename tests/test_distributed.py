@@ -346,6 +346,7 @@ def test_paper_trainings_on_a_local_cluster_give_the_numbers_of_one_process(tmp_
     np.testing.assert_allclose(dask["energy_rel_err_max_seeds"], one["energy_rel_err_max_seeds"], rtol=1000 * 2.2e-16)
 
 
+@pytest.mark.slow  # two E4 smoke runs, one in a spawned process: 12 s
 def test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process(tmp_path, capsys, monkeypatch):
     """`--scheduler processes`: the LPNet and the baseline of E4 trained in a spawned worker
     process (sent by cloudpickle) give the figures of one process."""

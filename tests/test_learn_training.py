@@ -119,7 +119,8 @@ def test_save_load_round_trip_is_bit_identical(tmp_path, rb, fitted):
         learn.TrainingRecord.load(path)
 
 
-@pytest.mark.parametrize("batch_size", [None, 32])  # full batch; seeded mini-batches (E4's sweep)
+# seeded mini-batches (E4's sweep) by default: their shuffles resume too; full batch with -m slow
+@pytest.mark.parametrize("batch_size", [pytest.param(None, marks=pytest.mark.slow), 32])
 def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch, batch_size):
     import learn._files as ckpt
     import learn._solvers._adam as training

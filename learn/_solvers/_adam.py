@@ -141,8 +141,10 @@ def train_adam(
 
     opt_state = opt.init(params)
     best = params
-    best_loss = jnp.asarray(jnp.inf)
-    best_epoch = jnp.asarray(-1)
+    # Strongly typed (not weak Python scalars): the carry's types are those the scan returns,
+    # so every chunk reuses the first chunk's compilation.
+    best_loss = jnp.asarray(jnp.inf, dtype=float)
+    best_epoch = jnp.asarray(-1, dtype=int)
     epoch0, elapsed0 = 0, 0.0
     hist: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": []}
 
@@ -154,8 +156,8 @@ def train_adam(
         best = eqx.filter(_files.replace_array_leaves(params, groups["best"], "best"), eqx.is_array)
         opt_state = _files.replace_array_leaves(opt_state, groups["optimizer"], "optimizer")
         epoch0 = int(attrs["epoch"])
-        best_loss = jnp.asarray(attrs["best_loss"])
-        best_epoch = jnp.asarray(int(attrs["best_epoch"]))
+        best_loss = jnp.asarray(attrs["best_loss"], dtype=float)
+        best_epoch = jnp.asarray(int(attrs["best_epoch"]), dtype=int)
         elapsed0 = float(attrs["elapsed_s"])
         hist = {k: list(v) for k, v in groups["history"].items()}
 

@@ -28,6 +28,7 @@ from liepoisson.internals import casimir_scale, positive_float, positive_int
 
 from .._models._base import AbstractCasimirConservingMap
 from .._models._baseline import check_one_step
+from .._solvers._levenberg_marquardt import residuals_of
 from .._solvers._problem import AbstractLeastSquares, AbstractStructuredJacobian
 from ._losses import AbstractLoss
 from ._problem import Description, Fitted, FittedProblem
@@ -275,16 +276,14 @@ def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, f
     Jacobian with respect to its weights: redundant weights count once; the fitted starts,
     common to the maps compared, are left out). Lower is better."""
     objective, args = problem.objective, problem.train
-    params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
-    flat, unravel = jax.flatten_util.ravel_pytree(params)
-
-    def residuals(x):
-        model = eqx.combine(unravel(x), static)
-        return objective.residuals(Fitted(model, fitted.starts), args).reshape(-1)
-
-    r = residuals(flat)
-    J = np.asarray(jax.jacfwd(residuals)(flat))
-    n = int(np.sum(objective._squared(fitted, args)[1])) * args.states.shape[-1]  # fitted components
+    # The residuals and Jacobian compiled for this structure (those Levenberg-Marquardt used):
+    # the map's weights are the first columns, the fitted starts the rest.
+    compiled = residuals_of(objective, fitted)
+    x = jax.flatten_util.ravel_pytree(eqx.filter(fitted, eqx.is_inexact_array))[0]
+    r, J = compiled.jacobian(x, args)
+    weights = jax.flatten_util.ravel_pytree(eqx.filter(fitted.model, eqx.is_inexact_array))[0].size
+    J = np.asarray(J)[:, :weights]
+    n = objective.count(fitted, args)  # fitted components
     ssr = float(jnp.sum(r**2))
     # Each weight's column at unit norm: the rank does not depend on the weights' units (a
     # time in ms scales the rates' columns by 1e3; docs/conventions.md, "Units").
