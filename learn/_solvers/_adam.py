@@ -202,10 +202,6 @@ def train_adam(
         run, lambda out: bool(np.all(np.isfinite(out[1][0])) and (not has_val or np.all(np.isfinite(out[1][1]))))
     )
 
-    @jax.jit
-    def evaluate(p, args):
-        return loss(p, args)
-
     def write_checkpoint(carry, epoch, elapsed):
         p, s, bp, bl, be = carry
         _files.write(
@@ -260,10 +256,11 @@ def train_adam(
         bar.close()
 
     p, s, bp, bl, be = carry
-    # The weights after the last update were never scored inside the scan.
-    final_crit = evaluate(p, val) if has_val else evaluate(p, train)
-    if bool(final_crit < bl):
-        bp, bl, be = p, final_crit, jnp.asarray(epoch)
+    # The weights after the last update were never scored inside the scan. The losses are
+    # those compiled once per structure (`AbstractProblem.losses`), shared with the stages.
+    final = problem.losses(eqx.combine(p, static))
+    if final.selection < float(bl):
+        bp, bl, be = p, jnp.asarray(final.selection, dtype=float), jnp.asarray(epoch, dtype=int)
         carry = (p, s, bp, bl, be)
     wall = elapsed0 + time.perf_counter() - start
     if checkpoint is not None:
@@ -271,10 +268,11 @@ def train_adam(
     if not np.isfinite(float(bl)):
         raise FloatingPointError(f"training diverged: no finite loss ({stopped or 'all epochs'})")
     best_model = eqx.combine(bp, static)
+    losses = problem.losses(best_model)
     info = {
         "history": {k: np.asarray(v) for k, v in hist.items()},
-        "train_loss": float(evaluate(bp, train)),
-        "val_loss": float(evaluate(bp, val)) if has_val else float("nan"),
+        "train_loss": losses.train,
+        "val_loss": losses.validation,
         "wall_time_s": wall,
         "best_epoch": int(be),
         "epochs": int(epoch),
