@@ -58,7 +58,12 @@ from ._solvers._stage import (
     WarmStart as WarmStart,
 )
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
-from ._training._families import FAMILIES as FAMILIES, Family as Family, quadratic_estimate as quadratic_estimate
+from ._training._families import (
+    FAMILIES as FAMILIES,
+    Family as Family,
+    quadratic_estimate as quadratic_estimate,
+    select_quadratic as select_quadratic,
+)
 from ._training._fit_splitting import fit_splitting as fit_splitting
 from ._training._identify import (
     PrincipalAxes as PrincipalAxes,

@@ -38,7 +38,7 @@ class LearnedHamiltonian(AbstractPoissonSystem):
         self._antiderivative = activation_antiderivative(terms.activation)
         self.vectors = np.asarray(terms.vectors(), dtype=np.float64)
         self.weight = float(net.hamiltonian_weight)
-        self.a = self.weight * np.asarray(terms.a, dtype=np.float64)
+        self.a = self.weight * np.asarray(terms.a_values(), dtype=np.float64)
         self.b = self.weight * np.asarray(terms.bias_values(), dtype=np.float64)
         self.e = self.weight * (np.zeros_like(self.a) if terms.e is None else np.asarray(terms.e, dtype=np.float64))
 

@@ -1,6 +1,6 @@
 r"""Learnable collective terms: the pieces $\Phi_s(\langle\alpha_s, y\rangle)$ of a G-LPNet's
-learned Hamiltonian, with $\Phi_s' = a_s\sigma(x) + e_s x + b_s$ (paper eq. G_LPNets_moduli,
-with an optional linear term $e_s$).
+learned Hamiltonian, with $\Phi_s' = a_s\sigma(x) + e_s x + b_s$ ([the paper](https://arxiv.org/abs/2308.15349),
+Sec. 6.1, eq. (73), with an optional linear term $e_s$).
 
 The flow of $\Phi_s(\langle\alpha_s, y\rangle)$ is the test flow with the frozen parameter
 $\Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$, because $\langle\alpha_s, y\rangle$ is conserved
@@ -34,6 +34,18 @@ def ridge_potential(x: Any, a: Any, b: Any, e: Any, antiderivative: Any, xp: Any
     return value + b * x
 
 
+def _kept(kept: Sequence[bool] | None, n_modules: int, name: str) -> tuple[bool, ...] | None:
+    if kept is None:
+        return None
+    try:
+        kept = tuple(kept)
+    except TypeError as err:
+        raise TypeError(f"{name} must be a sequence of True/False, one per module; got {kept!r}") from err
+    if len(kept) != n_modules or not all(isinstance(k, (bool, np.bool_)) for k in kept):
+        raise ValueError(f"{name} must be {n_modules} values True/False, one per module; got {kept!r}")
+    return tuple(bool(k) for k in kept)
+
+
 def check_order(order: Sequence[int] | None, n_modules: int, dim: int) -> tuple[int, ...]:
     if order is None:
         return tuple(s % dim for s in range(n_modules))
@@ -54,15 +66,17 @@ class RidgeTerms(eqx.Module):
     (+ $e_s x$ with `linear_term`; without `bias`, $b_s = 0$: no linear part of
     $\widetilde H$ from the constants, e.g. for a quadratic $\widetilde H$ without linear terms).
 
-    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis (paper eq.
-    Rot_sequence): three scalars $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
+    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis, as the rotations
+    about $e_1, e_2, e_3, e_1, \dots$ of [the paper](https://arxiv.org/abs/2308.15349), Sec. 6.2, eq. (76): three scalars $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
     $\alpha_s\in\mathbb R^n$. A linear term makes a quadratic piece exact and leaves the rest to
     $\sigma$: a sigmoid alone is linear only as $c_s \to 0$, and its cubic term
     $-a_sc_s^3x^3/48$ has the opposite sign to its linear term $a_sc_sx/4$.
 
     **Arguments:** `dim` of the state; `n_modules` $M$; `order` of the basis vectors (default
     cycling); `key`; `activation` $\sigma$ (paper: sigmoid); `full_vectors`; `linear_term`;
-    `bias` (default, and the paper: True).
+    `bias` (default, and the paper: True); `a_kept`, `b_kept`: which $a_s$ and $b_s$ the
+    pieces have (default all): the others are zero and not trained (a piece $b_sx$ alone, or
+    $a_sx^2/2$ without a linear part, e.g. a family of quadratics whose terms were selected).
     """
 
     a: jax.Array
@@ -73,10 +87,12 @@ class RidgeTerms(eqx.Module):
     dim: int = eqx.field(static=True)
     order: tuple[int, ...] = eqx.field(static=True)
     full_vectors: bool = eqx.field(static=True)
+    a_kept: tuple[bool, ...] | None = eqx.field(static=True)
+    b_kept: tuple[bool, ...] | None = eqx.field(static=True)
 
     def __init__(self, dim: int, n_modules: int, order: Sequence[int] | None = None, key: int | jax.Array = 0, *,
                  activation: str = "sigmoid", full_vectors: bool = False, linear_term: bool = False,
-                 bias: bool = True):
+                 bias: bool = True, a_kept: Sequence[bool] | None = None, b_kept: Sequence[bool] | None = None):
         self.dim = positive_int(dim, "dim")
         n_modules = positive_int(n_modules, "n_modules")
         self.order = check_order(order, n_modules, dim)
@@ -91,6 +107,14 @@ class RidgeTerms(eqx.Module):
         self.c = jax.random.normal(kc, shape, jnp.float64)
         self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64) if bias else None
         self.e = jnp.zeros(n_modules, jnp.float64) if linear_term else None
+        self.a_kept = _kept(a_kept, n_modules, "a_kept")
+        self.b_kept = _kept(b_kept, n_modules, "b_kept")
+        if self.b_kept is not None and not bias:
+            raise ValueError("b_kept selects among the biases b_s: it needs bias=True")
+        if self.a_kept is not None:
+            self.a = jnp.where(jnp.asarray(self.a_kept), self.a, 0.0)
+        if self.b_kept is not None:
+            self.b = jnp.where(jnp.asarray(self.b_kept), self.b, 0.0)
 
     @property
     def n_modules(self) -> int:
@@ -104,9 +128,15 @@ class RidgeTerms(eqx.Module):
     def bias(self) -> bool:
         return self.b is not None
 
+    def a_values(self) -> jax.Array:
+        """$a_s$, zero where not kept (`a_kept`)."""
+        return self.a if self.a_kept is None else self.a * jnp.asarray(self.a_kept, self.a.dtype)
+
     def bias_values(self) -> jax.Array:
-        """$b_s$, zeros without a bias."""
-        return jnp.zeros_like(self.a) if self.b is None else self.b
+        """$b_s$, zeros without a bias or where not kept (`b_kept`)."""
+        if self.b is None:
+            return jnp.zeros_like(self.a)
+        return self.b if self.b_kept is None else self.b * jnp.asarray(self.b_kept, self.b.dtype)
 
     def vectors(self) -> jax.Array:
         r"""The vectors $\alpha_s$, shape `(n_modules, dim)`."""
@@ -123,7 +153,8 @@ class RidgeTerms(eqx.Module):
     def reinitialised(self, key: int | jax.Array) -> RidgeTerms:
         """The same family of pieces with fresh parameters from `key`."""
         return RidgeTerms(self.dim, self.n_modules, self.order, key, activation=self.activation,
-                          full_vectors=self.full_vectors, linear_term=self.linear_term, bias=self.bias)
+                          full_vectors=self.full_vectors, linear_term=self.linear_term, bias=self.bias,
+                          a_kept=self.a_kept, b_kept=self.b_kept)
 
     def in_units(self, time: float, size: float) -> RidgeTerms:
         r"""The pieces that move states of size `size` over times in units `time` as these
@@ -134,7 +165,7 @@ class RidgeTerms(eqx.Module):
         $\text{size}\cdot z$ over a step $\text{time}\cdot\tau$ to $\text{size}$ times what
         this one maps $z$ to over $\tau$: the inputs $\langle\alpha_s, y\rangle$ are
         unchanged and the rates $q_s\alpha_s$ scale by 1/`time`. On any Poisson system with
-        `size` = 1 it is the change of the unit of time (docs/conventions.md, "Units")."""
+        `size` = 1 it is the change of the unit of time (conventions, [Units][units])."""
         time, size = positive_float(time, "time"), positive_float(size, "size")
         rate = size / time
         new = eqx.tree_at(lambda m: (m.a, m.c), self, (self.a * rate, self.c / size))
@@ -155,9 +186,9 @@ class RidgeTerms(eqx.Module):
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
         alpha = self.vector(s)
         x = jnp.dot(alpha, y)
-        q = self.a[s] * ACTIVATIONS[self.activation](x)
+        q = self.a_values()[s] * ACTIVATIONS[self.activation](x)
         if self.b is not None:
-            q = q + self.b[s]
+            q = q + self.bias_values()[s]
         if self.e is not None:
             q = q + self.e[s] * x
         return system.test_flow(q * alpha, t, y)
@@ -165,4 +196,6 @@ class RidgeTerms(eqx.Module):
     def spec(self) -> dict[str, Any]:
         return {"n_modules": self.n_modules, "order": list(self.order), "full_vectors": self.full_vectors,
                 "activation": self.activation, "linear_term": self.linear_term,
-                **({} if self.bias else {"bias": False})}  # files before `bias` have one
+                **({} if self.bias else {"bias": False}),  # files before `bias` have one
+                **({} if self.a_kept is None else {"a_kept": list(self.a_kept)}),
+                **({} if self.b_kept is None else {"b_kept": list(self.b_kept)})}

@@ -1,0 +1,75 @@
+"""The quadratic family whose terms are selected by the criterion (`learn.select_quadratic`) and
+the pieces it needs (`RidgeTerms(a_kept=..., b_kept=...)`)."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import integrators as it
+import learn
+import liepoisson as lp
+
+EPS = np.finfo(np.float64).eps
+
+
+def _heavy_top_observations(noise, seed=0):
+    # a Lagrange top: H = (Pi_1^2 + Pi_2^2)/4 + Pi_3^2/2 + 0.5 Gamma_3, so the diagonal
+    # quadratic has a = (1/2, 1/2, 1, 0, 0, 0) and b = (0, 0, 0, 0, 0, 0.5)
+    top = lp.systems.HeavyTop(inertia=(2.0, 2.0, 1.0), mgl=0.5, center_of_mass=(0.0, 0.0, 1.0))
+    rng = np.random.default_rng(seed)
+    pi = rng.normal(size=(30, 3))
+    gamma = rng.normal(size=(30, 3))
+    gamma /= np.linalg.norm(gamma, axis=1, keepdims=True)
+    return top, it.observe(top, np.concatenate([pi, gamma], axis=1), 0.1 * np.arange(21), noise=noise, seed=seed)
+
+
+def test_the_heavy_top_keeps_the_four_terms_it_has():
+    """From noisy observations (noise 1e-3 of the states' size) the backward elimination keeps
+    the three inverse moments of inertia and the gravity term, and drops the eight terms the
+    top does not have (among them the Gamma_k^2 terms, which the Casimir |Gamma|^2 makes
+    redundant)."""
+    top, data = _heavy_top_observations(1e-3)
+    A, b, a_kept, b_kept = learn.select_quadratic(top, data)
+    assert a_kept == (True, True, True, False, False, False)
+    assert b_kept == (False, False, False, False, False, True)
+    # finite differences at dt = 0.1 and noise 1e-3: the estimate is good to ~1%
+    np.testing.assert_allclose(np.diag(A)[:3], [0.5, 0.5, 1.0], rtol=2e-2)
+    np.testing.assert_allclose(b[5], 0.5, rtol=2e-2)
+    assert np.all(np.diag(A)[3:] == 0.0) and np.all(b[:5] == 0.0)
+
+
+def test_terms_not_kept_are_zero_are_not_trained_and_are_saved(tmp_path):
+    top, data = _heavy_top_observations(1e-3, seed=1)
+    a_kept = (True, True, True, False, False, False)
+    b_kept = (False, False, False, False, False, True)
+    terms = learn.RidgeTerms(6, 6, activation="identity", bias=True, a_kept=a_kept, b_kept=b_kept, key=3)
+    assert np.array_equal(np.asarray(terms.a_values())[3:], np.zeros(3))
+    assert np.array_equal(np.asarray(terms.bias_values())[:5], np.zeros(5))
+    net = learn.GLPNet(top, terms=terms, method=it.splitting.Strang(), h=0.1)
+    fitted, _ = learn.fit(net, data, optimiser=learn.LevenbergMarquardt(5, rtol=0.0), validation_fraction=0.0,
+                          progress=False)
+    # the weights not kept get no gradient: exactly where they started (zero)
+    assert np.array_equal(np.asarray(fitted.terms.a_values())[3:], np.zeros(3))
+    assert np.array_equal(np.asarray(fitted.terms.bias_values())[:5], np.zeros(5))
+    assert np.all(np.asarray(fitted.terms.a_values())[:3] != np.asarray(terms.a_values())[:3])  # the kept moved
+    # still an exact Poisson map (a piece b_s x alone is a test flow)
+    y = np.asarray(data.states[0][:5])
+    assert float(jnp.max(fitted.poisson_defect(y))) < 1e3 * EPS
+    fitted.save(tmp_path / "selected.h5")
+    back = learn.GLPNet.load(tmp_path / "selected.h5", top)
+    assert back.terms.a_kept == a_kept and back.terms.b_kept == b_kept
+    np.testing.assert_array_equal(np.asarray(back.rollout(y, 10)), np.asarray(fitted.rollout(y, 10)))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"a_kept": (True, False)}, "a_kept must be 3 values"),
+        ({"b_kept": "yes"}, "b_kept must be 3 values"),
+        ({"a_kept": 3}, "a_kept must be a sequence"),
+        ({"b_kept": (True, True, False), "bias": False}, "needs bias=True"),
+    ],
+)
+def test_bad_kept_masks_are_refused(kwargs, match):
+    with pytest.raises((TypeError, ValueError), match=match):
+        learn.RidgeTerms(3, 3, **kwargs)
