@@ -200,7 +200,8 @@ def ground_truth(
     is at round-off level: Casimirs and energy drift like a random walk of rounding errors.
     One compiled integrator serves every initial condition (re-set `time` and `state`, then
     `propagate_grid`): for these small systems a loop over one integrator beats heyoka's
-    ensemble mode by a wide margin (see BENCHMARKS.md).
+    ensemble mode by a wide margin (benchmarks,
+    [Ground truth][ground-truth-heyoka-taylor-vs-scipy-dop853-and-bdf-benchmarksground_truthpy]).
 
     **Arguments:**
 

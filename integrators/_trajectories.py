@@ -1,5 +1,5 @@
 r"""`Trajectories`: sampled solutions $y(t_n)$, $t_n = n h$, with their provenance, and the
-HDF5 format of `docs/conventions.md` ("Numbers and files")."""
+HDF5 format of the conventions ([Numbers and files][numbers-and-files])."""
 
 from __future__ import annotations
 
@@ -52,7 +52,8 @@ def _check_seed(seed: Any) -> int | None:
 
 
 def write_attributes(f: Any, metadata: dict[str, Any]) -> None:
-    """Write `Trajectories.metadata` as the file's attributes (`docs/conventions.md`, "Numbers and files")."""
+    """Write `Trajectories.metadata` as the file's attributes (conventions, [Numbers and
+    files][numbers-and-files])."""
     f.attrs["system"] = metadata["system"]
     f.attrs["system_params"] = json.dumps(metadata["system_params"], sort_keys=True)
     f.attrs["h"] = metadata["h"]
@@ -277,9 +278,9 @@ class Trajectories:
 
     # -- HDF5 -------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
-        """Write to HDF5 (`docs/conventions.md`, "Numbers and files"), atomically: a temporary file in the same
-        directory is renamed over `path` only once complete, so a failure never leaves a half
-        file nor clobbers an existing one."""
+        """Write to HDF5 (conventions, [Numbers and files][numbers-and-files]), atomically: a
+        temporary file in the same directory is renamed over `path` only once complete, so a
+        failure never leaves a half file nor clobbers an existing one."""
         import h5py
 
         with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:

@@ -1,6 +1,6 @@
 r"""Real Lie algebras from structure constants and their Lie-Poisson structure on g*.
 
-Conventions (`docs/conventions.md`): $[e_a, e_b] = C_{abd}\,e_d$;
+Conventions ([the conventions page][conventions]): $[e_a, e_b] = C_{abd}\,e_d$;
 $\mathbb{B}(\mu)_{ab} = \mathrm{sign}\cdot C_{abd}\,\mu_d$ (body convention `sign = -1`);
 $\dot\mu = \mathbb{B}(\mu)\,\partial H/\partial\mu$.
 """
@@ -319,7 +319,8 @@ class LieAlgebra:
         self, mu0: ArrayLike, mu1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
     ) -> np.ndarray:
         r"""The parameters $\alpha$ with `coadjoint_flow(alpha, t, mu0) == mu1`, orthogonal to
-        the Casimir gradients at `mu0` (paper eqs. Loss_function and alpha_mod_Casimirs).
+        the Casimir gradients at `mu0` ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4,
+        eqs. (25) and (26)).
 
         The inverse of the exact flow is the flow's own (`exact_flow.parameters`): the
         shortest rotation in closed form for so(3) (`RodriguesFlow`), Gauss-Newton otherwise.

@@ -1,6 +1,7 @@
 r"""Exact coadjoint flows $\mu(t) = \exp(t\,\mathbb{M}(\alpha))\,\mu(0)$ of linear Hamiltonians.
 
-Every flow here follows the body convention of `docs/conventions.md` (`sign = -1`):
+Every flow here follows the body convention (`sign = -1`; conventions,
+[The Lie-Poisson bracket][the-lie-poisson-bracket]):
 $\mathbb{M}(\alpha)_{ad} = -C_{abd}\,\alpha_b$, so that $\dot\mu = \mathbb{B}(\mu)\,\alpha$.
 `LieAlgebra` converts other signs by reversing time. The generic path is the matrix
 exponential; `RodriguesFlow` (so(3)) and `SE3Flow` (se(3)) are closed-form fast paths with
@@ -126,8 +127,9 @@ class AbstractCoadjointFlow(abc.ABC):
         t: ArrayLike,
         casimir_gradients: jax.Array,
     ) -> jax.Array:
-        r"""The parameters $\alpha$ with $\exp(t\,\mathbb{M}(\alpha))\,\mu_0 = \mu_1$,
-        orthogonal to the Casimir gradients at $\mu_0$ (paper eq. alpha_mod_Casimirs).
+        r"""The parameters $\alpha$ with $\exp(t\,\mathbb{M}(\alpha))\,\mu_0 = \mu_1$ and
+        $\langle\alpha, \nabla C_j(\mu_0)\rangle = 0$ for the Casimirs $C_j$
+        ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4, eq. (26)).
 
         **Arguments:** `mu0`, `mu1` of shape `(N, n)` on one coadjoint orbit; `t` a non-zero
         scalar of either sign (body convention: `LieAlgebra` passes `-sign * t`);
@@ -175,7 +177,8 @@ class RodriguesFlow(AbstractCoadjointFlow):
     `parameters` is the closed form of the shortest rotation carrying $\Pi^0$ to $\Pi^1$:
     $t\alpha = -\theta\,(\Pi^0\times\Pi^1)/|\Pi^0\times\Pi^1|$ with $\theta =
     \operatorname{atan2}(|\Pi^0\times\Pi^1|, \Pi^0\cdot\Pi^1)$, so $\alpha\perp\Pi^0$, the
-    Casimir gradient (the paper's eq. SO3_A_def with the exact angle instead of
+    Casimir gradient (as [the paper](https://arxiv.org/abs/2308.15349)'s
+    $A = \Pi^0\times\Pi^1/h$, Sec. 5.1, eq. (30), but with the exact angle instead of
     $\sin\theta$). Zero for coinciding points; `ValueError` for antiparallel ones.
     """
 

@@ -2,10 +2,10 @@ r"""The inverse of an exact test flow: the parameters $\alpha$ that carry $y_0$ 
 
 $\mathbb T(t, \alpha)\,y_0 = y_1$ fixes $\alpha$ only up to the span of the Casimir gradients
 at $y_0$ (they span the kernel of $\mathbb B(y_0)$); the solution returned is the one
-orthogonal to that span (paper eqs. Loss_function and alpha_mod_Casimirs). Closed forms live
-beside their flows (`RodriguesFlow.parameters`); this module holds the generic path,
-Gauss-Newton, and the checks shared by `LieAlgebra.coadjoint_flow_parameters` and
-`AbstractPoissonSystem.test_flow_parameters`.
+orthogonal to that span ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4, eqs. (25)
+and (26)). Closed forms live beside their flows (`RodriguesFlow.parameters`); this module
+holds the generic path, Gauss-Newton, and the checks shared by
+`LieAlgebra.coadjoint_flow_parameters` and `AbstractPoissonSystem.test_flow_parameters`.
 """
 
 from __future__ import annotations
@@ -42,7 +42,8 @@ def gauss_newton_parameters(
     max_iter: int = 30,
 ) -> jax.Array:
     r"""Solve $\mathrm{flow}(\alpha, t, \mu_0) = \mu_1$ for $\alpha \perp \nabla C_j(\mu_0)$ by
-    Gauss-Newton with backtracking (paper eqs. Loss_function and alpha_mod_Casimirs).
+    Gauss-Newton with backtracking ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4,
+    eqs. (25) and (26)).
 
     With $P$ an orthonormal basis of the complement of the Casimir gradients at $\mu_0$,
     $\alpha = P z$ and the iteration $z \leftarrow z - J^+ r(z)$, $r(z) = \mathrm{flow}(Pz, t,

@@ -44,9 +44,11 @@ def common_path_first(fun: Callable, ok: Callable[[Any], bool]) -> Callable:
 
     Under `vmap_samples`, `expm_action` branches on the batch's largest $|A|_1$; reverse mode
     through that branch carries the other paths along, in the same compiled program, and costs
-    more than the straight-line common path (BENCHMARKS.md). The first attempt is
-    compiled with the common path alone, as straight-line code, and gives NaN wherever a
-    batch is beyond its bound; when `ok(outputs)` (host values) is false, the call is
+    more than the straight-line common path (benchmarks,
+    [Any Lie algebra][any-lie-algebra-four-algebras-outside-the-catalogue-benchmarksany_algebrapy]).
+    The first attempt is compiled with the common path alone, as straight-line code, and
+    gives NaN wherever a batch is beyond its bound; when `ok(outputs)` (host values) is false,
+    the call is
     repeated with the full `expm_action` (compiled on first need), and so are all later calls
     (norms beyond the bound tend to stay: without this, a G-LPNet on sl(3) would compute every
     gradient twice). Either way the result is

@@ -1,4 +1,5 @@
-"""E1: LPNet for the rigid body learned from a single trajectory (paper section "Rigid body dynamics").
+"""E1: LPNet for the rigid body learned from a single trajectory (paper Sec. 5.1, "Rigid body
+dynamics").
 
 Data: one heyoka trajectory of 1000 points (999 pairs, h = 0.1) from Pi0 = (1/sqrt2, -1/sqrt2, 1),
 I = diag(1, 2, 3), so that its last point is the paper's (0.426, 1.332, -0.212) at t = 99.9.

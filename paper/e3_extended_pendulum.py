@@ -1,5 +1,5 @@
 r"""E3: LPNet for the extended pendulum of Jin et al. (2022), an affine non-Lie-Poisson bracket
-(paper section "Extended pendulum case").
+(paper Sec. 5.2, "Extended pendulum case").
 
 System: $y = (u, v, r)$, $K = \tfrac12u^2 - \cos v + ur - u^3 - uv^2$, Casimir $C = r - u^2 - v^2$.
 Data: three heyoka trajectories from $y_0 = (0, 1, 1)$, $(0, 1.5, 2.35)$, $(0, 2, 4.2)$ with

@@ -1,8 +1,8 @@
-r"""E4: LPNet for a charged particle in a magnetic field (paper section "A particle in a magnetic
+r"""E4: LPNet for a charged particle in a magnetic field (paper Sec. 5.3, "A particle in a magnetic
 field"), a canonical-with-magnetic-term bracket without Casimirs.
 
 System: $y = (p_1, p_2, x_1, x_2)$, $q = m = 1$, $B = r\,e_3$, $\varphi = 1/(100 r)$; second
-integral $I = x_1p_2 - x_2p_1 + r^3/3$ (paper eq. Cons_law_momentum).
+integral $I = x_1p_2 - x_2p_1 + r^3/3$ (paper Sec. 5.3, eq. (53)).
 Data: one heyoka trajectory of 20000 points (19999 pairs, h = 0.1) from $p_0 = (1, 0.5)$,
 $x_0 = (0.5, 1)$; 80/20 random split. Its last point (t = 1999.9) is the paper's prediction
 start $p \approx (0.119, 1.112)$, $x \approx (-0.627, 0.985)$. Model: MLP 3x32 sigmoid

@@ -1,4 +1,4 @@
-"""E5: LPNet for Kirchhoff's equations of an underwater vehicle on se(3)* (paper section
+"""E5: LPNet for Kirchhoff's equations of an underwater vehicle on se(3)* (paper Sec. 5.4,
 "Kirchhoff's equations for an underwater vehicle").
 
 Data: 500 heyoka trajectories x 100 steps (250 in the quick profile), h = 0.1,

@@ -1,4 +1,5 @@
-"""E6: G-LPNet for the rigid body over a volume of phase space (paper section "G-LPNets").
+"""E6: G-LPNet for the rigid body over a volume of phase space (paper Sec. 6.2, "Applications to
+rigid body dynamics").
 
 Data: 50 initial conditions uniform in [-2, 2]^3 (several Casimir surfaces), 20 pairs each,
 h = 0.1, I = diag(1, 2, 3). Model: 6 modules exp(q_s (h/6) M(c_s e_k)) cycling over e1, e2, e3,

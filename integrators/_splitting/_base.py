@@ -80,8 +80,9 @@ class IndexedFlows(AbstractFlows):
     r"""`n` flows of pieces of one kind, given by one function `flow(k, t, y)` that takes a
     traced index `k` (their parameters stacked, as a `learn.GLPNet`'s modules). A sequence of
     `flow(t, y)` like any other; a chain of them is one `jax.lax.scan` over `k`, so a step
-    traces one flow, not every one (its compilation time: BENCHMARKS.md, "Learning from
-    observations"). `order` (default `range(n)`): which stacked flow is in each position."""
+    traces one flow, not every one (its compilation time: benchmarks, [Levenberg-Marquardt on
+    the trajectory loss][levenberg-marquardt-on-the-trajectory-loss-learnlevenbergmarquardt]).
+    `order` (default `range(n)`): which stacked flow is in each position."""
 
     def __init__(self, flow: Callable[[int | jax.Array, float, jax.Array], jax.Array], n: int,
                  order: Sequence[int] | None = None):

@@ -1,7 +1,7 @@
-r"""G-LPNets ([the paper](https://arxiv.org/abs/2308.15349), Sec. 6, "G-LPNets: Derivation and test cases"): a classical
-splitting method applied to learnable collective terms, the data-driven splitting of a learned
-Hamiltonian $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ (Sec. 6.1, eqs. (73) and
-(74)).
+r"""G-LPNets ([the paper](https://arxiv.org/abs/2308.15349), Sec. 6, "G-LPNets: Derivation and
+test cases"): a classical splitting method applied to learnable collective terms, the
+data-driven splitting of a learned Hamiltonian
+$\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ (Sec. 6.1, eqs. (73) and (74)).
 
 Each piece is solved exactly (`learn.RidgeTerms`) and its flow is a Poisson map, so the network
 is an exact Poisson map for any weights, whatever the method composing the pieces.
@@ -40,8 +40,8 @@ def check_method(method: Any) -> AbstractSplittingMethod:
 class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
     r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
     $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
-    `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$ ([the paper](https://arxiv.org/abs/2308.15349), Sec. 6.1, eqs. (73)
-    and (74)).
+    `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$
+    ([the paper](https://arxiv.org/abs/2308.15349), Sec. 6.1, eqs. (73) and (74)).
 
     `method` is any `integrators.splitting` method, run by the same code that runs it on a
     known Hamiltonian's pieces: `LieTrotter` (default) is the paper's G-LPNet, each module over

@@ -1,6 +1,7 @@
 r"""Learnable collective terms: the pieces $\Phi_s(\langle\alpha_s, y\rangle)$ of a G-LPNet's
-learned Hamiltonian, with $\Phi_s' = a_s\sigma(x) + e_s x + b_s$ ([the paper](https://arxiv.org/abs/2308.15349),
-Sec. 6.1, eq. (73), with an optional linear term $e_s$).
+learned Hamiltonian, with $\Phi_s' = a_s\sigma(x) + e_s x + b_s$ (the moduli of
+[the paper](https://arxiv.org/abs/2308.15349), Sec. 6.1, eq. (73), with an optional linear
+term $e_s$).
 
 The flow of $\Phi_s(\langle\alpha_s, y\rangle)$ is the test flow with the frozen parameter
 $\Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$, because $\langle\alpha_s, y\rangle$ is conserved
@@ -66,8 +67,10 @@ class RidgeTerms(eqx.Module):
     (+ $e_s x$ with `linear_term`; without `bias`, $b_s = 0$: no linear part of
     $\widetilde H$ from the constants, e.g. for a quadratic $\widetilde H$ without linear terms).
 
-    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis, as the rotations
-    about $e_1, e_2, e_3, e_1, \dots$ of [the paper](https://arxiv.org/abs/2308.15349), Sec. 6.2, eq. (76): three scalars $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
+    By default $\alpha_s = c_s\,e_{k(s)}$ with $k$ cycling over the basis (as the sequence
+    $\widetilde{\mathbb T}_1\to\widetilde{\mathbb T}_2\to\widetilde{\mathbb T}_3\to\dots$ of
+    [the paper](https://arxiv.org/abs/2308.15349), Sec. 6.2, eq. (76)): three scalars
+    $(a_s, c_s, b_s)$ per piece; `full_vectors=True` learns
     $\alpha_s\in\mathbb R^n$. A linear term makes a quadratic piece exact and leaves the rest to
     $\sigma$: a sigmoid alone is linear only as $c_s \to 0$, and its cubic term
     $-a_sc_s^3x^3/48$ has the opposite sign to its linear term $a_sc_sx/4$.

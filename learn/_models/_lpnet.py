@@ -1,6 +1,6 @@
-r"""LPNets (paper section "A general application to finite-dimensional Lie groups"):
-a network predicts the parameters $\alpha(y)$ of an exact Poisson step, $y_{n+1} =
-\mathbb T(\alpha(y_n))\,y_n$ (eq. sol_eval_iteration)."""
+r"""LPNets ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4, "A general application to
+finite-dimensional Lie groups"): a network predicts the parameters $\alpha(y)$ of an exact
+Poisson step, $y_{n+1} = \mathbb T(\alpha(y_n))\,y_n$ (eq. (27))."""
 
 from __future__ import annotations
 
@@ -35,7 +35,8 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
 
     Every step is an exact test flow for fixed $\alpha$, so the Casimirs are conserved to
     round-off whatever the weights. The map is *not* exactly Poisson, because $\alpha$
-    depends on the point (`docs/conventions.md`): `poisson_defect` measures by how much, and
+    depends on the point (conventions, [What is exactly Poisson, and what is
+    not][what-is-exactly-poisson-and-what-is-not]): `poisson_defect` measures by how much, and
     its energy error drifts, over $N$ steps like $N$ times the one-step error. Variants are
     built by composition: an equivariant LPNet has a `learn.GroupAveraged` network, a
     reversible one is `learn.Reversible(lpnet)`; a G-LPNet (`learn.GLPNet`) is exactly
@@ -141,7 +142,8 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
         return jnp.asarray(self.network.output_scales())
 
     def params_from_pair(self, y0: np.ndarray, y1: np.ndarray, h: float) -> np.ndarray:
-        """`parametrisation.params_from_pair` (paper eqs. Loss_function_alpha, alpha_mod_Casimirs)."""
+        """`parametrisation.params_from_pair` ([the paper](https://arxiv.org/abs/2308.15349),
+        Sec. 4, eqs. (25) and (26))."""
         return self.parametrisation.params_from_pair(y0, y1, h)
 
     def reinitialised(self, key):

@@ -1,9 +1,10 @@
 r"""How the parameters $\alpha$ of an LPNet relate to one step: $y_{n+1} = \mathbb T(\alpha)\,y_n$.
 
 A parametrisation is a family of exact Poisson maps (for fixed parameters) and its inverse,
-the parameters that carry $y_0$ to $y_1$ (paper eqs. Loss_function, alpha_mod_Casimirs,
-SO3_A_def). Both live in `liepoisson`, beside the flows; the inverse is chosen there by the
-flow's type (closed form for so(3) and the se(3) rotation-shear, Gauss-Newton otherwise).
+the parameters that carry $y_0$ to $y_1$ ([the paper](https://arxiv.org/abs/2308.15349),
+Sec. 4, eqs. (25) and (26); for so(3), Sec. 5.1, eq. (30)). Both live in `liepoisson`, beside
+the flows; the inverse is chosen there by the flow's type (closed form for so(3) and the se(3)
+rotation-shear, Gauss-Newton otherwise).
 """
 
 from __future__ import annotations
@@ -88,8 +89,9 @@ class TestFlowParametrisation(AbstractInvertibleParametrisation):
     `system.test_flow(alpha, h, y)`, $\alpha\in\mathbb R^n$.
 
     `params_from_pair` is `system.test_flow_parameters`: the shortest rotation in closed form
-    for so(3)* (the paper's eq. SO3_A_def with the exact angle), Gauss-Newton restricted to the
-    complement of the Casimir gradients otherwise.
+    for so(3)* ([the paper](https://arxiv.org/abs/2308.15349)'s $A = \Pi^0\times\Pi^1/h$,
+    Sec. 5.1, eq. (30), with the exact angle), Gauss-Newton restricted to the complement of
+    the Casimir gradients otherwise.
 
     **Arguments:** `system`; `rtol`: tolerance for the Casimir mismatch of a pair (and, times
     100, for the residual of the parameters found).

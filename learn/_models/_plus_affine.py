@@ -37,8 +37,9 @@ class PlusAffine(AbstractWrappedNetwork):
     the residuals. Where the outputs are nearly affine in the inputs (an LPNet's
     $\alpha(y) \approx h\nabla H(y)$ for a quadratic $H$: E5's Kirchhoff equations), $\tilde N$
     then learns only the nonlinear rest; a deep sigmoid MLP fits an affine map itself only
-    slowly (BENCHMARKS.md, "E5: the affine part fixed"). The trained weights are
-    $\tilde N$'s alone.
+    slowly (benchmarks,
+    [E5: the affine part fixed][e5-the-affine-part-fixed-issue-29-benchmarksaffine_partpy]). The
+    trained weights are $\tilde N$'s alone.
 
     **Arguments:** `network` $\tilde N$ (any `learn.AbstractNetwork` that is not averaged over
     a group: put `PlusAffine` inside `learn.GroupAveraged`, which then averages the sum);

@@ -9,7 +9,8 @@ largest seen: Marquardt's scaling, Moré 1978), by a lineax Cholesky, trying lar
 the step lowers $\|r\|^2$; $\lambda$ is updated by Nielsen's rule. The loop runs on the host
 between two small compiled functions, so a map is compiled twice (residuals, Jacobian), not
 into one solver program: optimistix's `LevenbergMarquardt` on the same losses spends longer
-compiling a G-LPNet fit than running it (BENCHMARKS.md, "Learning from observations").
+compiling a G-LPNet fit than running it (benchmarks, [Levenberg-Marquardt on the trajectory
+loss][levenberg-marquardt-on-the-trajectory-loss-learnlevenbergmarquardt]).
 """
 
 from __future__ import annotations
@@ -125,11 +126,12 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     step evaluates $r$ and its Jacobian $J$ once and solves
     $(J^TJ + \lambda D)\delta = -J^Tr$ by a lineax Cholesky, $D$ the largest
     $\mathrm{diag}(J^TJ)$ seen (Marquardt's scaling), $\lambda$ by Nielsen's rule; the loop
-    runs on the host between two compiled functions (`learn/_solvers/_levenberg_marquardt.py`
-    says why not optimistix).
+    runs on the host between two compiled functions: optimistix's `LevenbergMarquardt`, one
+    compiled program, takes longer to compile a G-LPNet fit than to run it.
 
     For a few dozen to a few hundred unknowns it reaches the minimum of a least-squares loss
-    in tens of steps where BFGS takes hundreds (BENCHMARKS.md, "Learning from observations");
+    in tens of steps where BFGS takes hundreds (benchmarks, [Levenberg-Marquardt on the
+    trajectory loss][levenberg-marquardt-on-the-trajectory-loss-learnlevenbergmarquardt]);
     each step costs $p$ forward passes for $p$ weights ($p + d$ with fitted starts: a
     structured Jacobian), so for the thousands of weights of an MLP use `QuasiNewton` (a step
     that would hold more than 2000 passes is refused).

@@ -1,7 +1,8 @@
 r"""Any optimistix solver as a stage of `learn.fit`: `learn.Optimistix(optx.BFGS(rtol, atol))`,
 `learn.Optimistix(optx.LevenbergMarquardt(rtol, atol))`. The whole solve is one compiled
 program (optimistix's design); where the library's own stages are faster on its problems is in
-BENCHMARKS.md ("Solver stages: optimistix beside the library's own")."""
+the benchmarks ([Solver stages: optimistix beside the library's
+own][solver-stages-optimistix-beside-the-librarys-own-issue-39-benchmarkssolver_stagespy])."""
 
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
 """Quasi-Newton minimisation of a full-batch loss with JAX gradients: the `QuasiNewton` stage
-of `learn.fit` (its restarts, warm start and keep-if-better are the wrappers of `_stage.py`).
+of `learn.fit` (its restarts, warm start and keep-if-better are the wrappers `learn.Restarts`,
+`learn.WarmStart` and `learn.KeepIfBetter`).
 
 `minimiser(method, loss)` compiles the value and gradient of `loss(x, data)` (a flat parameter
 vector `x`) once per loss and returns `minimise(x0, data, max_iter, progress, desc) -> (x,
@@ -18,7 +19,8 @@ can make no more progress at float64 resolution.
 
 The SciPy methods run with NumPy's BLAS on one thread (`threadpoolctl`): their host updates are
 small vector operations, and a multi-threaded BLAS pool spins after each of them on the cores
-that JAX's gradient needs next (BENCHMARKS.md, "BLAS threads in the SciPy loop").
+that JAX's gradient needs next (benchmarks, [BLAS threads in the SciPy
+loop][blas-threads-in-the-scipy-loop-issue-29-benchmarksblas_threadspy]).
 """
 
 from __future__ import annotations

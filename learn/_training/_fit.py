@@ -66,8 +66,9 @@ def fit(
     - `data`: an `integrators.Trajectories` (consecutive states are the pairs, `h` its step),
       or `(y0, y1)` arrays `(N, dim)` with `h=`; or `integrators.Observations` (noisy states at
       their own times), compared by a `learn.TrajectoryLoss` (default: whole trajectories from
-      fitted initial states; docs/conventions.md, "Observations"), the held-out fraction taken
-      by whole trajectories, the map's `h` set to `h=`, its own, or the median interval.
+      fitted initial states; conventions, [Observations][conventions-observations]), the
+      held-out fraction taken by whole trajectories, the map's `h` set to `h=`, its own, or the
+      median interval.
     - `optimiser`: a stage (`Adam`, `QuasiNewton`, `LevenbergMarquardt`, or any
       `learn.AbstractStage`, e.g. wrapped in `learn.Restarts`) or a sequence of them run one
       after the other (e.g. `(Adam(100_000), QuasiNewton(30_000))`: Adam refined by
@@ -83,7 +84,8 @@ def fit(
     - `normalise` (MLP-based maps, pairs): set the fixed input/output scalings from the training
       data first (inputs: mean/std of $y_0$; outputs: of the loss's targets, or of the first
       estimate of the LPNet's parameters, or of $y_1 - y_0$ for the baseline). Default `False`:
-      a plain MLP as in the paper (what normalising does on E1 is in BENCHMARKS.md).
+      a plain MLP as in the paper (what normalising does on E1: benchmarks,
+      [Figures moved out of docstrings][figures-moved-out-of-docstrings-issue-27]).
     - `checkpoint`: a `Checkpoint` for the one resumable stage (`Adam` or `LevenbergMarquardt`).
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal);
       `callback(learn.Progress)`: called as training goes (after every 1000 Adam epochs, every

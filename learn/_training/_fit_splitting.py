@@ -66,8 +66,9 @@ def fit_splitting(
     sigmoid pieces), each from its least-squares quadratic of the observations' finite
     differences (`learn.Family.start`); the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned: with noisy data, parameters the data do not need
-    cost accuracy (docs/conventions.md, "Observations"). The records are those of every
-    family fitted, the chosen one last; each last stage's `details` hold its criterion.
+    cost accuracy (conventions, [Observations][conventions-observations]). The records are
+    those of every family fitted, the chosen one last; each last stage's `details` hold its
+    criterion.
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$). The other arguments are

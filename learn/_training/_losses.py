@@ -108,9 +108,10 @@ class AbstractPairsLoss(AbstractLoss, AbstractLeastSquares):
 
 
 class StateLoss(AbstractPairsLoss):
-    r"""The paper's loss (eqs. Loss_function, Loss_function_G_LPNets): the mean squared error of
-    one learned step, `training_prediction(y0, y1)` (the step of $y_0$; the explicit residual
-    form of an implicit step, `learn.Reversible`) against $y_1$."""
+    r"""The loss of [the paper](https://arxiv.org/abs/2308.15349) (Sec. 5.1 for an LPNet;
+    Sec. 6.1, eq. (74), for a G-LPNet): the mean squared error of one learned step,
+    `training_prediction(y0, y1)` (the step of $y_0$; the explicit residual form of an
+    implicit step, `learn.Reversible`) against $y_1$."""
 
     def pair_residuals(self, model, y0, targets):
         return vmap_samples(model.training_prediction)(y0, targets) - targets
@@ -121,9 +122,10 @@ class StateLoss(AbstractPairsLoss):
 
 
 class AlphaLoss(AbstractPairsLoss):
-    r"""An LPNet's loss on its parameters (paper eqs. Loss_function_alpha, alpha_mod_Casimirs):
-    the MSE of $\alpha(y_0)$ against the parameters of the exact step that carries $y_0$ to
-    $y_1$ (`parametrisation.params_from_pair`), in units of the network's output scale."""
+    r"""An LPNet's loss on its parameters: the MSE of $\alpha(y_0)$ against the parameters of
+    the exact step that carries $y_0$ to $y_1$ (`parametrisation.params_from_pair`;
+    [the paper](https://arxiv.org/abs/2308.15349), Sec. 4, eqs. (25) and (26)), in units of
+    the network's output scale."""
 
     def check_model(self, model):
         if not isinstance(model, AbstractOneFlowMap):

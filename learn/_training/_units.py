@@ -1,6 +1,6 @@
 r"""The units of a data set: a fit's starting weights are drawn for unit-free data and carried
 to the data's units, so the same measurements in seconds or milliseconds, in radians per second
-or per hour, give the same learned motion (docs/conventions.md, "Units")."""
+or per hour, give the same learned motion (conventions, [Units][units])."""
 
 from __future__ import annotations
 

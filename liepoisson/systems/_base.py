@@ -181,7 +181,8 @@ class AbstractPoissonSystem(abc.ABC):
         self, y0: ArrayLike, y1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10
     ) -> np.ndarray:
         r"""The parameters $\alpha$ with `test_flow(alpha, t, y0) == y1`, orthogonal to the
-        Casimir gradients at `y0` (paper eqs. Loss_function and alpha_mod_Casimirs).
+        Casimir gradients at `y0` ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4,
+        eqs. (25) and (26)).
 
         Gauss-Newton on `test_flow` (`liepoisson.gauss_newton_parameters`); Lie-Poisson
         systems use their algebra's exact flow and its closed forms instead.

@@ -30,7 +30,8 @@ def _finite_float(x, name: str) -> float:
 
 
 def segment_field_integral(x0: jnp.ndarray, a: jnp.ndarray, t: jnp.ndarray) -> jnp.ndarray:
-    r"""$\Phi(t) = \int_0^t |x_0 + a s|\,ds$ for planar $x_0, a$ (paper eq. integrated_Phi).
+    r"""$\Phi(t) = \int_0^t |x_0 + a s|\,ds$ for planar $x_0, a$
+    ([the paper](https://arxiv.org/abs/2308.15349), Sec. 5.3, eq. (55)).
 
     With $A = |a|$, $z = x\cdot a/A$, $d = |x_0\times a|/A$, $r = |x|$ and
     $G(z) = \tfrac12\left(z\sqrt{z^2+d^2} + d^2\operatorname{asinh}(z/d)\right)$,
@@ -86,7 +87,8 @@ class ChargedParticle(AbstractDefinedByParams):
     $B = b_0\,r\,e_3$ and $\varphi = k/r$, $r = |x|$ (paper defaults $q = m = b_0 = 1$,
     $k = 1/100$). $H = |p|^2/(2m) + q\varphi$,
     $\mathbb{B} = \begin{pmatrix}-q\hat B & -I\\ I & 0\end{pmatrix}$, no Casimirs; the second
-    integral is $I = x_1p_2 - x_2p_1 + q b_0 r^3/3$ (paper eq. Cons_law_momentum).
+    integral is $I = x_1p_2 - x_2p_1 + q b_0 r^3/3$
+    ([the paper](https://arxiv.org/abs/2308.15349), Sec. 5.3, eq. (53)).
 
     The paper writes $-\tfrac{q}{m}\hat B$ in the tensor; with $\partial H/\partial p = p/m$
     the Lorentz force needs $-q\hat B$. Both agree for the paper's $q = m = 1$.

@@ -15,8 +15,8 @@ class ExtendedPendulum(AbstractDefinedByParams):
     r"""Pendulum extended by a constant $c$ and written in $y = (u, v, r) = (p, q, p^2+q^2+c)$:
 
     $\mathbb{B}(y) = \begin{pmatrix}0&-1&-2v\\1&0&2u\\2v&-2u&0\end{pmatrix}$,
-    $K = \tfrac12u^2 - \cos v + ur - u^3 - uv^2$, Casimir $C = r - u^2 - v^2$ (paper eqs.
-    ext_pendulum, Casimir_pendulum).
+    $K = \tfrac12u^2 - \cos v + ur - u^3 - uv^2$, Casimir $C = r - u^2 - v^2$
+    ([the paper](https://arxiv.org/abs/2308.15349), Sec. 5.2, eqs. (34) to (36)).
     """
 
     name = "ExtendedPendulum"
