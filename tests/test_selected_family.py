@@ -1,6 +1,8 @@
 """The quadratic family whose terms are selected by the criterion (`learn.select_quadratic`) and
 the pieces it needs (`RidgeTerms(a_kept=..., b_kept=...)`)."""
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -39,26 +41,25 @@ def test_the_heavy_top_keeps_the_four_terms_it_has():
 
 
 def test_terms_not_kept_are_zero_are_not_trained_and_are_saved(tmp_path):
-    top, data = _heavy_top_observations(1e-3, seed=1)
+    top = lp.systems.HeavyTop(inertia=(2.0, 2.0, 1.0), mgl=0.5, center_of_mass=(0.0, 0.0, 1.0))
     a_kept = (True, True, True, False, False, False)
     b_kept = (False, False, False, False, False, True)
     terms = learn.RidgeTerms(6, 6, activation="identity", bias=True, a_kept=a_kept, b_kept=b_kept, key=3)
     assert np.array_equal(np.asarray(terms.a_values())[3:], np.zeros(3))
     assert np.array_equal(np.asarray(terms.bias_values())[:5], np.zeros(5))
     net = learn.GLPNet(top, terms=terms, method=it.splitting.Strang(), h=0.1)
-    fitted, _ = learn.fit(net, data, optimiser=learn.LevenbergMarquardt(5, rtol=0.0), validation_fraction=0.0,
-                          progress=False)
-    # the weights not kept get no gradient: exactly where they started (zero)
-    assert np.array_equal(np.asarray(fitted.terms.a_values())[3:], np.zeros(3))
-    assert np.array_equal(np.asarray(fitted.terms.bias_values())[:5], np.zeros(5))
-    assert np.all(np.asarray(fitted.terms.a_values())[:3] != np.asarray(terms.a_values())[:3])  # the kept moved
+    y = np.random.default_rng(1).normal(size=(3, 6))
+    # a step's derivative in the weights not kept is zero: no solver moves them
+    grad = eqx.filter_grad(lambda m: jnp.sum(jax.vmap(m.step)(jnp.asarray(y)) ** 2))(net)
+    assert np.array_equal(np.asarray(grad.terms.a)[3:], np.zeros(3))
+    assert np.array_equal(np.asarray(grad.terms.b)[:5], np.zeros(5))
+    assert np.all(np.asarray(grad.terms.a)[:3] != 0.0) and np.asarray(grad.terms.b)[5] != 0.0  # the kept do move
     # still an exact Poisson map (a piece b_s x alone is a test flow)
-    y = np.asarray(data.states[0][:5])
-    assert float(jnp.max(fitted.poisson_defect(y))) < 1e3 * EPS
-    fitted.save(tmp_path / "selected.h5")
+    assert float(jnp.max(net.poisson_defect(y))) < 1e3 * EPS
+    net.save(tmp_path / "selected.h5")
     back = learn.GLPNet.load(tmp_path / "selected.h5", top)
     assert back.terms.a_kept == a_kept and back.terms.b_kept == b_kept
-    np.testing.assert_array_equal(np.asarray(back.rollout(y, 10)), np.asarray(fitted.rollout(y, 10)))
+    np.testing.assert_array_equal(np.asarray(back.rollout(y, 10)), np.asarray(net.rollout(y, 10)))
 
 
 @pytest.mark.parametrize(
@@ -73,3 +74,19 @@ def test_terms_not_kept_are_zero_are_not_trained_and_are_saved(tmp_path):
 def test_bad_kept_masks_are_refused(kwargs, match):
     with pytest.raises((TypeError, ValueError), match=match):
         learn.RidgeTerms(3, 3, **kwargs)
+
+
+@pytest.mark.parametrize("any_axes", [False, True])
+def test_a_general_family_starts_at_the_fit_of_the_quadratic_it_extends(any_axes):
+    """`Family.from_nested`: the sigmoid pieces at zero and the fitted quadratic as their linear
+    term give the same learned Hamiltonian, so the same steps, bit for bit."""
+    body = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
+    general = next(f for f in learn.FAMILIES if f.activation == "sigmoid" and f.any_axes == any_axes)
+    nested = next(f for f in learn.FAMILIES if f.name == general.nested)
+    quadratic = learn.RidgeTerms(3, 3, activation="identity", bias=nested.bias, full_vectors=any_axes, key=1)
+    terms = general.from_nested(learn.RidgeTerms(3, 3, activation="sigmoid", linear_term=True, bias=True,
+                                                 full_vectors=any_axes, key=2), quadratic)
+    y0 = np.random.default_rng(0).normal(size=(4, 3))
+    one = learn.GLPNet(body, terms=quadratic, method=it.splitting.TripleJump(), h=0.1).rollout(y0, 20)
+    two = learn.GLPNet(body, terms=terms, method=it.splitting.TripleJump(), h=0.1).rollout(y0, 20)
+    np.testing.assert_array_equal(np.asarray(one), np.asarray(two))

@@ -38,6 +38,18 @@ class Family:
     #: Keep only the terms $a_k$, $b_k$ that the criterion selects on the finite differences
     #: (`select_quadratic`); on the basis axes, identity activation.
     select: bool = False
+    #: The quadratic family this one extends (its pieces plus sigmoids): when it was fitted
+    #: first, this family starts from its fit (`from_nested`), not from a warm start of its own.
+    nested: str | None = None
+
+    def from_nested(self, terms: RidgeTerms, fitted: RidgeTerms) -> RidgeTerms:
+        r"""`terms` (this family's pieces) at the fitted quadratic pieces of the family it
+        extends: $e_s = a_s$ (the quadratic as the linear term of $\Phi_s'$), $c_s$, $b_s$ as
+        fitted, $a_s = 0$ (the sigmoids start from zero): the same $\widetilde H$, so the fit
+        starts where the nested family's ended."""
+        terms = eqx.tree_at(lambda t: (t.a, t.c, t.e), terms,
+                            (jnp.zeros_like(fitted.a), fitted.c, fitted.a_values()))
+        return terms if fitted.b is None else eqx.tree_at(lambda t: t.b, terms, fitted.bias_values())
 
     @property
     def warm_start(self) -> bool:
@@ -118,7 +130,7 @@ def select_quadratic(system: AbstractPoissonSystem, data: Observations
     Bayesian information criterion of the finite differences most (or raises it by less than
     `SELECT_RESOLUTION`: a term the others make redundant, e.g. one of the $a_k$ of a Casimir
     $\sum_ky_k^2$), until every removal raises it. A term the data do not determine costs
-    accuracy (conventions, [Observations][observations]): e.g. the heavy top's $\tfrac12\sum\Pi_k^2/I_k
+    accuracy (conventions, [Observations][conventions-observations]): e.g. the heavy top's $\tfrac12\sum\Pi_k^2/I_k
     + mgl\,\Gamma_3$ keeps four of its twelve terms."""
     design, velocity, _ = _design(system, data, linear=True, diagonal=True)
     n = system.dim
@@ -162,6 +174,6 @@ FAMILIES = (
     Family("quadratic, selected", "identity", linear_term=False, bias=True, select=True),
     Family("quadratic, any axes, even", "identity", linear_term=False, bias=False, any_axes=True),
     Family("quadratic, any axes", "identity", linear_term=False, bias=True, any_axes=True),
-    Family("general", "sigmoid", linear_term=True, bias=True),
-    Family("general, any axes", "sigmoid", linear_term=True, bias=True, any_axes=True),
+    Family("general", "sigmoid", linear_term=True, bias=True, nested="quadratic"),
+    Family("general, any axes", "sigmoid", linear_term=True, bias=True, any_axes=True, nested="quadratic, any axes"),
 )

@@ -10,6 +10,7 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 from numpy.typing import ArrayLike
 
@@ -26,7 +27,8 @@ from .._solvers._stage import Context
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
-from ._units import observation_units
+from ._problem import Fitted
+from ._units import state_size
 
 
 def fit_splitting(
@@ -64,7 +66,9 @@ def fit_splitting(
     Without `activation`, the nested families `learn.FAMILIES` of $\widetilde H$ are fitted,
     on the basis axes and along learned directions (any symmetric quadratic form, linear terms,
     sigmoid pieces), each from its least-squares quadratic of the observations' finite
-    differences (`learn.Family.start`); the one with the lowest Bayesian information criterion
+    differences (`learn.Family.start`; the terms selected by the criterion for "quadratic,
+    selected", `learn.select_quadratic`), a sigmoid family from the fit of the quadratic family
+    it extends (`learn.Family.from_nested`); the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned: with noisy data, parameters the data do not need
     cost accuracy (conventions, [Observations][conventions-observations]). The records are
     those of every family fitted, the chosen one last; each last stage's `details` hold its
@@ -154,13 +158,20 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     families = FAMILIES if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
     # each family from the least-squares quadratic of the finite differences, in the data's units
-    size = observation_units(system, data)[1]
+    size = state_size(system, data)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
-    fits = []
+    fits, fitted = [], {}
     for family in families:
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
-        problem, results = solve(loss.problem(net, data, **split),
-                                 (LevenbergMarquardt(iterations, rtol, warm_start=family.warm_start),), context)
+        start = loss.problem(net, data, **split)
+        warm_start = family.warm_start
+        if family.nested in fitted:  # from the nested family's fit, map and initial states
+            nested = fitted[family.nested]
+            net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
+            start = start.with_start(Fitted(net, nested.starts))
+            warm_start = False
+        problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start),), context)
+        fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
