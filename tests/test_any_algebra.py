@@ -38,8 +38,10 @@ ALL = pytest.mark.parametrize("name", list(SYSTEMS))
 TRAINED = pytest.mark.parametrize(
     "name", [n if n == "diamond" else pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
 )
+# every algebra with -m slow: the automatic splitting's Strang and TripleJump orders are measured by
+# default in test_automatic_splitting.py (the diamond algebra with ridge terms)
 ORDERS = pytest.mark.parametrize(
-    "name", [n if n == "filiform5" else pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
+    "name", [pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
 )
 
 

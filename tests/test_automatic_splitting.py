@@ -60,7 +60,9 @@ def test_diagonal_quadratic_gives_the_axis_splitting_of_the_catalogue():
     assert np.max(np.abs(a - b)) <= 1e4 * EPS * np.max(np.abs(b))
 
 
-@pytest.mark.parametrize("make, n_pieces", [(generic_so4, 7), (diamond_with_ridges, 5)])
+# by default the diamond with ridge terms (quadratic and non-polynomial addends); so(4)'s seven
+# quadratic pieces with -m slow
+@pytest.mark.parametrize("make, n_pieces", [pytest.param(generic_so4, 7, marks=pytest.mark.slow), (diamond_with_ridges, 5)])
 def test_pieces_sum_to_the_hamiltonian_and_conserve_their_forms(make, n_pieces):
     system = make()
     pieces = system.hamiltonian_splitting()

@@ -365,7 +365,8 @@ def test_training_record_round_trip(tmp_path, rb, pairs):
         assert np.array_equal(loaded.history[key], value, equal_nan=True), key
 
 
-@pytest.mark.parametrize("method", ["lbfgsb", "lbfgs"])
+# SciPy's L-BFGS-B (every iteration reported) by default; optax's L-BFGS (its chunks) with -m slow
+@pytest.mark.parametrize("method", ["lbfgsb", pytest.param("lbfgs", marks=pytest.mark.slow)])
 def test_callback_follows_every_stage_as_it_runs(rb, pairs, method):
     """`callback` sees each optimiser's progress while it runs (what a live plot or a
     time-to-figure measurement needs): Adam's chunks, every quasi-Newton iteration (SciPy) or
