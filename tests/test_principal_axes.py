@@ -28,8 +28,19 @@ def test_principal_axes_of_a_rotated_body_are_its_axes_and_its_inverse_inertias(
     # an exact quadratic fitted by least squares in 10 features of O(1): a few hundred ulps
     np.testing.assert_allclose(axes.angles_to(R), 0.0, atol=1e-6)  # arccos near 1: sqrt of ~1e-13
     np.testing.assert_allclose(axes.values, np.array([0.5, 1.0, 1.5]) - 1.0, atol=300 * EPS)
-    np.testing.assert_allclose(Rotation.from_rotvec(axes.rotation_vector()).as_matrix(), axes.axes, atol=100 * EPS)
+    # the least rotation onto the axes as lines is the body's own (0.95 rad): its columns are the
+    # axes up to sign
+    np.testing.assert_allclose(axes.rotation_vector(), [0.4, -0.7, 0.5], atol=1e-6)
+    np.testing.assert_allclose(np.abs(np.sum(Rotation.from_rotvec(axes.rotation_vector()).as_matrix() * axes.axes, axis=0)),
+                               1.0, atol=100 * EPS)
     assert np.linalg.det(axes.axes) == pytest.approx(1.0, abs=100 * EPS)
+
+
+def test_the_rotation_vector_does_not_depend_on_the_signs_of_the_axes():
+    R, _ = rotated((0.4, -0.7, 0.5))
+    for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1), (-1, -1, -1)):
+        axes = learn.PrincipalAxes(np.array([0.5, 1.0, 1.5]), R * np.asarray(signs, dtype=float))
+        np.testing.assert_allclose(axes.rotation_vector(), [0.4, -0.7, 0.5], atol=100 * EPS)
 
 
 def test_angles_to_another_frame_are_the_angles_between_its_lines():

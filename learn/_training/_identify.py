@@ -72,12 +72,17 @@ class PrincipalAxes:
     axes: np.ndarray
 
     def rotation_vector(self) -> np.ndarray:
-        r"""The rotation vector (radians) that turns the data's axes onto the principal axes
-        (dimension 3). The axes' order and signs are conventions (ascending $\lambda$,
-        right-handed); `angles_to` compares axes without them."""
+        r"""The rotation vector (radians) of the least rotation that turns the data's axes onto
+        the principal axes (dimension 3): each axis is a line, so of the four right-handed
+        choices of the axes' signs the one of least angle (the same vector for every sign an
+        eigen-solver returns, so resampled fits compare). The axes' order is a convention
+        (ascending $\lambda$); `angles_to` compares axes without order or sign."""
         if self.axes.shape != (3, 3):
             raise ValueError(f"a rotation vector needs 3 axes; these are {self.axes.shape[0]}")
-        return Rotation.from_matrix(self.axes).as_rotvec()
+        axes = self.axes if np.linalg.det(self.axes) > 0 else self.axes * np.array([1.0, 1.0, -1.0])
+        candidates = [Rotation.from_matrix(axes * np.asarray(signs, dtype=np.float64)).as_rotvec()
+                      for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1))]
+        return min(candidates, key=lambda v: float(np.linalg.norm(v)))
 
     def angles_to(self, axes: ArrayLike) -> np.ndarray:
         r"""The angle (radians) between each axis and the column of `axes` in the same place,
