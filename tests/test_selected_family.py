@@ -90,3 +90,14 @@ def test_a_general_family_starts_at_the_fit_of_the_quadratic_it_extends(any_axes
     one = learn.GLPNet(body, terms=quadratic, method=it.splitting.TripleJump(), h=0.1).rollout(y0, 20)
     two = learn.GLPNet(body, terms=terms, method=it.splitting.TripleJump(), h=0.1).rollout(y0, 20)
     np.testing.assert_array_equal(np.asarray(one), np.asarray(two))
+
+
+def test_observations_at_rest_keep_no_term_and_give_no_nan():
+    """A body spinning about a principal axis does not move in the body frame: no term is needed
+    (every velocity is zero), none is kept, and nothing is NaN."""
+    body = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
+    y0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -2.0]])
+    data = it.observe(body, y0, 0.1 * np.arange(6), noise=0.0)
+    A, b, a_kept, b_kept = learn.select_quadratic(body, data)
+    assert not any(a_kept) and not any(b_kept)
+    assert np.array_equal(A, np.zeros((3, 3))) and np.array_equal(b, np.zeros(3))
