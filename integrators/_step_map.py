@@ -90,8 +90,7 @@ class AbstractStepMap(eqx.Module):
 
         **Returns:** `(n_steps // save_every + 1, dim)`, or `(n_traj, n_steps // save_every + 1,
         dim)` for many initial conditions; entry 0 is `y0`. Compiled once per map, shape and
-        length bucket (`compiled_length`: rollouts of nearby lengths, and every `save_every`,
-        share one program; loops vectorised over trajectories with `jax.vmap`).
+        `n_steps` (`jax.lax.scan`, vectorised over trajectories with `jax.vmap`).
 
         A trajectory that leaves the finite range (a learned map far outside its training
         region, too large a step) raises `RolloutDivergedError` naming the trajectory, the steps
@@ -113,17 +112,12 @@ class AbstractStepMap(eqx.Module):
         if y0.ndim > 2:
             raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}); got shape {y0.shape}")
         n_traj = 1 if y0.ndim == 1 else y0.shape[0]
-        check_fits_in_memory((n_traj, compiled_length(n_steps // save_every) + 1, dim),
+        check_fits_in_memory((n_traj, n_steps // save_every + 1, dim),
                              "the rollout's states (n_traj, n_steps // save_every + 1, dim)",
                              "save fewer states with save_every= (a divisor of n_steps: every save_every-th "
                              "state is kept), or roll out fewer trajectories or steps at a time")
-        every = jnp.asarray(save_every, dtype=jnp.int64)
-        n_saved = n_steps // save_every
-        length = compiled_length(n_saved)
-        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), length, every,
-                                jnp.asarray(n_saved, dtype=jnp.int64))
-        if length != n_saved:
-            out = out[:, : n_saved + 1]
+        every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32 if save_every < 2**31 else jnp.int64)
+        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, every)
         nonfinite.check(self, out, save_every)
         return out[0] if y0.ndim == 1 else out
 
@@ -249,32 +243,26 @@ def traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
     return eqx.tree_at(lambda m: m.h, step_map, jnp.asarray(step_map.h, dtype=jnp.float64))
 
 
-def compiled_length(n_saved: int) -> int:
-    """The number of saved states a rollout is compiled for: `n_saved` up to 16, else rounded up
-    to a multiple of $2^{\\lfloor\\log_2 n\\rfloor - 2}$ (less than a quarter more, four lengths
-    per octave), so that rollouts of one map over nearby lengths share one program."""
-    if n_saved <= 16:
-        return n_saved
-    quantum = 1 << (n_saved.bit_length() - 3)
-    return -(-n_saved // quantum) * quantum
-
-
 @eqx.filter_jit
-def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, length: int, save_every: jax.Array,
-                      n_saved: jax.Array) -> jax.Array:
-    """`y0` `(N, dim)` -> `(N, length + 1, dim)`: the first `n_saved + 1` states, every
-    `save_every`-th step (both traced: one program for every length up to `length` and every
-    spacing, and the same loops for all, so that a subsampled rollout is the full one's states
-    bit for bit), zeros after."""
+def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, save_every: int | jax.Array) -> jax.Array:
+    """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`. `save_every` is the Python int 1, or a traced
+    integer (then one program serves every spacing of the outputs: a study at several h with
+    the same output times compiles once per map)."""
     step = vmap_samples(step_map.step)
+    if isinstance(save_every, int) and save_every == 1:
 
-    def body(k, carry):
-        y, states = carry
-        y = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), y)
-        return y, jax.lax.dynamic_update_index_in_dim(states, y, k + 1, axis=1)
+        def body(y, _):
+            y = step(y)
+            return y, y
 
-    states = jnp.zeros((y0.shape[0], length + 1, y0.shape[1]), y0.dtype).at[:, 0].set(y0)
-    return jax.lax.fori_loop(0, n_saved, body, (y0, states))[1]
+    else:
+
+        def body(y, _):
+            y = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), y)
+            return y, y
+
+    _, ys = jax.lax.scan(body, y0, None, length=n_saved)
+    return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
 
 
 @eqx.filter_jit
