@@ -13,7 +13,6 @@ with $b_s$, every linear term $\sum_s b_s\alpha_s$); each module is still solved
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -23,6 +22,7 @@ from integrators import Observations
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._models._learned_terms import RidgeTerms
+from ._criterion import bic, effective_parameters
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,16 +105,13 @@ def _design(system: AbstractPoissonSystem, data: Observations, linear: bool, dia
 def _criterion(design: np.ndarray, velocity: np.ndarray) -> tuple[float, np.ndarray]:
     r"""`(bic, coefficients)` of the least squares `design @ x = velocity`: $n\log(\mathrm{SSR}/n)
     + k\log n$, $k$ the numerical rank of the design (unit-norm columns)."""
-    n = velocity.size
+    tiny = np.finfo(float).tiny  # exact data (every velocity 0): no log of 0
     if design.shape[1] == 0:
-        return n * math.log(max(float(velocity @ velocity), np.finfo(float).tiny) / n), np.zeros(0)
+        return bic(max(float(velocity @ velocity), tiny), velocity.size, 0), np.zeros(0)
     coefficients, *_ = np.linalg.lstsq(design, velocity, rcond=None)
     residual = velocity - design @ coefficients
-    norms = np.linalg.norm(design, axis=0)
-    singular = np.linalg.svd(design[:, norms > 0] / norms[norms > 0], compute_uv=False)
-    k = int(np.sum(singular > 1e-8 * singular[0])) if singular.size else 0
-    ssr = max(float(residual @ residual), np.finfo(float).tiny)
-    return n * math.log(ssr / n) + k * math.log(n), coefficients
+    ssr = max(float(residual @ residual), tiny)
+    return bic(ssr, velocity.size, effective_parameters(design)), coefficients
 
 
 #: Backward elimination drops a term while the criterion rises by less than this (a term whose

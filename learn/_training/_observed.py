@@ -30,6 +30,7 @@ from .._models._base import AbstractCasimirConservingMap
 from .._models._baseline import check_one_step
 from .._solvers._levenberg_marquardt import residuals_of
 from .._solvers._problem import AbstractLeastSquares, AbstractStructuredJacobian
+from ._criterion import bic, effective_parameters
 from ._losses import AbstractLoss
 from ._problem import Description, Fitted, FittedProblem
 
@@ -285,11 +286,5 @@ def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, f
     J = np.asarray(J)[:, :weights]
     n = objective.count(fitted, args)  # fitted components
     ssr = float(jnp.sum(r**2))
-    # Each weight's column at unit norm: the rank does not depend on the weights' units (a
-    # time in ms scales the rates' columns by 1e3; docs/conventions.md, "Units").
-    norms = np.linalg.norm(J, axis=0)
-    singular = np.linalg.svd(J[:, norms > 0] / norms[norms > 0], compute_uv=False)
-    # A direction of the weights that moves the residuals 1e8 times less than the best
-    # determined one is not fitted by the data (redundant weights give 0 to round-off).
-    k = int(np.sum(singular > 1e-8 * singular[0])) if singular.size else 0
-    return {"bic": n * math.log(ssr / n) + k * math.log(n), "n": n, "ssr": ssr, "effective_parameters": k}
+    k = effective_parameters(J)
+    return {"bic": bic(ssr, n, k), "n": n, "ssr": ssr, "effective_parameters": k}
