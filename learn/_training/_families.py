@@ -127,19 +127,19 @@ def select_quadratic(system: AbstractPoissonSystem, data: Observations
     Bayesian information criterion of the finite differences most (or raises it by less than
     `SELECT_RESOLUTION`: a term the others make redundant, e.g. one of the $a_k$ of a Casimir
     $\sum_ky_k^2$), until every removal raises it. A term the data do not determine costs
-    accuracy (conventions, [Observations][conventions-observations]): e.g. the heavy top's $\tfrac12\sum\Pi_k^2/I_k
-    + mgl\,\Gamma_3$ keeps four of its twelve terms."""
+    accuracy (conventions, [Observations][conventions-observations]): e.g. the heavy top's
+    $\tfrac12\sum\Pi_k^2/I_k + mgl\,\Gamma_3$ keeps four of its twelve terms."""
     design, velocity, _ = _design(system, data, linear=True, diagonal=True)
     n = system.dim
     kept = list(range(2 * n))
-    bic, _ = _criterion(design, velocity)
+    lowest, _ = _criterion(design, velocity)
     while kept:
         trials = [(_criterion(design[:, [c for c in kept if c != d]], velocity)[0], d) for d in kept]
         best, drop = min(trials)
-        if best >= bic + SELECT_RESOLUTION:
+        if best >= lowest + SELECT_RESOLUTION:
             break
         kept.remove(drop)
-        bic = min(bic, best)
+        lowest = min(lowest, best)
     _, coefficients = _criterion(design[:, kept], velocity)
     full = np.zeros(2 * n)
     full[kept] = coefficients
