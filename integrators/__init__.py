@@ -57,6 +57,10 @@ from ._nonfinite import (
     ReturnNonfinite as ReturnNonfinite,
     RolloutDivergedError as RolloutDivergedError,
 )
-from ._step_map import AbstractStepMap as AbstractStepMap, StepCost as StepCost
+from ._step_map import (
+    AbstractReconstructingStepMap as AbstractReconstructingStepMap,
+    AbstractStepMap as AbstractStepMap,
+    StepCost as StepCost,
+)
 from ._timing import StepTiming as StepTiming, step_timing as step_timing
 from ._trajectories import FORMAT_VERSION as FORMAT_VERSION, Trajectories as Trajectories

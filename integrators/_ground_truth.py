@@ -48,12 +48,14 @@ def _caches() -> tuple[dict[tuple[Any, ...], Any], weakref.WeakKeyDictionary]:
 
 
 def taylor_integrator(
-    system: AbstractPoissonSystem, tol: float | None = None, *, variational: bool = False
+    system: AbstractPoissonSystem, tol: float | None = None, *, variational: bool = False, configured: bool = False
 ):
     """The (cached) `heyoka.taylor_adaptive` of `system` at tolerance `tol` (default eps).
 
     With `variational=True` the state is augmented by the first-order variational equations
     (`heyoka.var_ode_sys`): `state[dim:].reshape(dim, dim)[i, j]` is $\\partial y_i/\\partial y_j(0)$.
+    With `configured=True` the state is $(\\mu, g)$, `dim + group.size` components: the
+    reconstruction $\\dot g = g\\,\\nabla H$ beside the motion (`system.heyoka_configured_system()`).
     Shared between calls of the same thread: set `ta.time` and `ta.state` before every use.
     """
     import heyoka as hy
@@ -62,17 +64,18 @@ def taylor_integrator(
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     tol = EPS if tol is None else positive_float(tol, "tol")
     by_params, by_object = _caches()
+    group = system.require_group() if configured else None
     if system.value_key() is not None:
-        key = (system.value_key(), tol, variational)
+        key = (system.value_key(), tol, variational, group)
         cache = by_params
     else:
-        key = (tol, variational)
+        key = (tol, variational, group)
         cache = by_object.setdefault(system, {})
     if key not in cache:
-        ode = system.heyoka_system()
+        ode = system.heyoka_configured_system() if configured else system.heyoka_system()
         if variational:
             ode = hy.var_ode_sys(ode, hy.var_args.vars, order=1)
-        cache[key] = hy.taylor_adaptive(ode, [0.0] * system.dim, tol=tol)
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * len(ode), tol=tol)
     return cache[key]
 
 
@@ -105,6 +108,7 @@ class _Job:
     max_steps: int
     chunk_size: int
     seed: int | None
+    g0: np.ndarray | None = None
 
     @property
     def grid(self) -> np.ndarray:
@@ -112,14 +116,16 @@ class _Job:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return (self.y0.shape[0], self.n_steps + 1, self.system.dim)
+        """`(n_traj, n_steps + 1, width)`: the momenta, then the configurations if any."""
+        return (self.y0.shape[0], self.n_steps + 1, self.system.dim + (0 if self.g0 is None else self.g0.shape[1]))
 
     def chunks(self, skip: Container[int] = ()) -> Iterator[tuple[int, tuple[Any, ...]]]:
         """`(k, (start, y0[start:stop], grid, tol, max_steps))` for every chunk k not in `skip`."""
         grid = self.grid
         for k, start in enumerate(range(0, self.y0.shape[0], self.chunk_size)):
             if k not in skip:
-                yield k, (start, self.y0[start : start + self.chunk_size], grid, self.tol, self.max_steps)
+                g0 = None if self.g0 is None else self.g0[start : start + self.chunk_size]
+                yield k, (start, self.y0[start : start + self.chunk_size], grid, self.tol, self.max_steps, g0)
 
     @property
     def n_chunks(self) -> int:
@@ -136,12 +142,15 @@ class _Job:
         }, sort_keys=True)
 
     def trajectories(self, states: np.ndarray) -> Trajectories:
-        """`states` `(n, m, dim)` at the first `m` output times, with this job's provenance."""
-        return Trajectories(states, self.h, self.system, times=self.grid[: states.shape[1]], integrator="heyoka-taylor",
-                            tolerance=self.tol, seed=self.seed)
+        """`states` `(n, m, dim)` at the first `m` output times (`(n, m, dim + group.size)` with
+        the configurations), with this job's provenance."""
+        dim = self.system.dim
+        return Trajectories(states[..., :dim], self.h, self.system, times=self.grid[: states.shape[1]],
+                            integrator="heyoka-taylor", tolerance=self.tol, seed=self.seed,
+                            configurations=None if self.g0 is None else states[..., dim:])
 
 
-def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size) -> _Job:
+def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size, g0=None) -> _Job:
     if not isinstance(system, AbstractPoissonSystem):
         raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
     h = positive_float(h, "h")
@@ -151,23 +160,45 @@ def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size) -> 
         raise ValueError(f"tol must be a relative tolerance in (0, 1), e.g. 1e-12; got {tol!r}")
     max_steps = positive_int(max_steps, "max_steps", minimum=0)
     y0 = _initial_conditions(system, y0)
+    if g0 is not None:
+        g0 = _initial_configurations(system, g0, y0.shape[0])
     show_progress(progress)  # validates it before any work
+    width = system.dim + (0 if g0 is None else g0.shape[1])
     if chunk_size is None:  # about 16 MiB of output per chunk
-        chunk_size = max(1, 2**24 // (8 * (n_steps + 1) * system.dim))
+        chunk_size = max(1, 2**24 // (8 * (n_steps + 1) * width))
     chunk_size = min(positive_int(chunk_size, "chunk_size"), y0.shape[0])
-    return _Job(system, y0, h, n_steps, tol_used, max_steps, chunk_size, _check_seed(seed))
+    return _Job(system, y0, h, n_steps, tol_used, max_steps, chunk_size, _check_seed(seed), g0)
+
+
+def _initial_configurations(system: AbstractPoissonSystem, g0: ArrayLike, n_traj: int) -> np.ndarray:
+    """`g0` as `(n_traj, group.size)` on `system.group` (one configuration is used for every
+    trajectory)."""
+    require = getattr(system, "require_group", None)
+    if require is None:
+        raise ValueError(f"g0 needs a Lie-Poisson system with a configuration group; {system!r} is not one")
+    group = require()
+    g0 = np.asarray(group.check(g0, "g0"))
+    if g0.ndim == 1:
+        g0 = np.broadcast_to(g0, (n_traj, group.size))
+    if g0.shape != (n_traj, group.size):
+        raise ValueError(f"g0 must have shape ({group.size},) or ({n_traj}, {group.size}) (one configuration of "
+                         f"{group.name} per initial state); got shape {g0.shape}")
+    return np.ascontiguousarray(g0)
 
 
 def integrate_chunk(
-    system: AbstractPoissonSystem, start: int, y0: np.ndarray, grid: np.ndarray, tol: float, max_steps: int
+    system: AbstractPoissonSystem, start: int, y0: np.ndarray, grid: np.ndarray, tol: float, max_steps: int,
+    g0: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The states `(len(y0), len(grid), dim)` of the trajectories from `y0` (numbered from
-    `start` in errors), by one compiled integrator of this process (reused across calls)."""
+    r"""The states `(len(y0), len(grid), dim)` of the trajectories from `y0` (numbered from
+    `start` in errors), by one compiled integrator of this process (reused across calls);
+    with configurations `g0`, `(len(y0), len(grid), dim + group.size)`, $(\mu, g)$."""
     import heyoka as hy
 
-    ta = taylor_integrator(system, tol)
-    out = np.empty((y0.shape[0], grid.shape[0], system.dim))
-    for i, y in enumerate(y0):
+    ta = taylor_integrator(system, tol, configured=g0 is not None)
+    start_states = y0 if g0 is None else np.concatenate([y0, g0], axis=1)
+    out = np.empty((y0.shape[0], grid.shape[0], start_states.shape[1]))
+    for i, y in enumerate(start_states):
         ta.time = 0.0
         ta.state[:] = y
         outcome, *_, states = ta.propagate_grid(grid, max_steps=max_steps)
@@ -191,6 +222,7 @@ def ground_truth(
     seed: int | None = None,
     client: Any = None,
     chunk_size: int | None = None,
+    g0: ArrayLike | None = None,
 ) -> Trajectories:
     r"""Integrate $\dot y = \mathbb{B}(y)\nabla H(y)$ (`system.heyoka_system()`; with the
     dissipation of a `DoubleBracket`) with heyoka's adaptive Taylor method and
@@ -218,13 +250,18 @@ def ground_truth(
       The result is bitwise the same as without. For ensembles larger than memory, write
       them to a file chunk by chunk with `save_ground_truth`.
     - `chunk_size`: trajectories per task (default: about 16 MiB of output per chunk).
+    - `g0`: initial configurations on `system.group`, `(group.size,)` (the same for every
+      trajectory) or `(n_traj, group.size)`: then $\dot g = g\,\nabla H$ is integrated with
+      the momenta (`system.heyoka_configured_system()`), and the result holds
+      `configurations`.
 
-    **Returns:** `Trajectories` with `states` of shape `(n_traj, n_steps + 1, dim)`.
+    **Returns:** `Trajectories` with `states` of shape `(n_traj, n_steps + 1, dim)` (and
+    `configurations` `(n_traj, n_steps + 1, group.size)` with `g0`).
 
     Raises `RuntimeError` naming the trajectory if heyoka stops early (non-finite state, step
     cap).
     """
-    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size)
+    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size, g0)
     client = check_client(client)
     check_fits_in_memory(job.shape, "the requested trajectories (n_traj, n_steps + 1, dim)",
                          "ask for fewer trajectories or output times (a larger sampling step h and fewer n_steps for "

@@ -26,7 +26,7 @@ from liepoisson import vmap_samples
 from liepoisson.internals import as_state, positive_float, positive_int, states
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._nonfinite import AbstractNonfinitePolicy, nonfinite_policy
+from ._nonfinite import AbstractNonfinitePolicy, RaiseIfNonfinite, nonfinite_policy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,6 +148,72 @@ class AbstractStepMap(eqx.Module):
         `fori_loop`) once, so maps that loop inside `step` override this with the count per
         iteration times the number of iterations."""
         return xla_flops(lambda m, y: m.step(y), traced_h(self), jnp.zeros(self.system.dim))
+
+
+class AbstractReconstructingStepMap(AbstractStepMap):
+    r"""A step map that also carries the configuration: $(g_{n+1}, \mu_{n+1}) =
+    \Psi_h(g_n, \mu_n)$, whose momentum part is `step`. A composition of lifted test flows
+    (a splitting method on `CollectiveTerm`s, a G-LPNet) reconstructs exactly: each piece moves
+    $g \mapsto g\exp(t\alpha)$ with its frozen body velocity $\alpha$, so the spatial momentum
+    $\mathrm{Ad}^*_{g^{-1}}\mu$ is kept to round-off and $g$ stays on the group."""
+
+    @abc.abstractmethod
+    def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""$(g_1, \mu_1)$ from one configuration `(group.size,)` and state `(dim,)`."""
+
+    def lifted_rollout(self, g0: ArrayLike, y0: ArrayLike, n_steps: int, *,
+                       save_every: int = 1) -> tuple[jax.Array, jax.Array]:
+        r"""Iterate `lifted_step` from $(g_0, \mu_0)$: configurations and states at steps
+        $0, s, 2s, \dots, n$ ($s$ = `save_every`, a divisor of `n_steps`).
+
+        **Arguments:** `g0` `(group.size,)` or `(n_traj, group.size)` on `system.group` (unit
+        quaternions, scalar last, for `liepoisson.Rotations`); `y0` `(dim,)` or `(n_traj, dim)`.
+
+        **Returns:** `(configurations, states)`, `(n_traj, n_saved, group.size)` and
+        `(n_traj, n_saved, dim)` (without the leading axis for one initial condition).
+        A trajectory that leaves the finite range raises `RolloutDivergedError`."""
+        check_h(self)
+        group = self.system.require_group()
+        dim = self.system.dim
+        n_steps = positive_int(n_steps, "n_steps", minimum=0)
+        save_every = positive_int(save_every, "save_every")
+        if n_steps % save_every:
+            raise ValueError(f"save_every must divide n_steps; got n_steps={n_steps}, save_every={save_every}")
+        y0 = states(y0, "y0", dim)
+        g0 = np.asarray(group.check(g0, "g0"))
+        if y0.ndim > 2 or g0.ndim > 2:
+            raise ValueError(f"y0 must have shape ({dim},) or (n_traj, {dim}) and g0 ({group.size},) or "
+                             f"(n_traj, {group.size}); got shapes {y0.shape} and {g0.shape}")
+        n_traj = max(1 if y0.ndim == 1 else y0.shape[0], 1 if g0.ndim == 1 else g0.shape[0])
+        if (y0.ndim == 2 and y0.shape[0] != n_traj) or (g0.ndim == 2 and g0.shape[0] != n_traj):
+            raise ValueError(f"g0 and y0 must hold as many initial conditions; got shapes {g0.shape} and {y0.shape}")
+        check_fits_in_memory((n_traj, n_steps // save_every + 1, dim + group.size),
+                             "the lifted rollout's configurations and states",
+                             "save fewer with save_every= (a divisor of n_steps), or roll out fewer trajectories "
+                             "or steps at a time")
+        G = jnp.broadcast_to(jnp.asarray(g0), (n_traj, group.size))
+        Y = jnp.broadcast_to(jnp.asarray(y0), (n_traj, dim))
+        gs, ys = _lifted_rollout_compiled(traced_h(self), G, Y, n_steps // save_every, save_every)
+        bad = ~(jnp.all(jnp.isfinite(ys), axis=(1, 2)) & jnp.all(jnp.isfinite(gs), axis=(1, 2)))
+        if bool(jnp.any(bad)):
+            RaiseIfNonfinite().check(self, jnp.where(jnp.isfinite(gs[..., :1]), ys, jnp.nan), save_every)
+        single = y0.ndim == 1 and g0.ndim == 1
+        return (gs[0], ys[0]) if single else (gs, ys)
+
+
+@eqx.filter_jit
+def _lifted_rollout_compiled(step_map: AbstractReconstructingStepMap, g0: jax.Array, y0: jax.Array, n_saved: int,
+                             save_every: int) -> tuple[jax.Array, jax.Array]:
+    """`(N, size)`, `(N, dim)` -> `(N, n_saved + 1, size)`, `(N, n_saved + 1, dim)`."""
+    step = jax.vmap(step_map.lifted_step)
+
+    def body(gy, _):
+        gy = jax.lax.fori_loop(0, save_every, lambda _, z: step(*z), gy) if save_every > 1 else step(*gy)
+        return gy, gy
+
+    _, (gs, ys) = jax.lax.scan(body, (g0, y0), None, length=n_saved)
+    return (jnp.concatenate([g0[:, None], jnp.swapaxes(gs, 0, 1)], axis=1),
+            jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1))
 
 
 #: The largest share of the machine's physical memory one output array may take.

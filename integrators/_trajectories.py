@@ -116,6 +116,9 @@ class Trajectories:
     - `system`: the `AbstractPoissonSystem` that generated them (`dim` must match).
     - `times`: `(n_steps + 1,)`; default `h * arange(n_steps + 1)`.
     - `integrator`, `tolerance`, `seed`: provenance, written to the file.
+    - `configurations` (keyword): the configurations $g_i(t_n)$ beside the momenta,
+      `(n_traj, n_steps + 1, group.size)` in the representation of `system.group` (unit
+      quaternions, scalar last, for `Rotations`; checked to lie on the group), or `None`.
     """
 
     def __init__(
@@ -130,6 +133,7 @@ class Trajectories:
         seed: int | None = None,
         created: str | None = None,
         liepoisson_version: str | None = None,
+        configurations: Any = None,
     ):
         if not isinstance(system, AbstractPoissonSystem):
             raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
@@ -164,6 +168,7 @@ class Trajectories:
                 tolerance = None
         self.states = arr
         self.times = t
+        self.configurations = _configurations(configurations, system, arr.shape)
         self.system = system
         self.integrator = integrator
         self.tolerance = tolerance
@@ -208,7 +213,8 @@ class Trajectories:
             f"h={self.h}, integrator={self.integrator!r})"
         )
 
-    def _like(self, states: np.ndarray, times: np.ndarray | None = None) -> Trajectories:
+    def _like(self, states: np.ndarray, times: np.ndarray | None = None,
+              configurations: np.ndarray | None = None) -> Trajectories:
         return Trajectories(
             states,
             self.h,
@@ -219,6 +225,7 @@ class Trajectories:
             seed=self.seed,
             created=self.created,
             liepoisson_version=self.liepoisson_version,
+            configurations=configurations,
         )
 
     # -- learning views -------------------------------------------------------------------
@@ -253,7 +260,7 @@ class Trajectories:
         states = self.states[indices]
         if states.ndim != 3 or states.shape[0] == 0:
             raise IndexError(f"indices must select at least one trajectory; got {indices!r}")
-        return self._like(states)
+        return self._like(states, configurations=None if self.configurations is None else self.configurations[indices])
 
     __getitem__ = select
 
@@ -274,7 +281,13 @@ class Trajectories:
                     f"datasets[{k}] comes from {d.integrator} (tol {d.tolerance}), datasets[0] "
                     f"from {first.integrator} (tol {first.tolerance})"
                 )
-        return first._like(np.concatenate([d.states for d in datasets], axis=0))
+        with_g = [d.configurations is not None for d in datasets]
+        if any(with_g) and not all(with_g):
+            k = with_g.index(not with_g[0])
+            raise ValueError(f"datasets[{k}] {'has' if with_g[k] else 'has no'} configurations, datasets[0] "
+                             f"{'has' if with_g[0] else 'has none'}: concatenate data sets of the same kind")
+        configurations = np.concatenate([d.configurations for d in datasets], axis=0) if with_g[0] else None
+        return first._like(np.concatenate([d.states for d in datasets], axis=0), configurations=configurations)
 
     # -- HDF5 -------------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
@@ -286,6 +299,8 @@ class Trajectories:
         with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
             f.create_dataset("trajectories", data=self.states)
             f.create_dataset("times", data=self.times)
+            if self.configurations is not None:
+                f.create_dataset("configurations", data=self.configurations)
             write_attributes(f, self.metadata)
 
     @classmethod
@@ -325,6 +340,8 @@ class Trajectories:
                 n_traj = f["trajectories"].shape[0] if f["trajectories"].ndim == 3 else 0
                 states = f["trajectories"][_selection(select, n_traj)]
                 times = f["times"][...]
+                configurations = (f["configurations"][_selection(select, n_traj)] if "configurations" in f
+                                  else None)
         except (ValueError, IndexError):
             raise
         except (OSError, KeyError, TypeError) as err:
@@ -350,6 +367,28 @@ class Trajectories:
                 seed=None if seed == _NO_SEED else seed,
                 created=text(attrs["created"]),
                 liepoisson_version=text(attrs["liepoisson_version"]),
+                configurations=configurations,
             )
         except (ValueError, TypeError) as err:
             raise ValueError(f"{path!r} holds inconsistent data: {err}") from err
+
+
+def _configurations(configurations: Any, system: AbstractPoissonSystem, shape: tuple[int, ...]) -> np.ndarray | None:
+    """`configurations` checked against `system.group` and the states' `shape`, or None."""
+    if configurations is None:
+        return None
+    group = getattr(system, "require_group", None)
+    if group is None:
+        raise ValueError(f"configurations need a Lie-Poisson system with a configuration group; {system!r} is not one")
+    group = group()
+    try:
+        arr = np.array(configurations, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"configurations must be a real array (n_traj, n_steps+1, {group.size}); "
+                        f"got {type(configurations).__name__}") from err
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.shape != (*shape[:2], group.size):
+        raise ValueError(f"configurations must have shape {(*shape[:2], group.size)} (the states' trajectories and "
+                         f"times, then the {group.size} components of {group.name}); got shape {np.shape(configurations)}")
+    return np.array(group.check(arr, "configurations"))

@@ -23,6 +23,13 @@ from ._coadjoint import (
     rotate as rotate,
     rotation_coefficients as rotation_coefficients,
 )
+from ._groups import (
+    AbstractLieGroup as AbstractLieGroup,
+    MatrixGroup as MatrixGroup,
+    Poses as Poses,
+    Rotations as Rotations,
+    rotation_angle as rotation_angle,
+)
 from ._expm import expm_action as expm_action
 from ._samples import common_path_first as common_path_first, vmap_samples as vmap_samples
 from ._casimirs import polynomial_casimirs as polynomial_casimirs

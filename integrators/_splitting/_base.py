@@ -31,7 +31,13 @@ from liepoisson.systems import (
     check_splitting,
 )
 
-from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops
+from .._step_map import (
+    AbstractReconstructingStepMap,
+    AbstractStepMap,
+    check_state,
+    traced_h,
+    xla_flops,
+)
 
 #: A flow $\varphi_t(y)$ as `flow(t, y)` on one state.
 Flow = Callable[[float, jax.Array], jax.Array]
@@ -270,7 +276,7 @@ def symmetric_coefficients(half: tuple[float, ...]) -> np.ndarray:
     return np.concatenate([half_arr, half_arr[-2::-1]])
 
 
-class Splitting(AbstractStepMap):
+class Splitting(AbstractReconstructingStepMap):
     r"""The splitting method `method` on the exact flows $\varphi^{[k]}_t$ of the pieces of
     `system`'s Hamiltonian, at step size `h`: $y_{n+1} = \Phi_h(y_n)$.
 
@@ -339,6 +345,17 @@ class Splitting(AbstractStepMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    def lifted_flows(self) -> FlowList:
+        r"""The exact flows of the pieces on $(g, \mu)$ (`AbstractExactTerm.lifted_flow`)."""
+        return FlowList([functools.partial(term.lifted_flow, self.system) for term in self.pieces])
+
+    def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""The same composition of the pieces' flows, each lifted to the configuration: exact
+        reconstruction (the method's order for $(g, \mu)$ together)."""
+        group = self.system.require_group()
+        return self.method.compose(self.lifted_flows(), (group.check(g, "g"), check_state(y, self.system.dim)),
+                                   self.h)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
+from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_state, composition_flops, splitting_method
 from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
 from liepoisson import JAX
@@ -37,7 +38,7 @@ def check_method(method: Any) -> AbstractSplittingMethod:
     return splitting_method(method)
 
 
-class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
+class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractReconstructingStepMap):
     r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
     $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
     `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$
@@ -130,6 +131,16 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""The step on $(g, \mu)$: each module's flow lifted, $g \mapsto
+        g\exp(t\,w\nabla\Phi_s)$ (its body velocity is constant along it), so the
+        reconstruction is exact for the learned $\widetilde H$ and the spatial momentum is
+        kept to round-off."""
+        group = self.system.require_group()
+        flows = IndexedFlows(lambda s, t, gy: self.terms.lifted_flow(self.system, s, t / self._time_divisor, gy),
+                             self.n_modules)
+        return self.method.compose(flows, (group.check(g, "g"), check_state(y, self.system.dim)), self.h)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -187,6 +187,11 @@ class RidgeTerms(eqx.Module):
     def flow(self, system: AbstractPoissonSystem, s: int | jax.Array, t: Any, y: jax.Array) -> jax.Array:
         r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
+        return system.test_flow(self.velocity(s, y), t, y)
+
+    def velocity(self, s: int | jax.Array, y: jax.Array) -> jax.Array:
+        r"""$\nabla\Phi_s = \Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$: the body velocity of
+        piece `s`, constant along its flow (the rate is conserved)."""
         alpha = self.vector(s)
         x = jnp.dot(alpha, y)
         q = self.a_values()[s] * ACTIVATIONS[self.activation](x)
@@ -194,7 +199,13 @@ class RidgeTerms(eqx.Module):
             q = q + self.bias_values()[s]
         if self.e is not None:
             q = q + self.e[s] * x
-        return system.test_flow(q * alpha, t, y)
+        return q * alpha
+
+    def lifted_flow(self, system: AbstractPoissonSystem, s: int | jax.Array, t: Any,
+                    gy: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
+        r"""`flow` on $(g, \mu)$: $(g\exp(t\nabla\Phi_s), \ldots)$, exact."""
+        g, y = gy
+        return system.lifted_test_flow(self.velocity(s, y), t, g, y)
 
     def spec(self) -> dict[str, Any]:
         return {"n_modules": self.n_modules, "order": list(self.order), "full_vectors": self.full_vectors,

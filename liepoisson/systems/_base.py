@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._casimir_values import casimir_gradient_values, casimir_values
+from .._groups import AbstractLieGroup, default_group
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
 from .._polynomial import Polynomial
@@ -301,6 +302,69 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
         return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol, names=("y0", "y1"))
+
+    # -- configurations ---------------------------------------------------------------------
+    @property
+    def group(self) -> AbstractLieGroup | None:
+        r"""The configuration group $G$ (`liepoisson.Rotations` for so(3), `liepoisson.Poses`
+        for se(3), by default), or `None` when the system does not say: then nothing
+        reconstructs $g$ (pass `group=` to `LiePoissonSystem`)."""
+        return default_group(self.algebra)
+
+    def require_group(self) -> AbstractLieGroup:
+        """`group`, or a `ValueError` saying how to give one."""
+        group = self.group
+        if group is None:
+            raise ValueError(
+                f"{self!r} has no configuration group, so its configurations cannot be reconstructed: give one, "
+                "e.g. LiePoissonSystem(algebra, H, group=liepoisson.MatrixGroup(basis)) with a matrix basis of the "
+                "algebra"
+            )
+        if self.algebra.sign != -1:
+            raise ValueError(
+                f"{self!r} is a right-invariant (spatial, sign=+1) system: the reconstruction here is that of body "
+                "systems, dg/dt = g xi (sign=-1)"
+            )
+        return group
+
+    def body_velocity(self, y: ArrayLike) -> jax.Array:
+        r"""$\xi = \partial H/\partial\mu$, the body velocity in $\mathfrak g$ with
+        $\dot g = g\,\xi$ (`generator`: with dissipation, the velocity of the damped motion)."""
+        return self.generator(y)
+
+    def spatial_momentum(self, g: ArrayLike, y: ArrayLike) -> jax.Array:
+        r"""$J = \mathrm{Ad}^*_{g^{-1}}\mu$ `(..., dim)`: conserved along every motion of a free
+        (left-invariant) system (Noether), and by every step that reconstructs exactly."""
+        group = self.require_group()
+        g = group.check(g, "g")
+        y = as_state(y, "y", self.dim)
+        return group.spatial_momentum(g, y)
+
+    def lifted_test_flow(self, alpha: ArrayLike, t: ArrayLike, g: ArrayLike,
+                         y: ArrayLike) -> tuple[jax.Array, jax.Array]:
+        r"""The test flow of $\langle\alpha, \mu\rangle$ lifted to the configuration:
+        $(g\exp(t\alpha),\ \mathrm{Ad}^*_{\exp(t\alpha)}\mu)$, exact, for a fixed `alpha` (the
+        body velocity is $\alpha$ throughout). Keeps the spatial momentum to round-off."""
+        group = self.require_group()
+        y1 = self.test_flow(alpha, t, y)
+        alpha = as_state(alpha, "alpha", self.dim)
+        t = as_scalar_time(t)
+        g = group.check(g, "g")
+        return group.right_exp(g, t[..., None] * alpha), y1
+
+    def heyoka_configured_system(self) -> list[tuple[Any, Any]]:
+        r"""$(\mu, g)$ as heyoka `(variable, right-hand side)` pairs: $\dot\mu = \mathbb B\nabla H$,
+        $\dot g = g\,\nabla H$ (`group.velocity_components`); the state is `mu` then `g`."""
+        import heyoka as hy
+
+        group = self.require_group()
+        pairs = self.heyoka_system()
+        mus = [v for v, _ in pairs]
+        H = self.hamiltonian_components(mus, HEYOKA)
+        xi = [hy.diff(H, v) for v in mus]
+        gs = list(hy.make_vars(*[f"g{i}" for i in range(group.size)]))
+        rhs = group.velocity_components(gs, xi)
+        return pairs + [(v, hy.expression(float(r)) if isinstance(r, (int, float)) else r) for v, r in zip(gs, rhs)]
 
 
 class AbstractExactlySolvableSystem(AbstractPoissonSystem):

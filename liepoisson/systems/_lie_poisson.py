@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._algebra import LieAlgebra
+from .._groups import AbstractLieGroup
 from .._namespace import JAX
 from .._symbolic import (
     SYMBOLIC,
@@ -93,6 +94,9 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
       sum to $H$ and each must be exact (a `CollectiveTerm`'s forms must Poisson-commute).
       Pieces whose function does not evaluate on symbols (e.g. written with jax.numpy) work,
       but are not saved: load such files with `system=` to get the splitting back.
+    - `group` (keyword): the configuration group (`liepoisson.MatrixGroup(basis)`, ...),
+      checked to represent `algebra`; default: `Rotations` for so(3), `Poses` for se(3), none
+      otherwise. Not saved in files (it moves configurations, not momenta).
     """
 
     def __init__(
@@ -101,6 +105,8 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
         hamiltonian: Callable[[Sequence[Any], Any], Any],
         name: str = "LiePoissonSystem",
         splitting: Sequence[AbstractExactTerm] = (),
+        *,
+        group: AbstractLieGroup | None = None,
     ):
         if not isinstance(algebra, LieAlgebra):
             raise TypeError(f"algebra must be a LieAlgebra; got {type(algebra).__name__}")
@@ -108,6 +114,12 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
             raise TypeError(f"hamiltonian must be callable (mu, xp) -> H; got {hamiltonian!r}")
         self.algebra = algebra
         self.name = str(name)
+        if group is not None:
+            if not isinstance(group, AbstractLieGroup):
+                raise TypeError(f"group must be a liepoisson.AbstractLieGroup (Rotations, Poses, MatrixGroup); "
+                                f"got {type(group).__name__}")
+            group.check_algebra(algebra.structure_constants, f"the algebra {algebra.name!r}")
+        self._group = group
         n = algebra.dim
         self._tree = trace(lambda: hamiltonian(symbols(n), SYMBOLIC), "hamiltonian")
         self._hamiltonian = hamiltonian
@@ -125,6 +137,12 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
         if splitting is None or (isinstance(splitting, Sequence) and len(splitting) == 0):
             return
         self._splitting = check_splitting(self, splitting, "splitting")
+
+    @property
+    def group(self) -> AbstractLieGroup | None:
+        """The `group=` given, else the default of the algebra (`Rotations` for so(3),
+        `Poses` for se(3))."""
+        return self._group if self._group is not None else super().group
 
     def __repr__(self) -> str:
         return f"LiePoissonSystem(name={self.name!r}, algebra={self.algebra.name!r}, dim={self.dim})"

@@ -37,6 +37,16 @@ class AbstractExactTerm(abc.ABC):
     def flow(self, system: AbstractPoissonSystem, t: ArrayLike, y: ArrayLike) -> jax.Array:
         """The exact flow of $H_k$ for time `t`, shape of `y`."""
 
+    def lifted_flow(self, system: AbstractPoissonSystem, t: ArrayLike,
+                    gy: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
+        r"""The exact flow of $H_k$ on configuration and momentum, $(g, \mu)$ = `gy`
+        (reconstruction $\dot g = g\,\nabla H_k$). Pieces whose body velocity changes along
+        their flow have no such closed form here: `ValueError`."""
+        raise ValueError(
+            f"the piece {self!r} has no exact reconstruction of the configuration in this library (its body velocity "
+            "changes along its flow); use pieces that are CollectiveTerms without Casimirs"
+        )
+
 
 class CollectiveTerm(AbstractExactTerm):
     r"""A piece $H_k(y) = \varphi(L y, C(y))$ of a Hamiltonian, with linear forms $L$ (rows)
@@ -97,3 +107,14 @@ class CollectiveTerm(AbstractExactTerm):
         """Exact flow of this term for time `t`."""
         y = as_state(y, "y", system.dim)
         return system.test_flow(self.frozen_alpha(system, y), t, y)
+
+    def lifted_flow(self, system, t, gy):
+        r"""$(g\exp(t\alpha), \mathrm{Ad}^*_{\exp(t\alpha)}\mu)$ with $\alpha$ frozen: the body
+        velocity $\nabla H_k = L^\top\partial_s\varphi$ is constant along the flow, so the
+        reconstruction is exact. A piece that uses the Casimirs is refused: its body velocity
+        has a part along their gradients, which move."""
+        if self.uses_casimirs:
+            return super().lifted_flow(system, t, gy)
+        g, y = gy
+        y = as_state(y, "y", system.dim)
+        return system.lifted_test_flow(self.frozen_alpha(system, y), t, g, y)
