@@ -22,6 +22,7 @@ from ._ground_truth import (
     save_ground_truth as save_ground_truth,
     taylor_integrator as taylor_integrator,
 )
+from ._body_observations import BodyObservations as BodyObservations, observe_body as observe_body
 from ._observations import (
     Observations as Observations,
     observe as observe,

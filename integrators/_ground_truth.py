@@ -73,9 +73,10 @@ def taylor_integrator(
         cache = by_object.setdefault(system, {})
     if key not in cache:
         ode = system.heyoka_configured_system() if configured else system.heyoka_system()
+        n_state = len(ode)
         if variational:
             ode = hy.var_ode_sys(ode, hy.var_args.vars, order=1)
-        cache[key] = hy.taylor_adaptive(ode, [0.0] * len(ode), tol=tol)
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol)
     return cache[key]
 
 

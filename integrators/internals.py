@@ -38,12 +38,12 @@ from ._files import atomic_write_text as atomic_write_text
 from ._files import open_hdf5 as open_hdf5
 from ._ground_truth import integrate_chunk as integrate_chunk
 from ._json_values import json_values as json_values
+from ._observations import rms_size as rms_size
 from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
 from ._splitting._base import composition_flops as composition_flops
 from ._splitting._base import splitting_method as splitting_method
-from ._observations import rms_size as rms_size
 from ._step_map import check_h as check_h
 from ._step_map import check_state as check_state
 from ._step_map import traced_h as traced_h

@@ -57,6 +57,13 @@ from ._solvers._stage import (
     Result as Result,
     WarmStart as WarmStart,
 )
+from ._training._body import (
+    BodyLoss as BodyLoss,
+    BodyObjective as BodyObjective,
+    BodySegments as BodySegments,
+    body_quadratic_estimate as body_quadratic_estimate,
+    latent_momenta as latent_momenta,
+)
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import (
     FAMILIES as FAMILIES,

@@ -155,6 +155,16 @@ class AbstractLieGroup(abc.ABC):
         r"""Matrices $E_a$ `(dim, N, N)` of a faithful representation of the algebra, with
         $[E_a, E_b] = C_{abd}E_d$ for the structure constants this group goes with."""
 
+    @abc.abstractmethod
+    def difference(self, g1: jax.Array, g2: jax.Array) -> jax.Array:
+        r"""A smooth measure of $g_1^{-1}g_2$ in $\mathbb R^{\dim}$, equal to
+        $\log(g_1^{-1}g_2)$ to first order (traceable, batched): the residual of a fit."""
+
+    @abc.abstractmethod
+    def log_between(self, g1: ArrayLike, g2: ArrayLike) -> np.ndarray:
+        r"""$\log(g_1^{-1}g_2)$ `(..., dim)` in numpy (for estimates from data, not traced): the
+        constant body velocity times the time that carries $g_1$ to $g_2$."""
+
     def check(self, g: ArrayLike, name: str = "g") -> jax.Array:
         """`g` as float64 configurations `(..., size)`, finite, on the group (within the
         stated tolerance; then projected onto it). `ValueError` naming `name` otherwise."""
@@ -229,6 +239,20 @@ class Rotations(AbstractLieGroup):
 
     def matrix_basis(self) -> np.ndarray:
         return np.array([np.array(hat(e), dtype=np.float64) for e in np.eye(3)])
+
+    def difference(self, g1, g2):
+        r"""$2\,\mathrm{sign}(w)\,u$ of $q_1^{-1}\otimes q_2 = (u, w)$: the rotation vector to
+        first order, $2\sin(\theta/2)$ along the axis (the same for $\pm q$)."""
+        rel = jnp.stack(quaternion_product(_split(g1 * jnp.asarray([-1.0, -1.0, -1.0, 1.0])), _split(g2)), axis=-1)
+        return 2.0 * jnp.where(rel[..., 3:] < 0.0, -1.0, 1.0) * rel[..., :3]
+
+    def log_between(self, g1, g2):
+        from scipy.spatial.transform import Rotation
+
+        q1, q2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
+        shape = np.broadcast_shapes(q1.shape, q2.shape)
+        q1, q2 = np.broadcast_to(q1, shape).reshape(-1, 4), np.broadcast_to(q2, shape).reshape(-1, 4)
+        return (Rotation.from_quat(q1).inv() * Rotation.from_quat(q2)).as_rotvec().reshape(shape[:-1] + (3,))
 
     def check(self, g, name="g"):
         return _check_quaternions(g, name, 4, "an attitude")
@@ -324,6 +348,25 @@ class Poses(AbstractLieGroup):
             E[3 + a, a, 3] = 1.0
         return E
 
+    def difference(self, g1, g2):
+        """The attitudes' `Rotations.difference`, then $R_1^\top(x_2 - x_1)$ (body frame)."""
+        R1 = rotation_matrix(g1[..., :4])
+        d = jnp.einsum("...ji,...j->...i", R1, g2[..., 4:] - g1[..., 4:])
+        return jnp.concatenate([Rotations().difference(g1[..., :4], g2[..., :4]), d], axis=-1)
+
+    def log_between(self, g1, g2):
+        g1, g2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
+        shape = np.broadcast_shapes(g1.shape, g2.shape)
+        g1, g2 = np.broadcast_to(g1, shape).reshape(-1, 7), np.broadcast_to(g2, shape).reshape(-1, 7)
+        phi = Rotations().log_between(g1[:, :4], g2[:, :4])
+        R1 = np.asarray(rotation_matrix(jnp.asarray(g1[:, :4])))
+        d = np.einsum("nji,nj->ni", R1, g2[:, 4:] - g1[:, 4:])  # R1^T (x2 - x1)
+        # V(phi) v = d: V is a linear map of v (se3_translation), solved column by column
+        V = np.stack([np.asarray(se3_translation(jnp.asarray(phi), jnp.broadcast_to(jnp.asarray(e), phi.shape)))
+                      for e in np.eye(3)], axis=-1)
+        v = np.linalg.solve(V, d[..., None])[..., 0]
+        return np.concatenate([phi, v], axis=1).reshape(shape[:-1] + (6,))
+
     def check(self, g, name="g"):
         return _check_quaternions(g, name, 7, "then a position (a pose is 7 numbers)")
 
@@ -413,6 +456,23 @@ class MatrixGroup(AbstractLieGroup):
 
     def matrix_basis(self) -> np.ndarray:
         return self.basis
+
+    def difference(self, g1, g2):
+        """The basis coordinates of $g_1^{-1}g_2 - 1$ (the logarithm to first order)."""
+        G1 = g1.reshape(g1.shape[:-1] + (self.n, self.n))
+        G2 = g2.reshape(g2.shape[:-1] + (self.n, self.n))
+        rel = jnp.linalg.solve(G1, G2) - jnp.eye(self.n)
+        return rel.reshape(rel.shape[:-2] + (self.size,)) @ jnp.asarray(self._coordinates)
+
+    def log_between(self, g1, g2):
+        from scipy.linalg import logm
+
+        g1, g2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
+        shape = np.broadcast_shapes(g1.shape, g2.shape)
+        G1 = np.broadcast_to(g1, shape).reshape(-1, self.n, self.n)
+        G2 = np.broadcast_to(g2, shape).reshape(-1, self.n, self.n)
+        logs = np.stack([np.real(logm(np.linalg.solve(a, b))).reshape(-1) for a, b in zip(G1, G2)])
+        return (logs @ self._coordinates).reshape(shape[:-1] + (self.dim,))
 
     def check(self, g, name="g"):
         g = as_state(g, name, self.size)

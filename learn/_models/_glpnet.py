@@ -160,6 +160,13 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractRec
         potential = ridge_potential(s, t.a_values(), t.bias_values(), e, activation_antiderivative(t.activation), JAX)
         return self.hamiltonian_weight * jnp.sum(potential, axis=-1)
 
+    def body_velocity(self, y: jax.Array) -> jax.Array:
+        r"""$\xi = \nabla\widetilde H(y) = w\sum_s\Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$ for
+        one state `(dim,)`: the body velocity a configuration moves with ($\dot g = g\,\xi$),
+        what a gyroscope measures."""
+        velocities = jax.vmap(lambda s: self.terms.velocity(s, y))(jnp.arange(self.n_modules))
+        return self.hamiltonian_weight * jnp.sum(velocities, axis=0)
+
     def learned_system(self):
         r"""The Poisson system $\dot y = \mathbb B(y)\nabla\widetilde H$ with this network's
         learned Hamiltonian and the system's bracket, split into its pieces (one

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
@@ -21,7 +22,7 @@ from .._solvers._quasi_newton import QuasiNewton
 from ._base import AbstractLearnedMap
 
 
-class ParametricHamiltonian(AbstractLearnedMap):
+class ParametricHamiltonian(AbstractLearnedMap, AbstractReconstructingStepMap):
     r"""The flow of $\dot y = \mathbb B(y)\nabla_y H(y; \theta)$ over one step, for a
     Hamiltonian family `hamiltonian(y, theta)` (JAX, scalar) with parameters $\theta$ fitted
     by `learn.fit`; the bracket is `system`'s.
@@ -81,6 +82,37 @@ class ParametricHamiltonian(AbstractLearnedMap):
             return z + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
         return jax.lax.fori_loop(0, self.substeps, rk4, y)
+
+    def body_velocity(self, y: jax.Array) -> jax.Array:
+        r"""$\xi = \nabla_y H(y; \theta)$ for one state: the body velocity ($\dot g = g\,\xi$)."""
+        return jax.grad(self.hamiltonian_family)(y, self.theta)
+
+    def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""RK4 (`substeps` steps) on $(g, y)$ with $\dot g = g\,\nabla H$ written in the group's
+        coordinates (`group.velocity_components`), then $g$ projected on the group (a unit
+        quaternion normalised): accurate, not structure-preserving, as `step`."""
+        group = self.system.require_group()
+        g, y = group.check(g, "g"), check_state(y, self.system.dim)
+        dt = check_h(self) / self.substeps
+
+        def f(z):
+            gz, yz = z
+            xi = self.body_velocity(yz)
+            dg = jnp.stack(group.velocity_components([gz[i] for i in range(group.size)], [xi[i] for i in range(xi.size)]))
+            return dg, self.system.poisson_tensor(yz) @ xi
+
+        def add(z, k, c):
+            return z[0] + c * k[0], z[1] + c * k[1]
+
+        def rk4(_, z):
+            k1 = f(z)
+            k2 = f(add(z, k1, 0.5 * dt))
+            k3 = f(add(z, k2, 0.5 * dt))
+            k4 = f(add(z, k3, dt))
+            return tuple(zi + dt / 6.0 * (a + 2.0 * b + 2.0 * c + d) for zi, a, b, c, d in zip(z, k1, k2, k3, k4))
+
+        g1, y1 = jax.lax.fori_loop(0, self.substeps, rk4, (g, y))
+        return group.project(g1), y1
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -70,6 +70,12 @@ class Family:
             kept = {"a_kept": a_kept, "b_kept": b_kept}
         else:
             A, b = quadratic_estimate(system, data, linear=self.bias, diagonal=not self.any_axes)
+        return self.terms_of(system, A, b, size, **kept)
+
+    def terms_of(self, system: AbstractPoissonSystem, A: np.ndarray, b: np.ndarray, size: float,
+                 **kept: tuple[bool, ...]) -> RidgeTerms:
+        r"""This family's pieces holding $\tfrac12y^\top Ay + b^\top y$ (`start`'s split along
+        the eigenvectors of $A$, or the axes), inputs scaled by `size`."""
         if self.any_axes:
             values, vectors = np.linalg.eigh(A)
         else:

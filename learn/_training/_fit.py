@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators import Observations, Trajectories
+from integrators import BodyObservations, Observations, Trajectories
 from liepoisson.internals import positive_int, show_progress
 
 from .._models._base import AbstractLearnedMap, check_learned_map
@@ -184,6 +184,14 @@ def named_losses(data: Any) -> dict[str | None, AbstractLoss]:
     """The losses a kind of data knows by name, `None` its default: on pairs the state loss
     (default) and an LPNet's alpha loss."""
     return {None: StateLoss(), "state": StateLoss(), "alpha": AlphaLoss()}
+
+
+@named_losses.register
+def _(data: BodyObservations) -> dict[str | None, AbstractLoss]:
+    """On body observations: whole trajectories with latent momenta (`learn.BodyLoss`)."""
+    from ._body import BodyLoss
+
+    return {None: BodyLoss()}
 
 
 @named_losses.register

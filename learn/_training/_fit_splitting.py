@@ -14,7 +14,7 @@ import equinox as eqx
 import jax
 from numpy.typing import ArrayLike
 
-from integrators import Observations, Trajectories
+from integrators import BodyObservations, Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.internals import show_progress
 from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
@@ -24,6 +24,7 @@ from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
+from ._body import BodyLoss, body_quadratic_estimate
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
@@ -44,6 +45,7 @@ def fit_splitting(
     validation_fraction: float = 0.2,
     seed: int = 0,
     progress: bool | None = None,
+    families: Sequence[Family] | None = None,
 ) -> tuple[GLPNet, Sequence[TrainingRecord]]:
     r"""A G-LPNet for any Poisson system with test flows, as a data-driven splitting method;
     returns `(network, records)`, one `TrainingRecord` per fit.
@@ -74,9 +76,17 @@ def fit_splitting(
     those of every family fitted, the chosen one last; each last stage's `details` hold its
     criterion.
 
+    With `integrators.BodyObservations` (configurations and/or body velocities, what a star
+    tracker and a gyroscope record) the momenta are latent: each family is fitted by
+    Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
+    and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
+    the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
+    momenta).
+
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
-    trajectories; `"identity"`: a quadratic $\widetilde H$). The other arguments are
-    `learn.fit`'s.
+    trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
+    families to choose from on observations (default `learn.FAMILIES`; e.g.
+    `(learn.FAMILIES[3],)` for any quadratic form alone). The other arguments are `learn.fit`'s.
     """
     check_conservative(system)
     if method is not None:  # a wrong method fails before the first fit
@@ -86,7 +96,17 @@ def fit_splitting(
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
-    return _recipe(data, system, method, loss, activation, iterations, key, common)
+    if families is not None:
+        if activation is not None:
+            raise ValueError("give activation= or families=, not both (a family has its activation)")
+        families = tuple(families)
+        if not families or not all(isinstance(f, Family) for f in families):
+            raise TypeError(f"families must be a non-empty sequence of learn.Family (e.g. learn.FAMILIES[:2]); "
+                            f"got {families!r}")
+        if not isinstance(data, (Observations, BodyObservations)):
+            raise ValueError("families= chooses between families on observations (integrators.Observations or "
+                             "BodyObservations); pairs and trajectories fit one family (activation=)")
+    return _recipe(data, system, method, loss, activation, iterations, key, common, families)
 
 
 def check_conservative(system: AbstractPoissonSystem) -> None:
@@ -112,7 +132,7 @@ def warn_dissipative_data(data: Observations) -> None:
 
 
 @functools.singledispatch
-def _recipe(data, system, method, loss, activation, iterations, key, common):
+def _recipe(data, system, method, loss, activation, iterations, key, common, families=None):
     """Pairs and trajectories: Strang, then the same pieces composed by `method`, by BFGS."""
     iterations = BFGS_ITERATIONS if iterations is None else iterations
     if loss is not None:
@@ -145,7 +165,7 @@ RTOL = 1e-10
 BIC_RESOLUTION = 0.1
 
 @_recipe.register
-def _(data: Observations, system, method, loss, activation, iterations, key, common):
+def _(data: Observations, system, method, loss, activation, iterations, key, common, families=None):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
     through `method`; the lowest BIC wins."""
     warn_dissipative_data(data)
@@ -155,7 +175,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
     split = {"h": common["h"], "validation_fraction": common["validation_fraction"], "seed": common["seed"],
              "normalise": False}
-    families = FAMILIES if activation is None else (
+    families = families or FAMILIES if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
     # each family from the least-squares quadratic of the finite differences, in the data's units
     size = state_size(system, data)
@@ -180,3 +200,56 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     best = min(fits, key=lambda f: (f[0], f[1]))
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
 
+
+
+@_recipe.register
+def _(data: BodyObservations, system, method, loss, activation, iterations, key, common, families=None):
+    """Body observations (configurations, velocities; momenta latent): each family from the
+    quadratic of `body_quadratic_estimate`, fitted by Levenberg-Marquardt on `learn.BodyLoss`
+    through `method`; the lowest BIC wins."""
+
+    method = Strang() if method is None else method
+    iterations = LM_ITERATIONS if iterations is None else iterations
+    loss = BodyLoss() if loss is None else loss
+    if not isinstance(loss, BodyLoss):
+        raise TypeError(f"loss must be a learn.BodyLoss for body observations; got {type(loss).__name__}")
+    if system.group != data.group:
+        raise ValueError(f"system {system!r} moves configurations on {system.group!r}; the observations are on "
+                         f"{data.group!r}")
+    context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
+    split = {"h": common["h"], "validation_fraction": 0.0, "seed": common["seed"], "normalise": False}
+    families = (families or tuple(f for f in FAMILIES if not f.select)) if activation is None else (
+        Family(activation, activation, linear_term=activation != "identity", bias=True),)
+    rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim * len(data.measured)))
+    fits, fitted = [], {}
+    for family in families:
+        A, b = body_quadratic_estimate(data, linear=family.bias, diagonal=not family.any_axes)
+        velocities = data.velocities if data.velocities is not None else [
+            data.group_velocities(j) for j in range(len(data))]
+        size = _momentum_size(A, b, velocities)
+        net = GLPNet(system, terms=family.terms_of(system, A, b, size), method=method)
+        start = loss.problem(net, data, **split)
+        if family.nested in fitted:  # from the nested family's fit, map and starts
+            nested = fitted[family.nested]
+            net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
+            start = start.with_start(Fitted(net, nested.starts))
+        problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),), context)
+        fitted[family.name] = problem.y0
+        criterion = information_criterion(problem, problem.y0)
+        last = results[-1]
+        results[-1] = dataclasses.replace(last, record=dataclasses.replace(
+            last.record, details={**last.record.details, **criterion, "family": family.name}))
+        fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
+    best = min(fits, key=lambda f: (f[0], f[1]))
+    return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
+
+
+def _momentum_size(A, b, velocities) -> float:
+    r"""The RMS size of the momenta $\mu = A^{-1}(\xi - b)$ of the velocities (the latent
+    states' scale), 1 if 0."""
+    import numpy as np
+
+    xi = np.concatenate(velocities)
+    mu = np.linalg.solve(A, (xi - b).T).T
+    size = float(np.sqrt(np.mean(np.sum(mu**2, axis=1))))
+    return size if size > 0.0 else 1.0

@@ -23,6 +23,13 @@ class HeavyTop(AbstractLiePoissonSystem, AbstractDefinedByParams):
 
     name = "HeavyTop"
 
+    @property
+    def group(self):
+        r"""`None`: the top's configuration is a rotation $R$ with $\Gamma = R^\top e_3$ (a
+        semidirect product reduced by the symmetry about the vertical), not the pose of se(3)
+        that its algebra's default would give; its reconstruction is not implemented."""
+        return None
+
     def __init__(self, inertia=(1.0, 2.0, 3.0), mgl=1.0, center_of_mass=(0.0, 0.0, 1.0)):
         self.inertia = positive_vector(inertia, "inertia", 3)
         self.mgl = positive_float(mgl, "mgl")

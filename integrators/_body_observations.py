@@ -1,0 +1,340 @@
+r"""What instruments measure of a body: its configuration (a star tracker's attitude, a
+navigation system's pose) and its body velocity (a gyroscope's rates, a log's speeds), at
+uneven times, with noise; never its momentum, which needs the inertia that is to be learned.
+And `observe_body`, which makes such data from heyoka's ground truth of $(\mu, g)$.
+
+Noise ([Observations of bodies][conventions-body-observations]): an attitude is rotated by a
+random rotation vector of standard deviation `noise` radians per axis (in the body frame); a
+position gets Gaussian noise of `noise` times the RMS size of the positions; a velocity gets
+Gaussian noise of `noise` times the RMS size of the velocities.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+import liepoisson
+from liepoisson import Poses, Rotations
+from liepoisson.internals import fraction, jsonable, positive_int
+from liepoisson.systems import AbstractLiePoissonSystem, system_for_file
+
+from ._files import atomic_path, open_hdf5
+from ._ground_truth import taylor_integrator
+from ._noise import noise_level
+from ._observations import (
+    _per_trajectory,
+    check_times,
+    format_version,
+    rms_size,
+    times_per_trajectory,
+)
+from ._validation_split import validation_split
+
+FORMAT = "liepoisson-body-observations"
+FORMAT_VERSION = 1
+#: What can be measured: `"configurations"`, `"velocities"` or both.
+MEASURED = ("configurations", "velocities")
+
+
+def _check_system(system: Any) -> AbstractLiePoissonSystem:
+    if not isinstance(system, AbstractLiePoissonSystem):
+        raise TypeError(f"system must be a Lie-Poisson system (liepoisson.systems.AbstractLiePoissonSystem) with a "
+                        f"configuration group; got {type(system).__name__}")
+    system.require_group()
+    return system
+
+
+def _rows(value: Any, name: str, n: int, width: int, times: list[np.ndarray]) -> list[np.ndarray]:
+    arrays = _per_trajectory(value, name)
+    arrays = list(arrays) if isinstance(arrays, list) or arrays.ndim == 3 else [arrays]
+    if len(arrays) != n:
+        raise ValueError(f"{name} has {len(arrays)} trajectories and times {n}; give one array per trajectory")
+    out = []
+    for j, (a, t) in enumerate(zip(arrays, times)):
+        a = np.asarray(a, dtype=np.float64)
+        if a.ndim != 2 or a.shape[1] != width:
+            raise ValueError(f"{name}[{j}] must have shape (n_observations, {width}); got shape {a.shape}")
+        if a.shape[0] != t.shape[0]:
+            raise ValueError(f"{name}[{j}] has {a.shape[0]} observations and times[{j}] {t.shape[0]}; give one "
+                             "time per observation")
+        bad = np.argwhere(~np.isfinite(a))
+        if bad.size:
+            k, i = (int(v) for v in bad[0])
+            raise ValueError(f"{name}[{j}] must be finite; observation {k} (t = {t[k]}), component {i} is {a[k, i]}. "
+                             "Missing values are not masked: drop that observation and its time")
+        out.append(a.copy())
+    return out
+
+
+class BodyObservations:
+    r"""Trajectories of a body observed at their own times: configurations $g_j(t_{j,k})$ on
+    `system.group` (unit quaternions $(x, y, z, w)$, scalar last, for `liepoisson.Rotations`;
+    quaternion and position for `liepoisson.Poses`), body velocities $\xi_j(t_{j,k})$
+    ($\Omega$ for a rigid body; $(\Omega, v)$ for a vehicle), or both. The momenta are not
+    observed: a fit treats them as unknowns ([Observations of bodies][conventions-body-observations]).
+
+    **Arguments:**
+
+    - `system`: a Lie-Poisson system with a configuration group (its Hamiltonian is what is
+      learned; only its algebra and group are used).
+    - `times`: one array of times per trajectory (or one 1-D array shared by all), strictly
+      increasing.
+    - `configurations`: one `(n_j, group.size)` array per trajectory, or `None`; quaternions
+      within `liepoisson._groups.QUATERNION_TOLERANCE` (1e-6) of unit norm are normalised,
+      others refused.
+    - `velocities`: one `(n_j, dim)` array per trajectory, or `None`. At least one of the two.
+    - `metadata`: JSON values kept with the data and in its file.
+    """
+
+    def __init__(self, system: AbstractLiePoissonSystem, times: Any, configurations: Any = None,
+                 velocities: Any = None, *, metadata: dict[str, Any] | None = None):
+        system = _check_system(system)
+        group = system.group
+        if configurations is None and velocities is None:
+            raise ValueError("give configurations, velocities or both: observations need something measured")
+        first = configurations if configurations is not None else velocities
+        arr = _per_trajectory(first, "configurations" if configurations is not None else "velocities")
+        n = len(arr) if isinstance(arr, list) or arr.ndim == 3 else 1
+        ts = times_per_trajectory(times, n)
+        if len(ts) != n:
+            raise ValueError(f"times has {len(ts)} trajectories and the measurements {n}; give one time array per "
+                             "trajectory (or one 1-D array shared by all)")
+        for j, t in enumerate(ts):
+            check_times(t, f"times[{j}]")
+            if t.shape[0] < 2:
+                raise ValueError(f"times[{j}] has {t.shape[0]} time(s); a trajectory needs at least two observations")
+        self.system = system
+        self.times: tuple[np.ndarray, ...] = tuple(np.array(t, dtype=np.float64) for t in ts)
+        self.configurations: tuple[np.ndarray, ...] | None = None
+        self.velocities: tuple[np.ndarray, ...] | None = None
+        if configurations is not None:
+            gs = _rows(configurations, "configurations", n, group.size, list(self.times))
+            self.configurations = tuple(np.asarray(group.check(g, f"configurations[{j}]")) for j, g in enumerate(gs))
+        if velocities is not None:
+            self.velocities = tuple(_rows(velocities, "velocities", n, system.dim, list(self.times)))
+        try:
+            self.metadata: dict[str, Any] = jsonable(dict(metadata or {}))
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"metadata must be a dict of JSON values; got {metadata!r}") from err
+
+    # -- shape -----------------------------------------------------------------------------
+    @property
+    def group(self):
+        return self.system.group
+
+    @property
+    def measured(self) -> tuple[str, ...]:
+        """What these observations hold: `("configurations", "velocities")` or one of them."""
+        return tuple(k for k in MEASURED if getattr(self, k) is not None)
+
+    @property
+    def n_trajectories(self) -> int:
+        return len(self.times)
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    @property
+    def dim(self) -> int:
+        return self.system.dim
+
+    @property
+    def n_observations(self) -> int:
+        """All observation times of all trajectories."""
+        return int(sum(t.size for t in self.times))
+
+    def __repr__(self) -> str:
+        steps = np.concatenate([np.diff(t) for t in self.times])
+        return (f"BodyObservations({self.system!r}, {' and '.join(self.measured)}, {self.n_trajectories} "
+                f"trajectories, {self.n_observations} observations, steps {steps.min():.3g}..{steps.max():.3g})")
+
+    def intervals(self) -> np.ndarray:
+        """Every interval between consecutive observations of a trajectory, `(N,)`."""
+        return np.concatenate([np.diff(t) for t in self.times])
+
+    def is_regular(self, rtol: float = 1e-9) -> bool:
+        dt = self.intervals()
+        return bool(np.all(np.abs(dt - dt[0]) <= rtol * dt[0]))
+
+    def velocity_scale(self) -> float:
+        r"""$\sqrt{\operatorname{mean}|\xi|^2}$ of the observed velocities (of the finite
+        differences of the configurations when no velocity is observed): what velocity noise
+        and velocity residuals are measured against."""
+        if self.velocities is not None:
+            return rms_size(self.velocities)
+        return rms_size([self.group_velocities(j) for j in range(len(self))])
+
+    def position_scale(self) -> float | None:
+        r"""$\sqrt{\operatorname{mean}|x|^2}$ of the observed positions (poses), else `None`."""
+        if self.configurations is None or not isinstance(self.group, Poses):
+            return None
+        return max(rms_size([g[:, 4:] for g in self.configurations]), np.finfo(float).tiny)
+
+    def group_velocities(self, j: int) -> np.ndarray:
+        r"""The body velocities `(n_j - 1, dim)` over the intervals of trajectory `j` from its
+        configurations, $\log(g_k^{-1}g_{k+1})/\Delta t$ (at the intervals' midpoints)."""
+        if self.configurations is None:
+            raise ValueError("these observations hold no configurations")
+        g = self.configurations[j]
+        return np.asarray(self.group.log_between(g[:-1], g[1:])) / np.diff(self.times[j])[:, None]
+
+    def select(self, indices: int | Any) -> BodyObservations:
+        """The trajectories `indices` (an int or a sequence of ints)."""
+        idx = np.atleast_1d(np.asarray(indices))
+        if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+            raise TypeError(f"indices must be an int or a non-empty sequence of ints; got {indices!r}")
+        if np.any((idx < -len(self)) | (idx >= len(self))):
+            raise IndexError(f"indices {idx.tolist()} out of range for {len(self)} trajectories")
+        pick = (lambda xs: None if xs is None else [xs[i] for i in idx])
+        return BodyObservations(self.system, pick(self.times), pick(self.configurations), pick(self.velocities),
+                                metadata=self.metadata)
+
+    def split(self, validation_fraction: float, seed: int = 0) -> tuple[BodyObservations, BodyObservations | None]:
+        """`(training, validation)` by whole trajectories (random, seeded); `None` for none."""
+        seed = positive_int(seed, "seed", minimum=0)
+        train, val = validation_split(len(self), validation_fraction, seed, "trajectory")
+        if len(val) == 0:
+            return self, None
+        return self.select(train), self.select(val)
+
+    def in_units(self, time: float) -> BodyObservations:
+        """The same observations with times divided by `time` (e.g. 1e-3 for milliseconds to
+        seconds) and velocities multiplied by it: configurations do not change."""
+        from liepoisson.internals import positive_float
+
+        time = positive_float(time, "time")
+        return BodyObservations(self.system, [t / time for t in self.times], self.configurations,
+                                None if self.velocities is None else [v * time for v in self.velocities],
+                                metadata={**self.metadata, "time_unit": time})
+
+    # -- files -----------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> None:
+        """Write to HDF5, atomically: datasets `trajectory` (each observation's trajectory),
+        `t`, and `configurations` `(N, group.size)` and/or `velocities` `(N, dim)`; the system,
+        the group and the metadata as attributes."""
+        import h5py
+
+        index = np.concatenate([np.full(t.size, j) for j, t in enumerate(self.times)])
+        with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+            f.create_dataset("trajectory", data=index)
+            f.create_dataset("t", data=np.concatenate(self.times))
+            for key in self.measured:
+                f.create_dataset(key, data=np.concatenate(getattr(self, key)))
+            f.attrs["format"] = FORMAT
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["system"] = self.system.name
+            f.attrs["system_params"] = json.dumps(self.system.params)
+            f.attrs["group"] = self.group.name
+            f.attrs["metadata"] = json.dumps(self.metadata)
+            f.attrs["liepoisson_version"] = liepoisson.__version__
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, system: AbstractLiePoissonSystem | None = None) -> BodyObservations:
+        """Read a file written by `save` (the system rebuilt from it, or `system` checked
+        against it); `ValueError` naming the file if it is of another kind or damaged."""
+        path = os.fspath(path)
+        f = open_hdf5(path, "liepoisson body observations (written by BodyObservations.save)")
+        try:
+            with f:
+                if f.attrs.get("format") != FORMAT:
+                    raise ValueError(f"{path!r} is not a liepoisson body-observations file (attribute format is "
+                                     f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
+                version = format_version(f.attrs["format_version"], path)
+                if version != FORMAT_VERSION:
+                    raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads {FORMAT_VERSION}")
+                index, t = f["trajectory"][...], f["t"][...]
+                data = {k: f[k][...] for k in MEASURED if k in f}
+                name = f.attrs["system"]
+                params = json.loads(f.attrs["system_params"])
+                metadata = json.loads(f.attrs.get("metadata", "{}"))
+        except ValueError:
+            raise
+        except (OSError, KeyError, TypeError) as err:
+            raise ValueError(f"{path!r} is damaged or lacks a field of a body-observations file: {err}") from err
+        name = name.decode() if isinstance(name, bytes) else str(name)
+        system = system_for_file(name, params, system, f"the file {path!r}")
+        if index.shape != t.shape or any(v.shape[0] != t.shape[0] for v in data.values()):
+            raise ValueError(f"{path!r} holds columns of different lengths")
+        labels = np.unique(index)
+        rows = [np.flatnonzero(index == v) for v in labels]
+        return cls(system, [t[r] for r in rows],
+                   *[[data[k][r] for r in rows] if k in data else None for k in MEASURED], metadata=metadata)
+
+
+def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike, times: Any, *,
+                 noise: float = 0.0, measure: str | tuple[str, ...] = MEASURED, drop: float = 0.0, seed: int = 0,
+                 tol: float | None = None) -> BodyObservations:
+    r"""What instruments would record of heyoka's ground truth of $(\mu, g)$, for studies:
+    trajectory $j$ from momentum `y0[j]` and configuration `g0[j]` at `times[j][0]`, observed at
+    `times[j]`.
+
+    **Arguments:** `y0` `(n, dim)`; `g0` `(n, group.size)` or `(group.size,)`; `times` as
+    `BodyObservations` (or `integrators.uneven_times(...)`); `noise` >= 0: attitude noise in
+    radians (a random rotation vector with that standard deviation per axis, in the body
+    frame), and velocities' and positions' noise relative to their RMS size; `measure`:
+    `"configurations"`, `"velocities"` or both (default); `drop`: the probability that an
+    observation is dropped (the first and last of each trajectory are kept); `seed`: drops and
+    noise from independent streams of it (noise 0 gives the clean values at the same times).
+    """
+    system = _check_system(system)
+    group = system.group
+    measure = (measure,) if isinstance(measure, str) else tuple(measure)
+    if not measure or any(m not in MEASURED for m in measure):
+        raise ValueError(f"measure must be 'configurations', 'velocities' or both; got {measure!r}")
+    y0 = np.array(system.check_regular(y0, "y0"), dtype=np.float64).reshape(-1, system.dim)
+    g0 = np.asarray(group.check(g0, "g0"))
+    g0 = np.broadcast_to(g0, (y0.shape[0], group.size)) if g0.ndim == 1 else g0
+    if g0.shape != (y0.shape[0], group.size):
+        raise ValueError(f"g0 must have shape ({group.size},) or ({y0.shape[0]}, {group.size}); got shape {g0.shape}")
+    noise = noise_level(noise)
+    drop = fraction(drop, "drop")
+    seed = positive_int(seed, "seed", minimum=0)
+    ts = times_per_trajectory(times, y0.shape[0])
+    if len(ts) != y0.shape[0]:
+        raise ValueError(f"times has {len(ts)} trajectories and y0 {y0.shape[0]} initial states")
+    for j, t in enumerate(ts):
+        check_times(t, f"times[{j}]")
+        if t.size < 2:
+            raise ValueError(f"times[{j}] has {t.size} time(s); a trajectory needs at least two observations")
+    drops, noises = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    keep = []
+    for t in ts:
+        k = drops.random(t.size) >= drop
+        k[0] = k[-1] = True
+        keep.append(k)
+    import heyoka as hy
+
+    ta = taylor_integrator(system, tol, configured=True)
+    mus, gs = [], []
+    for j, (y, g, t) in enumerate(zip(y0, g0, ts)):
+        ta.time, ta.state[:] = float(t[0]), np.concatenate([y, g])
+        outcome, *_, states = ta.propagate_grid(t)
+        if outcome != hy.taylor_outcome.time_limit:
+            raise RuntimeError(f"heyoka stopped trajectory {j} at t={ta.time}: {outcome}")
+        states = np.array(states[keep[j]])
+        mus.append(states[:, : system.dim])
+        gs.append(np.asarray(group.project(states[:, system.dim :])))
+    velocities = [np.asarray(system.body_velocity(m)) for m in mus]
+    v_std = noise * rms_size(velocities)
+    out_v = [v + v_std * noises.standard_normal(v.shape) for v in velocities] if "velocities" in measure else None
+    out_g = None
+    if "configurations" in measure:
+        out_g = []
+        p_std = noise * rms_size([g[:, 4:] for g in gs]) if isinstance(group, Poses) else 0.0
+        for g in gs:
+            rotation = noise * noises.standard_normal((g.shape[0], 3))
+            q = np.asarray(Rotations().right_exp(g[:, :4], rotation))
+            if isinstance(group, Poses):
+                out_g.append(np.concatenate([q, g[:, 4:] + p_std * noises.standard_normal((g.shape[0], 3))], axis=1))
+            elif isinstance(group, Rotations):
+                out_g.append(q)
+            else:
+                out_g.append(np.asarray(group.right_exp(g, noise * noises.standard_normal((g.shape[0], group.dim)))))
+    metadata = {"source": "integrators.observe_body", "noise": noise, "measure": list(measure), "drop": drop,
+                "seed": seed, "tolerance": tol, "velocity_noise_std": v_std}
+    return BodyObservations(system, [t[k] for t, k in zip(ts, keep)], out_g, out_v, metadata=metadata)

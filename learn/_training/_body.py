@@ -1,0 +1,262 @@
+r"""Learning from what instruments measure of a body (`integrators.BodyObservations`):
+configurations and body velocities, with the momenta latent.
+
+A G-LPNet's step lifted to the configuration (`GLPNet.lifted_step`) is rolled out over each
+trajectory from a fitted start $(g_0\exp(\delta), \mu_0)$; its body velocity is
+$\xi = \nabla\widetilde H(\mu)$. The residuals compare the predicted configurations with the
+observed ones (`group.difference`: radians for an attitude, positions relative to their RMS
+size) and the predicted velocities with the observed ones (relative to their RMS size). The
+momenta are never observed: $\mu_0$ of each trajectory is an unknown of the fit, like the
+network's weights.
+
+What is identifiable (conventions, [Observations of bodies][conventions-body-observations]):
+scaling the momenta and the inverse of $\widetilde H$'s quadratic form together,
+$\mu\to c\mu$, $\widetilde H(\mu)\to c\widetilde H(\mu/c)$, changes neither velocities nor
+configurations; the fit starts with the inertia $\mathbb M$ ($\mu = \mathbb M\xi$) of trace $n$
+and the criterion compares families at that gauge. Unlike from momenta, the part of
+$\widetilde H$ along the Casimirs is seen: it moves the configuration.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from numpy.typing import ArrayLike
+
+from integrators import AbstractReconstructingStepMap, BodyObservations
+from liepoisson.internals import positive_float
+
+from ._losses import AbstractLoss
+from ._observed import SegmentsObjective
+from ._problem import Description, Fitted, FittedProblem
+
+
+class BodySegments(eqx.Module):
+    """Body observations as a training problem's `args`, one segment per trajectory (padded to
+    the longest): `index` `(S,)` (the row of fitted starts), `dt` `(S, L-1)`, `mask` `(S, L)`,
+    `first` `(S, size)` the first observed configuration (the identity without configurations),
+    `configurations` `(S, L, size)`, `velocities` `(S, L, dim)`, `weights` `(dim,)` of the
+    configuration residual, `velocity_scale`; `measured` which of the two are compared."""
+
+    index: jax.Array
+    dt: jax.Array
+    mask: jax.Array
+    first: jax.Array
+    configurations: jax.Array
+    velocities: jax.Array
+    weights: jax.Array
+    velocity_scale: jax.Array
+    substeps: int = eqx.field(static=True)
+    measured: tuple[str, ...] = eqx.field(static=True)
+
+
+def body_segments(data: BodyObservations, substeps: int) -> BodySegments:
+    """Every trajectory of `data` as one segment."""
+    group, dim = data.group, data.dim
+    length = max(t.size for t in data.times)
+    S = len(data)
+    fill = float(np.median(data.intervals()))
+    dt = np.full((S, length - 1), fill)
+    mask = np.zeros((S, length))
+    gs = np.tile(group.identity(), (S, length, 1))
+    vs = np.zeros((S, length, dim))
+    for j, t in enumerate(data.times):
+        dt[j, : t.size - 1] = np.diff(t)
+        mask[j, : t.size] = 1.0
+        if data.configurations is not None:
+            gs[j, : t.size] = data.configurations[j]
+            gs[j, t.size :] = data.configurations[j][-1]
+        if data.velocities is not None:
+            vs[j, : t.size] = data.velocities[j]
+    weights = np.ones(dim)
+    position = data.position_scale()
+    if position is not None:  # positions relative to their RMS size, as their noise
+        weights[3:] = 1.0 / position
+    return BodySegments(jnp.arange(S, dtype=jnp.int32), jnp.asarray(dt), jnp.asarray(mask), jnp.asarray(gs[:, 0]),
+                        jnp.asarray(gs), jnp.asarray(vs), jnp.asarray(weights),
+                        jnp.asarray(data.velocity_scale()), substeps, data.measured)
+
+
+def lifted_segment(model, g0: jax.Array, mu0: jax.Array, dt: jax.Array, mask: jax.Array,
+                   substeps: int) -> tuple[jax.Array, jax.Array]:
+    """`(configurations (L, size), momenta (L, dim))` of one segment rolled out by
+    `model.lifted_step` from `(g0, mu0)` over its intervals (padding repeats the last)."""
+
+    def advance(gy, d):
+        m = eqx.tree_at(lambda m: m.h, model, d / substeps, is_leaf=lambda v: v is None)
+        if substeps == 1:
+            return m.lifted_step(*gy)
+        return jax.lax.fori_loop(0, substeps, lambda _, z: m.lifted_step(*z), gy)
+
+    def body(gy, inputs):
+        d, present = inputs
+        moved = advance(gy, d)
+        gy = jax.tree_util.tree_map(lambda new, old: jnp.where(present > 0, new, old), moved, gy)
+        return gy, gy
+
+    _, (gs, ys) = jax.lax.scan(body, (g0, mu0), (dt, mask[1:]))
+    return jnp.concatenate([g0[None], gs]), jnp.concatenate([mu0[None], ys])
+
+
+class BodyObjective(SegmentsObjective):
+    r"""The mean squared residual over every observation of every trajectory: configuration
+    (`group.difference` of observed and predicted, weighted) and velocity ($\nabla\widetilde H(\mu)$
+    less the observed, over its RMS size), as measured. The fitted starts are $(\mu_0, \delta)$
+    per trajectory, $g_0 = g_\text{obs}(t_0)\exp(\delta)$ ($\mu_0$ alone without configurations);
+    the Jacobian's blocks are `SegmentsObjective`'s (each trajectory depends on its own start)."""
+
+    def __call__(self, fitted: Fitted, args: BodySegments) -> jax.Array:
+        r = self.residuals(fitted, args)
+        per = args.velocities.shape[-1] * len(args.measured)
+        return jnp.sum(r**2) / (jnp.sum(args.mask) * per)
+
+    def count(self, fitted: Fitted, args: BodySegments) -> int:
+        """Every present observation times the components compared."""
+        per = args.velocities.shape[-1] * len(args.measured)
+        return round(float(np.sum(np.asarray(args.mask)))) * per
+
+    def residuals(self, fitted: Fitted, args: BodySegments) -> jax.Array:
+        """`(S, L, k)`: configuration then velocity residuals, zero where nothing is observed."""
+        model = fitted.model
+        group = model.system.require_group()
+        dim = args.velocities.shape[-1]
+        mu0 = fitted.starts[:, :dim]
+        has_g = "configurations" in args.measured
+        g0 = group.right_exp(args.first, fitted.starts[:, dim:]) if has_g else args.first
+        gs, mus = jax.vmap(lifted_segment, in_axes=(None, 0, 0, 0, 0, None))(
+            model, g0, mu0, args.dt, args.mask, args.substeps)
+        parts = []
+        if has_g:
+            parts.append(group.difference(args.configurations, gs) * args.weights)
+        if "velocities" in args.measured:
+            xi = jax.vmap(jax.vmap(model.body_velocity))(mus)
+            parts.append((xi - args.velocities) / args.velocity_scale)
+        return jnp.concatenate(parts, axis=-1) * args.mask[..., None]
+
+
+class BodyLoss(AbstractLoss):
+    r"""How `learn.fit` compares a G-LPNet with `integrators.BodyObservations`: whole
+    trajectories rolled out by its lifted step from fitted starts $(g_0\exp(\delta), \mu_0)$
+    (`BodyObjective`). `max_step`: each interval in equal steps of at most this (`None`: one
+    step per interval). No held-out trajectories: their momenta would be unknowns too (the
+    information criterion chooses between families, `learn.fit_splitting`)."""
+
+    max_step: float | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if self.max_step is not None:
+            positive_float(self.max_step, "BodyLoss.max_step")
+
+    @property
+    def name(self) -> str:
+        return "body observations: latent momenta"
+
+    def problem(self, model, data: BodyObservations, *, h, validation_fraction, seed, normalise) -> FittedProblem:
+        """The trajectories as `BodySegments`, the starts from `latent_starts`."""
+        if not isinstance(data, BodyObservations):
+            raise TypeError(f"learn.BodyLoss compares a map with integrators.BodyObservations; got {type(data).__name__}")
+        if not isinstance(model, AbstractReconstructingStepMap) or not hasattr(type(model), "body_velocity"):
+            raise TypeError(f"learning from body observations needs a map that carries the configuration and has a "
+                            f"learned Hamiltonian (learn.GLPNet); got {type(model).__name__}")
+        if normalise:
+            raise ValueError("normalise=True is for an MLP on pairs; not for body observations")
+        if model.system.group != data.group:
+            raise ValueError(f"the model's system moves configurations on {model.system.group!r}; the observations "
+                             f"are on {data.group!r}")
+        substeps = substeps_for_body(data, self.max_step)
+        h = positive_float(h, "h") if h is not None else (
+            float(model.h) if model.h is not None else float(np.median(data.intervals())))
+        model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)
+        args = body_segments(data, substeps)
+        description = Description(loss=self.name, h=h, n_train=int(data.n_observations), n_val=0, seed=int(seed),
+                                  validation_fraction=0.0, max_step=self.max_step, substeps=substeps)
+        return FittedProblem(BodyObjective(), Fitted(model, latent_starts(model, data)), args, None, description)
+
+
+def substeps_for_body(data: BodyObservations, max_step: float | None) -> int:
+    if max_step is None:
+        return 1
+    return max(1, int(np.ceil(float(np.max(data.intervals())) / max_step - 1e-12)))
+
+
+def first_velocities(data: BodyObservations) -> np.ndarray:
+    """The body velocity at the first time of each trajectory `(S, dim)`: observed, or from the
+    first interval's configurations."""
+    if data.velocities is not None:
+        return np.stack([v[0] for v in data.velocities])
+    return np.stack([data.group_velocities(j)[0] for j in range(len(data))])
+
+
+def latent_momenta(model, xi: ArrayLike, iterations: int = 20) -> jax.Array:
+    r"""The momenta $\mu$ `(..., dim)` with $\nabla\widetilde H(\mu) = \xi$ for body velocities
+    `xi` `(..., dim)` (what a gyroscope reads): the latent state a learned map starts from
+    (Newton's method on `model.body_velocity`, least squares per step; exact after one step
+    for a quadratic $\widetilde H$). In the gauge of the fit (conventions,
+    [Observations of bodies][conventions-body-observations])."""
+    xi = jnp.asarray(xi, dtype=jnp.float64)
+    dim = model.system.dim
+    if xi.ndim < 1 or xi.shape[-1] != dim or not bool(jnp.all(jnp.isfinite(xi))):
+        raise ValueError(f"xi must be finite body velocities of shape (..., {dim}); got shape {xi.shape}")
+    flat = xi.reshape(-1, dim)
+    grad = jax.vmap(model.body_velocity)
+    hess = jax.vmap(jax.jacfwd(model.body_velocity))
+    mu = jnp.zeros_like(flat)
+    for _ in range(iterations):
+        mu = mu - jnp.einsum("sij,sj->si", jnp.linalg.pinv(hess(mu)), grad(mu) - flat)
+    return mu.reshape(xi.shape)
+
+
+def latent_starts(model, data: BodyObservations) -> jax.Array:
+    r"""Starts `(S, dim)` or `(S, 2 dim)`: `latent_momenta` of each trajectory's first velocity,
+    then $\delta = 0$ when configurations are observed."""
+    mu = latent_momenta(model, first_velocities(data))
+    if "configurations" in data.measured:
+        return jnp.concatenate([mu, jnp.zeros_like(mu)], axis=1)
+    return mu
+
+
+def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagonal: bool = False
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(A, b)` of a quadratic $\widetilde H = \tfrac12\mu^\top A\mu + b^\top\mu$ from body
+    velocities alone: with the inertia $\mathbb M = A^{-1}$, $\mu = \mathbb M(\xi - b)$, the
+    Lie-Poisson equations $\dot\mu = \mathbb B(\mu)\xi$ read
+    $\mathbb M\dot\xi = \mathbb B(\mathbb M\xi - c)\,\xi$ with $c = \mathbb Mb$: homogeneous and
+    linear in $(\mathbb M, c)$, solved at the midpoints of consecutive velocities (observed, or
+    from the configurations) by the smallest singular vector. Scale (not identifiable):
+    $\operatorname{tr}\mathbb M = n$."""
+    system = data.system
+    n = system.dim
+    xis, dxis = [], []
+    for j, t in enumerate(data.times):
+        if data.velocities is not None:
+            v, tt = data.velocities[j], t
+        else:
+            v, tt = data.group_velocities(j), 0.5 * (t[1:] + t[:-1])
+        if v.shape[0] < 2:
+            continue
+        xis.append(0.5 * (v[1:] + v[:-1]))
+        dxis.append((v[1:] - v[:-1]) / np.diff(tt)[:, None])
+    xi, dxi = np.concatenate(xis), np.concatenate(dxis)
+    C = np.asarray(system.algebra.structure_constants)
+    L = float(system.algebra.sign) * np.einsum("abd,kb->kad", C, xi)  # B(mu) xi = L mu, L_ad = sign C_abd xi_b
+    i, j = np.diag_indices(n) if diagonal else np.triu_indices(n)
+    columns = []
+    for a, c in zip(i, j, strict=True):
+        E = np.zeros((n, n))
+        E[a, c] = E[c, a] = 1.0
+        columns.append((dxi @ E - np.einsum("kpq,qr,kr->kp", L, E, xi)).reshape(-1))
+    if linear:
+        columns.extend(L[:, :, q].reshape(-1) for q in range(n))  # + L c
+    D = np.stack(columns, axis=1)
+    norms = np.linalg.norm(D, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    theta = np.linalg.svd(D / norms, full_matrices=False)[2][-1] / norms
+    M = np.zeros((n, n))
+    M[i, j] = M[j, i] = theta[: i.size]
+    c = theta[i.size :] if linear else np.zeros(n)
+    scale = n / np.trace(M)
+    M, c = M * scale, c * scale
+    A = np.linalg.inv(M)
+    return A, A @ c
