@@ -128,6 +128,22 @@ def row_from_json(cls: type, values: dict[str, Any]) -> Any:
                   for f in dataclasses.fields(cls) if f.name in values or absent(f)})
 
 
+def saved_row(cls: type, path: Path, compute: Callable[[], Any]) -> Any:
+    """The row of type `cls` an earlier run saved at `path` (an interrupted study resumes: each
+    row is saved when it is done), else `compute()`, saved there first. A file of another
+    format is refitted, with a warning."""
+    if path.exists():
+        try:
+            return row_from_json(cls, json.loads(path.read_text()))
+        except (TypeError, json.JSONDecodeError) as err:
+            import sys
+
+            print(f"warning: refitting {path}: not a row of this version ({err})", file=sys.stderr)
+    row = compute()
+    atomic_write_text(path, json.dumps(row_to_json(row), indent=2) + "\n")
+    return row
+
+
 @dataclasses.dataclass(frozen=True)
 class Column:
     """A column of a table of typed rows: its `header` and the `cell` of a row (a number is

@@ -40,9 +40,8 @@ reads the saved rows and fits only the missing ones, so an interrupted `--full` 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
-import json
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -55,10 +54,19 @@ from scipy.spatial.transform import Rotation
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import atomic_write_text, figure, series_styles, span_decades
+from integrators.internals import figure, series_styles, span_decades
 from liepoisson.internals import casimir_scale
 
-from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
+from ._experiment import (
+    AbstractExperiment,
+    Column,
+    fmt,
+    optional,
+    row_from_json,
+    row_to_json,
+    saved_row,
+    table_lines,
+)
 from ._sindy import SINDyModel, WeakSINDyModel, sindy_available
 from ._study import (
     AbstractHamiltonianModel,
@@ -69,6 +77,8 @@ from ._study import (
     ParametricModel,
     SplittingModel,
     Training,
+)
+from ._study import (
     differences as differences,
 )
 
@@ -406,17 +416,6 @@ PROFILES = {
 }
 
 
-def _saved(path: Path) -> W2Row | None:
-    """The row an earlier run saved at `path`, or `None` (none, or one of another format: refit)."""
-    if not path.exists():
-        return None
-    try:
-        return row_from_json(W2Row, json.loads(path.read_text()))
-    except (TypeError, json.JSONDecodeError) as err:
-        print(f"warning: refitting {path}: not a row of this version ({err})", file=sys.stderr)
-        return None
-
-
 class W2(AbstractExperiment):
     id = "W2"
     title = "learning from observations: noisy, unevenly sampled trajectories, against SINDy and the parametric limit"
@@ -436,11 +435,8 @@ class W2(AbstractExperiment):
                     if not model.accepts(data):
                         continue
                     path = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(" ", "_")
-                    row = _saved(path)  # a row of an interrupted run: each row is saved when it is done
-                    if row is None:
-                        row = evaluate(protocol, model, data, y0, reference, system=system, noise=noise,
-                                       sampling=sampling)
-                        atomic_write_text(path, json.dumps(row_to_json(row), indent=2) + "\n")
+                    row = saved_row(W2Row, path, functools.partial(
+                        evaluate, protocol, model, data, y0, reference, system=system, noise=noise, sampling=sampling))
                     rows.append(row)
                     if progress:
                         print(line(row), flush=True)

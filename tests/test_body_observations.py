@@ -131,3 +131,23 @@ def test_the_learned_step_keeps_the_spatial_momentum_of_its_latent_momentum():
     # ~10 roundings per step, 500 steps
     assert np.abs(J - J[:, :1]).max() <= 500 * 10 * EPS * np.abs(J).max()
     assert np.abs(C - C[:, :1]).max() <= 500 * 10 * EPS * np.abs(C).max()
+
+
+def test_a_vehicle_is_observed_by_its_pose_and_its_velocities():
+    vehicle = lp.systems.Kirchhoff()
+    y0 = np.random.default_rng(4).uniform(-1.0, 1.0, size=(3, 6))
+    g0 = np.concatenate([Rotation.random(3, random_state=5).as_quat(), np.zeros((3, 3))], axis=1)
+    times = it.uneven_times(3, 11, (0.05, 0.3), seed=6)
+    clean = it.observe_body(vehicle, y0, g0, times)
+    assert clean.position_scale() > 0.0
+    # the spatial momentum of the recorded poses and of the momenta behind the velocities
+    # (mu = (I Omega, M v) for this diagonal body) is conserved: heyoka at tolerance eps
+    for g, xi in zip(clean.configurations, clean.velocities):
+        mu = xi * np.r_[vehicle.inertia, vehicle.mass]
+        J = np.asarray(vehicle.spatial_momentum(g, mu))
+        assert np.abs(J - J[0]).max() <= 1e3 * EPS * np.abs(J).max()
+    noisy = it.observe_body(vehicle, y0, g0, times, noise=1e-2, measure="configurations")
+    assert noisy.measured == ("configurations",)
+    dx = np.concatenate([a[:, 4:] - b[:, 4:] for a, b in zip(noisy.configurations, clean.configurations)])
+    # positions: noise x their RMS size per component (33 samples x 3: within 40%)
+    assert 0.6 < np.std(dx) / (1e-2 * clean.position_scale()) < 1.4

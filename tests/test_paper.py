@@ -547,3 +547,20 @@ def test_e5_profiles_build_their_stages():
     full = e5_kirchhoff.PROFILES["full"]
     assert [type(s).__name__ for s in e5_kirchhoff.stages(full, full.refine_iterations)] == ["QuasiNewton"]
     assert e5_kirchhoff.stages(full, 500)[0].iterations == 500
+
+
+@pytest.mark.slow  # the G-LPNet's families and the limit fitted on body observations: ~90 s
+def test_w4_smoke_predicts_attitudes_from_attitudes_and_rates(tmp_path):
+    from paper.__main__ import main
+
+    assert main(["run", "W4", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    metrics = json.loads((tmp_path / "W4" / "metrics.json").read_text())
+    rows = {r["model"]: r for r in metrics["rows"]}
+    glpnet, limit = rows["G-LPNet"], rows["limit"]
+    # exact reconstruction: the latent momentum's Casimir and the spatial momentum stay at
+    # round-off over the rollout (5 time units of steps 0.05: a few roundings each)
+    assert glpnet["casimir_drift"] < 1e-13 and glpnet["spatial_momentum_drift"] < 1e-13
+    # on the same small data, the learned map is within 1.5x of the true family's fit
+    assert glpnet["attitude_error"] < 1.5 * limit["attitude_error"]
+    assert any("G-LPNet attitude error" in v for v in metrics["verdict"])
+    assert (tmp_path / "W4" / "attitude_error_satellite.png").exists()

@@ -81,7 +81,8 @@ def fit_splitting(
     Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
     and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
     the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
-    momenta).
+    momenta); a family extending one whose residuals are `PRUNE_RATIO` (100) times the best's
+    is skipped.
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
@@ -202,12 +203,18 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
 
 
 
+#: On body observations, a family that extends a nested one is skipped when the nested
+#: family's sum of squared residuals is more than this many times the best family's so far: a
+#: residual 10x larger in RMS is structure (e.g. principal axes off the basis axes) that the
+#: extension's sigmoid pieces along the same directions would have to remove.
+PRUNE_RATIO = 100.0
+
+
 @_recipe.register
 def _(data: BodyObservations, system, method, loss, activation, iterations, key, common, families=None):
     """Body observations (configurations, velocities; momenta latent): each family from the
     quadratic of `body_quadratic_estimate`, fitted by Levenberg-Marquardt on `learn.BodyLoss`
     through `method`; the lowest BIC wins."""
-
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
     loss = BodyLoss() if loss is None else loss
@@ -221,13 +228,14 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     families = (families or tuple(f for f in FAMILIES if not f.select)) if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim * len(data.measured)))
-    fits, fitted = [], {}
+    velocities = data.velocities if data.velocities is not None else [
+        data.group_velocities(j) for j in range(len(data))]
+    fits, fitted, ssr = [], {}, {}
     for family in families:
+        if family.nested in ssr and ssr[family.nested] > PRUNE_RATIO * min(ssr.values()):
+            continue
         A, b = body_quadratic_estimate(data, linear=family.bias, diagonal=not family.any_axes)
-        velocities = data.velocities if data.velocities is not None else [
-            data.group_velocities(j) for j in range(len(data))]
-        size = _momentum_size(A, b, velocities)
-        net = GLPNet(system, terms=family.terms_of(system, A, b, size), method=method)
+        net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
         start = loss.problem(net, data, **split)
         if family.nested in fitted:  # from the nested family's fit, map and starts
             nested = fitted[family.nested]
@@ -236,12 +244,18 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
+        ssr[family.name] = criterion["ssr"]
+        fits.append((criterion["bic"], len(fits), problem, results, family.name, criterion))
+    best = min(fits, key=lambda f: (f[0], f[1]))
+    records = []
+    for f in fits:
+        problem, results, name, criterion = f[2], list(f[3]), f[4], f[5]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": family.name}))
-        fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
-    best = min(fits, key=lambda f: (f[0], f[1]))
-    return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
+            last.record, details={**last.record.details, **criterion, "family": name}))
+        records.append(training_record(problem, results))
+    chosen = fits.index(best)
+    return best[2].map(best[2].y0), tuple(r for k, r in enumerate(records) if k != chosen) + (records[chosen],)
 
 
 def _momentum_size(A, b, velocities) -> float:

@@ -1,0 +1,60 @@
+"""Learning from what instruments measure (W4's protocols, one condition at a time): a tumbling
+satellite's attitude and angular velocities, an underwater vehicle's pose and velocities; the
+momenta latent. The G-LPNet beside the parametric limit, SINDy and weak SINDy.
+
+    python -m benchmarks.body_observations [--systems satellite vehicle] [--noise 0 1e-3 1e-2]
+        [--sampling regular uneven] [--models G-LPNet limit SINDy "weak SINDy"]
+        [--time-unit 1e-3] [--out benchmarks/results/body_observations.json]
+
+`--time-unit 1e-3` gives the learned maps the same observations in milliseconds (times x 1000,
+velocities / 1000; the predictions are converted back): the figures must not change. The
+protocols, models and figures are `paper.w4_bodies`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+from benchmarks._report import default_out, write_json
+from paper import w4_bodies as w4
+from paper._experiment import row_to_json
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.body_observations",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--systems", nargs="+", choices=list(w4.protocols()), default=["satellite"])
+    parser.add_argument("--noise", nargs="+", type=float, default=[0.0, 1e-3, 1e-2])
+    parser.add_argument("--sampling", nargs="+", choices=["regular", "uneven"], default=["uneven"])
+    parser.add_argument("--models", nargs="+", default=["G-LPNet", "limit", "SINDy", "weak SINDy"])
+    parser.add_argument("--steps", type=int, default=200, help="Levenberg-Marquardt steps per fit")
+    parser.add_argument("--time-unit", type=float, default=1.0,
+                        help="give the learners the observations in this unit of time (seconds)")
+    parser.add_argument("--out", default=default_out("body_observations"))
+    args = parser.parse_args(argv)
+    models = [m for m in w4.models() if m.label in args.models]
+    if args.time_unit != 1.0:  # the learned maps; SINDy's fits are not covariant in time (its thresholds)
+        models = [dataclasses.replace(m, unit=args.time_unit) for m in models if isinstance(m, w4.LearnedBodyModel)]
+    rows = []
+    protocols = w4.protocols()
+    for system in args.systems:
+        protocol = protocols[system]
+        test = w4.test_set(protocol)
+        for sampling in args.sampling:
+            for noise in args.noise:
+                data = w4.observations(protocol, noise, sampling)
+                for model in models:
+                    start = time.perf_counter()
+                    row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling,
+                                      steps=args.steps)
+                    print(w4.line(row), f"({time.perf_counter() - start:.0f} s with the evaluation)", flush=True)
+                    rows.append(row)
+    for v in w4.verdict(rows):
+        print("-", v)
+    write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.verdict(rows)})
+
+
+if __name__ == "__main__":
+    main()

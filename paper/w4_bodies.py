@@ -1,0 +1,485 @@
+"""W4 (beyond the paper): from what instruments measure to where the body points and where it
+goes. A tumbling satellite (the rigid body I = (2, 1, 2/3) with its principal axes turned by
+the rotation vector (0.4, -0.7, 0.5), 0.95 rad, from the sensor axes) observed by a star
+tracker (attitude quaternions) and a gyroscope (body angular velocities), and an underwater
+vehicle (Kirchhoff's body with an added mass coupling rotation and translation, W2's
+"coupled Kirchhoff") observed by its navigation (pose: attitude and position) and its body
+velocities; noise 0, 1e-3 and 1e-2 (attitude in radians per axis, velocities and positions
+relative to their RMS size; `integrators.observe_body`), at a regular h = 0.1 or at steps
+drawn from [0.05, 0.3]. The momenta are never observed. Fitted to the same observations:
+
+- **G-LPNet**: `learn.fit_splitting(system, observations)`: TripleJump, the momenta latent
+  (`learn.BodyLoss`, each interval in steps of at most `MAX_STEP`), the family of H~ chosen by
+  the Bayesian information criterion;
+- **limit**: the true family (any symmetric quadratic form, `learn.ParametricHamiltonian` with
+  RK4 in 10 sub-steps on momentum and configuration) fitted on the same loss, initial states
+  included, from the truth 10% off: what the data allow at best;
+- **SINDy** and **weak SINDy** (pysindy, extra `peers`): a polynomial field of degree 2 for the
+  body velocities (the observed ones; from the configurations' differences without them),
+  integrated by LSODA with the kinematics (dq/dt = q (Omega, 0)/2, dx/dt = R v).
+
+Every model predicts from 12 held-out initial conditions (attitude, position at the origin,
+body velocity; the learned maps start from `learn.latent_momenta`) to `t_end` (50 for the
+satellite, 20 for the vehicle), against heyoka's (g, mu): mean attitude error (the angle of
+R_pred^T R_true), velocity error (relative to the velocities' RMS), position error (relative to
+the distance travelled, RMS), and for the G-LPNet and the limit the inertia (its principal
+values over their trace, and its principal axes) and, on their rollouts, the drift of the
+latent momentum's Casimirs and of the spatial momentum.
+
+Rows are saved as they are measured (`<out>/W4/rows/`): an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
+
+import integrators as it
+import learn
+import liepoisson as lp
+from integrators.internals import figure, series_styles
+
+from ._experiment import (
+    AbstractExperiment,
+    Column,
+    fmt,
+    optional,
+    row_from_json,
+    row_to_json,
+    saved_row,
+    table_lines,
+)
+from ._sindy import PolynomialField, WeakSINDyModel, sindy_available
+from .w2_observations import (
+    _quadratic_form,
+    coupled_kirchhoff_matrix,
+    quadratic_body,
+    rotated_inverse_inertia,
+)
+
+H_REGULAR, UNEVEN = 0.1, (0.05, 0.3)
+#: The learned maps' training intervals run in steps of at most this; their predictions at
+#: `H_EVAL` (splitting errors below the noise-free target of 1e-4 rad at t = 50).
+MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
+N_TEST = 12
+DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
+
+
+def _sphere(n: int, rng: np.random.Generator) -> np.ndarray:
+    y = rng.normal(size=(n, 3))
+    return y / np.linalg.norm(y, axis=1, keepdims=True)
+
+
+def _vehicle(n: int, rng: np.random.Generator) -> np.ndarray:
+    return rng.uniform(-1.0, 1.0, size=(n, 6))
+
+
+@dataclasses.dataclass(frozen=True)
+class BodyProtocol:
+    """A study's body: its system, observations (trajectories x observations, what is
+    measured), the true quadratic form `A` of H, and the horizon of the predictions."""
+
+    system: lp.systems.LiePoissonSystem
+    n_trajectories: int
+    n_observations: int
+    initial: Callable[[int, np.random.Generator], np.ndarray]
+    A: np.ndarray
+    t_end: float
+    measure: tuple[str, ...] = ("configurations", "velocities")
+
+    @property
+    def poses(self) -> bool:
+        return isinstance(self.system.group, lp.Poses)
+
+    def configurations(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Random attitudes (and positions at the origin for a pose)."""
+        q = Rotation.random(n, random_state=rng).as_quat()
+        return np.concatenate([q, np.zeros((n, 3))], axis=1) if self.poses else q
+
+
+def protocols() -> dict[str, BodyProtocol]:
+    return {
+        "satellite": BodyProtocol(quadratic_body(lp.so3(), rotated_inverse_inertia(), "rotated rigid body"), 30, 41,
+                                  _sphere, rotated_inverse_inertia(), 50.0),
+        "vehicle": BodyProtocol(quadratic_body(lp.se3(), coupled_kirchhoff_matrix(), "coupled Kirchhoff"), 40, 41,
+                                _vehicle, coupled_kirchhoff_matrix(), 20.0),
+    }
+
+
+def observations(protocol: BodyProtocol, noise: float, sampling: str, seed: int = DATA_SEED,
+                 n_trajectories: int | None = None, n_observations: int | None = None) -> it.BodyObservations:
+    n = protocol.n_trajectories if n_trajectories is None else n_trajectories
+    m = protocol.n_observations if n_observations is None else n_observations
+    rng = np.random.default_rng(seed)
+    y0, g0 = protocol.initial(n, rng), protocol.configurations(n, rng)
+    times = H_REGULAR * np.arange(m) if sampling == "regular" else it.uneven_times(n, m, UNEVEN, seed=seed)
+    return it.observe_body(protocol.system, y0, g0, times, noise=noise, seed=seed, measure=protocol.measure)
+
+
+@dataclasses.dataclass(frozen=True)
+class TestSet:
+    """Held-out initial conditions and heyoka's `(configurations, states)` every `H_SAVE`."""
+
+    g0: np.ndarray
+    xi0: np.ndarray
+    configurations: np.ndarray
+    states: np.ndarray
+    velocities: np.ndarray
+
+
+def test_set(protocol: BodyProtocol, t_end: float | None = None, n: int = N_TEST) -> TestSet:
+    rng = np.random.default_rng(TEST_SEED)
+    y0, g0 = protocol.initial(n, rng), protocol.configurations(n, rng)
+    t_end = protocol.t_end if t_end is None else t_end
+    truth = it.ground_truth(protocol.system, y0, H_SAVE, round(t_end / H_SAVE), g0=g0)
+    velocities = np.asarray(protocol.system.body_velocity(truth.states))
+    return TestSet(g0, velocities[:, 0], truth.configurations, truth.states, velocities)
+
+
+@dataclasses.dataclass(frozen=True)
+class Prediction:
+    """A model's configurations and velocities `(n, steps, ...)` every `H_SAVE` from the test
+    set's initial conditions; for a map with a latent momentum, its rollout's momenta."""
+
+    configurations: np.ndarray
+    velocities: np.ndarray
+    momenta: np.ndarray | None = None
+
+
+class AbstractBodyModel:
+    label: str
+
+    def fit(self, protocol: BodyProtocol, data: it.BodyObservations, steps: int) -> Any:
+        raise NotImplementedError
+
+    def predict(self, fitted: Any, protocol: BodyProtocol, test: TestSet) -> Prediction:
+        raise NotImplementedError
+
+
+@dataclasses.dataclass(frozen=True)
+class LearnedBodyModel(AbstractBodyModel):
+    """A map with a learned Hamiltonian fitted with latent momenta: the G-LPNet
+    (`fit_splitting`) or the limit (`ParametricHamiltonian`). `unit`: fitted to the
+    observations in this unit of time (seconds; `BodyObservations.in_units`), its predictions
+    converted back."""
+
+    label: str
+    unit: float = 1.0
+
+    def fit(self, protocol, data, steps):
+        data = data if self.unit == 1.0 else data.in_units(self.unit)
+        loss = learn.BodyLoss(max_step=MAX_STEP / self.unit)
+        if self.label == "G-LPNet":
+            net, _ = learn.fit_splitting(protocol.system, data, loss=loss, iterations=steps, seed=TRAIN_SEED,
+                                         key=TRAIN_SEED, progress=False)
+            return net
+        n = protocol.A.shape[0]
+        theta0 = 1.1 * protocol.A[np.triu_indices(n)]
+        model = learn.ParametricHamiltonian(protocol.system, _quadratic_form(n), theta0, substeps=10)
+        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.LevenbergMarquardt(steps, rtol=1e-12),
+                              validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
+        return fitted
+
+    def predict(self, fitted, protocol, test):
+        mu0 = np.asarray(learn.latent_momenta(fitted, test.xi0 * self.unit))
+        every = round(H_SAVE / H_EVAL)
+        steps = every * (test.states.shape[1] - 1)
+        g, mu = fitted.with_h(H_EVAL / self.unit).lifted_rollout(test.g0, mu0, steps, save_every=every)
+        xi = np.asarray(jax.vmap(jax.vmap(fitted.body_velocity))(mu)) / self.unit
+        return Prediction(np.asarray(g), xi, np.asarray(mu))
+
+
+@dataclasses.dataclass(frozen=True)
+class SINDyBodyModel(AbstractBodyModel):
+    """A polynomial field of degree 2 for the body velocities (SINDy on finite differences,
+    or weak SINDy), integrated with the kinematics."""
+
+    label: str
+
+    def fit(self, protocol, data, steps):
+        import pysindy as ps
+
+        velocities = data.velocities if data.velocities is not None else [
+            data.group_velocities(j) for j in range(len(data))]
+        times = data.times if data.velocities is not None else [0.5 * (t[1:] + t[:-1]) for t in data.times]
+        as_states = it.Observations(protocol.system, list(times), list(velocities))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if self.label == "weak SINDy":
+                return WeakSINDyModel("weak SINDy").vector_field(as_states)
+            model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
+                             differentiation_method=ps.FiniteDifference())
+            model.fit(list(as_states.states), t=list(as_states.times))
+            library = model.feature_library
+            return PolynomialField(library, model.coefficients())
+
+    def predict(self, fitted, protocol, test):
+        group = protocol.system.group
+        t = H_SAVE * np.arange(test.states.shape[1])
+        gs, xis = [], []
+        for g0, xi0 in zip(test.g0, test.xi0):
+            dim = xi0.size
+
+            def rhs(_, z, dim=dim):
+                xi, g = z[:dim], z[dim:]
+                dg = np.asarray(group.velocity_components(list(g), list(xi)), dtype=np.float64)
+                return np.concatenate([fitted.predict(xi[None])[0], dg])
+
+            def escape(_, z, dim=dim, xi0=xi0):
+                return 100.0 * (1.0 + np.linalg.norm(xi0)) - np.linalg.norm(z[:dim])
+
+            escape.terminal = True
+            sol = solve_ivp(rhs, (0.0, t[-1]), np.concatenate([xi0, g0]), method="LSODA", t_eval=t, rtol=1e-10,
+                            atol=1e-10, events=escape)
+            out = np.full((t.size, dim + group.size), np.nan)
+            out[: sol.y.shape[1]] = sol.y.T
+            xis.append(out[:, :dim])
+            gs.append(out[:, dim:])
+        gs = np.stack(gs)
+        finite = np.all(np.isfinite(gs), axis=-1)
+        gs[finite] = np.asarray(group.project(gs[finite]))
+        return Prediction(gs, np.stack(xis))
+
+
+@dataclasses.dataclass(frozen=True)
+class W4Row:
+    """One model on one condition: errors at `t_end`, fit time, and what it identified."""
+
+    system: str
+    noise: float
+    sampling: str
+    model: str
+    fit_seconds: float
+    attitude_error: float
+    velocity_error: float
+    position_error: float | None = optional()
+    attitude_error_curve: Any = optional()
+    inertia_ratios: Any = optional()
+    inertia_ratio_error: float | None = optional()
+    casimir_drift: float | None = optional()
+    spatial_momentum_drift: float | None = optional()
+    family: str | None = optional()
+
+    @property
+    def condition(self) -> tuple[str, str, float]:
+        return self.system, self.sampling, self.noise
+
+
+def _ratios(A: np.ndarray) -> np.ndarray:
+    """The inertia's principal values over their mean (the gauge-free part of the fit)."""
+    M = np.linalg.inv(A)
+    values = np.linalg.eigvalsh(M)
+    return values / values.mean()
+
+
+def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> dict[str, Any]:
+    """Errors of `prediction` against the test set at the end, and the attitude error curve."""
+    angles = np.asarray(lp.rotation_angle(prediction.configurations[..., :4], test.configurations[..., :4]))
+    angles = np.where(np.isfinite(angles), angles, np.inf)
+    scale = float(np.sqrt(np.mean(np.sum(test.velocities**2, axis=-1))))
+    dv = np.linalg.norm(prediction.velocities[:, -1] - test.velocities[:, -1], axis=-1) / scale
+    out = {"attitude_error": float(np.mean(angles[:, -1])), "velocity_error": float(np.mean(np.where(
+        np.isfinite(dv), dv, np.inf))), "attitude_error_curve": np.mean(angles, axis=0).tolist()}
+    if protocol.poses:
+        travelled = float(np.sqrt(np.mean(np.sum(test.configurations[:, -1, 4:] ** 2, axis=-1))))
+        dx = np.linalg.norm(prediction.configurations[:, -1, 4:] - test.configurations[:, -1, 4:], axis=-1)
+        out["position_error"] = float(np.mean(np.where(np.isfinite(dx), dx, np.inf))) / travelled
+    if prediction.momenta is not None:
+        system = protocol.system
+        C = np.asarray(system.casimirs(prediction.momenta))
+        J = np.asarray(system.spatial_momentum(prediction.configurations, prediction.momenta))
+        out["casimir_drift"] = float(np.max(np.abs(C - C[:, :1])) / max(np.max(np.abs(C)), 1e-300))
+        out["spatial_momentum_drift"] = float(np.max(np.abs(J - J[:, :1])) / max(np.max(np.abs(J)), 1e-300))
+    return out
+
+
+def models() -> list[AbstractBodyModel]:
+    out: list[AbstractBodyModel] = [LearnedBodyModel("G-LPNet"), LearnedBodyModel("limit")]
+    if sindy_available():
+        out += [SINDyBodyModel("SINDy"), SINDyBodyModel("weak SINDy")]
+    return out
+
+
+def evaluate(protocol: BodyProtocol, model: AbstractBodyModel, data: it.BodyObservations, test: TestSet, *,
+             system: str, noise: float, sampling: str, steps: int) -> W4Row:
+    start = time.perf_counter()
+    fitted = model.fit(protocol, data, steps)
+    fit_seconds = time.perf_counter() - start
+    figures = measure(protocol, test, model.predict(fitted, protocol, test))
+    extra: dict[str, Any] = {}
+    if isinstance(model, LearnedBodyModel):
+        hessian = np.asarray(jax.hessian(lambda y: jax.numpy.sum(fitted.hamiltonian(y)))(
+            np.zeros(protocol.system.dim)))
+        ratios = _ratios(hessian)
+        extra = {"inertia_ratios": ratios.tolist(),
+                 "inertia_ratio_error": float(np.max(np.abs(ratios / _ratios(protocol.A) - 1.0)))}
+        if model.label == "G-LPNet":
+            extra["family"] = _family(fitted)
+    return W4Row(system=system, noise=noise, sampling=sampling, model=model.label, fit_seconds=fit_seconds,
+                 **figures, **extra)
+
+
+def _family(net) -> str:
+    terms = net.terms
+    axes = "any axes" if terms.full_vectors else "axes"
+    return f"{terms.activation}, {axes}{', linear terms' if terms.bias else ''}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    systems: tuple[str, ...]
+    noises: tuple[float, ...]
+    samplings: tuple[str, ...]
+    steps: int = 200  # Levenberg-Marquardt steps per fit
+    n_trajectories: int | None = None
+    n_observations: int | None = None
+    t_end: float | None = None  # the protocol's when None
+
+
+PROFILES = {
+    "smoke": Profile(("satellite",), (1e-3,), ("uneven",), steps=10, n_trajectories=4, n_observations=8, t_end=5.0),
+    "quick": Profile(("satellite",), (0.0, 1e-3, 1e-2), ("uneven",)),
+    "full": Profile(("satellite", "vehicle"), (0.0, 1e-3, 1e-2), ("regular", "uneven")),
+}
+
+
+COLUMNS = (
+    Column("system", lambda r: r.system),
+    Column("sampling", lambda r: r.sampling),
+    Column("noise", lambda r: f"{r.noise:g}"),
+    Column("model", lambda r: r.model),
+    Column("attitude error [rad]", lambda r: r.attitude_error),
+    Column("velocity error", lambda r: r.velocity_error),
+    Column("position error", lambda r: r.position_error),
+    Column("inertia ratios, max rel. error", lambda r: r.inertia_ratio_error),
+    Column("Casimir drift", lambda r: r.casimir_drift),
+    Column("spatial momentum drift", lambda r: r.spatial_momentum_drift),
+    Column("fit [s]", lambda r: f"{r.fit_seconds:.1f}"),
+    Column("H~ family", lambda r: r.family or "—"),
+)
+
+
+def _peer(rows: list[W4Row], row: W4Row, model: str) -> W4Row | None:
+    return next((r for r in rows if r.condition == row.condition and r.model == model), None)
+
+
+def line(row: W4Row) -> str:
+    position = "" if row.position_error is None else f", position {fmt(row.position_error)}"
+    ratios = "" if row.inertia_ratio_error is None else f", inertia ratios within {fmt(row.inertia_ratio_error)}"
+    return (f"{row.system}, {row.sampling}, noise {row.noise:g}, {row.model}: attitude error {fmt(row.attitude_error)} "
+            f"rad, velocity {fmt(row.velocity_error)}{position}{ratios}, fit {row.fit_seconds:.1f} s")
+
+
+def verdict(rows: list[W4Row]) -> list[str]:
+    out = []
+    for r in rows:
+        if r.model != "G-LPNet":
+            continue
+        key = "position_error" if r.position_error is not None else "attitude_error"
+        what = "position" if key == "position_error" else "attitude"
+        parts = [f"{r.system}, {r.sampling}, noise {r.noise:g}: G-LPNet {what} error {fmt(getattr(r, key))}"]
+        limit = _peer(rows, r, "limit")
+        if limit:
+            parts.append(f"{getattr(r, key) / getattr(limit, key):.2f}x the limit's ({fmt(getattr(limit, key))})")
+        for peer in (_peer(rows, r, "SINDy"), _peer(rows, r, "weak SINDy")):
+            if peer:
+                below = getattr(r, key) < getattr(peer, key)
+                parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(getattr(peer, key))}")
+        parts.append(f"inertia ratios within {fmt(r.inertia_ratio_error)}, Casimir drift {fmt(r.casimir_drift)}, "
+                     f"spatial momentum drift {fmt(r.spatial_momentum_drift)}")
+        out.append("; ".join(parts))
+    return out
+
+
+def _plots(rows: list[W4Row], out_dir: Path) -> list[str]:
+    """Per system, sampling and noise: the mean attitude error against time, one line per model."""
+    names = []
+    for system in dict.fromkeys(r.system for r in rows):
+        conditions = list(dict.fromkeys((r.sampling, r.noise) for r in rows if r.system == system))
+        fig = figure(figsize=(4.5 * len(conditions), 4.0))
+        for k, (sampling, noise) in enumerate(conditions):
+            ax = fig.add_subplot(1, len(conditions), k + 1)
+            chosen = [r for r in rows if r.system == system and (r.sampling, r.noise) == (sampling, noise)]
+            for r, style in zip(chosen, series_styles(len(chosen))):
+                curve = np.asarray(r.attitude_error_curve, dtype=np.float64)
+                t = H_SAVE * np.arange(curve.size)
+                ax.semilogy(t[1:], np.maximum(curve[1:], 1e-16), label=r.model, **style)
+            ax.set_title(f"{system}, {sampling}, noise {noise:g}")
+            ax.set_xlabel("t")
+            ax.set_ylabel("attitude error [rad]")
+            ax.legend(fontsize=8)
+        name = f"attitude_error_{system}.png"
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=110)
+        names.append(name)
+    return names
+
+
+class W4(AbstractExperiment):
+    id = "W4"
+    title = "from attitude, pose and velocities to where the body points and goes, momenta latent"
+    paper_values = ()
+
+    def run(self, profile: str, out_dir: Path, progress: bool):
+        P = PROFILES[profile]
+        rows: list[W4Row] = []
+        all_protocols = protocols()
+        for system in P.systems:
+            protocol = all_protocols[system]
+            test = test_set(protocol, P.t_end)
+            for sampling, noise in itertools.product(P.samplings, P.noises):
+                data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
+                                    n_observations=P.n_observations)
+                for model in models():
+                    path = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(
+                        " ", "_")
+                    row = saved_row(W4Row, path, functools.partial(
+                        evaluate, protocol, model, data, test, system=system, noise=noise, sampling=sampling,
+                        steps=P.steps))
+                    rows.append(row)
+                    if progress:
+                        print(line(row), flush=True)
+        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows), "figures": _plots(rows, out_dir),
+                "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
+                "model": "G-LPNet (TripleJump, momenta latent, family by BIC)"}
+
+    def rows(self, metrics):
+        rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
+        return [(f"{r.system} {r.sampling} noise {r.noise:g} G-LPNet attitude error", "—", fmt(r.attitude_error),
+                 fmt(getattr(_peer(rows, r, "limit"), "attitude_error", None))) for r in rows if r.model == "G-LPNet"]
+
+    def markdown_table(self, metrics):
+        rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
+        lines = [
+            f"# {self.id}: {self.title}",
+            "",
+            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run W4"
+            + (" --full`" if metrics.get("profile") == "full" else "`")
+            + f". Seeds: {metrics.get('seeds')}. Errors at the end of the predictions (t = 50 for the satellite, "
+            f"20 for the vehicle), means over {N_TEST} held-out initial conditions against heyoka; velocity error "
+            "relative to the velocities' RMS, position error to the distance travelled; drifts of the learned maps' "
+            "rollouts relative to the largest value.",
+            "",
+            "## Verdict",
+            "",
+            *[f"- {v}" for v in metrics.get("verdict", [])],
+            "",
+            "## Every fit",
+            "",
+            *table_lines(COLUMNS, rows),
+        ]
+        return "\n".join(lines) + "\n"
+
+
+EXPERIMENT = W4()
