@@ -151,3 +151,15 @@ def test_a_vehicle_is_observed_by_its_pose_and_its_velocities():
     dx = np.concatenate([a[:, 4:] - b[:, 4:] for a, b in zip(noisy.configurations, clean.configurations)])
     # positions: noise x their RMS size per component (33 samples x 3: within 40%)
     assert 0.6 < np.std(dx) / (1e-2 * clean.position_scale()) < 1.4
+
+
+@pytest.mark.slow  # three families fitted: ~6 s
+def test_a_family_extending_a_hopeless_one_is_skipped():
+    # principal axes 0.95 rad off the basis: a quadratic on the axes leaves residuals far above
+    # 100x those of any quadratic form, so its sigmoid extension ("general") is not fitted
+    obs = observations(n=4, m=11, noise=1e-3)
+    families = [f for f in learn.FAMILIES if f.name in ("quadratic", "quadratic, any axes, even", "general")]
+    _, records = learn.fit_splitting(ROTATED, obs, families=families, iterations=10, progress=False)
+    fitted = {r.stages[-1].details["family"]: r.stages[-1].details["ssr"] for r in records}
+    assert set(fitted) == {"quadratic", "quadratic, any axes, even"}
+    assert fitted["quadratic"] > 100 * fitted["quadratic, any axes, even"]
