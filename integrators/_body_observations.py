@@ -5,7 +5,8 @@ And `observe_body`, which makes such data from heyoka's ground truth of $(\mu, g
 
 Noise ([Observations of bodies][conventions-body-observations]): an attitude is rotated by a
 random rotation vector of standard deviation `noise` radians per axis (in the body frame); a
-position gets Gaussian noise of `noise` times the RMS size of the positions; a velocity gets
+position gets Gaussian noise of `noise` times the RMS size of the positions' displacements from each
+trajectory's first; a velocity gets
 Gaussian noise of `noise` times the RMS size of the velocities.
 """
 
@@ -170,10 +171,11 @@ class BodyObservations:
         return rms_size([self.group_velocities(j) for j in range(len(self))])
 
     def position_scale(self) -> float | None:
-        r"""$\sqrt{\operatorname{mean}|x|^2}$ of the observed positions (poses), else `None`."""
+        r"""The RMS size of the observed positions' displacements from each trajectory's first
+        (poses; the same wherever the origin is), 1 if nothing moves; `None` without poses."""
         if self.configurations is None or not isinstance(self.group, Poses):
             return None
-        return max(rms_size([g[:, 4:] for g in self.configurations]), np.finfo(float).tiny)
+        return displacement_scale(self.configurations)
 
     def group_velocities(self, j: int) -> np.ndarray:
         r"""The body velocities `(n_j - 1, dim)` over the intervals of trajectory `j` from its
@@ -266,6 +268,12 @@ class BodyObservations:
                    *[[data[k][r] for r in rows] if k in data else None for k in MEASURED], metadata=metadata)
 
 
+def displacement_scale(poses: list[np.ndarray]) -> float:
+    """The RMS size of the positions' displacements from each trajectory's first, 1 if 0."""
+    size = rms_size([g[:, 4:] - g[:1, 4:] for g in poses])
+    return size if size > 0.0 else 1.0
+
+
 def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike, times: Any, *,
                  noise: float = 0.0, measure: str | tuple[str, ...] = MEASURED, drop: float = 0.0, seed: int = 0,
                  tol: float | None = None) -> BodyObservations:
@@ -276,7 +284,8 @@ def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike,
     **Arguments:** `y0` `(n, dim)`; `g0` `(n, group.size)` or `(group.size,)`; `times` as
     `BodyObservations` (or `integrators.uneven_times(...)`); `noise` >= 0: attitude noise in
     radians (a random rotation vector with that standard deviation per axis, in the body
-    frame), and velocities' and positions' noise relative to their RMS size; `measure`:
+    frame), velocities' noise relative to their RMS size, positions' to that of their
+    displacements from each trajectory's first; `measure`:
     `"configurations"`, `"velocities"` or both (default); `drop`: the probability that an
     observation is dropped (the first and last of each trajectory are kept); `seed`: drops and
     noise from independent streams of it (noise 0 gives the clean values at the same times).
@@ -325,7 +334,7 @@ def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike,
     out_g = None
     if "configurations" in measure:
         out_g = []
-        p_std = noise * rms_size([g[:, 4:] for g in gs]) if isinstance(group, Poses) else 0.0
+        p_std = noise * displacement_scale(gs) if isinstance(group, Poses) else 0.0
         for g in gs:
             rotation = noise * noises.standard_normal((g.shape[0], 3))
             q = np.asarray(Rotations().right_exp(g[:, :4], rotation))

@@ -100,21 +100,19 @@ def rotation_angle(q1: jax.Array, q2: jax.Array) -> jax.Array:
     (the same for $\pm q$): $2\,\mathrm{atan2}(|u|, |w|)$ of $q_1^{-1}\otimes q_2$."""
     conj = q1 * jnp.asarray([-1.0, -1.0, -1.0, 1.0])
     rel = jnp.stack(quaternion_product(_split(conj), _split(q2)), axis=-1)
-    return 2.0 * jnp.arctan2(jnp.linalg.norm(rel[..., :3], axis=-1), jnp.abs(rel[..., 3]))
+    u2 = jnp.sum(rel[..., :3] ** 2, axis=-1)
+    u = jnp.where(u2 > 0.0, jnp.sqrt(jnp.where(u2 > 0.0, u2, 1.0)), 0.0)  # finite gradient at u = 0
+    return 2.0 * jnp.arctan2(u, jnp.abs(rel[..., 3]))
 
 
 def se3_translation(phi: jax.Array, v: jax.Array) -> jax.Array:
     r"""$V(\phi)\,v = v + A\,\phi\times v + B\,\phi\times(\phi\times v)$ with
-    $A = (1 - \cos\theta)/\theta^2$, $B = (\theta - \sin\theta)/\theta^3$: the body-frame
-    displacement of $\exp$ of $(\phi, v)$ in se(3) (series for small $\theta$, where $B$
-    cancels)."""
-    theta2 = jnp.sum(phi * phi, axis=-1)
-    small = theta2 < 1e-4  # first omitted terms: theta^6/40320 and theta^6/362880, < 3e-17
-    theta = jnp.sqrt(jnp.where(small, 1.0, theta2))
-    half = jnp.sin(0.5 * theta)
-    A = jnp.where(small, 0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0, 2.0 * half * half / (theta * theta))
-    B = jnp.where(small, 1.0 / 6.0 - theta2 / 120.0 + theta2 * theta2 / 5040.0,
-                  (theta - jnp.sin(theta)) / (theta * theta * theta))
+    $A = (1 - \cos\theta)/\theta^2$, $B = (\theta - \sin\theta)/\theta^3$
+    (`liepoisson.rotation_coefficients`, series at small $\theta$): the body-frame
+    displacement of $\exp$ of $(\phi, v)$ in se(3)."""
+    from ._coadjoint import rotation_coefficients
+
+    _, A, B = rotation_coefficients(jnp.sum(phi * phi, axis=-1))
     pv = jnp.cross(phi, v)
     return v + A[..., None] * pv + B[..., None] * jnp.cross(phi, pv)
 
@@ -249,8 +247,8 @@ class Rotations(AbstractLieGroup):
     def log_between(self, g1, g2):
         from scipy.spatial.transform import Rotation
 
-        q1, q2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
-        shape = np.broadcast_shapes(q1.shape, q2.shape)
+        q1, q2 = np.asarray(self.check(g1, "g1")), np.asarray(self.check(g2, "g2"))
+        shape = _broadcast(q1, q2)
         q1, q2 = np.broadcast_to(q1, shape).reshape(-1, 4), np.broadcast_to(q2, shape).reshape(-1, 4)
         return (Rotation.from_quat(q1).inv() * Rotation.from_quat(q2)).as_rotvec().reshape(shape[:-1] + (3,))
 
@@ -355,8 +353,8 @@ class Poses(AbstractLieGroup):
         return jnp.concatenate([Rotations().difference(g1[..., :4], g2[..., :4]), d], axis=-1)
 
     def log_between(self, g1, g2):
-        g1, g2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
-        shape = np.broadcast_shapes(g1.shape, g2.shape)
+        g1, g2 = np.asarray(self.check(g1, "g1")), np.asarray(self.check(g2, "g2"))
+        shape = _broadcast(g1, g2)
         g1, g2 = np.broadcast_to(g1, shape).reshape(-1, 7), np.broadcast_to(g2, shape).reshape(-1, 7)
         phi = Rotations().log_between(g1[:, :4], g2[:, :4])
         R1 = np.asarray(rotation_matrix(jnp.asarray(g1[:, :4])))
@@ -467,11 +465,18 @@ class MatrixGroup(AbstractLieGroup):
     def log_between(self, g1, g2):
         from scipy.linalg import logm
 
-        g1, g2 = np.asarray(g1, dtype=np.float64), np.asarray(g2, dtype=np.float64)
-        shape = np.broadcast_shapes(g1.shape, g2.shape)
+        g1, g2 = np.asarray(self.check(g1, "g1")), np.asarray(self.check(g2, "g2"))
+        shape = _broadcast(g1, g2)
         G1 = np.broadcast_to(g1, shape).reshape(-1, self.n, self.n)
         G2 = np.broadcast_to(g2, shape).reshape(-1, self.n, self.n)
-        logs = np.stack([np.real(logm(np.linalg.solve(a, b))).reshape(-1) for a, b in zip(G1, G2)])
+        logs = []
+        for k, (a, b) in enumerate(zip(G1, G2)):
+            log = logm(np.linalg.solve(a, b))
+            if np.abs(np.imag(log)).max(initial=0.0) > 1e-8 * max(1.0, np.abs(log).max()):
+                raise ValueError(f"g1^-1 g2 (pair {k}) has no real logarithm near the identity (a half-turn or "
+                                 "more between consecutive configurations): sample them more densely")
+            logs.append(np.real(log).reshape(-1))
+        logs = np.stack(logs)
         return (logs @ self._coordinates).reshape(shape[:-1] + (self.dim,))
 
     def check(self, g, name="g"):
@@ -483,6 +488,13 @@ class MatrixGroup(AbstractLieGroup):
                 raise ValueError(f"{name} must hold invertible {self.n}x{self.n} matrices (row by row); "
                                  f"one has determinant {det[np.argmin(np.abs(det))]:.3g}")
         return g
+
+
+def _broadcast(g1: np.ndarray, g2: np.ndarray) -> tuple[int, ...]:
+    try:
+        return np.broadcast_shapes(g1.shape, g2.shape)
+    except ValueError:
+        raise ValueError(f"g1 and g2 must have shapes that broadcast; got {g1.shape} and {g2.shape}") from None
 
 
 def default_group(algebra: Any) -> AbstractLieGroup | None:

@@ -163,3 +163,21 @@ def test_a_family_extending_a_hopeless_one_is_skipped():
     fitted = {r.stages[-1].details["family"]: r.stages[-1].details["ssr"] for r in records}
     assert set(fitted) == {"quadratic", "quadratic, any axes, even"}
     assert fitted["quadratic"] > 100 * fitted["quadratic, any axes, even"]
+
+
+def test_the_inertia_estimate_refuses_too_little_data_and_survives_a_steady_spin():
+    t = np.array([0.0, 0.1])
+    two = it.BodyObservations(BODY, t, None, [np.ones((2, 3))])
+    with pytest.raises(ValueError, match="pairs of consecutive velocities"):
+        learn.body_quadratic_estimate(two)
+    # a steady spin about a principal axis fixes almost nothing: a start, finite and positive
+    spin = it.BodyObservations(BODY, np.linspace(0.0, 1.0, 11), None, [np.tile([0.0, 0.0, 1.5], (11, 1))])
+    A, b = learn.body_quadratic_estimate(spin, linear=False)
+    assert np.all(np.isfinite(A)) and np.all(np.linalg.eigvalsh(A) > 0.0) and np.all(b == 0.0)
+
+
+def test_a_damped_body_is_not_reconstructed_and_says_so():
+    damped = lp.systems.damped_rigid_body(inertia=(2.0, 1.0, 2.0 / 3.0), gamma=0.1)
+    assert damped.group is None
+    with pytest.raises(ValueError, match="dissipative: reconstructing its configuration is not implemented"):
+        it.ground_truth(damped, [0.0, 0.6, 0.8], 0.1, 2, g0=[0.0, 0.0, 0.0, 1.0])

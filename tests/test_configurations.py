@@ -199,3 +199,20 @@ def test_a_user_system_with_a_matrix_group_reconstructs_like_the_quaternions(tmp
     back = it.Trajectories.load(tmp_path / "truth.h5")
     np.testing.assert_array_equal(back.configurations, quats.configurations)
     assert back.select([0]).configurations.shape == (1, 21, 4)
+
+
+def test_rotation_angle_has_a_finite_gradient_at_equal_attitudes():
+    import jax
+
+    q = np.asarray(Rotation.from_rotvec([0.3, 0.1, -0.2]).as_quat())
+    grad = np.asarray(jax.grad(lambda p: lp.rotation_angle(p, q))(q))
+    assert np.all(np.isfinite(grad))
+
+
+def test_a_half_turn_between_matrix_configurations_is_refused():
+    M = lp.MatrixGroup(lp.Rotations().matrix_basis())
+    half = Rotation.from_rotvec([np.pi, 0.0, 0.0]).as_matrix().reshape(-1)
+    with pytest.raises(ValueError, match="no real logarithm"):
+        M.log_between(np.eye(3).reshape(-1), half)
+    with pytest.raises(ValueError, match="g1 and g2 must have shapes that broadcast"):
+        lp.Rotations().log_between(np.tile([0, 0, 0, 1.0], (2, 1)), np.tile([0, 0, 0, 1.0], (3, 1)))

@@ -224,8 +224,9 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
     Lie-Poisson equations $\dot\mu = \mathbb B(\mu)\xi$ read
     $\mathbb M\dot\xi = \mathbb B(\mathbb M\xi - c)\,\xi$ with $c = \mathbb Mb$: homogeneous and
     linear in $(\mathbb M, c)$, solved at the midpoints of consecutive velocities (observed, or
-    from the configurations) by the smallest singular vector. Scale (not identifiable):
-    $\operatorname{tr}\mathbb M = n$."""
+    from the configurations) by the smallest singular vector; $\mathbb M$ made positive definite
+    (eigenvalues clipped at 1e-3 of the largest: a start, not a result). Scale (not
+    identifiable): $\operatorname{tr}\mathbb M = n$."""
     system = data.system
     n = system.dim
     xis, dxis = [], []
@@ -238,6 +239,11 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
             continue
         xis.append(0.5 * (v[1:] + v[:-1]))
         dxis.append((v[1:] - v[:-1]) / np.diff(tt)[:, None])
+    unknowns = (n if diagonal else n * (n + 1) // 2) + (n if linear else 0)
+    if sum(x.shape[0] for x in xis) * n < 2 * unknowns:
+        raise ValueError(f"the data give {sum(x.shape[0] for x in xis)} pairs of consecutive velocities; estimating "
+                         f"{unknowns} coefficients of the inertia needs at least {-(-2 * unknowns // n)} (trajectories "
+                         "of three or more observations)")
     xi, dxi = np.concatenate(xis), np.concatenate(dxis)
     C = np.asarray(system.algebra.structure_constants)
     L = float(system.algebra.sign) * np.einsum("abd,kb->kad", C, xi)  # B(mu) xi = L mu, L_ad = sign C_abd xi_b
@@ -256,7 +262,15 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
     M = np.zeros((n, n))
     M[i, j] = M[j, i] = theta[: i.size]
     c = theta[i.size :] if linear else np.zeros(n)
-    scale = n / np.trace(M)
-    M, c = M * scale, c * scale
+    # the singular vector's sign is arbitrary: the one with the larger positive part; then the
+    # inertia made positive definite (noise, or motions that do not fix every direction, leave
+    # eigenvalues near zero or below: clipped at 1e-3 of the largest) and scaled to trace n
+    values, vectors = np.linalg.eigh(M)
+    if values.max() < -values.min():
+        values, c = -values[::-1], -c
+        vectors = vectors[:, ::-1]
+    values = np.maximum(values, 1e-3 * values.max())
+    scale = n / values.sum()
+    M, c = (vectors * (values * scale)) @ vectors.T, c * scale
     A = np.linalg.inv(M)
     return A, A @ c

@@ -225,6 +225,9 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
                          f"{data.group!r}")
     context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
     split = {"h": common["h"], "validation_fraction": 0.0, "seed": common["seed"], "normalise": False}
+    if families is not None and any(f.select for f in families):
+        raise ValueError("families with select=True ('quadratic, selected') choose their terms on the momenta's "
+                         "finite differences, which body observations do not have; leave them out")
     families = (families or tuple(f for f in FAMILIES if not f.select)) if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim * len(data.measured)))

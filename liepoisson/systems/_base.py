@@ -314,6 +314,10 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
     def require_group(self) -> AbstractLieGroup:
         """`group`, or a `ValueError` saying how to give one."""
         group = self.group
+        if group is None and isinstance(self, AbstractDissipativeSystem):
+            raise ValueError(f"{self!r} is dissipative: reconstructing its configuration is not implemented (the "
+                             "damped velocity is not grad H and no spatial momentum is conserved); reconstruct the "
+                             "conservative part, system.conservative")
         if group is None:
             raise ValueError(
                 f"{self!r} has no configuration group, so its configurations cannot be reconstructed: give one, "
@@ -383,6 +387,12 @@ class AbstractDissipativeSystem(AbstractLiePoissonSystem):
     The motion is not Hamiltonian: no composition of the exact flows of pieces of $H$
     integrates it, so the splitting methods refuse it (`integrators.DampedSplitting` and the
     Lie-group methods integrate it)."""
+
+    @property
+    def group(self) -> AbstractLieGroup | None:
+        r"""`None`: the reconstruction of a damped motion (its velocity is not $\nabla H$, and
+        the spatial momentum is not conserved) is not implemented."""
+        return None
 
     @property
     @abc.abstractmethod
