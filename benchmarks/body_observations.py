@@ -15,7 +15,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import time
+
+import numpy as np
 
 from benchmarks._report import default_out, write_json
 from paper import w4_bodies as w4
@@ -32,6 +35,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=200, help="Levenberg-Marquardt steps per fit")
     parser.add_argument("--time-unit", type=float, default=1.0,
                         help="give the learners the observations in this unit of time (seconds)")
+    parser.add_argument("--bootstrap", type=int, default=0,
+                        help="also refit the G-LPNet's family on N resamples of the trajectories: the spread of its "
+                             "inertia's principal values and axes")
     parser.add_argument("--out", default=default_out("body_observations"))
     args = parser.parse_args(argv)
     models = [m for m in w4.models() if m.label in args.models]
@@ -53,7 +59,29 @@ def main(argv: list[str] | None = None) -> None:
                     rows.append(row)
     for v in w4.verdict(rows):
         print("-", v)
-    write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.verdict(rows)})
+    spread = {}
+    if args.bootstrap:
+        for system in args.systems:
+            protocol = protocols[system]
+            for sampling in args.sampling:
+                for noise in args.noise:
+                    M = w4.bootstrap_inertia(protocol, w4.observations(protocol, noise, sampling), args.bootstrap,
+                                             steps=args.steps)
+                    values, axes = np.linalg.eigh(M)
+                    truth = np.linalg.inv(protocol.A)
+                    true_values, true_axes = np.linalg.eigh(truth * truth.shape[0] / np.trace(truth))
+                    # each principal axis's angle from the true one (as lines), per resample
+                    cosines = np.abs(np.einsum("kij,ij->kj", axes, true_axes)).clip(0.0, 1.0)
+                    angles = np.degrees(np.arccos(cosines))
+                    key = f"{system}, {sampling}, noise {noise:g}"
+                    spread[key] = {"principal_values_mean": values.mean(0).tolist(),
+                                   "principal_values_std": values.std(0, ddof=1).tolist(),
+                                   "true_principal_values": true_values.tolist(),
+                                   "axes_angle_deg_mean": angles.mean(0).tolist(),
+                                   "axes_angle_deg_std": angles.std(0, ddof=1).tolist()}
+                    print(key, "bootstrap of the inertia (trace 3):", json.dumps(spread[key]))
+    write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.verdict(rows),
+                                "bootstrap": spread})
 
 
 if __name__ == "__main__":

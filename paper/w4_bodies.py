@@ -319,9 +319,7 @@ def evaluate(protocol: BodyProtocol, model: AbstractBodyModel, data: it.BodyObse
     figures = measure(protocol, test, model.predict(fitted, protocol, test))
     extra: dict[str, Any] = {}
     if isinstance(model, LearnedBodyModel):
-        hessian = np.asarray(jax.hessian(lambda y: jax.numpy.sum(fitted.hamiltonian(y)))(
-            np.zeros(protocol.system.dim)))
-        ratios = _ratios(hessian)
+        ratios = _ratios(np.linalg.inv(learned_inertia(fitted)))
         extra = {"inertia_ratios": ratios.tolist(),
                  "inertia_ratio_error": float(np.max(np.abs(ratios / _ratios(protocol.A) - 1.0)))}
         if model.label == "G-LPNet":
@@ -334,6 +332,33 @@ def _family(net) -> str:
     terms = net.terms
     axes = "any axes" if terms.full_vectors else "axes"
     return f"{terms.activation}, {axes}{', linear terms' if terms.bias else ''}"
+
+
+def learned_inertia(fitted) -> np.ndarray:
+    r"""The inertia $\widetilde{\mathbb M} = (\nabla^2\widetilde H)^{-1}$ of a fitted map at
+    $\mu = 0$, scaled to trace $n$ (the gauge-free part: its ratios and principal axes)."""
+    hessian = np.asarray(jax.hessian(lambda y: jax.numpy.sum(fitted.hamiltonian(y)))(
+        np.zeros(fitted.system.dim)))
+    M = np.linalg.inv(hessian)
+    return M * M.shape[0] / np.trace(M)
+
+
+def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int, seed: int = 0,
+                      steps: int = 200) -> np.ndarray:
+    """The G-LPNet's inertia (`learned_inertia`) over `n` fits to the trajectories of `data`
+    resampled with replacement (seeded), `(n, dim, dim)`; the family the full data chose is
+    refitted (`families=`), not chosen again."""
+    net = LearnedBodyModel("G-LPNet").fit(protocol, data, steps)
+    family = next(f for f in learn.FAMILIES if not f.select and f.any_axes == net.terms.full_vectors
+                  and f.bias == net.terms.bias and f.activation == net.terms.activation)
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        sample = data.select(rng.integers(0, len(data), len(data)))
+        fitted, _ = learn.fit_splitting(protocol.system, sample, loss=learn.BodyLoss(max_step=MAX_STEP),
+                                        iterations=steps, families=[family], progress=False)
+        out.append(learned_inertia(fitted))
+    return np.stack(out)
 
 
 @dataclasses.dataclass(frozen=True)
