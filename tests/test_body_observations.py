@@ -121,6 +121,8 @@ def test_a_fit_on_attitudes_alone_learns_the_rotated_body():
     assert predicted_attitude_error(net, 0.02) < 1e-2
 
 
+@pytest.mark.slow  # a fit, then a rollout (~10 s); the property is by construction, checked by default on an
+# untrained G-LPNet in test_configurations.py
 def test_the_learned_step_keeps_the_spatial_momentum_of_its_latent_momentum():
     obs = observations(noise=1e-3)
     net, _ = learn.fit_splitting(ROTATED, obs, families=[learn.FAMILIES[3]], iterations=20, progress=False)

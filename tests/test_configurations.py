@@ -87,7 +87,8 @@ def test_heyoka_reconstruction_keeps_the_spatial_momentum_and_the_unit_quaternio
     np.testing.assert_allclose(truth.states, it.ground_truth(system, y0, 0.5, 40).states, atol=1e3 * EPS * scale)
 
 
-@pytest.mark.parametrize("system", [BODY, VEHICLE], ids=["rigid body", "Kirchhoff"])
+# Kirchhoff's poses (SE(3)) under -m slow (~10 s each); by default the rigid body's rotations
+@pytest.mark.parametrize("system", [BODY, pytest.param(VEHICLE, marks=pytest.mark.slow)], ids=["rigid body", "Kirchhoff"])
 @pytest.mark.parametrize(("method", "order"), [(Strang(), 2), (TripleJump(), 4)])
 def test_lifted_splitting_has_the_methods_order_on_configuration_and_momentum(system, method, order):
     rng = np.random.default_rng(5)
