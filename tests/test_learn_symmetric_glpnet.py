@@ -58,8 +58,11 @@ def test_network_with_a_method_is_that_method_on_its_learned_system(method, syst
     assert g.exact_flows_per_step == method().flows_per_step(2 * system.dim)
 
 
-@pytest.mark.parametrize("linear_term", [False, True])
-@pytest.mark.parametrize("activation", ["sigmoid", "tanh", "identity"])
+# every activation and both choices of the linear term by default; the other three pairs with -m slow
+@pytest.mark.parametrize(("activation", "linear_term"), [
+    ("sigmoid", False), ("tanh", True), ("identity", False),
+    *(pytest.param(a, b, marks=pytest.mark.slow) for a, b in [("sigmoid", True), ("tanh", False), ("identity", True)]),
+])
 def test_every_activation_is_strang_of_its_learned_hamiltonian(activation, linear_term):
     g = net(activation=activation, linear_term=linear_term)
     if linear_term:
@@ -147,7 +150,7 @@ def test_compositions_of_the_learned_splitting_raise_the_order():
 
 @pytest.mark.parametrize(
     "method, n_modules",
-    [(it.splitting.TripleJump, 1), (it.splitting.TripleJump, 3), (it.splitting.Suzuki, 2),
+    [(it.splitting.TripleJump, 1), pytest.param(it.splitting.TripleJump, 3, marks=pytest.mark.slow), (it.splitting.Suzuki, 2),
      pytest.param(it.splitting.Yoshida6, 2, marks=pytest.mark.slow)],
 )
 def test_composed_network_is_the_composition_of_its_strang_steps(method, n_modules):
