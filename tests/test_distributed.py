@@ -25,8 +25,10 @@ from integrators import _ground_truth
 
 @pytest.fixture(scope="module")
 def client():
+    # the scheduler's web server on a free port: with dashboard_address=None Dask still binds
+    # its default 8787, and the CLI's own cluster (below) would then warn that it is taken
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster, distributed.Client(cluster) as c:
         yield c
 
