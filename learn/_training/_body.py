@@ -217,19 +217,65 @@ def latent_starts(model, data: BodyObservations) -> jax.Array:
     return mu
 
 
+#: Samples under each test function of `body_quadratic_estimate`'s weak form; the windows of a
+#: longer trajectory overlap by half. Measured on W4's bodies (inertia error of the estimate at
+#: trace n, 30-40 trajectories x 41 uneven observations): 15 is within 2x of the best of 5, 9,
+#: 15 and 41 samples at noise 0, 1e-3 and 1e-2 on both bodies (BENCHMARKS.md, "The inertia
+#: estimate in weak form").
+WEAK_WINDOW = 15
+
+# Gauss-Legendre nodes per interval: exact for a test function of degree 4 times a cubic
+_GAUSS = np.polynomial.legendre.leggauss(4)
+
+
+def weak_form_weights(t: np.ndarray, window: int = WEAK_WINDOW) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(W, W')` `(n_windows, len(t))`: $W_{rk} = \int\phi_r s_k\,dt$ and
+    $W'_{rk} = \int\phi_r' s_k\,dt$, so that $W f pprox \int\phi_r f\,dt$ for samples $f_k =
+    f(t_k)$ of a smooth $f$ (the integral of their cubic spline, not-a-knot; $s_k$ its
+    cardinal functions). The test functions $\phi_r = \psi_r^2$,
+    $\psi_r = (t - a)(b - t)/((b - a)/2)^2$, vanish with their derivative at the ends of
+    windows $[a, b]$ of `window` consecutive samples (of half a shorter trajectory, at least
+    three), overlapping by half, so
+    $\int\phi_r\dot f\,dt = -\int\phi_r' f\,dt$: no difference of noisy samples is taken."""
+    from scipy.interpolate import CubicSpline
+
+    k = t.size
+    width = min(window, max(3, k // 2), k)  # a short trajectory: two or more windows, if it can
+    starts = list(range(0, k - width + 1, max(1, width // 2)))
+    if starts[-1] != k - width:
+        starts.append(k - width)  # the tail of the trajectory under a test function too
+    x, w = _GAUSS
+    W, dW = np.zeros((len(starts), k)), np.zeros((len(starts), k))
+    for r, s in enumerate(starts):
+        tk = t[s : s + width]
+        a, b = tk[0], tk[-1]
+        lo, hi = tk[:-1, None], tk[1:, None]
+        nodes = (0.5 * (lo + hi) + 0.5 * (hi - lo) * x).ravel()
+        weights = (0.5 * (hi - lo) * w).ravel()
+        cardinal = CubicSpline(tk, np.eye(width))(nodes)  # (nodes, width)
+        psi = (nodes - a) * (b - nodes) / (0.5 * (b - a)) ** 2
+        dpsi = (a + b - 2.0 * nodes) / (0.5 * (b - a)) ** 2
+        W[r, s : s + width] = (weights * psi**2) @ cardinal
+        dW[r, s : s + width] = (weights * 2.0 * psi * dpsi) @ cardinal
+    return W, dW
+
+
 def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagonal: bool = False
                             ) -> tuple[np.ndarray, np.ndarray]:
     r"""`(A, b)` of a quadratic $\widetilde H = \tfrac12\mu^\top A\mu + b^\top\mu$ from body
     velocities alone: with the inertia $\mathbb M = A^{-1}$, $\mu = \mathbb M(\xi - b)$, the
     Lie-Poisson equations $\dot\mu = \mathbb B(\mu)\xi$ read
     $\mathbb M\dot\xi = \mathbb B(\mathbb M\xi - c)\,\xi$ with $c = \mathbb Mb$: homogeneous and
-    linear in $(\mathbb M, c)$, solved at the midpoints of consecutive velocities (observed, or
-    from the configurations) by the smallest singular vector; $\mathbb M$ made positive definite
-    (eigenvalues clipped at 1e-3 of the largest: a start, not a result). Scale (not
-    identifiable): $\operatorname{tr}\mathbb M = n$."""
+    linear in $(\mathbb M, c)$. In weak form against test functions $\phi_r$ on windows of
+    the velocities (observed, or from the configurations; `weak_form_weights`),
+    $-\mathbb M\int\phi_r'\xi\,dt = \int\phi_r\,\mathbb B(\mathbb M\xi - c)\,\xi\,dt$, solved
+    by the smallest singular vector: the noise of the velocities is integrated, not
+    differenced. $\mathbb M$ made positive definite (eigenvalues clipped at 1e-3 of the
+    largest: a start, not a result). Scale (not identifiable): $\operatorname{tr}\mathbb M = n$."""
     system = data.system
     n = system.dim
-    xis, dxis = [], []
+    C = np.asarray(system.algebra.structure_constants)
+    xis, Ls, Ws, dWs = [], [], [], []
     for j, t in enumerate(data.times):
         if data.velocities is not None:
             v, tt = data.velocities[j], t
@@ -237,24 +283,28 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
             v, tt = data.group_velocities(j), 0.5 * (t[1:] + t[:-1])
         if v.shape[0] < 2:
             continue
-        xis.append(0.5 * (v[1:] + v[:-1]))
-        dxis.append((v[1:] - v[:-1]) / np.diff(tt)[:, None])
+        W, dW = weak_form_weights(tt)
+        xis.append(v)
+        Ls.append(float(system.algebra.sign) * np.einsum("abd,kb->kad", C, v))  # B(mu) xi = L mu
+        Ws.append(W)
+        dWs.append(dW)
     unknowns = (n if diagonal else n * (n + 1) // 2) + (n if linear else 0)
-    if sum(x.shape[0] for x in xis) * n < 2 * unknowns:
-        raise ValueError(f"the data give {sum(x.shape[0] for x in xis)} pairs of consecutive velocities; estimating "
-                         f"{unknowns} coefficients of the inertia needs at least {-(-2 * unknowns // n)} (trajectories "
-                         "of three or more observations)")
-    xi, dxi = np.concatenate(xis), np.concatenate(dxis)
-    C = np.asarray(system.algebra.structure_constants)
-    L = float(system.algebra.sign) * np.einsum("abd,kb->kad", C, xi)  # B(mu) xi = L mu, L_ad = sign C_abd xi_b
+    windows = sum(W.shape[0] for W in Ws)
+    if windows * n < 2 * unknowns:
+        raise ValueError(f"the data give {windows} windows of consecutive velocities ({windows * n} equations); "
+                         f"estimating {unknowns} coefficients of the inertia needs at least {2 * unknowns} equations "
+                         "(more trajectories of two or more observations, or longer ones)")
     i, j = np.diag_indices(n) if diagonal else np.triu_indices(n)
     columns = []
     for a, c in zip(i, j, strict=True):
         E = np.zeros((n, n))
         E[a, c] = E[c, a] = 1.0
-        columns.append((dxi @ E - np.einsum("kpq,qr,kr->kp", L, E, xi)).reshape(-1))
-    if linear:
-        columns.extend(L[:, :, q].reshape(-1) for q in range(n))  # + L c
+        columns.append(np.concatenate([
+            (-dW @ (xi @ E) - W @ np.einsum("kpq,qr,kr->kp", L, E, xi)).reshape(-1)
+            for xi, L, W, dW in zip(xis, Ls, Ws, dWs, strict=True)]))
+    if linear:  # + B(c) xi = L c
+        columns.extend(np.concatenate([(W @ L[:, :, q]).reshape(-1) for L, W in zip(Ls, Ws, strict=True)])
+                       for q in range(n))
     D = np.stack(columns, axis=1)
     norms = np.linalg.norm(D, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
