@@ -10,6 +10,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._models._base import (
+    AbstractBodyMap as AbstractBodyMap,
     AbstractCasimirConservingMap as AbstractCasimirConservingMap,
     AbstractLearnedMap as AbstractLearnedMap,
     AbstractOneFlowMap as AbstractOneFlowMap,

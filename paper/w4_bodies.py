@@ -31,6 +31,7 @@ Rows are saved as they are measured (`<out>/W4/rows/`): an interrupted run resum
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import functools
 import itertools
@@ -157,39 +158,41 @@ class Prediction:
     momenta: np.ndarray | None = None
 
 
-class AbstractBodyModel:
+class AbstractBodyModel(abc.ABC):
+    """A model of W4: fitted to body observations, then predicting the test set's attitudes
+    (poses) and velocities from their first values."""
+
     label: str
 
+    @abc.abstractmethod
     def fit(self, protocol: BodyProtocol, data: it.BodyObservations, steps: int) -> Any:
-        raise NotImplementedError
+        """The fitted model (`steps`: Levenberg-Marquardt steps, where it takes them)."""
 
+    @abc.abstractmethod
     def predict(self, fitted: Any, protocol: BodyProtocol, test: TestSet) -> Prediction:
-        raise NotImplementedError
+        """Configurations and velocities every `H_SAVE` from the test set's first ones."""
+
+    def identified(self, fitted: Any, protocol: BodyProtocol) -> dict[str, Any]:
+        """What the fit identified, for the row (nothing by default)."""
+        return {}
 
 
 @dataclasses.dataclass(frozen=True)
 class LearnedBodyModel(AbstractBodyModel):
-    """A map with a learned Hamiltonian fitted with latent momenta: the G-LPNet
-    (`fit_splitting`) or the limit (`ParametricHamiltonian`). `unit`: fitted to the
-    observations in this unit of time (seconds; `BodyObservations.in_units`), its predictions
-    converted back."""
+    """A map with a learned Hamiltonian fitted with latent momenta (`learn.AbstractBodyMap`).
+    `unit`: fitted to the observations in this unit of time (seconds;
+    `BodyObservations.in_units`), its predictions converted back."""
 
-    label: str
     unit: float = 1.0
+
+    @abc.abstractmethod
+    def fit_in_units(self, protocol: BodyProtocol, data: it.BodyObservations, loss: learn.BodyLoss,
+                     steps: int) -> learn.AbstractBodyMap:
+        """The map fitted to `data` (already in `unit`) on `loss`."""
 
     def fit(self, protocol, data, steps):
         data = data if self.unit == 1.0 else data.in_units(self.unit)
-        loss = learn.BodyLoss(max_step=MAX_STEP / self.unit)
-        if self.label == "G-LPNet":
-            net, _ = learn.fit_splitting(protocol.system, data, loss=loss, iterations=steps, seed=TRAIN_SEED,
-                                         key=TRAIN_SEED, progress=False)
-            return net
-        n = protocol.A.shape[0]
-        theta0 = 1.1 * protocol.A[np.triu_indices(n)]
-        model = learn.ParametricHamiltonian(protocol.system, _quadratic_form(n), theta0, substeps=10)
-        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.LevenbergMarquardt(steps, rtol=1e-12),
-                              validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
-        return fitted
+        return self.fit_in_units(protocol, data, learn.BodyLoss(max_step=MAX_STEP / self.unit), steps)
 
     def predict(self, fitted, protocol, test):
         mu0 = np.asarray(learn.latent_momenta(fitted, test.xi0 * self.unit))
@@ -199,30 +202,59 @@ class LearnedBodyModel(AbstractBodyModel):
         xi = np.asarray(jax.vmap(jax.vmap(fitted.body_velocity))(mu)) / self.unit
         return Prediction(np.asarray(g), xi, np.asarray(mu))
 
+    def identified(self, fitted, protocol):
+        ratios = _ratios(np.linalg.inv(learned_inertia(fitted)))
+        return {"inertia_ratios": ratios.tolist(),
+                "inertia_ratio_error": float(np.max(np.abs(ratios / _ratios(protocol.A) - 1.0)))}
+
 
 @dataclasses.dataclass(frozen=True)
-class SINDyBodyModel(AbstractBodyModel):
-    """A polynomial field of degree 2 for the body velocities (SINDy on finite differences,
-    or weak SINDy), integrated with the kinematics."""
+class GLPNetBodyModel(LearnedBodyModel):
+    """The G-LPNet of `learn.fit_splitting`: every family, the lowest BIC."""
 
-    label: str
+    label: str = "G-LPNet"
+
+    def fit_in_units(self, protocol, data, loss, steps):
+        net, _ = learn.fit_splitting(protocol.system, data, loss=loss, iterations=steps, seed=TRAIN_SEED,
+                                     key=TRAIN_SEED, progress=False)
+        return net
+
+    def identified(self, fitted, protocol):
+        return {**super().identified(fitted, protocol), "family": _family(fitted)}
+
+
+@dataclasses.dataclass(frozen=True)
+class LimitBodyModel(LearnedBodyModel):
+    """The parametric limit: the true quadratic family (`learn.ParametricHamiltonian`, RK4),
+    started 10% off the truth."""
+
+    label: str = "limit"
+
+    def fit_in_units(self, protocol, data, loss, steps):
+        n = protocol.A.shape[0]
+        theta0 = 1.1 * protocol.A[np.triu_indices(n)]
+        model = learn.ParametricHamiltonian(protocol.system, _quadratic_form(n), theta0, substeps=10)
+        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.LevenbergMarquardt(steps, rtol=1e-12),
+                              validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
+        return fitted
+
+
+@dataclasses.dataclass(frozen=True)
+class AbstractSINDyBodyModel(AbstractBodyModel):
+    """A polynomial field of degree 2 for the body velocities, identified from their samples
+    (observed, or from the configurations), integrated with the kinematics."""
+
+    @abc.abstractmethod
+    def field(self, as_states: it.Observations) -> Any:
+        """The identified field (`predict(xi)` `(k, dim)` -> `(k, dim)`) of velocity samples."""
 
     def fit(self, protocol, data, steps):
-        import pysindy as ps
-
         velocities = data.velocities if data.velocities is not None else [
             data.group_velocities(j) for j in range(len(data))]
         times = data.times if data.velocities is not None else [0.5 * (t[1:] + t[:-1]) for t in data.times]
-        as_states = it.Observations(protocol.system, list(times), list(velocities))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            if self.label == "weak SINDy":
-                return WeakSINDyModel("weak SINDy").vector_field(as_states)
-            model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
-                             differentiation_method=ps.FiniteDifference())
-            model.fit(list(as_states.states), t=list(as_states.times))
-            library = model.feature_library
-            return PolynomialField(library, model.coefficients())
+            return self.field(it.Observations(protocol.system, list(times), list(velocities)))
 
     def predict(self, fitted, protocol, test):
         group = protocol.system.group
@@ -250,6 +282,33 @@ class SINDyBodyModel(AbstractBodyModel):
         finite = np.all(np.isfinite(gs), axis=-1)
         gs[finite] = np.asarray(group.project(gs[finite]))
         return Prediction(gs, np.stack(xis))
+
+
+
+
+@dataclasses.dataclass(frozen=True)
+class SINDyBodyModel(AbstractSINDyBodyModel):
+    """SINDy (pysindy, STLSQ) on finite differences of the velocities."""
+
+    label: str = "SINDy"
+
+    def field(self, as_states):
+        import pysindy as ps
+
+        model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
+                         differentiation_method=ps.FiniteDifference())
+        model.fit(list(as_states.states), t=list(as_states.times))
+        return PolynomialField(model.feature_library, model.coefficients())
+
+
+@dataclasses.dataclass(frozen=True)
+class WeakSINDyBodyModel(AbstractSINDyBodyModel):
+    """Weak SINDy (W2's, one weak library per trajectory) on the velocities."""
+
+    label: str = "weak SINDy"
+
+    def field(self, as_states):
+        return WeakSINDyModel("weak SINDy").vector_field(as_states)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -305,9 +364,9 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
 
 
 def models() -> list[AbstractBodyModel]:
-    out: list[AbstractBodyModel] = [LearnedBodyModel("G-LPNet"), LearnedBodyModel("limit")]
+    out: list[AbstractBodyModel] = [GLPNetBodyModel(), LimitBodyModel()]
     if sindy_available():
-        out += [SINDyBodyModel("SINDy"), SINDyBodyModel("weak SINDy")]
+        out += [SINDyBodyModel(), WeakSINDyBodyModel()]
     return out
 
 
@@ -317,15 +376,8 @@ def evaluate(protocol: BodyProtocol, model: AbstractBodyModel, data: it.BodyObse
     fitted = model.fit(protocol, data, steps)
     fit_seconds = time.perf_counter() - start
     figures = measure(protocol, test, model.predict(fitted, protocol, test))
-    extra: dict[str, Any] = {}
-    if isinstance(model, LearnedBodyModel):
-        ratios = _ratios(np.linalg.inv(learned_inertia(fitted)))
-        extra = {"inertia_ratios": ratios.tolist(),
-                 "inertia_ratio_error": float(np.max(np.abs(ratios / _ratios(protocol.A) - 1.0)))}
-        if model.label == "G-LPNet":
-            extra["family"] = _family(fitted)
     return W4Row(system=system, noise=noise, sampling=sampling, model=model.label, fit_seconds=fit_seconds,
-                 **figures, **extra)
+                 **figures, **model.identified(fitted, protocol))
 
 
 def _family(net) -> str:

@@ -181,6 +181,15 @@ def test_a_family_extending_a_hopeless_one_is_skipped():
     assert fitted["quadratic"] > 100 * fitted["quadratic, any axes, even"]
 
 
+def test_body_observations_refuse_a_map_without_a_body_velocity():
+    obs = observations(BODY, n=2, m=5)
+    with pytest.raises(TypeError, match="carries the configuration and has a learned Hamiltonian"):
+        learn.fit(learn.LPNet(BODY, hidden=(4,), key=0), obs, loss=learn.BodyLoss(), progress=False)
+    with pytest.raises(TypeError, match="learn.BodyLoss compares a map with integrators.BodyObservations"):
+        learn.fit(learn.GLPNet(BODY, n_modules=2), it.ground_truth(BODY, unit_rows(2, 3, 0), 0.1, 3),
+                  loss=learn.BodyLoss(), progress=False)
+
+
 def test_the_inertia_estimate_refuses_too_little_data_and_survives_a_steady_spin():
     t = np.array([0.0, 0.1])
     two = it.BodyObservations(BODY, t, None, [np.ones((2, 3))])

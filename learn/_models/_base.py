@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 import liepoisson as lp
-from integrators import AbstractStepMap
+from integrators import AbstractReconstructingStepMap, AbstractStepMap
 from liepoisson.internals import check_system, jsonable
 from liepoisson.systems import AbstractPoissonSystem, system_for_file
 
@@ -151,6 +151,16 @@ class AbstractWarmStartableMap(AbstractLearnedMap):
         """`(simpler, mapped)`: a simpler map to fit first and `mapped(fitted_simpler, states)`,
         this map started from it (`states` `(N, dim)`: the training states, e.g. to scale the
         mapping); `None` if this map is already the simpler one."""
+
+
+class AbstractBodyMap(AbstractLearnedMap, AbstractReconstructingStepMap):
+    r"""A learned map of a Hamiltonian $\widetilde H$ that carries the configuration: its
+    body velocity $\xi = \nabla\widetilde H(\mu)$ is what a gyroscope reads, so it can be fitted
+    on configurations and velocities with the momenta latent (`learn.BodyLoss`)."""
+
+    @abc.abstractmethod
+    def body_velocity(self, y: jax.Array) -> jax.Array:
+        r"""$\xi = \nabla\widetilde H(y)$ for one state `(dim,)`."""
 
 
 class AbstractOneFlowMap(AbstractLearnedMap):

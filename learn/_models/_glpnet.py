@@ -18,7 +18,6 @@ import jax
 import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
-from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_state, composition_flops, splitting_method
 from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
 from liepoisson import JAX
@@ -26,7 +25,7 @@ from liepoisson.internals import as_state, check_system, positive_float
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._solvers._quasi_newton import QuasiNewton
-from ._base import AbstractCasimirConservingMap, AbstractWarmStartableMap
+from ._base import AbstractBodyMap, AbstractCasimirConservingMap, AbstractWarmStartableMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
 from ._networks import network_or_default
@@ -38,7 +37,7 @@ def check_method(method: Any) -> AbstractSplittingMethod:
     return splitting_method(method)
 
 
-class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractReconstructingStepMap):
+class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBodyMap):
     r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
     $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
     `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$

@@ -13,16 +13,15 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._solvers._quasi_newton import QuasiNewton
-from ._base import AbstractLearnedMap
+from ._base import AbstractBodyMap, AbstractLearnedMap
 
 
-class ParametricHamiltonian(AbstractLearnedMap, AbstractReconstructingStepMap):
+class ParametricHamiltonian(AbstractBodyMap):
     r"""The flow of $\dot y = \mathbb B(y)\nabla_y H(y; \theta)$ over one step, for a
     Hamiltonian family `hamiltonian(y, theta)` (JAX, scalar) with parameters $\theta$ fitted
     by `learn.fit`; the bracket is `system`'s.

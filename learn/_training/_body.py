@@ -25,9 +25,10 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators import AbstractReconstructingStepMap, BodyObservations
+from integrators import BodyObservations
 from liepoisson.internals import positive_float
 
+from .._models._base import AbstractBodyMap
 from ._losses import AbstractLoss
 from ._observed import SegmentsObjective
 from ._problem import Description, Fitted, FittedProblem
@@ -157,7 +158,7 @@ class BodyLoss(AbstractLoss):
         """The trajectories as `BodySegments`, the starts from `latent_starts`."""
         if not isinstance(data, BodyObservations):
             raise TypeError(f"learn.BodyLoss compares a map with integrators.BodyObservations; got {type(data).__name__}")
-        if not isinstance(model, AbstractReconstructingStepMap) or not hasattr(type(model), "body_velocity"):
+        if not isinstance(model, AbstractBodyMap):
             raise TypeError(f"learning from body observations needs a map that carries the configuration and has a "
                             f"learned Hamiltonian (learn.GLPNet); got {type(model).__name__}")
         if normalise:
