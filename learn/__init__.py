@@ -16,7 +16,7 @@ from ._models._base import (
     AbstractOneFlowMap as AbstractOneFlowMap,
     AbstractWarmStartableMap as AbstractWarmStartableMap,
 )
-from ._models._baseline import MLPBaseline as MLPBaseline
+from ._models._baseline import MLPBaseline as MLPBaseline, NeuralODE as NeuralODE
 from ._models._equivariant import GroupAveraged as GroupAveraged
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._models._learned_system import LearnedHamiltonian as LearnedHamiltonian

@@ -4,16 +4,17 @@ an LPNet on the state, to show what the Lie-Poisson structure buys (it conserves
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_state
-from liepoisson.internals import check_system, positive_float
+from integrators.internals import check_h, check_state
+from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractLearnedMap
@@ -111,3 +112,87 @@ class MLPBaseline(AbstractFixedStepMap):
     def normalised(self, y0, y1, h, targets=None):
         """Scalings from the data: inputs the mean/std of $y_0$, outputs those of $y_1 - y_0$."""
         return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, y1 - y0))
+
+
+class NeuralODE(AbstractLearnedMap):
+    r"""A neural ODE without structure: $\dot y = s_\text{out}\odot\mathrm{MLP}((y -
+    m_\text{in})/s_\text{in}) + m_\text{out}$, one step of $h$ being `substeps` classical
+    Runge-Kutta steps (RK4). Unlike `MLPBaseline` it takes the step as an input, so it follows
+    observations at uneven times (`learn.fit` on `integrators.Observations`, its trajectory
+    loss); like it, it conserves no Casimir and is no Poisson map: the baseline that shows
+    what the Lie-Poisson structure buys on the same data.
+
+    **Arguments:** as `MLPBaseline`'s (`hidden`, `activation`, `key`, scalings, or `network`
+    from `dim` to `dim`); `substeps`; `h`. `learn.fit(normalise=True)` sets the scalings:
+    inputs $y_0$, outputs $(y_1 - y_0)/h$ (the field's size).
+    """
+
+    network: AbstractNetwork
+    system: AbstractPoissonSystem = eqx.field(static=True)
+    substeps: int = eqx.field(static=True)
+    h: float | None
+
+    def __init__(
+        self,
+        system: AbstractPoissonSystem,
+        hidden: Sequence[int] | None = None,
+        activation: str | None = None,
+        key: int | jax.Array | None = None,
+        h: float | None = None,
+        input_scaling: Scaling | None = None,
+        output_scaling: Scaling | None = None,
+        *,
+        substeps: int = 4,
+        network: AbstractNetwork | None = None,
+    ):
+        self.system = check_system(system)
+        network = network_or_default(
+            network, functools.partial(AffineMLP, system.dim, system.dim), hidden=hidden, activation=activation,
+            key=key, input_scaling=input_scaling, output_scaling=output_scaling)
+        self.network = check_network(network, system.dim, system.dim, "states to their time derivative")
+        self.substeps = positive_int(substeps, "substeps")
+        self.h = None if h is None else positive_float(h, "h")
+
+    def vector_field(self, y: jax.Array) -> jax.Array:
+        r"""$\dot y$ `(..., dim)` of the learned field."""
+        y = jnp.asarray(y)
+        return jax.vmap(self.network)(y.reshape(-1, self.system.dim)).reshape(y.shape)
+
+    def step(self, y: jax.Array) -> jax.Array:
+        y = check_state(y, self.system.dim)
+        return rk4(self.network, y, check_h(self), self.substeps)
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
+
+    def hyperparameters(self) -> dict[str, Any]:
+        return {"network": self.network.spec(), "substeps": self.substeps}
+
+    @classmethod
+    def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
+        return cls(system, h=h, substeps=hyperparameters["substeps"],
+                   network=network_from_spec(hyperparameters["network"], key))
+
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))
+
+    def normalised(self, y0, y1, h, targets=None):
+        """Scalings from the data: inputs the mean/std of $y_0$, outputs those of
+        $(y_1 - y_0)/h$."""
+        rates = (np.asarray(y1) - np.asarray(y0)) / np.reshape(np.asarray(h, dtype=np.float64), (-1, 1))
+        return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, rates))
+
+
+def rk4(field: Callable[[jax.Array], jax.Array], y: jax.Array, h: jax.Array | float, substeps: int) -> jax.Array:
+    r"""`substeps` classical Runge-Kutta steps of $\dot y = f(y)$ over $h$."""
+    dt = h / substeps
+
+    def one(_, z):
+        k1 = field(z)
+        k2 = field(z + 0.5 * dt * k1)
+        k3 = field(z + 0.5 * dt * k2)
+        k4 = field(z + dt * k3)
+        return z + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+    return jax.lax.fori_loop(0, substeps, one, y)
