@@ -14,7 +14,7 @@ BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0))
 def test_a_step_is_classical_runge_kutta_on_its_field():
     net = learn.NeuralODE(BODY, hidden=(8,), key=1, h=0.3, substeps=3)
     y = np.array([0.3, -0.5, 0.8])
-    f = lambda z: np.asarray(net.vector_field(z))  # noqa: E731
+    f = lambda z: np.asarray(net.vector_field(z))
     dt, z = 0.1, y.copy()
     for _ in range(3):
         k1 = f(z)

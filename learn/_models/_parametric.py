@@ -18,7 +18,7 @@ from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._solvers._quasi_newton import QuasiNewton
-from ._base import AbstractBodyMap, AbstractLearnedMap
+from ._base import AbstractBodyMap
 
 
 class ParametricHamiltonian(AbstractBodyMap):
