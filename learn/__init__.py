@@ -64,6 +64,7 @@ from ._training._body import (
     BodySegments as BodySegments,
     body_quadratic_estimate as body_quadratic_estimate,
     latent_momenta as latent_momenta,
+    weak_form_quadratic as weak_form_quadratic,
 )
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import (

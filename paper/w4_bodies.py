@@ -16,7 +16,10 @@ drawn from [0.05, 0.3]. The momenta are never observed. Fitted to the same obser
   included, from the truth 10% off: what the data allow at best;
 - **SINDy** and **weak SINDy** (pysindy, extra `peers`): a polynomial field of degree 2 for the
   body velocities (the observed ones; from the configurations' differences without them),
-  integrated by LSODA with the kinematics (dq/dt = q (Omega, 0)/2, dx/dt = R v).
+  integrated by LSODA with the kinematics (dq/dt = q (Omega, 0)/2, dx/dt = R v);
+- **neural ODE**: `learn.NeuralODE`, an MLP field for the body velocities (two hidden layers of
+  32, tanh) fitted to their trajectories by Levenberg-Marquardt, integrated as SINDy's: no
+  structure.
 
 Every model predicts from 12 held-out initial conditions (attitude, position at the origin,
 body velocity; the learned maps start from `learn.latent_momenta`) to `t_end` (50 for the
@@ -74,6 +77,9 @@ H_REGULAR, UNEVEN = 0.1, (0.05, 0.3)
 #: `H_EVAL` (splitting errors below the noise-free target of 1e-4 rad at t = 50).
 MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
 N_TEST = 12
+#: Levenberg-Marquardt steps of the neural ODE's fit at most (it stops once three steps lower
+#: the loss by less than 1e-6 of it).
+NEURAL_ODE_STEPS = 200
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
 
 
@@ -240,9 +246,9 @@ class LimitBodyModel(LearnedBodyModel):
 
 
 @dataclasses.dataclass(frozen=True)
-class AbstractSINDyBodyModel(AbstractBodyModel):
-    """A polynomial field of degree 2 for the body velocities, identified from their samples
-    (observed, or from the configurations), integrated with the kinematics."""
+class AbstractVelocityFieldModel(AbstractBodyModel):
+    r"""A field $\dot\xi = f(\xi)$ for the body velocities without structure, identified from
+    their samples (observed, or from the configurations), integrated with the kinematics."""
 
     @abc.abstractmethod
     def field(self, as_states: it.Observations) -> Any:
@@ -287,7 +293,7 @@ class AbstractSINDyBodyModel(AbstractBodyModel):
 
 
 @dataclasses.dataclass(frozen=True)
-class SINDyBodyModel(AbstractSINDyBodyModel):
+class SINDyBodyModel(AbstractVelocityFieldModel):
     """SINDy (pysindy, STLSQ) on finite differences of the velocities."""
 
     label: str = "SINDy"
@@ -302,13 +308,45 @@ class SINDyBodyModel(AbstractSINDyBodyModel):
 
 
 @dataclasses.dataclass(frozen=True)
-class WeakSINDyBodyModel(AbstractSINDyBodyModel):
+class WeakSINDyBodyModel(AbstractVelocityFieldModel):
     """Weak SINDy (W2's, one weak library per trajectory) on the velocities."""
 
     label: str = "weak SINDy"
 
     def field(self, as_states):
         return WeakSINDyModel("weak SINDy").vector_field(as_states)
+
+
+@dataclasses.dataclass(frozen=True)
+class NeuralODEBodyModel(AbstractVelocityFieldModel):
+    """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field of two hidden layers of
+    32, tanh, RK4 sub-steps), fitted by Levenberg-Marquardt on their trajectories with fitted
+    starts; the kinematics integrated beside it. No structure: the peer that shows what the
+    Lie-Poisson one buys."""
+
+    label: str = "neural ODE"
+
+    def field(self, as_states):
+        # scalings from the samples: the velocities, and their rates from consecutive ones
+        xi = np.concatenate(as_states.states)
+        rates = np.concatenate([np.diff(y, axis=0) / np.diff(t)[:, None]
+                                for y, t in zip(as_states.states, as_states.times)])
+        net = learn.NeuralODE(as_states.system, hidden=(32, 32), activation="tanh", key=TRAIN_SEED,
+                              input_scaling=(tuple(xi.mean(0)), tuple(xi.std(0))),
+                              output_scaling=((0.0,) * xi.shape[1], tuple(rates.std(0))))
+        fitted, _ = learn.fit(net, as_states, optimiser=learn.LevenbergMarquardt(NEURAL_ODE_STEPS, rtol=1e-6),
+                              validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
+        return _NetworkField(fitted)
+
+
+class _NetworkField:
+    """A fitted `NeuralODE`'s field with `PolynomialField`'s `predict` (compiled once)."""
+
+    def __init__(self, net: learn.NeuralODE):
+        self.field = jax.jit(lambda xi: net.vector_field(xi))
+
+    def predict(self, xi: np.ndarray) -> np.ndarray:
+        return np.asarray(self.field(np.asarray(xi, dtype=np.float64)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -364,7 +402,7 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
 
 
 def models() -> list[AbstractBodyModel]:
-    out: list[AbstractBodyModel] = [GLPNetBodyModel(), LimitBodyModel()]
+    out: list[AbstractBodyModel] = [GLPNetBodyModel(), LimitBodyModel(), NeuralODEBodyModel()]
     if sindy_available():
         out += [SINDyBodyModel(), WeakSINDyBodyModel()]
     return out

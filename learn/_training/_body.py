@@ -264,6 +264,14 @@ def weak_form_weights(t: np.ndarray, window: int = WEAK_WINDOW) -> tuple[np.ndar
 def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagonal: bool = False
                             ) -> tuple[np.ndarray, np.ndarray]:
     r"""`(A, b)` of a quadratic $\widetilde H = \tfrac12\mu^\top A\mu + b^\top\mu$ from body
+    velocities alone (`weak_form_quadratic`, which also gives its misfit)."""
+    A, b, _ = weak_form_quadratic(data, linear, diagonal)
+    return A, b
+
+
+def weak_form_quadratic(data: BodyObservations, linear: bool = True, diagonal: bool = False
+                        ) -> tuple[np.ndarray, np.ndarray, float]:
+    r"""`(A, b, misfit)`: `(A, b)` of a quadratic $\widetilde H = \tfrac12\mu^\top A\mu + b^\top\mu$ from body
     velocities alone: with the inertia $\mathbb M = A^{-1}$, $\mu = \mathbb M(\xi - b)$, the
     Lie-Poisson equations $\dot\mu = \mathbb B(\mu)\xi$ read
     $\mathbb M\dot\xi = \mathbb B(\mathbb M\xi - c)\,\xi$ with $c = \mathbb Mb$: homogeneous and
@@ -272,7 +280,10 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
     $-\mathbb M\int\phi_r'\xi\,dt = \int\phi_r\,\mathbb B(\mathbb M\xi - c)\,\xi\,dt$, solved
     by the smallest singular vector: the noise of the velocities is integrated, not
     differenced. $\mathbb M$ made positive definite (eigenvalues clipped at 1e-3 of the
-    largest: a start, not a result). Scale (not identifiable): $\operatorname{tr}\mathbb M = n$."""
+    largest: a start, not a result). Scale (not identifiable): $\operatorname{tr}\mathbb M = n$.
+    `misfit`: the squared smallest singular value of the weak-form equations (columns of unit
+    norm), their least residual: a family of fewer coefficients (`diagonal`, no `linear`) has
+    a subset of the columns, so its misfit is never below the fuller family's."""
     system = data.system
     n = system.dim
     C = np.asarray(system.algebra.structure_constants)
@@ -309,7 +320,8 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
     D = np.stack(columns, axis=1)
     norms = np.linalg.norm(D, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
-    theta = np.linalg.svd(D / norms, full_matrices=False)[2][-1] / norms
+    _, singular, vt = np.linalg.svd(D / norms, full_matrices=False)
+    theta = vt[-1] / norms
     M = np.zeros((n, n))
     M[i, j] = M[j, i] = theta[: i.size]
     c = theta[i.size :] if linear else np.zeros(n)
@@ -324,4 +336,4 @@ def body_quadratic_estimate(data: BodyObservations, linear: bool = True, diagona
     scale = n / values.sum()
     M, c = (vectors * (values * scale)) @ vectors.T, c * scale
     A = np.linalg.inv(M)
-    return A, A @ c
+    return A, A @ c, float(singular[-1] ** 2)

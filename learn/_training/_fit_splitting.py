@@ -24,7 +24,7 @@ from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
-from ._body import BodyLoss, body_quadratic_estimate
+from ._body import BodyLoss, weak_form_quadratic
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
@@ -81,8 +81,9 @@ def fit_splitting(
     Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
     and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
     the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
-    momenta); a family extending one whose residuals are `PRUNE_RATIO` (100) times the best's
-    is skipped.
+    momenta); a family whose start misfits the weak-form equations `PRUNE_RATIO` (100) times
+    more than the best start, or that extends one whose residuals are 100 times the best's,
+    is skipped (named in each record's `details["skipped"]`).
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
@@ -203,17 +204,21 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
 
 
 
-#: On body observations, a family that extends a nested one is skipped when the nested
-#: family's sum of squared residuals is more than this many times the best family's so far: a
-#: residual 10x larger in RMS is structure (e.g. principal axes off the basis axes) that the
-#: extension's sigmoid pieces along the same directions would have to remove.
+#: On body observations, a family is skipped when the misfit of its quadratic start in the
+#: weak-form equations (`weak_form_quadratic`) is more than this many times the least of any
+#: family's, and a family that extends a nested one when the nested family's sum of squared
+#: residuals is more than this many times the best family's so far: a residual 10x larger in
+#: RMS is structure (e.g. principal axes off the basis axes) that the family, or the
+#: extension's sigmoid pieces along the same directions, would have to remove. (Measured on
+#: W4's bodies, principal axes 0.95 rad off: the diagonal families' weak-form misfit is 180x
+#: the full ones' at noise 1e-2 and 1e4-1e11x below; 1.0-1.03x for an aligned body.)
 PRUNE_RATIO = 100.0
 
 
 @_recipe.register
 def _(data: BodyObservations, system, method, loss, activation, iterations, key, common, families=None):
     """Body observations (configurations, velocities; momenta latent): each family from the
-    quadratic of `body_quadratic_estimate`, fitted by Levenberg-Marquardt on `learn.BodyLoss`
+    quadratic of `weak_form_quadratic`, fitted by Levenberg-Marquardt on `learn.BodyLoss`
     through `method`; the lowest BIC wins."""
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
@@ -233,11 +238,16 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim * len(data.measured)))
     velocities = data.velocities if data.velocities is not None else [
         data.group_velocities(j) for j in range(len(data))]
-    fits, fitted, ssr = [], {}, {}
+    starts = {(f.bias, f.any_axes): weak_form_quadratic(data, linear=f.bias, diagonal=not f.any_axes)
+              for f in families}
+    least = min(misfit for _, _, misfit in starts.values())
+    fits, fitted, ssr, skipped = [], {}, {}, []
     for family in families:
-        if family.nested in ssr and ssr[family.nested] > PRUNE_RATIO * min(ssr.values()):
+        A, b, misfit = starts[family.bias, family.any_axes]
+        if misfit > PRUNE_RATIO * least or (
+                family.nested in ssr and ssr[family.nested] > PRUNE_RATIO * min(ssr.values())):
+            skipped.append(family.name)
             continue
-        A, b = body_quadratic_estimate(data, linear=family.bias, diagonal=not family.any_axes)
         net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
         start = loss.problem(net, data, **split)
         if family.nested in fitted:  # from the nested family's fit, map and starts
@@ -255,7 +265,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         problem, results, name, criterion = f[2], list(f[3]), f[4], f[5]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": name}))
+            last.record, details={**last.record.details, **criterion, "family": name, "skipped": skipped}))
         records.append(training_record(problem, results))
     chosen = fits.index(best)
     return best[2].map(best[2].y0), tuple(r for k, r in enumerate(records) if k != chosen) + (records[chosen],)
