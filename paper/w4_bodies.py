@@ -77,9 +77,6 @@ H_REGULAR, UNEVEN = 0.1, (0.05, 0.3)
 #: `H_EVAL` (splitting errors below the noise-free target of 1e-4 rad at t = 50).
 MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
 N_TEST = 12
-#: Levenberg-Marquardt steps of the neural ODE's fit at most (it stops once three steps lower
-#: the loss by less than 1e-6 of it).
-NEURAL_ODE_STEPS = 200
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
 
 
@@ -251,8 +248,9 @@ class AbstractVelocityFieldModel(AbstractBodyModel):
     their samples (observed, or from the configurations), integrated with the kinematics."""
 
     @abc.abstractmethod
-    def field(self, as_states: it.Observations) -> Any:
-        """The identified field (`predict(xi)` `(k, dim)` -> `(k, dim)`) of velocity samples."""
+    def field(self, as_states: it.Observations, steps: int) -> Any:
+        """The identified field (`predict(xi)` `(k, dim)` -> `(k, dim)`) of velocity samples
+        (`steps`: the fit's iterations, where it iterates)."""
 
     def fit(self, protocol, data, steps):
         velocities = data.velocities if data.velocities is not None else [
@@ -260,7 +258,7 @@ class AbstractVelocityFieldModel(AbstractBodyModel):
         times = data.times if data.velocities is not None else [0.5 * (t[1:] + t[:-1]) for t in data.times]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return self.field(it.Observations(protocol.system, list(times), list(velocities)))
+            return self.field(it.Observations(protocol.system, list(times), list(velocities)), steps)
 
     def predict(self, fitted, protocol, test):
         group = protocol.system.group
@@ -298,7 +296,7 @@ class SINDyBodyModel(AbstractVelocityFieldModel):
 
     label: str = "SINDy"
 
-    def field(self, as_states):
+    def field(self, as_states, steps):
         import pysindy as ps
 
         model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
@@ -313,7 +311,7 @@ class WeakSINDyBodyModel(AbstractVelocityFieldModel):
 
     label: str = "weak SINDy"
 
-    def field(self, as_states):
+    def field(self, as_states, steps):
         return WeakSINDyModel("weak SINDy").vector_field(as_states)
 
 
@@ -321,12 +319,12 @@ class WeakSINDyBodyModel(AbstractVelocityFieldModel):
 class NeuralODEBodyModel(AbstractVelocityFieldModel):
     """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field of two hidden layers of
     32, tanh, RK4 sub-steps), fitted by Levenberg-Marquardt on their trajectories with fitted
-    starts; the kinematics integrated beside it. No structure: the peer that shows what the
+    starts (the profile's steps at most, stopping once three lower the loss by less than 1e-6); the kinematics integrated beside it. No structure: the peer that shows what the
     Lie-Poisson one buys."""
 
     label: str = "neural ODE"
 
-    def field(self, as_states):
+    def field(self, as_states, steps):
         # scalings from the samples: the velocities, and their rates from consecutive ones
         xi = np.concatenate(as_states.states)
         rates = np.concatenate([np.diff(y, axis=0) / np.diff(t)[:, None]
@@ -334,7 +332,7 @@ class NeuralODEBodyModel(AbstractVelocityFieldModel):
         net = learn.NeuralODE(as_states.system, hidden=(32, 32), activation="tanh", key=TRAIN_SEED,
                               input_scaling=(tuple(xi.mean(0)), tuple(xi.std(0))),
                               output_scaling=((0.0,) * xi.shape[1], tuple(rates.std(0))))
-        fitted, _ = learn.fit(net, as_states, optimiser=learn.LevenbergMarquardt(NEURAL_ODE_STEPS, rtol=1e-6),
+        fitted, _ = learn.fit(net, as_states, optimiser=learn.LevenbergMarquardt(steps, rtol=1e-6),
                               validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
         return _NetworkField(fitted)
 
@@ -507,7 +505,7 @@ def verdict(rows: list[W4Row]) -> list[str]:
         limit = _peer(rows, r, "limit")
         if limit:
             parts.append(f"{getattr(r, key) / getattr(limit, key):.2f}x the limit's ({fmt(getattr(limit, key))})")
-        for peer in (_peer(rows, r, "SINDy"), _peer(rows, r, "weak SINDy")):
+        for peer in (_peer(rows, r, m) for m in ("neural ODE", "SINDy", "weak SINDy")):
             if peer:
                 below = getattr(r, key) < getattr(peer, key)
                 parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(getattr(peer, key))}")
