@@ -5,6 +5,9 @@ is not a Poisson map)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -14,6 +17,26 @@ from liepoisson.systems import AbstractPoissonSystem
 
 from ._implicit import AbstractImplicitStepMap
 from ._step_map import AbstractStepMap, check_state
+
+
+def rk4_steps(field: Callable[[Any], Any], y: Any, h: float | jax.Array, substeps: int = 1) -> Any:
+    r"""`substeps` classical Runge-Kutta steps (RK4, as `RK4`) of $\dot y = f(y)$ over $h$,
+    for `y` any pytree of arrays (a state; a configuration and a state); one step is traced,
+    and looped over when there are several."""
+    dt = h / substeps
+
+    def shifted(z, k, c):
+        return jax.tree_util.tree_map(lambda zi, ki: zi + c * ki, z, k)
+
+    def one(_, z):
+        k1 = field(z)
+        k2 = field(shifted(z, k1, 0.5 * dt))
+        k3 = field(shifted(z, k2, 0.5 * dt))
+        k4 = field(shifted(z, k3, dt))
+        return jax.tree_util.tree_map(lambda zi, a, b, c, d: zi + (dt / 6.0) * (a + 2.0 * b + 2.0 * c + d),
+                                      z, k1, k2, k3, k4)
+
+    return one(0, y) if substeps == 1 else jax.lax.fori_loop(0, substeps, one, y)
 
 
 class RK4(AbstractStepMap):
@@ -33,12 +56,7 @@ class RK4(AbstractStepMap):
         self.h = positive_float(h, "h")
 
     def step(self, y: jax.Array) -> jax.Array:
-        y, h, f = check_state(y, self.system.dim), self.h, self.system.vector_field
-        k1 = f(y)
-        k2 = f(y + 0.5 * h * k1)
-        k3 = f(y + 0.5 * h * k2)
-        k4 = f(y + h * k3)
-        return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        return rk4_steps(self.system.vector_field, check_state(y, self.system.dim), self.h)
 
     @property
     def exact_flows_per_step(self) -> int:

@@ -16,6 +16,8 @@ these names may change with the library.
   `save_ground_truth` on a cluster).
 - `validation_split(n, validation_fraction, seed, unit)`: the seeded training/validation split
   of `n` items (pairs of `Trajectories`, trajectories of `Observations`), as sorted indices.
+- `rk4_steps(field, y, h, substeps)`: classical Runge-Kutta steps on any pytree (the learned
+  maps' RK4 and `RK4`'s).
 - `rms_size(states)`: sqrt(mean |y|^2) over a list of arrays of states, the
   size `observe`'s noise is relative to.
 - `json_values(value, nan=None)`: results as JSON values (numpy as numbers, infinities as
@@ -42,6 +44,7 @@ from ._observations import rms_size as rms_size
 from ._plots import figure as figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
+from ._runge_kutta import rk4_steps as rk4_steps
 from ._splitting._base import composition_flops as composition_flops
 from ._splitting._base import splitting_method as splitting_method
 from ._step_map import check_h as check_h

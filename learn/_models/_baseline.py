@@ -4,7 +4,7 @@ an LPNet on the state, to show what the Lie-Poisson structure buys (it conserves
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import equinox as eqx
@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_h, check_state
+from integrators.internals import check_h, check_state, rk4_steps
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -160,7 +160,7 @@ class NeuralODE(AbstractLearnedMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         y = check_state(y, self.system.dim)
-        return rk4(self.network, y, check_h(self), self.substeps)
+        return rk4_steps(self.network, y, check_h(self), self.substeps)
 
     @property
     def exact_flows_per_step(self) -> int:
@@ -183,16 +183,3 @@ class NeuralODE(AbstractLearnedMap):
         rates = (np.asarray(y1) - np.asarray(y0)) / np.reshape(np.asarray(h, dtype=np.float64), (-1, 1))
         return eqx.tree_at(lambda m: m.network, self, self.network.rescaled(y0, rates))
 
-
-def rk4(field: Callable[[jax.Array], jax.Array], y: jax.Array, h: jax.Array | float, substeps: int) -> jax.Array:
-    r"""`substeps` classical Runge-Kutta steps of $\dot y = f(y)$ over $h$."""
-    dt = h / substeps
-
-    def one(_, z):
-        k1 = field(z)
-        k2 = field(z + 0.5 * dt * k1)
-        k3 = field(z + 0.5 * dt * k2)
-        k4 = field(z + dt * k3)
-        return z + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-    return jax.lax.fori_loop(0, substeps, one, y)

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators.internals import check_h, check_state
+from integrators.internals import check_h, check_state, rk4_steps
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -69,18 +69,7 @@ class ParametricHamiltonian(AbstractBodyMap):
         return self.system.poisson_tensor(y) @ jax.grad(self.hamiltonian_family)(y, self.theta)
 
     def step(self, y: jax.Array) -> jax.Array:
-        y = check_state(y, self.system.dim)
-        dt = check_h(self) / self.substeps
-        f = self.vector_field
-
-        def rk4(_, z):
-            k1 = f(z)
-            k2 = f(z + 0.5 * dt * k1)
-            k3 = f(z + 0.5 * dt * k2)
-            k4 = f(z + dt * k3)
-            return z + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-        return jax.lax.fori_loop(0, self.substeps, rk4, y)
+        return rk4_steps(self.vector_field, check_state(y, self.system.dim), check_h(self), self.substeps)
 
     def body_velocity(self, y: jax.Array) -> jax.Array:
         r"""$\xi = \nabla_y H(y; \theta)$ for one state: the body velocity ($\dot g = g\,\xi$)."""
@@ -92,7 +81,6 @@ class ParametricHamiltonian(AbstractBodyMap):
         quaternion normalised): accurate, not structure-preserving, as `step`."""
         group = self.system.require_group()
         g, y = group.check(g, "g"), check_state(y, self.system.dim)
-        dt = check_h(self) / self.substeps
 
         def f(z):
             gz, yz = z
@@ -100,17 +88,7 @@ class ParametricHamiltonian(AbstractBodyMap):
             dg = jnp.stack(group.velocity_components([gz[i] for i in range(group.size)], [xi[i] for i in range(xi.size)]))
             return dg, self.system.poisson_tensor(yz) @ xi
 
-        def add(z, k, c):
-            return z[0] + c * k[0], z[1] + c * k[1]
-
-        def rk4(_, z):
-            k1 = f(z)
-            k2 = f(add(z, k1, 0.5 * dt))
-            k3 = f(add(z, k2, 0.5 * dt))
-            k4 = f(add(z, k3, dt))
-            return tuple(zi + dt / 6.0 * (a + 2.0 * b + 2.0 * c + d) for zi, a, b, c, d in zip(z, k1, k2, k3, k4))
-
-        g1, y1 = jax.lax.fori_loop(0, self.substeps, rk4, (g, y))
+        g1, y1 = rk4_steps(f, (g, y), check_h(self), self.substeps)
         return group.project(g1), y1
 
     @property
