@@ -31,6 +31,8 @@ from ._observations import (
     _per_trajectory,
     check_times,
     format_version,
+    observation_plan,
+    propagate_grids,
     rms_size,
     times_per_trajectory,
 )
@@ -303,29 +305,11 @@ def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike,
     noise = noise_level(noise)
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)
-    ts = times_per_trajectory(times, y0.shape[0])
-    if len(ts) != y0.shape[0]:
-        raise ValueError(f"times has {len(ts)} trajectories and y0 {y0.shape[0]} initial states")
-    for j, t in enumerate(ts):
-        check_times(t, f"times[{j}]")
-        if t.size < 2:
-            raise ValueError(f"times[{j}] has {t.size} time(s); a trajectory needs at least two observations")
-    drops, noises = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    keep = []
-    for t in ts:
-        k = drops.random(t.size) >= drop
-        k[0] = k[-1] = True
-        keep.append(k)
-    import heyoka as hy
-
+    ts, keep, noises = observation_plan(times, y0.shape[0], drop, seed)
     ta = taylor_integrator(system, tol, configured=True)
     mus, gs = [], []
-    for j, (y, g, t) in enumerate(zip(y0, g0, ts)):
-        ta.time, ta.state[:] = float(t[0]), np.concatenate([y, g])
-        outcome, *_, states = ta.propagate_grid(t)
-        if outcome != hy.taylor_outcome.time_limit:
-            raise RuntimeError(f"heyoka stopped trajectory {j} at t={ta.time}: {outcome}")
-        states = np.array(states[keep[j]])
+    for states, k in zip(propagate_grids(ta, np.concatenate([y0, g0], axis=1), ts), keep, strict=True):
+        states = states[k]
         mus.append(states[:, : system.dim])
         gs.append(np.asarray(group.project(states[:, system.dim :])))
     velocities = [np.asarray(system.body_velocity(m)) for m in mus]

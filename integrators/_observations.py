@@ -523,6 +523,44 @@ def uneven_times(n_trajectories: int, n_observations: int, steps: tuple[float, f
     return np.concatenate([np.zeros((n_trajectories, 1)), np.cumsum(dt, axis=1)], axis=1)
 
 
+def observation_plan(times: Any, n_trajectories: int, drop: float, seed: int
+                     ) -> tuple[list[np.ndarray], list[np.ndarray], np.random.Generator]:
+    """`(times, keep, noise stream)` of an `observe`-like call: the checked times of each of
+    `n_trajectories` (at least two each), which observations survive `drop` (the first and
+    last always), and the generator of the noise; drops and noise come from two independent
+    streams of `seed`, so noise 0 gives the clean values at the same times."""
+    ts = times_per_trajectory(times, n_trajectories)
+    if len(ts) != n_trajectories:
+        raise ValueError(f"times has {len(ts)} trajectories and y0 {n_trajectories} initial states")
+    for j, t in enumerate(ts):
+        check_times(t, f"times[{j}]")
+        if t.size < 2:
+            raise ValueError(f"times[{j}] has {t.size} time(s); a trajectory needs at least two observations")
+    drops, noises = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    keep = []
+    for t in ts:
+        k = drops.random(t.size) >= drop
+        k[0] = k[-1] = True
+        keep.append(k)
+    return ts, keep, noises
+
+
+def propagate_grids(ta: Any, starts: np.ndarray, ts: list[np.ndarray]) -> list[np.ndarray]:
+    """heyoka's states `(len(t), size)` at the times `t` of each trajectory from its start
+    (one integrator `ta` reused); a trajectory heyoka cannot finish is a `RuntimeError`."""
+    import heyoka as hy
+
+    out = []
+    for j, (y, t) in enumerate(zip(starts, ts, strict=True)):
+        ta.time, ta.state[:] = float(t[0]), y
+        outcome, *_, states = ta.propagate_grid(t)
+        if outcome != hy.taylor_outcome.time_limit:
+            raise RuntimeError(f"heyoka stopped trajectory {j} (start {np.asarray(y).tolist()}) at t={ta.time}: "
+                               f"{outcome}")
+        out.append(np.array(states))
+    return out
+
+
 def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: float = 0.0,
             law: str | AbstractNoiseLaw = "gaussian", drop: float = 0.0, seed: int = 0,
             tol: float | None = None) -> Observations:
@@ -553,29 +591,9 @@ def observe(system: AbstractPoissonSystem, y0: ArrayLike, times: Any, *, noise: 
     law = noise_law(law)
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)
-    ts = times_per_trajectory(times, y0.shape[0])
-    if len(ts) != y0.shape[0]:
-        raise ValueError(f"times has {len(ts)} trajectories and y0 {y0.shape[0]} initial states")
-    for j, t in enumerate(ts):
-        check_times(t, f"times[{j}]")
-        if t.size < 2:
-            raise ValueError(f"times[{j}] has {t.size} time(s); a trajectory needs at least two observations")
-    drops, noises = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    keep = []
-    for t in ts:
-        k = drops.random(t.size) >= drop
-        k[0] = k[-1] = True
-        keep.append(k)
-    import heyoka as hy
-
+    ts, keep, noises = observation_plan(times, y0.shape[0], drop, seed)
     ta = taylor_integrator(system, tol)
-    clean = []
-    for j, (y, t) in enumerate(zip(y0, ts)):
-        ta.time, ta.state[:] = float(t[0]), y
-        outcome, *_, states = ta.propagate_grid(t)
-        if outcome != hy.taylor_outcome.time_limit:
-            raise RuntimeError(f"heyoka stopped trajectory {j} (y0={y.tolist()}) at t={ta.time}: {outcome}")
-        clean.append(np.array(states[keep[j]]))
+    clean = [states[k] for states, k in zip(propagate_grids(ta, y0, ts), keep, strict=True)]
     std = noise * rms_size(clean)
     observed = []
     for y in clean:
