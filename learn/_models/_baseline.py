@@ -57,6 +57,14 @@ def check_one_step(model: AbstractLearnedMap, steps: ArrayLike, h: float | None 
         )
 
 
+def state_network(system: AbstractPoissonSystem, network: AbstractNetwork | None, role: str, **default: Any
+                  ) -> AbstractNetwork:
+    """`network`, or the default `AffineMLP` from `dim` to `dim` built from `default` (`hidden`,
+    `activation`, `key`, scalings), checked to map `dim` to `dim` (`role` says what it maps)."""
+    network = network_or_default(network, functools.partial(AffineMLP, system.dim, system.dim), **default)
+    return check_network(network, system.dim, system.dim, role)
+
+
 class MLPBaseline(AbstractFixedStepMap):
     r"""$y \mapsto y + s_\text{out}\odot\mathrm{MLP}((y - m_\text{in})/s_\text{in}) + m_\text{out}$,
     with fixed scalings (`learn.fit(normalise=True)` sets them from the data: inputs $y_0$,
@@ -85,10 +93,8 @@ class MLPBaseline(AbstractFixedStepMap):
         network: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
-        network = network_or_default(
-            network, functools.partial(AffineMLP, system.dim, system.dim), hidden=hidden, activation=activation,
-            key=key, input_scaling=input_scaling, output_scaling=output_scaling)
-        self.network = check_network(network, system.dim, system.dim, "states to increments")
+        self.network = state_network(system, network, "states to increments", hidden=hidden, activation=activation,
+                                     key=key, input_scaling=input_scaling, output_scaling=output_scaling)
         self.h = None if h is None else positive_float(h, "h")
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -146,10 +152,9 @@ class NeuralODE(AbstractLearnedMap):
         network: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
-        network = network_or_default(
-            network, functools.partial(AffineMLP, system.dim, system.dim), hidden=hidden, activation=activation,
-            key=key, input_scaling=input_scaling, output_scaling=output_scaling)
-        self.network = check_network(network, system.dim, system.dim, "states to their time derivative")
+        self.network = state_network(system, network, "states to their time derivative", hidden=hidden,
+                                     activation=activation, key=key, input_scaling=input_scaling,
+                                     output_scaling=output_scaling)
         self.substeps = positive_int(substeps, "substeps")
         self.h = None if h is None else positive_float(h, "h")
 
