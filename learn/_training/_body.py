@@ -231,7 +231,7 @@ _GAUSS = np.polynomial.legendre.leggauss(4)
 
 def weak_form_weights(t: np.ndarray, window: int = WEAK_WINDOW) -> tuple[np.ndarray, np.ndarray]:
     r"""`(W, W')` `(n_windows, len(t))`: $W_{rk} = \int\phi_r s_k\,dt$ and
-    $W'_{rk} = \int\phi_r' s_k\,dt$, so that $W f pprox \int\phi_r f\,dt$ for samples $f_k =
+    $W'_{rk} = \int\phi_r' s_k\,dt$, so that $W f \approx \int\phi_r f\,dt$ for samples $f_k =
     f(t_k)$ of a smooth $f$ (the integral of their cubic spline, not-a-knot; $s_k$ its
     cardinal functions). The test functions $\phi_r = \psi_r^2$,
     $\psi_r = (t - a)(b - t)/((b - a)/2)^2$, vanish with their derivative at the ends of
