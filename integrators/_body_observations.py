@@ -25,7 +25,7 @@ from liepoisson.internals import fraction, jsonable, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem, system_for_file
 
 from ._files import atomic_path, open_hdf5
-from ._ground_truth import taylor_integrator
+from ._ground_truth import initial_configurations, taylor_integrator
 from ._noise import noise_level
 from ._observations import (
     _per_trajectory,
@@ -298,10 +298,7 @@ def observe_body(system: AbstractLiePoissonSystem, y0: ArrayLike, g0: ArrayLike,
     if not measure or any(m not in MEASURED for m in measure):
         raise ValueError(f"measure must be 'configurations', 'velocities' or both; got {measure!r}")
     y0 = np.array(system.check_regular(y0, "y0"), dtype=np.float64).reshape(-1, system.dim)
-    g0 = np.asarray(group.check(g0, "g0"))
-    g0 = np.broadcast_to(g0, (y0.shape[0], group.size)) if g0.ndim == 1 else g0
-    if g0.shape != (y0.shape[0], group.size):
-        raise ValueError(f"g0 must have shape ({group.size},) or ({y0.shape[0]}, {group.size}); got shape {g0.shape}")
+    g0 = initial_configurations(system, g0, y0.shape[0])
     noise = noise_level(noise)
     drop = fraction(drop, "drop")
     seed = positive_int(seed, "seed", minimum=0)

@@ -162,7 +162,7 @@ def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size, g0=
     max_steps = positive_int(max_steps, "max_steps", minimum=0)
     y0 = _initial_conditions(system, y0)
     if g0 is not None:
-        g0 = _initial_configurations(system, g0, y0.shape[0])
+        g0 = initial_configurations(system, g0, y0.shape[0])
     show_progress(progress)  # validates it before any work
     width = system.dim + (0 if g0 is None else g0.shape[1])
     if chunk_size is None:  # about 16 MiB of output per chunk
@@ -171,7 +171,7 @@ def _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size, g0=
     return _Job(system, y0, h, n_steps, tol_used, max_steps, chunk_size, _check_seed(seed), g0)
 
 
-def _initial_configurations(system: AbstractPoissonSystem, g0: ArrayLike, n_traj: int) -> np.ndarray:
+def initial_configurations(system: AbstractPoissonSystem, g0: ArrayLike, n_traj: int) -> np.ndarray:
     """`g0` as `(n_traj, group.size)` on `system.group` (one configuration is used for every
     trajectory)."""
     require = getattr(system, "require_group", None)

@@ -85,6 +85,8 @@ def test_bad_body_observations_are_refused_with_what_was_wrong():
         it.BodyObservations(lp.systems.LiePoissonSystem(lp.sl2(), lambda m, xp: m[0] ** 2), t, None, [np.ones((3, 3))])
     with pytest.raises(TypeError, match="Lie-Poisson system"):
         it.BodyObservations(lp.systems.ExtendedPendulum(), t, None, [np.ones((3, 3))])
+    with pytest.raises(ValueError, match=r"g0 must have shape \(4,\) or \(2, 4\)"):  # three attitudes, two starts
+        it.observe_body(BODY, unit_rows(2, 3, 0), Rotation.random(3, random_state=0).as_quat(), t)
 
 
 def test_the_inertia_estimate_from_velocities_recovers_the_rotated_body():
