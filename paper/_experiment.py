@@ -246,12 +246,25 @@ class AbstractExperiment(abc.ABC):
         """The table label of the metric `key` (the key itself if it has none)."""
         return dict(self.table_rows).get(key, key)
 
+    def provenance(self, metrics: dict[str, Any]) -> str:
+        """The profile and the command that produced `metrics`."""
+        full = " --full" if metrics.get("profile") == "full" else ""
+        return f"Profile `{metrics.get('profile')}`; produced by `python -m paper run {self.id}{full}`"
+
+    def study_markdown(self, metrics: dict[str, Any], description: str, sections: list[tuple[str, list[str]]]) -> str:
+        """A study's table: title, provenance and `description`, the verdict, then each
+        `(heading, lines)` of `sections`."""
+        lines = [f"# {self.id}: {self.title}", "", f"{self.provenance(metrics)}. {description}", "", "## Verdict", "",
+                 *[f"- {v}" for v in metrics.get("verdict", [])]]
+        for heading, body in sections:
+            lines += ["", f"## {heading}", "", *body]
+        return "\n".join(lines) + "\n"
+
     def markdown_table(self, metrics: dict[str, Any]) -> str:
         lines = [
             f"# {self.id}: {self.title}",
             "",
-            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run {self.id}"
-            + (" --full`" if metrics.get("profile") == "full" else "`"),
+            self.provenance(metrics),
             "",
             f"| metric | paper | ours ({metrics.get('model', 'LPNet')}) | baseline ({metrics.get('baseline_model', 'MLP')}) |",
             "|---|---|---|---|",

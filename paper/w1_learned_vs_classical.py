@@ -252,36 +252,24 @@ class W1(AbstractExperiment):
                  fmt(_strang(rows, r).error_t100)) for r in rows if r.learned]
 
     def markdown_table(self, metrics):
-        P = metrics.get("profile")
         rows = _rows(metrics)
-        lines = [
-            f"# {self.id}: {self.title}",
-            "",
-            f"Profile `{P}`; produced by `python -m paper run W1" + (" --full`" if P == "full" else "`")
-            + f". {metrics.get('test_initial_conditions')} held-out initial conditions; error at "
+        description = (
+            f"{metrics.get('test_initial_conditions')} held-out initial conditions; error at "
             f"t = 100 against heyoka (max over trajectories of |y - y_ref|); energy error and Casimir "
             f"drift: max relative over {metrics.get('long_steps')} steps (sampled every 10), infinite for a "
             "map that diverged; cost: wall time per step / Strang's, same run (the fastest of 5 compiled "
-            "rollouts of >= 50 ms each, `integrators.step_timing`); flops: XLA's count per step / Strang's.",
-            "",
-            "## Verdict",
-            "",
-            *[f"- {v}" for v in metrics.get("verdict", [])],
-            "",
-            "## Step-size transfer (symmetric G-LPNet trained at h = 0.1)",
-            "",
+            "rollouts of >= 50 ms each, `integrators.step_timing`); flops: XLA's count per step / Strang's.")
+        transfer = [
             ("Energy error: max relative over the long run at each step size. H~ - H on the test states "
-            "(relative to max abs(H)): raw up to a constant; modulo Casimirs (after a least-squares fit "
-            "by polynomials of degree <= 2 in them, which move no trajectory); and the vector fields "
-            "B grad H~ against B grad H."),
+             "(relative to max abs(H)): raw up to a constant; modulo Casimirs (after a least-squares fit "
+             "by polynomials of degree <= 2 in them, which move no trajectory); and the vector fields "
+             "B grad H~ against B grad H."),
             "",
             *table_lines(TRANSFER_COLUMNS, metrics.get("transfer", {}).items()),
-            "",
-            "## Every method",
-            "",
-            *table_lines(_method_columns(rows), rows),
         ]
-        return "\n".join(lines) + "\n"
+        return self.study_markdown(metrics, description, [
+            ("Step-size transfer (symmetric G-LPNet trained at h = 0.1)", transfer),
+            ("Every method", table_lines(_method_columns(rows), rows))])
 
 
 TRANSFER_COLUMNS = (

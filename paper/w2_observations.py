@@ -457,24 +457,11 @@ class W2(AbstractExperiment):
                 for r in rows if r.model == "G-LPNet"]
 
     def markdown_table(self, metrics):
-        lines = [
-            f"# {self.id}: {self.title}",
-            "",
-            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run W2"
-            + (" --full`" if metrics.get("profile") == "full" else "`")
-            + f". Seeds: {metrics.get('seeds')}. SINDy: {metrics.get('sindy')}. Figures: means over "
-            f"{N_TEST} held-out initial conditions, rolled out {metrics.get('test_steps')} steps of 0.1 against heyoka; energy: max "
-            "relative error of the true H; Casimir drift: max |C(t) - C(0)| / (|grad C| |y|).",
-            "",
-            "## Verdict",
-            "",
-            *[f"- {v}" for v in metrics.get("verdict", [])],
-            "",
-            "## Every fit",
-            "",
-            *table_lines(COLUMNS, _rows(metrics)),
-        ]
-        return "\n".join(lines) + "\n"
+        description = (
+            f"Seeds: {metrics.get('seeds')}. SINDy: {metrics.get('sindy')}. Figures: means over "
+            f"{N_TEST} held-out initial conditions, rolled out {metrics.get('test_steps')} steps of 0.1 against heyoka; "
+            "energy: max relative error of the true H; Casimir drift: max |C(t) - C(0)| / (|grad C| |y|).")
+        return self.study_markdown(metrics, description, [("Every fit", table_lines(COLUMNS, _rows(metrics)))])
 
 
 COLUMNS = (

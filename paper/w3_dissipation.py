@@ -330,26 +330,10 @@ class W3(AbstractExperiment):
 
     def markdown_table(self, metrics):
         truth = {k: row_from_json(W3Truth, t) for k, t in metrics.get("truth", {}).items()}
-        lines = [
-            f"# {self.id}: {self.title}",
-            "",
-            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run W3"
-            + (" --full`" if metrics.get("profile") == "full" else "`")
-            + f". Every model steps h = {metrics.get('h')} for {metrics.get('steps')} steps against heyoka (tol = eps).",
-            "",
-            "## Verdict",
-            "",
-            *[f"- {v}" for v in metrics.get("verdict", [])],
-            "",
-            "## heyoka",
-            "",
-            *table_lines(TRUTH_COLUMNS, truth.items()),
-            "",
-            "## Every model",
-            "",
-            *table_lines(COLUMNS, _rows(metrics)),
-        ]
-        return "\n".join(lines) + "\n"
+        description = f"Every model steps h = {metrics.get('h')} for {metrics.get('steps')} steps against heyoka (tol = eps)."
+        return self.study_markdown(metrics, description, [
+            ("heyoka", table_lines(TRUTH_COLUMNS, truth.items())),
+            ("Every model", table_lines(COLUMNS, _rows(metrics)))])
 
 
 TRUTH_COLUMNS = (

@@ -577,25 +577,12 @@ class W4(AbstractExperiment):
 
     def markdown_table(self, metrics):
         rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
-        lines = [
-            f"# {self.id}: {self.title}",
-            "",
-            f"Profile `{metrics.get('profile')}`; produced by `python -m paper run W4"
-            + (" --full`" if metrics.get("profile") == "full" else "`")
-            + f". Seeds: {metrics.get('seeds')}. Errors at the end of the predictions (t = 50 for the satellite, "
+        description = (
+            f"Seeds: {metrics.get('seeds')}. Errors at the end of the predictions (t = 50 for the satellite, "
             f"20 for the vehicle), means over {N_TEST} held-out initial conditions against heyoka; velocity error "
             "relative to the velocities' RMS, position error to the distance travelled; drifts of the learned maps' "
-            "rollouts relative to the largest value.",
-            "",
-            "## Verdict",
-            "",
-            *[f"- {v}" for v in metrics.get("verdict", [])],
-            "",
-            "## Every fit",
-            "",
-            *table_lines(COLUMNS, rows),
-        ]
-        return "\n".join(lines) + "\n"
+            "rollouts relative to the largest value.")
+        return self.study_markdown(metrics, description, [("Every fit", table_lines(COLUMNS, rows))])
 
 
 EXPERIMENT = W4()
