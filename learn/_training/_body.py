@@ -219,10 +219,8 @@ def latent_starts(model, data: BodyObservations) -> jax.Array:
 
 
 #: Samples under each test function of `body_quadratic_estimate`'s weak form; the windows of a
-#: longer trajectory overlap by half. Measured on W4's bodies (inertia error of the estimate at
-#: trace n, 30-40 trajectories x 41 uneven observations): 15 is within 2x of the best of 5, 9,
-#: 15 and 41 samples at noise 0, 1e-3 and 1e-2 on both bodies (BENCHMARKS.md, "The inertia
-#: estimate in weak form").
+#: longer trajectory overlap by half. Chosen among 5, 9, 15 and 41 on W4's bodies (BENCHMARKS.md,
+#: "The vehicle at noise 1e-2 fixed: the inertia estimate in weak form").
 WEAK_WINDOW = 15
 
 # Gauss-Legendre nodes per interval: exact for a test function of degree 4 times a cubic

@@ -209,9 +209,8 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
 #: family's, and a family that extends a nested one when the nested family's sum of squared
 #: residuals is more than this many times the best family's so far: a residual 10x larger in
 #: RMS is structure (e.g. principal axes off the basis axes) that the family, or the
-#: extension's sigmoid pieces along the same directions, would have to remove. (Measured on
-#: W4's bodies, principal axes 0.95 rad off: the diagonal families' weak-form misfit is 180x
-#: the full ones' at noise 1e-2 and 1e4-1e11x below; 1.0-1.03x for an aligned body.)
+#: extension's sigmoid pieces along the same directions, would have to remove (the misfits of
+#: rotated and aligned bodies: BENCHMARKS.md, "Families screened by their start").
 PRUNE_RATIO = 100.0
 
 
