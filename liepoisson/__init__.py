@@ -5,7 +5,17 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from ._abstract_algebra import AbstractLieAlgebra as AbstractLieAlgebra
 from ._algebra import LieAlgebra as LieAlgebra
+from ._matrix_algebra import (
+    MatrixLieAlgebra as MatrixLieAlgebra,
+    gl as gl,
+    sl as sl,
+    so as so,
+    sp as sp,
+    su as su,
+    u as u,
+)
 from ._catalogue import (
     direct_sum as direct_sum,
     heisenberg as heisenberg,

@@ -16,12 +16,12 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._abstract_algebra import AbstractLieAlgebra
 from ._casimir_values import casimir_gradient_values, casimir_values
 from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
-from ._inverse import checked_flow_parameters
 from ._polynomial import Polynomial
-from ._validation import as_scalar_time, as_state, broadcast_batch
+from ._validation import as_state
 
 # Structure constants given as floats (e.g. computed ones) may carry round-off: accept
 # violations of antisymmetry and Jacobi up to 1e-10 relative to the size of the constants.
@@ -90,7 +90,7 @@ def _warn_if_casimirs_missing(C: np.ndarray, found: int, degree: int, name: Any)
         )
 
 
-class LieAlgebra:
+class LieAlgebra(AbstractLieAlgebra):
     r"""A real Lie algebra $\mathfrak g$ given by structure constants, with the Lie-Poisson
     structure on $\mathfrak g^*$.
 
@@ -162,9 +162,6 @@ class LieAlgebra:
     def n_casimirs(self) -> int:
         return len(self.casimir_polynomials)
 
-    def __repr__(self) -> str:
-        return f"LieAlgebra(name={self.name!r}, dim={self.dim}, n_casimirs={self.n_casimirs})"
-
     # -- portable definition ---------------------------------------------------------------
     def definition(self) -> dict[str, Any]:
         """Everything that defines this algebra as JSON values (saved with data sets and models
@@ -180,7 +177,7 @@ class LieAlgebra:
         }
 
     @classmethod
-    def from_definition(cls, definition: Any, what: str = "definition") -> LieAlgebra:
+    def from_definition(cls, definition: Any, what: str = "definition") -> LieAlgebra:  # type: ignore[override]
         """The algebra of `definition()`; `ValueError` naming `what` for a malformed one. The
         closed-form evaluators (`RodriguesFlow`, `SE3Flow`) are restored; any other evaluator
         is replaced by the matrix exponential (the same exact flow)."""
@@ -267,86 +264,17 @@ class LieAlgebra:
         mu = as_state(mu, "mu", self.dim)
         return self.sign * jnp.einsum("abd,...d->...ab", self._C, mu)
 
-    def poisson_tensor_components(self, mu: Sequence[Any]) -> list[list[Any]]:
-        """$\\mathbb{B}$ as nested lists of expressions in the components (any backend)."""
-        n = self.dim
-        out: list[list[Any]] = [[0.0] * n for _ in range(n)]
-        for a in range(n):
-            for b in range(n):
-                entry: Any = 0.0
-                for d in range(n):
-                    c = self.sign * self._C[a, b, d]
-                    if c != 0.0:
-                        entry = entry + float(c) * mu[d]
-                out[a][b] = entry
-        return out
-
     def coadjoint_generator(self, alpha: ArrayLike) -> jax.Array:
         r"""$\mathbb{M}(\alpha)_{ad} = \mathrm{sign}\cdot C_{abd}\,\alpha_b$: $\dot\mu = \mathbb{M}(\alpha)\mu$
         is the flow of $H = \langle\alpha, \mu\rangle$."""
         alpha = as_state(alpha, "alpha", self.dim)
         return self.sign * jnp.einsum("abd,...b->...ad", self._C, alpha)
 
-    def coadjoint_flow(self, alpha: ArrayLike, t: ArrayLike, mu: ArrayLike) -> jax.Array:
-        r"""$\exp(t\,\mathbb{M}(\alpha))\,\mu$: exact flow of $H = \langle \alpha, \mu\rangle$.
+    def _coadjoint_flow(self, alpha, t, mu):
+        return self.exact_flow(self._C, alpha, t, mu)
 
-        `alpha` and `mu` of shape `(..., n)` and `t` a scalar or array, broadcast against each
-        other. Usable inside `jax.jit`, `jax.vmap` and `jax.grad`. This is the coadjoint action
-        of $\exp(t\alpha)$; it is a Poisson map and conserves every Casimir.
-        """
-        alpha = as_state(alpha, "alpha", self.dim)
-        mu = as_state(mu, "mu", self.dim)
-        t = as_scalar_time(t)
-        batch = broadcast_batch(self.dim, alpha=alpha.shape[:-1], mu=mu.shape[:-1], t=t.shape)
-        alpha = jnp.broadcast_to(alpha, batch + (self.dim,))
-        mu = jnp.broadcast_to(mu, batch + (self.dim,))
-        # The fast paths are written for sign = -1; sign = +1 reverses time.
-        t = jnp.broadcast_to(-self.sign * t, batch)
-        out = self.exact_flow(self._C, alpha, t, mu)
-        if not isinstance(out, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(out))):
-            # Finite inputs (checked above), non-finite result: exp(t M(alpha)) overflowed, which
-            # happens on non-compact algebras, where the flow grows like exp(|t alpha|).
-            k = np.unravel_index(int(np.argmax(~np.isfinite(np.asarray(out)).any(axis=-1))), batch) if batch else ()
-            size = float(np.abs(np.asarray(t)[k]) * np.linalg.norm(np.asarray(alpha)[k]))
-            raise FloatingPointError(
-                f"coadjoint_flow overflowed at batch index {tuple(int(i) for i in k)}: |t| |alpha| = {size:.3g}; "
-                f"exp(t M(alpha)) on {self.name} grows like exp(|t alpha|) and exceeds float64. "
-                "Use smaller alpha or t (a learned map far outside its training data produces such alpha)"
-            )
-        return out
-
-    def coadjoint_flow_parameters(
-        self, mu0: ArrayLike, mu1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10, names: tuple[str, str] = ("mu0", "mu1")
-    ) -> np.ndarray:
-        r"""The parameters $\alpha$ with `coadjoint_flow(alpha, t, mu0) == mu1`, orthogonal to
-        the Casimir gradients at `mu0` ([the paper](https://arxiv.org/abs/2308.15349), Sec. 4,
-        eqs. (25) and (26)).
-
-        The inverse of the exact flow is the flow's own (`exact_flow.parameters`): the
-        shortest rotation in closed form for so(3) (`RodriguesFlow`), Gauss-Newton otherwise.
-
-        **Arguments:** `mu0`, `mu1` of shape `(..., n)`; `t` a finite, non-zero scalar;
-        `rtol`: the relative Casimir mismatch beyond which a pair is rejected, and
-        (times 100, relative to the size of the states) the largest residual accepted;
-        `names`: how error messages call the two states.
-
-        **Returns:** `alpha`, `(..., n)`. Raises `ValueError` naming the pair (its index over
-        the flattened leading axes) when a Casimir differs between `mu0` and `mu1`, when the
-        solution is not unique (antiparallel so(3) pair) or when no solution is found.
-        """
-        return checked_flow_parameters(
-            mu0,
-            mu1,
-            t,
-            rtol,
-            dim=self.dim,
-            names=names,
-            flow=self.coadjoint_flow,
-            casimirs=self.casimirs,
-            casimir_gradients=self.casimir_gradients,
-            # The exact flows are written for sign = -1; sign = +1 reverses time.
-            solve=lambda a, b, t, G: self.exact_flow.parameters(self._C, a, b, -self.sign * t, G),
-        )
+    def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
+        return self.exact_flow.parameters(self._C, mu0, mu1, t, casimir_gradients)
 
     # -- Casimirs --------------------------------------------------------------------------
     def casimirs(self, mu: ArrayLike) -> jax.Array:
@@ -357,10 +285,5 @@ class LieAlgebra:
         """Gradients $\\partial C_j/\\partial\\mu$, shape `(..., k, n)`."""
         return casimir_gradient_values(self._casimir_gradient_polys, as_state(mu, "mu", self.dim))
 
-    def orbit_dimension(self, mu: ArrayLike, rtol: float = 1e-10) -> int | np.ndarray:
-        r"""Dimension of the coadjoint orbit through $\mu$: $\operatorname{rank}\mathbb{B}(\mu)$."""
-        B = np.asarray(self.poisson_tensor(mu))
-        s = np.linalg.svd(B, compute_uv=False)
-        scale = max(1.0, float(np.max(np.abs(np.asarray(mu)))))
-        rank = np.sum(s > rtol * scale * max(1.0, float(np.max(np.abs(self._C)))), axis=-1)
-        return int(rank) if np.ndim(rank) == 0 else rank
+    def _bracket_scale(self) -> float:
+        return max(1.0, float(np.max(np.abs(self._C))))

@@ -283,7 +283,27 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     @property
     def casimir_polynomials(self):
-        return self.algebra.casimir_polynomials
+        polynomials = getattr(self.algebra, "casimir_polynomials", None)
+        if polynomials is None:
+            raise ValueError(f"{self.algebra!r} has no Casimir polynomials (its Casimirs are traces of matrix powers); "
+                             "use casimirs(y) and casimir_gradients(y)")
+        return polynomials
+
+    def casimirs(self, y: ArrayLike) -> jax.Array:
+        """The algebra's Casimirs at `y`, shape `(..., k)`."""
+        return self.algebra.casimirs(as_state(y, "y", self.dim))
+
+    def casimir_gradients(self, y: ArrayLike) -> jax.Array:
+        """The algebra's Casimir gradients at `y`, shape `(..., k, dim)`."""
+        return self.algebra.casimir_gradients(as_state(y, "y", self.dim))
+
+    @property
+    def n_casimirs(self) -> int:
+        return self.algebra.n_casimirs
+
+    def poisson_tensor(self, y: ArrayLike) -> jax.Array:
+        """$\\mathbb{B}(y)$, shape `(..., dim, dim)`, the algebra's."""
+        return self.algebra.poisson_tensor(as_state(y, "y", self.dim))
 
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
@@ -291,7 +311,7 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
     def vector_field(self, y: ArrayLike) -> jax.Array:
         r"""$\dot\mu = \mathbb B(\mu)\,\xi(\mu)$, $\xi$ = `generator` ($\nabla H$ unless damped)."""
         y = self.check_regular(y)
-        return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.generator(y))
+        return self.algebra.poisson_action(y, self.generator(y))
 
     def generator(self, y: ArrayLike) -> jax.Array:
         r"""The element $\xi(\mu)$ of $\mathfrak g$ with $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$:

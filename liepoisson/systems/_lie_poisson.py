@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .._algebra import LieAlgebra
+from .._abstract_algebra import AbstractLieAlgebra
 from .._groups import AbstractLieGroup
 from .._namespace import JAX
 from .._symbolic import (
@@ -81,7 +81,8 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
 
     **Arguments:**
 
-    - `algebra`: a `LieAlgebra`.
+    - `algebra`: a `LieAlgebra` (structure constants) or a `MatrixLieAlgebra` (`liepoisson.so(N)`,
+      ...; its Hamiltonian is written on the components $\mu_a$, so for moderate dimensions).
     - `hamiltonian`: `hamiltonian(mu, xp)` on the components `mu[0..n-1]`, written with Python
       operators and the namespace `xp` (`xp.sqrt`, `xp.sin`, `xp.cos`, `xp.exp`, `xp.log`) so
       numpy, JAX and heyoka can all evaluate it. It is evaluated once on symbols here: a
@@ -101,15 +102,15 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
 
     def __init__(
         self,
-        algebra: LieAlgebra,
+        algebra: AbstractLieAlgebra,
         hamiltonian: Callable[[Sequence[Any], Any], Any],
         name: str = "LiePoissonSystem",
         splitting: Sequence[AbstractExactTerm] = (),
         *,
         group: AbstractLieGroup | None = None,
     ):
-        if not isinstance(algebra, LieAlgebra):
-            raise TypeError(f"algebra must be a LieAlgebra; got {type(algebra).__name__}")
+        if not isinstance(algebra, AbstractLieAlgebra):
+            raise TypeError(f"algebra must be a liepoisson.LieAlgebra or MatrixLieAlgebra; got {type(algebra).__name__}")
         if not callable(hamiltonian):
             raise TypeError(f"hamiltonian must be callable (mu, xp) -> H; got {hamiltonian!r}")
         self.algebra = algebra
@@ -178,7 +179,7 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
         """The system of `params` (as `params` returns them); `ValueError` naming `what` for a
         malformed definition."""
         try:
-            algebra = LieAlgebra.from_definition(params["algebra"], f"{what}['algebra']")
+            algebra = AbstractLieAlgebra.from_definition(params["algebra"], f"{what}['algebra']")
             hamiltonian = TreeFunction(params["hamiltonian"], algebra.dim)
             k = algebra.n_casimirs
             pieces = params.get("splitting")

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from .._abstract_algebra import AbstractLieAlgebra
+from .._algebra import LieAlgebra
 from .._jsonable import jsonable
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
@@ -45,6 +47,16 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
     return SYSTEMS[name](**(params or {}))
 
 
+def same_algebra(a: AbstractLieAlgebra, b: AbstractLieAlgebra) -> bool:
+    """Equal definitions: the same kind and sign, the same structure constants or matrix family."""
+    if type(a) is not type(b) or a.sign != b.sign:
+        return False
+    if isinstance(a, LieAlgebra):
+        return a.structure_constants.shape == b.structure_constants.shape and bool(
+            np.array_equal(a.structure_constants, b.structure_constants))
+    return a.definition() == b.definition()
+
+
 def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[str, Any], where: str) -> None:
     """`ValueError` unless `system` is the system saved as `(name, params)` in `where` (a file).
 
@@ -60,14 +72,12 @@ def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[
             raise ValueError(f"{prefix}: the file holds a LiePoissonSystem, got a {type(system).__name__}")
         try:
             algebra = params["algebra"]
-            C = np.asarray(algebra["structure_constants"], dtype=np.float64)
+            saved = AbstractLieAlgebra.from_definition(algebra, f"{where}: the algebra")
             y = np.asarray(params["probes"]["y"], dtype=np.float64)
             H = np.asarray(params["probes"]["H"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(f"{where} holds a damaged system definition: {type(err).__name__}: {err}") from err
-        if C.shape != system.algebra.structure_constants.shape or not np.array_equal(
-            C, system.algebra.structure_constants
-        ) or int(algebra.get("sign", -1)) != system.algebra.sign:
+        if not same_algebra(saved, system.algebra):
             raise ValueError(f"{prefix}: the algebras differ (structure constants or sign)")
         mine = np.asarray(system.hamiltonian(y))
         if not np.allclose(mine, H, rtol=_PROBE_RTOL, atol=_PROBE_RTOL * float(np.max(np.abs(H), initial=1.0))):

@@ -1,0 +1,359 @@
+r"""Matrix Lie algebras of any size: so(N), u(N), su(N), sp(2N, R), gl(N), sl(N).
+
+An element is an $m\times m$ matrix $X = \sum_a x_a E_a$ in a basis $E_a$ orthonormal for the
+pairing $\langle A, B\rangle = \kappa\,\mathrm{Re}\,\mathrm{tr}(A^\dagger B)$ (`kappa`,
+$\tfrac12$ for so(N) so that so(3)'s components are the angular momentum, 1 otherwise). The
+same matrix represents a momentum $\mu \in \mathfrak g^*$ through $\mu_a = \langle M, E_a\rangle$.
+Every algebra here is closed under $X \mapsto X^\dagger$, so ([the conventions page][conventions])
+
+$$\mathrm{ad}^*_\xi\mu \leftrightarrow [\Xi^\dagger, M], \qquad
+\dot M = [\Xi^\dagger, M] \;\; (\text{body}, \Xi = \partial H/\partial\mu), \qquad
+M(t) = e^{t A^\dagger} M e^{-t A^\dagger}$$
+
+for the test flow of $\langle\alpha, \mu\rangle$: a conjugation, so the whole spectrum of $M$ is
+kept (the Casimirs are the traces of its powers). For so(N) and u(N), $\Xi^\dagger = -\Xi$ and
+the body equation is $\dot M = [M, \Xi]$ (Manakov's $\dot M = [M, \Omega]$).
+
+Coordinates and matrices are converted by one scatter and one gather over the nonzero entries
+of the basis, $O(m^2)$; brackets, $\mathrm{ad}^*$ and flows are matrix products, $O(m^3)$. No
+structure-constant tensor is formed unless asked for (`structure_constants`, small algebras
+only).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._abstract_algebra import AbstractLieAlgebra
+from ._inverse import gauss_newton_parameters
+from ._validation import as_state
+
+#: Largest dimension for which `structure_constants` is formed (n^3 float64: 16.8 MB at 128).
+STRUCTURE_CONSTANTS_MAX_DIM = 128
+#: Largest dimension for which `coadjoint_flow_parameters` (Gauss-Newton, a dense n x n
+#: Jacobian per pair) is attempted.
+FLOW_PARAMETERS_MAX_DIM = 400
+
+FAMILIES = ("so", "u", "su", "sp", "gl", "sl")
+
+
+def _helmert(N: int) -> np.ndarray:
+    """`(N, N - 1)`: orthonormal traceless diagonals, column k = (1, ..., 1, -k, 0, ...)/sqrt(k(k+1))."""
+    H = np.zeros((N, N - 1))
+    for k in range(1, N):
+        H[:k, k - 1] = 1.0
+        H[k, k - 1] = -float(k)
+        H[:, k - 1] /= math.sqrt(k * (k + 1))
+    return H
+
+
+def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
+    """`(m, a, p, c, kappa, names)`: the basis as triples, $E_a$ has entry `c` at flat index `p`
+    (row-major in an m x m matrix)."""
+    a_list: list[int] = []
+    p_list: list[int] = []
+    c_list: list[complex] = []
+    names: list[str] = []
+
+    def add(entries: list[tuple[int, int, complex]], name: str) -> None:
+        a = len(names)
+        for i, j, c in entries:
+            a_list.append(a)
+            p_list.append(i * m + j)
+            c_list.append(c)
+        names.append(name)
+
+    r2 = 1.0 / math.sqrt(2.0)
+    if family == "so":
+        m, kappa = N, 0.5
+        for i in range(N):
+            for j in range(i + 1, N):
+                add([(i, j, 1.0), (j, i, -1.0)], f"M{i + 1}{j + 1}")
+    elif family in ("u", "su"):
+        m, kappa = N, 1.0
+        if family == "u":
+            for i in range(N):
+                add([(i, i, 1j)], f"d{i + 1}")
+        else:
+            H = _helmert(N)
+            for k in range(N - 1):
+                add([(i, i, 1j * H[i, k]) for i in range(k + 2)], f"h{k + 1}")
+        for i in range(N):
+            for j in range(i + 1, N):
+                add([(i, j, r2), (j, i, -r2)], f"r{i + 1}{j + 1}")
+                add([(i, j, 1j * r2), (j, i, 1j * r2)], f"s{i + 1}{j + 1}")
+    elif family in ("gl", "sl"):
+        m, kappa = N, 1.0
+        if family == "gl":
+            for i in range(N):
+                for j in range(N):
+                    add([(i, j, 1.0)], f"E{i + 1}{j + 1}")
+        else:
+            H = _helmert(N)
+            for k in range(N - 1):
+                add([(i, i, H[i, k]) for i in range(k + 2)], f"h{k + 1}")
+            for i in range(N):
+                for j in range(N):
+                    if i != j:
+                        add([(i, j, 1.0)], f"E{i + 1}{j + 1}")
+    elif family == "sp":
+        # sp(2N, R) = {[[a, b], [c, -a^T]] : b, c symmetric}.
+        m, kappa = 2 * N, 1.0
+        for i in range(N):
+            for j in range(N):
+                add([(i, j, r2), (N + j, N + i, -r2)], f"a{i + 1}{j + 1}")
+        for i in range(N):
+            add([(i, N + i, 1.0)], f"b{i + 1}{i + 1}")
+            for j in range(i + 1, N):
+                add([(i, N + j, r2), (j, N + i, r2)], f"b{i + 1}{j + 1}")
+        for i in range(N):
+            add([(N + i, i, 1.0)], f"c{i + 1}{i + 1}")
+            for j in range(i + 1, N):
+                add([(N + i, j, r2), (N + j, i, r2)], f"c{i + 1}{j + 1}")
+    else:
+        raise ValueError(f"family must be one of {FAMILIES}; got {family!r}")
+    return m, np.asarray(a_list), np.asarray(p_list), np.asarray(c_list), kappa, names
+
+
+class MatrixLieAlgebra(AbstractLieAlgebra):
+    r"""A classical matrix Lie algebra of any size, with the Lie-Poisson structure on its dual.
+
+    **Arguments:**
+
+    - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
+      traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
+      for sl).
+    - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
+    - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
+
+    The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)` build
+    them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
+    Casimirs are traces of powers (`casimirs`), the spectrum is `spectrum`.
+    """
+
+    def __init__(self, family: str, N: int, *, sign: int = -1):
+        if not isinstance(family, str) or family not in FAMILIES:
+            raise ValueError(f"family must be one of {FAMILIES}; got {family!r}")
+        if isinstance(N, bool) or not isinstance(N, (int, np.integer)):
+            raise TypeError(f"N must be an integer; got {type(N).__name__} {N!r}")
+        smallest = 1 if family == "sp" else 2
+        if N < smallest:
+            raise ValueError(f"N must be >= {smallest} for {family}(N); got {N}")
+        if isinstance(sign, bool) or sign not in (-1, 1):
+            raise ValueError(f"sign must be -1 (body) or +1 (spatial); got {sign!r}")
+        self.family = family
+        self.N = int(N)
+        self.sign = int(sign)
+        self.name = f"{family}{self.N}"
+        m, a, p, c, kappa, names = _basis(family, self.N)
+        self.size = m
+        self.kappa = kappa
+        self.basis_names = tuple(names)
+        self.complex = family in ("u", "su")
+        self._dim = len(names)
+        self._dtype = jnp.complex128 if self.complex else jnp.float64
+        self._a = a
+        self._p = p
+        self._c = c if self.complex else c.real
+
+    # -- the two representations -----------------------------------------------------------
+    @property
+    def dim(self) -> int:
+        return self._dim
+
+    def matrix(self, x: ArrayLike) -> jax.Array:
+        r"""$X = \sum_a x_a E_a$, `(..., m, m)` for `x` `(..., n)` (an element of $\mathfrak g$
+        or, through the pairing, of $\mathfrak g^*$)."""
+        x = jnp.asarray(x, jnp.float64)
+        batch = x.shape[:-1]
+        values = jnp.asarray(self._c, self._dtype) * x[..., self._a]
+        flat = jnp.zeros(batch + (self.size * self.size,), self._dtype).at[..., self._p].add(values)
+        return flat.reshape(batch + (self.size, self.size))
+
+    def coordinates(self, X: ArrayLike) -> jax.Array:
+        r"""$x_a = \langle X, E_a\rangle$, `(..., n)` for `X` `(..., m, m)`: the orthogonal
+        projection onto the algebra, so it also takes any matrix to its nearest element."""
+        X = jnp.asarray(X)
+        batch = X.shape[:-2]
+        flat = X.reshape(batch + (self.size * self.size,))
+        values = self.kappa * jnp.real(jnp.conj(jnp.asarray(self._c, self._dtype)) * flat[..., self._p])
+        return jnp.zeros(batch + (self.dim,), jnp.float64).at[..., self._a].add(values)
+
+    def _dagger(self, X: jax.Array) -> jax.Array:
+        Xt = jnp.swapaxes(X, -1, -2)
+        return jnp.conj(Xt) if self.complex else Xt
+
+    # -- Lie algebra operations ----------------------------------------------------------------
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
+        r"""$[\xi, \eta] = XY - YX$ in coordinates."""
+        X = self.matrix(as_state(xi, "xi", self.dim))
+        Y = self.matrix(as_state(eta, "eta", self.dim))
+        return self.coordinates(X @ Y - Y @ X)
+
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
+        r"""$\mathrm{ad}^*_\xi\mu \leftrightarrow [\Xi^\dagger, M]$."""
+        X = self._dagger(self.matrix(as_state(xi, "xi", self.dim)))
+        M = self.matrix(as_state(mu, "mu", self.dim))
+        return self.coordinates(X @ M - M @ X)
+
+    def poisson_action(self, mu: ArrayLike, xi: ArrayLike) -> jax.Array:
+        r"""$\mathbb B(\mu)\,\xi = -\mathrm{sign}\cdot\mathrm{ad}^*_\xi\mu$ by two matrix products."""
+        return -self.sign * self.ad_star(xi, mu)
+
+    def poisson_tensor(self, mu: ArrayLike) -> jax.Array:
+        r"""$\mathbb B(\mu)$ `(..., n, n)`, column $b$ = $\mathbb B(\mu)\,e_b$ (n products of
+        $m\times m$ matrices: for moderate sizes; the dynamics never forms it)."""
+        mu = as_state(mu, "mu", self.dim)
+        eye = jnp.eye(self.dim)
+        cols = jax.vmap(lambda e: self.poisson_action(mu, jnp.broadcast_to(e, mu.shape)), out_axes=-1)(eye)
+        return cols
+
+    @property
+    def structure_constants(self) -> np.ndarray:
+        r"""$C_{abd} = \langle [E_a, E_b], E_d\rangle$ (read-only), formed on first use, for
+        dimensions up to `STRUCTURE_CONSTANTS_MAX_DIM`."""
+        cached = self.__dict__.get("_C")
+        if cached is not None:
+            return cached
+        n = self.dim
+        if n > STRUCTURE_CONSTANTS_MAX_DIM:
+            raise ValueError(
+                f"{self.name} has dimension {n}: its structure-constant tensor would hold n^3 = {n**3:.3g} entries, "
+                f"more than formed here (dimension <= {STRUCTURE_CONSTANTS_MAX_DIM}); its operations (bracket, "
+                "ad_star, poisson_action, coadjoint_flow) work on matrices and need none"
+            )
+        E = np.asarray(self.matrix(np.eye(n)))
+        comm = np.einsum("aij,bjk->abik", E, E)
+        comm = comm - comm.transpose(1, 0, 2, 3)
+        C = np.array(self.coordinates(comm.reshape(n * n, self.size, self.size))).reshape(n, n, n)
+        C[np.abs(C) < 1e2 * np.finfo(np.float64).eps] = 0.0  # exact zeros where round-off
+        C.setflags(write=False)
+        self.__dict__["_C"] = C
+        return C
+
+    # -- Casimirs --------------------------------------------------------------------------------
+    @property
+    def n_casimirs(self) -> int:
+        """The rank: floor(N/2) for so(N), N for u(N), gl(N) and sp(2N), N - 1 for su(N), sl(N)."""
+        return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
+                "gl": self.N, "sl": self.N - 1}[self.family]
+
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
+        r"""Traces of powers, real, `(..., k)`: so(N) $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$,
+        $k = 1..\lfloor N/2\rfloor$ (so(3): $|\Pi|^2$); u(N) $\mathrm{tr}\,(iM)^k$, $k = 1..N$
+        (su(N): $2..N$); sp(2N) $\mathrm{tr}\,M^{2k}$, $k = 1..N$; gl(N) $\mathrm{tr}\,M^k$,
+        $k = 1..N$ (sl(N): $2..N$). One matrix product per power."""
+        M = self.matrix(as_state(mu, "mu", self.dim))
+        if self.complex:
+            M = 1j * M
+        if self.family == "so":
+            step, powers, scale = M @ M, range(1, self.N // 2 + 1), [0.5 * (-1) ** k for k in range(1, self.N // 2 + 1)]
+        elif self.family == "sp":
+            step, powers, scale = M @ M, range(1, self.N + 1), [1.0] * self.N
+        else:
+            first = 1 if self.family in ("u", "gl") else 2
+            step, powers, scale = M, range(first, self.N + 1), [1.0] * (self.N + 1 - first)
+        out, P = [], None
+        for k in range(1, max(powers) + 1):
+            P = step if P is None else P @ step
+            if k in powers:
+                out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+        return jnp.stack(out, axis=-1) * jnp.asarray(scale)
+
+    def casimir_gradients(self, mu: ArrayLike) -> jax.Array:
+        """Gradients by reverse-mode differentiation of `casimirs`, `(..., k, n)`."""
+        mu = as_state(mu, "mu", self.dim)
+        flat = mu.reshape(-1, self.dim)
+        grads = jax.vmap(jax.jacrev(self.casimirs))(flat)
+        return grads.reshape(mu.shape[:-1] + (self.n_casimirs, self.dim))
+
+    def spectrum(self, mu: ArrayLike) -> jax.Array:
+        r"""The eigenvalues of $M$, kept by every coadjoint motion: real, ascending, of the
+        Hermitian $iM$ for u(N), su(N) and of $-iM$ for so(N) (`(..., m)`); complex, of $M$ for
+        the others, sorted by real then imaginary part."""
+        M = self.matrix(as_state(mu, "mu", self.dim))
+        if self.complex:
+            return jnp.linalg.eigvalsh(1j * M)
+        if self.family == "so":
+            return jnp.linalg.eigvalsh(-1j * M.astype(jnp.complex128))
+        return jnp.sort_complex(jnp.linalg.eigvals(M))
+
+    # -- exact flows ------------------------------------------------------------------------------
+    def _coadjoint_flow(self, alpha, t, mu):
+        A = self._dagger(self.matrix(t[..., None] * alpha))
+        M = self.matrix(mu)
+        U = jsl.expm(A)
+        if self.family in ("so", "u", "su"):
+            V = self._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
+        else:
+            V = jsl.expm(-A)
+        return self.coordinates(U @ M @ V)
+
+    def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
+        if self.dim > FLOW_PARAMETERS_MAX_DIM:
+            raise ValueError(
+                f"coadjoint_flow_parameters on {self.name} (dimension {self.dim}): the Gauss-Newton inverse forms a "
+                f"dense {self.dim} x {self.dim} Jacobian per pair and is attempted up to dimension "
+                f"{FLOW_PARAMETERS_MAX_DIM}"
+            )
+        # A bound method: equal algebras compare equal, so the solver compiles once per algebra.
+        return gauss_newton_parameters(self._flow_one, mu0, mu1, t, casimir_gradients)
+
+    def _flow_one(self, alpha: jax.Array, t: jax.Array, mu: jax.Array) -> jax.Array:
+        return self._coadjoint_flow(alpha, t, mu)
+
+    # -- files -------------------------------------------------------------------------------------
+    def definition(self) -> dict[str, Any]:
+        return {"kind": "MatrixLieAlgebra", "family": self.family, "N": self.N, "sign": self.sign}
+
+    def value_key(self) -> tuple[Any, ...]:
+        return ("MatrixLieAlgebra", self.family, self.N, self.sign)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, MatrixLieAlgebra) and self.value_key() == other.value_key()
+
+    def __hash__(self) -> int:
+        return hash(self.value_key())
+
+    def _bracket_scale(self) -> float:
+        return 2.0
+
+
+def so(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""so(N), $N\times N$ antisymmetric matrices, basis $E_{ij} - E_{ji}$ ($i < j$), pairing
+    $\tfrac12\mathrm{tr}(A^\top B)$: the components of $\mu$ are the entries $M_{ij}$, $i<j$."""
+    return MatrixLieAlgebra("so", N, sign=sign)
+
+
+def u(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""u(N), $N\times N$ skew-Hermitian matrices (dimension $N^2$), pairing
+    $\mathrm{Re}\,\mathrm{tr}(A^\dagger B)$."""
+    return MatrixLieAlgebra("u", N, sign=sign)
+
+
+def su(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""su(N), traceless skew-Hermitian matrices (dimension $N^2 - 1$)."""
+    return MatrixLieAlgebra("su", N, sign=sign)
+
+
+def sp(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""sp(2N, R), $2N\times 2N$ Hamiltonian matrices $[[a, b], [c, -a^\top]]$, $b, c$
+    symmetric (dimension $2N^2 + N$)."""
+    return MatrixLieAlgebra("sp", N, sign=sign)
+
+
+def gl(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""gl(N, R), all real $N\times N$ matrices (dimension $N^2$)."""
+    return MatrixLieAlgebra("gl", N, sign=sign)
+
+
+def sl(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""sl(N, R), traceless real $N\times N$ matrices (dimension $N^2 - 1$)."""
+    return MatrixLieAlgebra("sl", N, sign=sign)

@@ -1,0 +1,219 @@
+"""Matrix Lie algebras (so(N), u(N), su(N), sp(2N), gl(N), sl(N)): bracket, Lie-Poisson
+structure, Casimirs and coadjoint flows against independent references (structure constants
+formed from the matrices, finite differences, the so(3) of structure constants)."""
+
+import jax
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import liepoisson as lp
+
+EPS = np.finfo(np.float64).eps
+SMALL = [lp.so(3), lp.so(4), lp.so(5), lp.u(2), lp.u(3), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3), lp.sl(3)]
+IDS = [g.name for g in SMALL]
+
+
+def _vectors(g, seed, k=1):
+    return np.random.default_rng(seed).normal(size=(k, g.dim))
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_dimensions_and_rank(g):
+    expected = {"so": g.N * (g.N - 1) // 2, "u": g.N**2, "su": g.N**2 - 1, "sp": 2 * g.N**2 + g.N,
+                "gl": g.N**2, "sl": g.N**2 - 1}[g.family]
+    assert g.dim == expected
+    mu = _vectors(g, 0)[0]
+    # generic corank = number of Casimirs (the rank of the algebra)
+    assert g.orbit_dimension(mu) == g.dim - g.n_casimirs
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_basis_is_orthonormal_and_coordinates_project(g):
+    E = np.asarray(g.matrix(np.eye(g.dim)))
+    gram = g.kappa * np.real(np.einsum("aij,bij->ab", E.conj(), E))
+    np.testing.assert_allclose(gram, np.eye(g.dim), atol=4 * EPS)
+    x = _vectors(g, 1)[0]
+    np.testing.assert_allclose(np.asarray(g.coordinates(g.matrix(x))), x, atol=8 * EPS)
+    # a matrix outside the algebra: its residual after projection is orthogonal to the basis
+    rng = np.random.default_rng(2)
+    Z = rng.normal(size=(g.size, g.size)) + (1j * rng.normal(size=(g.size, g.size)) if g.complex else 0)
+    R = Z - np.asarray(g.matrix(g.coordinates(Z)))
+    assert np.abs(g.kappa * np.real(np.einsum("aij,ij->a", E.conj(), R))).max() < 32 * EPS
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_structure_constants_are_a_lie_algebra_and_give_the_same_operations(g):
+    C = g.structure_constants
+    # LieAlgebra checks antisymmetry and Jacobi of the constants formed from the matrices.
+    h = lp.LieAlgebra(C, casimirs=[])
+    xi, eta, mu = _vectors(g, 3, 3)
+    scale = np.abs(xi).max() * np.abs(mu).max()
+    # ad* and the Poisson tensor by matrix products against the structure-constant formulas;
+    # each entry is a sum of n products of O(1) numbers: a few n eps.
+    tol = 4 * g.dim * EPS * scale
+    np.testing.assert_allclose(np.asarray(g.ad_star(xi, mu)), np.asarray(h.ad_star(xi, mu)), atol=tol)
+    np.testing.assert_allclose(np.asarray(g.bracket(xi, eta)), np.asarray(h.bracket(xi, eta)), atol=tol)
+    np.testing.assert_allclose(np.asarray(g.poisson_tensor(mu)), np.asarray(h.poisson_tensor(mu)), atol=tol)
+    np.testing.assert_allclose(np.asarray(g.poisson_action(mu, xi)), np.asarray(h.poisson_tensor(mu) @ xi), atol=tol)
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_jacobi_identity(g, seed):
+    x, y, z = _vectors(g, seed, 3)
+    J = g.bracket(g.bracket(x, y), z) + g.bracket(g.bracket(y, z), x) + g.bracket(g.bracket(z, x), y)
+    size = np.abs(x).max() * np.abs(y).max() * np.abs(z).max()
+    # two nested products of m x m matrices of O(1) entries: O(m^2) round-off terms
+    assert np.abs(np.asarray(J)).max() <= 64 * g.size**2 * EPS * size
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_casimirs_are_casimirs(g):
+    mu = _vectors(g, 4, 5)
+    B = np.asarray(g.poisson_tensor(mu))
+    G = np.asarray(g.casimir_gradients(mu))
+    assert G.shape == (5, g.n_casimirs, g.dim)
+    scale = np.abs(B).max() * np.abs(G).max()
+    assert np.abs(np.einsum("kab,kjb->kja", B, G)).max() < 64 * g.dim * EPS * scale
+    # gradients are independent at a generic point
+    assert all(np.linalg.matrix_rank(Gk) == g.n_casimirs for Gk in G)
+    # against central finite differences of casimirs (step 1e-6: error ~ 1e-12 relative)
+    e = np.eye(g.dim)[0]
+    fd = (np.asarray(g.casimirs(mu[0] + 1e-6 * e)) - np.asarray(g.casimirs(mu[0] - 1e-6 * e))) / 2e-6
+    np.testing.assert_allclose(fd, G[0, :, 0], rtol=1e-6, atol=1e-6 * np.abs(G[0]).max())
+
+
+def test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two():
+    Pi = np.array([0.3, -1.1, 0.8])
+    assert abs(float(lp.so(3).casimirs(Pi)[0]) - Pi @ Pi) < 4 * EPS
+    M = np.asarray(lp.so(4).matrix(np.arange(1.0, 7.0)))
+    c = np.asarray(lp.so(4).casimirs(np.arange(1.0, 7.0)))
+    # -tr M^2 / 2 is the sum of the squared entries above the diagonal; tr M^4 / 2 directly
+    np.testing.assert_allclose(c, [np.sum(np.arange(1.0, 7.0) ** 2), np.trace(M @ M @ M @ M) / 2], rtol=8 * EPS)
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_coadjoint_flow_is_generated_by_the_poisson_tensor(g):
+    alpha, mu = _vectors(g, 5, 2)
+    h = 1e-5  # central difference: truncation h^2 |d^3 mu| ~ 1e-10, round-off eps/h ~ 1e-11
+    fd = (np.asarray(g.coadjoint_flow(alpha, h, mu)) - np.asarray(g.coadjoint_flow(alpha, -h, mu))) / (2 * h)
+    np.testing.assert_allclose(fd, np.asarray(g.poisson_action(mu, alpha)), atol=1e-8)
+    # zero rotation: the identity, up to the round trip through the matrix (factors 1/sqrt(2))
+    np.testing.assert_allclose(np.asarray(g.coadjoint_flow(np.zeros(g.dim), 1.0, mu)), mu, rtol=0,
+                               atol=4 * EPS * np.abs(mu).max())
+
+
+@pytest.mark.parametrize("g", SMALL, ids=IDS)
+def test_coadjoint_flow_is_a_poisson_map(g):
+    alpha, mu = _vectors(g, 6, 2)
+    alpha *= 0.5
+    flow = lambda m: g.coadjoint_flow(alpha, 0.7, m)
+    D = np.asarray(jax.jacfwd(flow)(mu))
+    lhs = D @ np.asarray(g.poisson_tensor(mu)) @ D.T
+    rhs = np.asarray(g.poisson_tensor(flow(mu)))
+    assert np.abs(lhs - rhs).max() < 256 * g.dim * EPS * np.abs(rhs).max()
+
+
+@pytest.mark.parametrize("g", [lp.so(5), lp.u(4), lp.su(3), lp.sp(2)], ids=lambda g: g.name)
+def test_casimirs_and_spectrum_kept_over_a_long_composition(g):
+    rng = np.random.default_rng(7)
+    mu0 = rng.normal(size=g.dim)
+    alphas = rng.normal(size=(1000, g.dim))
+    compact = g.family in ("so", "u", "su")
+    if not compact:
+        alphas *= 0.05  # non-compact: keep exp(t alpha) moderate so the orbit stays bounded
+
+    def body(mu, a):
+        return g._coadjoint_flow(a, np.asarray(0.3), mu), None
+
+    mu1, _ = jax.lax.scan(body, mu0, alphas)
+    c0, c1 = np.asarray(g.casimirs(mu0)), np.asarray(g.casimirs(mu1))
+    rel = np.abs(c1 - c0) / np.abs(c0)
+    # 1000 conjugations, each exact to a few eps: a random walk of round-off, <= ~1e3 eps
+    assert rel.max() < 2e3 * EPS * g.size
+    if compact:
+        s0, s1 = np.asarray(g.spectrum(mu0)), np.asarray(g.spectrum(mu1))
+        assert np.abs(s1 - s0).max() < 2e3 * EPS * g.size * np.abs(s0).max()
+
+
+def test_so3_of_matrices_is_so3_of_structure_constants():
+    # so(3)'s components (M12, M13, M23) are (-Pi3, Pi2, -Pi1) for M = hat(Pi).
+    P = np.array([[0, 0, -1], [0, 1, 0], [-1, 0, 0]], dtype=float)
+    g, h = lp.so(3), lp.so3()
+    rng = np.random.default_rng(8)
+    Pi, A = rng.normal(size=(2, 3))
+    M = np.asarray(g.matrix(P @ Pi))
+    hat = np.array([[0, -Pi[2], Pi[1]], [Pi[2], 0, -Pi[0]], [-Pi[1], Pi[0], 0]])
+    np.testing.assert_array_equal(M, hat)
+    np.testing.assert_allclose(P @ np.asarray(h.coadjoint_flow(A, 0.9, Pi)),
+                               np.asarray(g.coadjoint_flow(P @ A, 0.9, P @ Pi)), atol=8 * EPS)
+    np.testing.assert_allclose(P @ np.asarray(h.poisson_tensor(Pi)) @ P.T, np.asarray(g.poisson_tensor(P @ Pi)), atol=0)
+
+
+@pytest.mark.parametrize("g", [lp.so(4), lp.su(2)], ids=lambda g: g.name)
+def test_flow_parameters_invert_the_flow(g):
+    alpha, mu = _vectors(g, 9, 2)
+    mu1 = np.asarray(g.coadjoint_flow(0.3 * alpha, 1.0, mu))
+    a = g.coadjoint_flow_parameters(mu, mu1, 1.0)
+    np.testing.assert_allclose(np.asarray(g.coadjoint_flow(a, 1.0, mu)), mu1, atol=1e-12)
+    # orthogonal to the Casimir gradients at mu (the paper's eq. (26))
+    assert np.abs(np.asarray(g.casimir_gradients(mu)) @ a).max() < 1e-12
+
+
+def test_large_algebras_build_without_a_structure_constant_tensor():
+    for g in (lp.so(64), lp.u(64)):
+        assert g.dim in (2016, 4096)
+        with pytest.raises(ValueError, match="structure-constant tensor"):
+            _ = g.structure_constants
+        x = np.random.default_rng(10).normal(size=g.dim)
+        np.testing.assert_allclose(np.asarray(g.coordinates(g.matrix(x))), x, atol=8 * EPS)
+
+
+def test_definitions_round_trip_and_bad_input():
+    for g in SMALL:
+        back = lp.AbstractLieAlgebra.from_definition(g.definition())
+        assert back == g and hash(back) == hash(g)
+    assert lp.so(3) != lp.so(3, sign=1)
+    with pytest.raises(ValueError, match="family"):
+        lp.MatrixLieAlgebra("so3", 3)
+    with pytest.raises(ValueError, match="N must be >= 2"):
+        lp.so(1)
+    with pytest.raises(TypeError, match="N must be an integer"):
+        lp.u(2.5)
+    with pytest.raises(ValueError, match="sign"):
+        lp.sl(3, sign=0)
+    with pytest.raises(ValueError, match="not a valid matrix Lie algebra"):
+        lp.AbstractLieAlgebra.from_definition({"kind": "MatrixLieAlgebra", "family": "so"})
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 6\)"):
+        lp.so(4).coadjoint_flow(np.zeros(5), 1.0, np.zeros(6))
+    with pytest.raises(ValueError, match="finite"):
+        lp.u(2).casimirs([np.nan, 0, 0, 0])
+
+
+def test_non_compact_overflow_is_reported():
+    g = lp.gl(2)
+    with pytest.raises(FloatingPointError, match="overflowed"):
+        g.coadjoint_flow(np.array([400.0, 0, 0, -400.0]), 2.0, np.ones(4))
+
+
+def test_manakov_body_as_a_lie_poisson_system_on_so4():
+    # H = sum_{i<j} M_ij^2 / (2 (J_i + J_j)): dM/dt = [M, Omega], M = J Omega + Omega J.
+    J = np.array([1.0, 1.3, 1.9, 2.6])
+    g = lp.so(4)
+    pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    inertia = np.array([J[i] + J[j] for i, j in pairs])
+    body = lp.systems.LiePoissonSystem(g, lambda m, xp: sum(m[a] * m[a] / (2 * inertia[a]) for a in range(6)))
+    y = np.random.default_rng(11).normal(size=6)
+    M = np.asarray(g.matrix(y))
+    Omega = np.zeros((4, 4))
+    for a, (i, j) in enumerate(pairs):
+        Omega[i, j], Omega[j, i] = y[a] / inertia[a], -y[a] / inertia[a]
+    np.testing.assert_allclose(J[:, None] * Omega + Omega * J[None, :], M, atol=4 * EPS)
+    np.testing.assert_allclose(np.asarray(body.vector_field(y)), np.asarray(g.coordinates(M @ Omega - Omega @ M)),
+                               atol=8 * EPS)
+    assert body.n_casimirs == 2
+    back = lp.systems.LiePoissonSystem.from_params(body.name, body.params)
+    np.testing.assert_allclose(np.asarray(back.vector_field(y)), np.asarray(body.vector_field(y)), atol=0)
