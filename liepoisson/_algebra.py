@@ -21,60 +21,8 @@ from ._casimir_values import casimir_gradient_values, casimir_values
 from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
 from ._polynomial import Polynomial
+from ._structure import check_structure_constants, generic_corank
 from ._validation import as_state
-
-# Structure constants given as floats (e.g. computed ones) may carry round-off: accept
-# violations of antisymmetry and Jacobi up to 1e-10 relative to the size of the constants.
-_STRUCTURE_RTOL = 1e-10
-
-
-def _check_structure_constants(C: Any) -> np.ndarray:
-    what = f"{type(C).__name__} {C!r}"
-    try:
-        if isinstance(C, (str, bytes)) or C is None:
-            raise TypeError
-        if np.iscomplexobj(C):
-            what = f"complex {type(C).__name__} of dtype {np.asarray(C).dtype}"
-            raise TypeError
-        C = np.asarray(C, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise TypeError(f"structure_constants must be a real array of shape (n, n, n); got {what}") from err
-    if C.ndim != 3 or not (C.shape[0] == C.shape[1] == C.shape[2]) or C.shape[0] == 0:
-        raise ValueError(f"structure_constants must have shape (n, n, n) with n >= 1; got {C.shape}")
-    if not np.all(np.isfinite(C)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(C))[0])
-        raise ValueError(f"structure_constants must be finite; found {C[bad]} at (a, b, d) = {bad}")
-    scale = max(1.0, float(np.max(np.abs(C))))
-    sym = C + C.transpose(1, 0, 2)
-    if np.max(np.abs(sym)) > _STRUCTURE_RTOL * scale:
-        idx = tuple(int(i) for i in np.unravel_index(np.argmax(np.abs(sym)), sym.shape))
-        raise ValueError(
-            "structure_constants must be antisymmetric, C[a, b, d] = -C[b, a, d]; the largest "
-            f"violation is {np.abs(sym)[idx]:.3g} at (a, b, d) = {idx}"
-        )
-    # Jacobi: [[e_a, e_b], e_c] + cyclic = 0, i.e. sum_d C_abd C_dce + cyclic(a, b, c) = 0.
-    J = (
-        np.einsum("abd,dce->abce", C, C)
-        + np.einsum("bcd,dae->abce", C, C)
-        + np.einsum("cad,dbe->abce", C, C)
-    )
-    if np.max(np.abs(J)) > _STRUCTURE_RTOL * scale * scale:
-        idx = tuple(int(i) for i in np.unravel_index(np.argmax(np.abs(J)), J.shape))
-        raise ValueError(
-            "structure_constants must satisfy the Jacobi identity; the largest violation is "
-            f"{np.abs(J)[idx]:.3g} at (a, b, c) = {idx[:3]} (component {idx[3]})"
-        )
-    C = C.copy()
-    C.setflags(write=False)
-    return C
-
-
-def generic_corank(C: np.ndarray) -> int:
-    r"""$n - \max_\mu \operatorname{rank} C_{abd}\mu_d$ over seeded random $\mu$: the number of
-    independent Casimirs near a generic point."""
-    mus = np.random.default_rng(0).normal(size=(4, C.shape[0]))
-    B = np.einsum("abd,kd->kab", C, mus)
-    return C.shape[0] - max(int(np.linalg.matrix_rank(b)) for b in B)
 
 
 def _warn_if_casimirs_missing(C: np.ndarray, found: int, degree: int, name: Any) -> None:
@@ -117,7 +65,7 @@ class LieAlgebra(AbstractLieAlgebra):
         sign: int = -1,
         max_casimir_degree: int = 4,
     ):
-        C = _check_structure_constants(structure_constants)
+        C = check_structure_constants(structure_constants)
         n = C.shape[0]
         if isinstance(sign, bool) or sign not in (-1, 1):
             raise ValueError(f"sign must be -1 (body) or +1 (spatial); got {sign!r}")
