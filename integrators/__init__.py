@@ -35,6 +35,11 @@ from ._lie_group import (
     CommutatorFree4 as CommutatorFree4,
     LieEuler as LieEuler,
 )
+from ._isospectral import (
+    ISOSPECTRAL_METHODS as ISOSPECTRAL_METHODS,
+    IsospectralMidpoint as IsospectralMidpoint,
+    IsospectralTripleJump as IsospectralTripleJump,
+)
 from ._lyapunov import lyapunov_exponent as lyapunov_exponent
 from ._noise import (
     NOISE_LAWS as NOISE_LAWS,

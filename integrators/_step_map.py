@@ -121,6 +121,21 @@ class AbstractStepMap(eqx.Module):
         nonfinite.check(self, out, save_every)
         return out[0] if y0.ndim == 1 else out
 
+    # -- the state between steps ------------------------------------------------------------
+    # A rollout carries the state from step to step in the map's own representation (an
+    # isospectral method: the matrix W), converting only the states it saves.
+    def carry(self, y: jax.Array) -> Any:
+        """The state `y` `(dim,)` as the map carries it between steps (default: `y`)."""
+        return y
+
+    def step_carry(self, c: Any) -> Any:
+        """One step on a carried state (default: `step`)."""
+        return self.step(c)
+
+    def uncarry(self, c: Any) -> jax.Array:
+        """The state `(dim,)` of a carried one (default: itself)."""
+        return c
+
     def poisson_defect(self, y: ArrayLike) -> jax.Array:
         r"""$\max_{ab}|(J\,\mathbb B(y)\,J^\top - \mathbb B(\Phi_h(y)))_{ab}|$ per point, with
         $J = \partial\Phi_h/\partial y$ (forward-mode autodiff): zero, up to round-off, exactly
@@ -314,20 +329,21 @@ def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, sa
     """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`. `save_every` is the Python int 1, or a traced
     integer (then one program serves every spacing of the outputs: a study at several h with
     the same output times compiles once per map)."""
-    step = vmap_samples(step_map.step)
+    step = vmap_samples(step_map.step_carry)
+    uncarry = vmap_samples(step_map.uncarry)
     if isinstance(save_every, int) and save_every == 1:
 
-        def body(y, _):
-            y = step(y)
-            return y, y
+        def body(c, _):
+            c = step(c)
+            return c, uncarry(c)
 
     else:
 
-        def body(y, _):
-            y = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), y)
-            return y, y
+        def body(c, _):
+            c = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), c)
+            return c, uncarry(c)
 
-    _, ys = jax.lax.scan(body, y0, None, length=n_saved)
+    _, ys = jax.lax.scan(body, vmap_samples(step_map.carry)(y0), None, length=n_saved)
     return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
 
 

@@ -22,6 +22,7 @@ from ._double_bracket import (
     damped_heavy_top as damped_heavy_top,
     damped_rigid_body as damped_rigid_body,
 )
+from ._generalized_rigid_body import GeneralizedRigidBody as GeneralizedRigidBody
 from ._heavy_top import HeavyTop as HeavyTop
 from ._kirchhoff import Kirchhoff as Kirchhoff
 from ._lie_poisson import LiePoissonSystem as LiePoissonSystem

@@ -13,6 +13,7 @@ from .._jsonable import jsonable
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
 from ._double_bracket import DoubleBracket
+from ._generalized_rigid_body import GeneralizedRigidBody
 from ._heavy_top import HeavyTop
 from ._kirchhoff import Kirchhoff
 from ._lie_poisson import KIND, LiePoissonSystem
@@ -20,7 +21,7 @@ from ._pendulum import ExtendedPendulum
 from ._rigid_body import RigidBody
 
 SYSTEMS: dict[str, type] = {
-    cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle)
+    cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle, GeneralizedRigidBody)
 }
 
 # A system given to a loader reproduces the saved Hamiltonian at the probe points to this

@@ -1,0 +1,111 @@
+"""The generalized rigid body on so(N) and the isospectral integrators: against heyoka (observed
+orders), against Euler's rigid body at N = 3, and Casimirs / spectrum over long runs."""
+
+import numpy as np
+import pytest
+
+import integrators as it
+import liepoisson as lp
+
+EPS = np.finfo(np.float64).eps
+J4 = (1.0, 1.3, 1.9, 2.6)
+
+
+def test_generalized_rigid_body_at_n3_is_eulers_rigid_body():
+    J = np.array([1.0, 1.5, 2.25])
+    body = lp.systems.GeneralizedRigidBody(J)
+    euler = lp.systems.RigidBody(inertia=(J[1] + J[2], J[0] + J[2], J[0] + J[1]))
+    # (M12, M13, M23) = (-Pi3, Pi2, -Pi1)
+    P = np.array([[0, 0, -1], [0, 1, 0], [-1, 0, 0]], dtype=float)
+    Pi = np.random.default_rng(0).normal(size=(4, 3))
+    np.testing.assert_allclose(np.asarray(body.vector_field(Pi @ P.T)), np.asarray(euler.vector_field(Pi)) @ P.T,
+                               atol=8 * EPS)
+    np.testing.assert_allclose(np.asarray(body.hamiltonian(Pi @ P.T)), np.asarray(euler.hamiltonian(Pi)), rtol=4 * EPS)
+
+
+def test_velocity_matrix_is_minus_the_angular_velocity():
+    body = lp.systems.GeneralizedRigidBody(J4)
+    y = np.random.default_rng(1).normal(size=body.dim)
+    M = body.algebra.matrix(y)
+    Omega = np.asarray(body.algebra.matrix(body.hamiltonian_gradient(y)))
+    np.testing.assert_allclose(np.asarray(body.velocity_matrix(M)), -Omega, atol=4 * EPS)
+    J = np.diag(J4)
+    np.testing.assert_allclose(J @ Omega + Omega @ J, np.asarray(M), atol=8 * EPS)
+    # the isospectral methods' generic path (-matrix of the generator) agrees with the system's own
+    np.testing.assert_allclose(np.asarray(it._isospectral.velocity_matrix(lp.systems.LiePoissonSystem(
+        body.algebra, body.hamiltonian_components), M)), np.asarray(body.velocity_matrix(M)), atol=4 * EPS)
+
+
+@pytest.mark.parametrize(("method", "order"), [(it.IsospectralMidpoint, 2), (it.IsospectralTripleJump, 4)])
+def test_isospectral_methods_converge_at_their_order_against_heyoka(method, order):
+    body = lp.systems.GeneralizedRigidBody(J4)
+    y0 = np.random.default_rng(2).normal(size=(2, body.dim))
+    conv = it.convergence(lambda h: method(body, h, tol=1e-14), body, y0, t_final=1.0, hs=[0.1, 0.05, 0.025])
+    assert abs(conv.order - order) < 0.1
+
+
+def test_strang_splitting_of_the_generalized_rigid_body_against_heyoka():
+    body = lp.systems.GeneralizedRigidBody(J4)
+    y0 = np.random.default_rng(3).normal(size=(2, body.dim))
+    conv = it.convergence(lambda h: it.splitting.Strang(body, h), body, y0, t_final=1.0, hs=[0.1, 0.05, 0.025])
+    assert abs(conv.order - 2) < 0.1
+
+
+@pytest.mark.parametrize("make", [lambda: lp.systems.GeneralizedRigidBody((1.0, 1.2, 1.7, 2.0, 3.1)),
+                                  lambda: lp.systems.LiePoissonSystem(
+                                      lp.u(3), lambda m, xp: sum((k + 1.0) * m[k] ** 2 for k in range(9)) / 2)],
+                         ids=["so5", "u3"])
+def test_isospectral_midpoint_keeps_casimirs_and_spectrum_over_long_runs(make):
+    system = make()
+    g = system.algebra
+    y0 = np.random.default_rng(4).normal(size=g.dim)
+    # steps well inside the stability region: h |Omega| ~ 0.1 (u3's weights reach 9, so |Omega| ~ 27)
+    method = it.IsospectralMidpoint(system, 0.05 if g.family == "so" else 0.004)
+    ys = np.asarray(method.rollout(y0, 2000, save_every=20))
+    c = np.asarray(g.casimirs(ys))
+    s = np.asarray(g.spectrum(ys))
+    # each step is a conjugation by a Cayley transform, unitary to a few eps: a random walk of
+    # round-off over 2000 steps stays below 1e-13 of each Casimir's size sum_i |lambda_i|^k
+    # (its value, for the even powers; an odd power's value may be much smaller)
+    powers = [2 * k for k in range(1, g.n_casimirs + 1)] if g.family == "so" else range(1, g.n_casimirs + 1)
+    size = np.array([np.sum(np.abs(s[0]) ** k) for k in powers]) / (2 if g.family == "so" else 1)
+    assert (np.abs(c - c[0]) / size).max() < 1e-13
+    assert np.abs(s - s[0]).max() < 1e-13 * np.abs(s[0]).max()
+    # the energy is not exactly kept, but bounded: no drift over the run
+    H = np.asarray(system.hamiltonian(ys))
+    assert np.abs(H - H[0]).max() < 1e-3 * abs(H[0])
+    assert 1 <= int(method.iterations(y0)) < 30
+
+
+def test_strang_keeps_the_casimirs_of_so5():
+    body = lp.systems.GeneralizedRigidBody((1.0, 1.2, 1.7, 2.0, 3.1))
+    y0 = np.random.default_rng(5).normal(size=body.dim)
+    ys = np.asarray(it.splitting.Strang(body, 0.05).rollout(y0, 1000, save_every=50))
+    c = np.asarray(body.casimirs(ys))
+    assert (np.abs(c - c[0]) / np.abs(c[0])).max() < 1e-13
+
+
+def test_bad_input():
+    with pytest.raises(TypeError, match="compact matrix algebra"):
+        it.IsospectralMidpoint(lp.systems.RigidBody(), 0.1)
+    with pytest.raises(TypeError, match="compact matrix algebra"):
+        it.IsospectralMidpoint(lp.systems.LiePoissonSystem(lp.gl(2), lambda m, xp: m[0] ** 2), 0.1)
+    body = lp.systems.GeneralizedRigidBody(J4)
+    for h in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="h"):
+            it.IsospectralMidpoint(body, h)
+    with pytest.raises(ValueError, match="tol"):
+        it.IsospectralMidpoint(body, 0.1, tol=0.0)
+    with pytest.raises(ValueError, match="N >= 3"):
+        lp.systems.GeneralizedRigidBody((1.0, 2.0))
+    with pytest.raises(ValueError, match="J"):
+        lp.systems.GeneralizedRigidBody((1.0, -2.0, 3.0))
+    # a step too large for the fixed-point iteration: NaN, which a rollout reports
+    with pytest.raises(it.RolloutDivergedError):
+        it.IsospectralMidpoint(body, 50.0, max_iter=5).rollout(10 * np.ones(body.dim), 3)
+
+
+def test_generalized_rigid_body_round_trips_through_its_name():
+    body = lp.systems.GeneralizedRigidBody(J4)
+    back = lp.systems.from_name(body.name, body.params)
+    assert back == body and back.dim == 6
