@@ -54,6 +54,7 @@ from ._plots import (
     plot_convergence as plot_convergence,
     plot_diagnostics as plot_diagnostics,
     plot_energy as plot_energy,
+    plot_vorticity as plot_vorticity,
     plot_work_precision as plot_work_precision,
 )
 from ._nonfinite import (

@@ -25,11 +25,13 @@ For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a m
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from numpy.typing import ArrayLike
 
 from liepoisson import MatrixLieAlgebra
 from liepoisson.internals import positive_float, positive_int
@@ -81,88 +83,158 @@ class IsospectralMidpoint(AbstractStepMap):
     integrator for $\dot W = [B(W), W]$ (Modin & Viviani 2020) that keeps the spectrum of $W$
     to round-off.
 
-    **Arguments:** `system`, a Lie-Poisson system on so(N), u(N) or su(N); `h` > 0; `tol`
-    (default `DEFAULT_TOL`), the fixed-point iteration's stopping tolerance relative to
-    max|W|; `max_iter` (default `DEFAULT_MAX_ITER`): a step still moving after that many
-    iterations is NaN.
+    **Arguments:**
 
-    `step_matrix(W)` steps a matrix, `iterations(W)` says how many iterations a step took.
+    - `system`, a Lie-Poisson system on so(N), u(N) or su(N); `h` > 0.
+    - `tol` (default `DEFAULT_TOL`): the fixed-point iteration stops when an iteration moves
+      the stage by at most `tol` times max|W|.
+    - `iterations` (default `None`): `None` iterates until `tol` is met (at most `max_iter`
+      iterations), the robust choice; an integer $k$ makes every step of a rollout do exactly
+      $k$ iterations from its extrapolated start (straight-line code, which reverse-mode
+      differentiation needs), and a step whose last iteration still moved more than `tol` is
+      NaN (a rollout then says so and suggests more); `iterations_needed(y0)` says what a run
+      needs, but a later step may need more.
+    - `max_iter` (default `DEFAULT_MAX_ITER`): the cap of the iterations to `tol`.
+
+    A rollout carries $W$ and the last three stage increments of each substep; its first step
+    starts from a history found by three steps backwards (the method is symmetric: a step back
+    shares its stage with the step forward it undoes), so every step starts from the quadratic
+    extrapolation of the last three. `step(y)` alone starts cold and iterates to `tol`.
     """
 
     system: AbstractLiePoissonSystem = eqx.field(static=True)
     h: float
     tol: float = eqx.field(static=True)
+    iterations: int | None = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
     substeps: ClassVar[tuple[float, ...]] = (1.0,)
 
     def __init__(self, system: AbstractLiePoissonSystem, h: float, *, tol: float = DEFAULT_TOL,
-                 max_iter: int = DEFAULT_MAX_ITER):
+                 iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER):
         self.system = check_isospectral(system)
         self.h = positive_float(h, "h")
         self.tol = positive_float(tol, "tol")
+        self.iterations = None if iterations is None else positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
 
     @property
     def exact_flows_per_step(self) -> int:
         return 0
 
-    def _midpoint(self, W: jax.Array, h: jax.Array | float) -> tuple[jax.Array, jax.Array]:
-        """One isospectral midpoint step of size `h` from `W`, and its iteration count."""
-        dagger = (lambda X: jnp.conj(X.T)) if jnp.iscomplexobj(W) else (lambda X: X.T)
+    @property
+    def divergence_hint(self) -> str:
+        if self.iterations is None:
+            return (f"The fixed-point iteration did not meet tol={self.tol:g} within max_iter={self.max_iter} "
+                    "iterations (a step too large for it to contract), or the state left the finite range: "
+                    "try a smaller h")
+        return (f"A step's fixed-point iteration did not meet tol={self.tol:g} in iterations={self.iterations} "
+                f"(a step that has not converged is NaN): use more, e.g. IsospectralMidpoint(..., "
+                f"iterations={self.iterations + 1}), or iterations=None to iterate until tol is met")
+
+    def _iterate(self, W, h, Wt):
+        r"""One fixed-point iteration of the stage equation: `(new stage, B at Wt, moved)`."""
+        B = velocity_matrix(self.system, Wt)
+        X = B @ Wt  # [B, Wt] = X - X^dagger, B Wt B = X B (skew-Hermitian factors)
+        Wn = W + 0.5 * h * (X - _dagger(X)) + 0.25 * h * h * (X @ B)
+        return Wn, B, jnp.max(jnp.abs(Wn - Wt))
+
+    def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None
+                  ) -> tuple[jax.Array, jax.Array, jax.Array]:
+        r"""One isospectral midpoint step of size `h` from `W`, the stage $\tilde W$ sought
+        from $W + D$ by `iterations` iterations (None: until `tol`): returns the new state (NaN
+        if the stage has not converged), the stage's increment $\tilde W - W$ and the
+        iteration count."""
         scale = self.tol * jnp.maximum(jnp.max(jnp.abs(W)), jnp.finfo(jnp.float64).tiny)
+        if iterations is None:
 
-        def stage(Wt):
-            B = velocity_matrix(self.system, Wt)
-            X = B @ Wt
-            return W + 0.5 * h * (X - dagger(X)) + 0.25 * h * h * (X @ B)
+            def body(state):
+                Wt, _, _, k = state
+                return (*self._iterate(W, h, Wt), k + 1)
 
-        def cond(state):
-            _, moved, k = state
-            return (moved > scale) & (k < self.max_iter)
-
-        def body(state):
-            Wt, _, k = state
-            Wn = stage(Wt)
-            return Wn, jnp.max(jnp.abs(Wn - Wt)), k + 1
-
-        Wt, moved, k = jax.lax.while_loop(cond, body, (W, jnp.asarray(jnp.inf), jnp.asarray(0)))
-        B = 0.5 * h * velocity_matrix(self.system, Wt)
+            Wt, B, moved, k = jax.lax.while_loop(
+                lambda state: (state[2] > scale) & (state[3] < self.max_iter), body,
+                (W + D, jnp.zeros_like(W), jnp.asarray(jnp.inf), jnp.asarray(0)))
+        else:  # straight-line code: no control flow in the step
+            Wt = W + D
+            for _ in range(iterations):
+                Wt, B, moved = self._iterate(W, h, Wt)
+            k = jnp.asarray(iterations)
+        # B is from the last iteration, at the iterate before the last (as quflow does):
+        # converged to the tolerance, and one evaluation of B a step cheaper.
+        B = 0.5 * h * B
         eye = jnp.eye(W.shape[-1], dtype=W.dtype)
         Q = jnp.linalg.solve(eye - B, eye + B)  # the Cayley transform: unitary (orthogonal)
-        W1 = Q @ W @ dagger(Q)
-        W1 = 0.5 * (W1 - dagger(W1))  # back onto the algebra (exact halving): no drift off it
-        return jnp.where(moved <= scale, W1, jnp.nan), k
+        W1 = Q @ W @ _dagger(Q)
+        W1 = 0.5 * (W1 - _dagger(W1))  # back onto the algebra (exact halving): no drift off it
+        return jnp.where(moved <= scale, W1, jnp.nan), Wt - W, k
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
-        """One step on the matrix $W$ `(m, m)` of the state."""
+        """One step on the matrix $W$ `(m, m)` of the state, the stage started at $W$ and
+        iterated until `tol`."""
         for c in self.substeps:
-            W, _ = self._midpoint(W, c * self.h)
+            W, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), None)
         return W
 
     def step(self, y: jax.Array) -> jax.Array:
         algebra = self.system.algebra
         return algebra.coordinates(self.step_matrix(algebra.matrix(check_state(y, self.system.dim))))
 
-    # A rollout carries W itself: converting to coordinates and back every step would cost
-    # a rounding per step (the basis of u(N) has entries 1/sqrt(2)) and bias the Casimirs.
-    def carry(self, y: jax.Array) -> jax.Array:
-        return self.system.algebra.matrix(check_state(y, self.system.dim))
+    # A rollout carries W itself, and each substep's last three stage increments: the next
+    # step's iteration starts from their quadratic extrapolation, O(h^4) from the solution
+    # (quflow starts from the last increment, O(h^2)), which saves one to three iterations a
+    # step (BENCHMARKS.md, "Zeitlin's model"). Converting W to coordinates and back every step
+    # would cost a rounding per step (u(N)'s basis has entries 1/sqrt(2)) and bias the Casimirs.
+    def carry(self, y: jax.Array) -> tuple[jax.Array, tuple[Any, ...]]:
+        W = self.system.algebra.matrix(check_state(y, self.system.dim))
+        # Three steps back, each substep undoing one forward substep (in reverse order): the
+        # stage it finds is that forward substep's, whose increment starts from the state it
+        # lands on.
+        found: list[list[jax.Array]] = [[] for _ in self.substeps]
+        Wb = W
+        for _ in range(3):
+            for index in reversed(range(len(self.substeps))):
+                Wn, D, _ = self._midpoint(Wb, -self.substeps[index] * self.h, jnp.zeros_like(Wb), None)
+                found[index].append(Wb + D - Wn)
+                Wb = Wn
+        return W, tuple(tuple(history) for history in found)
 
-    def step_carry(self, c: jax.Array) -> jax.Array:
-        return self.step_matrix(c)
+    def step_carry(self, c: tuple[jax.Array, tuple[Any, ...]]) -> tuple[jax.Array, tuple[Any, ...]]:
+        return self._step_warm(c, self.iterations)[0]
 
-    def uncarry(self, c: jax.Array) -> jax.Array:
-        return self.system.algebra.coordinates(c)
-
-    def iterations(self, y: jax.Array) -> jax.Array:
-        """The fixed-point iterations of one step from `y` (summed over substeps)."""
-        algebra = self.system.algebra
-        W = algebra.matrix(check_state(jnp.asarray(y, jnp.float64), self.system.dim))
-        total = jnp.asarray(0)
-        for c in self.substeps:
-            W, k = self._midpoint(W, c * self.h)
+    def _step_warm(self, c, iterations):
+        W, histories = c
+        updated, total = [], jnp.asarray(0)
+        for coefficient, (D1, D2, D3) in zip(self.substeps, histories):
+            W, D, k = self._midpoint(W, coefficient * self.h, 3.0 * (D1 - D2) + D3, iterations)
+            updated.append((D, D1, D2))
             total = total + k
-        return total
+        return (W, tuple(updated)), total
+
+    def uncarry(self, c: tuple[jax.Array, tuple[Any, ...]]) -> jax.Array:
+        return self.system.algebra.coordinates(c[0])
+
+    def iterations_needed(self, y: ArrayLike, n_steps: int = 20) -> tuple[float, int]:
+        """`(mean, max)` of the fixed-point iterations (summed over substeps) that the steps
+        of a rollout from `y` need to meet `tol`, over `n_steps` steps: choose `iterations=`
+        from the max (and more for a flow that stiffens)."""
+        n_steps = positive_int(n_steps, "n_steps")
+        counts = np.asarray(_count_iterations(self, self.carry(jnp.asarray(y, jnp.float64)), n_steps))
+        return float(counts.mean()), int(counts.max())
+
+
+def _dagger(X: jax.Array) -> jax.Array:
+    Xt = jnp.swapaxes(X, -1, -2)
+    return jnp.conj(Xt) if jnp.iscomplexobj(X) else Xt
+
+
+@eqx.filter_jit
+def _count_iterations(method: IsospectralMidpoint, c: Any, n_steps: int) -> jax.Array:
+    def body(c, _):
+        c, k = method._step_warm(c, None)
+        return c, k
+
+    _, counts = jax.lax.scan(body, c, None, length=n_steps)
+    return counts
 
 
 class IsospectralTripleJump(IsospectralMidpoint):

@@ -76,7 +76,15 @@ def _raise_if_nonfinite(step_map: Any, out: jax.Array, save_every: int) -> None:
     when = f"at step {k}" if save_every == 1 else f"between steps {(k - 1) * save_every} and {k * save_every}"
     raise RolloutDivergedError(
         f"{step_map.label} (h={step_map.h:g}) diverged: trajectory {i} became non-finite "
-        f"{when}; its last finite state (step {(k - 1) * save_every}) is {np.round(last, 6).tolist()}. "
+        f"{when}; its last finite state (step {(k - 1) * save_every}) is {_short(last)}. "
         f"{step_map.divergence_hint}; pass nonfinite='return' to get the states with their non-finite tail",
         trajectory=i, step=k * save_every, last_finite_step=(k - 1) * save_every, state=last, states=y,
     )
+
+
+def _short(state: np.ndarray, shown: int = 12) -> str:
+    """A state for a message: all of a small one, the first `shown` components of a large one
+    (the `RolloutDivergedError` carries the whole state)."""
+    if state.size <= shown:
+        return str(np.round(state, 6).tolist())
+    return f"{str(np.round(state[:shown], 6).tolist())[:-1]}, ... ({state.size} components; the error's .state has all)]"

@@ -239,3 +239,39 @@ def plot_convergence(convergence: Convergence, path: str | os.PathLike, *, label
     ax.legend(fontsize=7)
     fig.savefig(os.fspath(path))
 
+
+def plot_vorticity(system: Any, states: Any, path: str | os.PathLike, *, titles: Any = None,
+                   n_theta: int | None = None, n_phi: int | None = None) -> None:
+    r"""The vorticity of one or more states of a `liepoisson.systems.Zeitlin` on the sphere, in
+    Mollweide's equal-area projection, side by side on one colour scale (red positive, blue
+    negative), saved to `path`.
+
+    **Arguments:** `system`, a `Zeitlin`; `states` `(dim,)` or `(k, dim)`; `titles`, one per
+    state (e.g. the times); `n_theta`, `n_phi`, the grid (default $2N \times 4N$).
+    """
+    from liepoisson.systems import Zeitlin
+
+    if not isinstance(system, Zeitlin):
+        raise TypeError(f"system must be a liepoisson.systems.Zeitlin; got {type(system).__name__}")
+    states = np.atleast_2d(np.asarray(states, dtype=np.float64))
+    if states.ndim != 2 or states.shape[-1] != system.dim:
+        raise ValueError(f"states must have shape ({system.dim},) or (k, {system.dim}); got {np.shape(states)}")
+    titles = [None] * len(states) if titles is None else list(titles)
+    if len(titles) != len(states):
+        raise ValueError(f"titles must hold one title per state ({len(states)}); got {len(titles)}")
+    fields = [system.vorticity(y, n_theta, n_phi) for y in states]
+    top = max(float(np.abs(f).max()) for _, _, f in fields) or 1.0
+    fig = figure(figsize=(4.2 * len(states), 2.6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(states), subplot_kw={"projection": "mollweide"}))
+    for ax, (theta, phi, f), title in zip(axes, fields, titles):
+        lon = np.where(phi > np.pi, phi - 2 * np.pi, phi)  # [-pi, pi) for the projection
+        order = np.argsort(lon)
+        image = ax.pcolormesh(lon[order], np.pi / 2 - theta, f[:, order], cmap="RdBu_r", vmin=-top, vmax=top,
+                              shading="nearest")
+        ax.set_xticklabels([])
+        ax.set_yticklabels([])
+        ax.grid(True, lw=0.3)
+        if title is not None:
+            ax.set_title(str(title), fontsize=9)
+    fig.colorbar(image, ax=axes.tolist(), shrink=0.7, label="vorticity")
+    fig.savefig(os.fspath(path))

@@ -34,6 +34,7 @@ from ._registry import (
     system_for_file as system_for_file,
 )
 from ._rigid_body import RigidBody as RigidBody
+from ._zeitlin import Zeitlin as Zeitlin
 from ._reversing import (
     check_reversing_symmetry as check_reversing_symmetry,
     check_sign_symmetry as check_sign_symmetry,

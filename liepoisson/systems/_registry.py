@@ -19,9 +19,10 @@ from ._kirchhoff import Kirchhoff
 from ._lie_poisson import KIND, LiePoissonSystem
 from ._pendulum import ExtendedPendulum
 from ._rigid_body import RigidBody
+from ._zeitlin import Zeitlin
 
 SYSTEMS: dict[str, type] = {
-    cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle, GeneralizedRigidBody)
+    cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle, GeneralizedRigidBody, Zeitlin)
 }
 
 # A system given to a loader reproduces the saved Hamiltonian at the probe points to this

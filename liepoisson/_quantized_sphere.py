@@ -1,0 +1,178 @@
+r"""The quantized sphere: the Hoppe-Yau Laplacian on u(N), its inverse, and the map between
+real spherical-harmonic coefficients and skew-Hermitian matrices (Zeitlin's model).
+
+Conventions follow the `quflow` code of Modin and Viviani (0-based indices, $s = (N-1)/2$):
+
+- $\Delta_N W = \sum_a [S_a, [S_a, W]]$ with the spin-$s$ generators $S_a$; entrywise
+  $(\Delta_N W)_{ij} = d_{ij}W_{ij} + c_{ij}W_{i-1,j-1} + c_{i+1,j+1}W_{i+1,j+1}$,
+  $d_{ij} = -[(N-1)(i+j+1) - 2ij]$, $c_{ij} = \sqrt{i(N-i)\,j(N-j)}$: each diagonal of $W$ is
+  transformed by its own symmetric tridiagonal matrix. Spectrum $-l(l+1)$, $l = 0..N-1$, with
+  multiplicity $2l+1$ (the continuum's); kernel the multiples of the identity.
+- $P = \Delta_N^{-1}W$ is the traceless solution of $\Delta_N P = W - (\mathrm{tr}\,W/N)\,1$,
+  one tridiagonal solve per diagonal: $O(N^2)$.
+- A field $\omega = \sum_{lm}\omega_{lm}Y^r_{lm}$ (real harmonics, $l < N$) is the matrix
+  $W = \sum_{lm}\omega_{lm}T_{lm}$ with $\|T_{lm}\|_F^2 = N$; $T_{lm}$ on the $|m|$-th diagonals,
+  built from the eigenvectors of that diagonal's tridiagonal block.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+import scipy.special
+
+
+def hbar(N: int) -> float:
+    r"""$\hbar = 2/\sqrt{N^2 - 1}$: $\dot W = [P, W]/\hbar$ in physical time, independent of $N$."""
+    return 2.0 / math.sqrt(N * N - 1)
+
+
+def _diagonal_coefficients(N: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """`(b, a)` of the m-th diagonal's block: main entries b_k and couplings a_k (k to k-1, a_0 = 0),
+    k = 0..N-m-1."""
+    k = np.arange(N - m, dtype=np.float64)
+    b = -((N - 1) * (2 * k + m + 1) - 2 * k * (k + m))
+    a = np.sqrt(k * (N - k) * (k + m) * (N - k - m))
+    return b, a
+
+
+@functools.cache
+def _solver_arrays(N: int) -> tuple[np.ndarray, ...]:
+    """The N upper diagonals of an N x N matrix as one tridiagonal system of N(N+1)/2
+    unknowns, the blocks uncoupled (one solve is faster than N small ones: benchmarks,
+    "Zeitlin's model"): `(rows, cols, dl, d, du, first)`, `first` the position of the m = 0
+    block's first unknown (0)."""
+    rows, cols, dl, d, du = [], [], [], [], []
+    for m in range(N):
+        n = N - m
+        b, a = _diagonal_coefficients(N, m)
+        if m == 0:
+            b = b.copy()
+            b[0] -= 0.5  # quflow's regularisation of the singular m = 0 block (its kernel: constants)
+        rows.append(np.arange(n))
+        cols.append(np.arange(n) + m)
+        d.append(b)
+        dl.append(a)  # a_0 = 0: no coupling to the previous block
+        du.append(np.append(a[1:], 0.0))  # none to the next
+    return tuple(np.concatenate(x) for x in (rows, cols, dl, d, du))
+
+
+def laplacian(W: jax.Array) -> jax.Array:
+    r"""$\Delta_N W$ for `W` `(..., N, N)` (any complex matrices), entrywise in $O(N^2)$."""
+    W = jnp.asarray(W)
+    N = W.shape[-1]
+    i = np.arange(N, dtype=np.float64)
+    d = -((N - 1) * (i[:, None] + i[None, :] + 1) - 2 * i[:, None] * i[None, :])
+    c = np.sqrt(i[:, None] * (N - i[:, None]) * i[None, :] * (N - i[None, :]))  # c_ij
+    pad = [(0, 0)] * (W.ndim - 2) + [(1, 1), (1, 1)]
+    Wp = jnp.pad(W, pad)
+    cp = np.pad(c, 1)
+    before = Wp[..., :-2, :-2]  # W_{i-1, j-1}
+    after = Wp[..., 2:, 2:]  # W_{i+1, j+1}
+    return d * W + c * before + cp[2:, 2:] * after
+
+
+def solve_poisson(W: jax.Array) -> jax.Array:
+    r"""$P = \Delta_N^{-1}W$ for skew-Hermitian `W` `(N, N)`: the traceless $P$ with
+    $\Delta_N P = W - (\mathrm{tr}\,W/N)\,1$ (one tridiagonal solve per upper diagonal, real
+    and imaginary parts as two right-hand sides; the lower diagonals by skew-Hermitian symmetry)."""
+    W = jnp.asarray(W)
+    N = W.shape[-1]
+    rows, cols, dl, d, du = _solver_arrays(N)
+    W = W - (jnp.trace(W) / N) * jnp.eye(N, dtype=W.dtype)
+    rhs = W[rows, cols]  # the upper diagonals, m = 0 first
+    rhs = jnp.stack([jnp.real(rhs), jnp.imag(rhs)], axis=-1)  # (N(N+1)/2, 2)
+    x = jax.lax.linalg.tridiagonal_solve(jnp.asarray(dl), jnp.asarray(d), jnp.asarray(du), rhs)
+    x = x[..., 0] + 1j * x[..., 1]
+    x = x.at[:N].add(-jnp.sum(x[:N]) / N)  # traceless (the m = 0 block is the main diagonal)
+    U = jnp.zeros((N, N), dtype=jnp.complex128).at[rows, cols].set(x)
+    strict = jnp.triu(U, 1)
+    return U - jnp.conj(strict.T)
+
+
+# -- spherical harmonics --------------------------------------------------------------------------
+@functools.cache
+def harmonic_basis(N: int) -> tuple[np.ndarray, ...]:
+    r"""For each $m = 0..N-1$: the `(N - m, N - m)` matrix whose column $l - m$ is
+    $v^{(l,m)}$, $l = m..N-1$, the eigenvector of the m-th diagonal's block for $-l(l+1)$,
+    scaled to $|v|^2 = N$, the sign of its last component $(-1)^m$ (quflow's `compute_basis`)."""
+    out = []
+    for m in range(N):
+        b, a = _diagonal_coefficients(N, m)
+        if N - m == 1:
+            V = np.ones((1, 1))
+        else:
+            _, V = scipy.linalg.eigh_tridiagonal(b, a[1:])
+        V = V[:, ::-1] * math.sqrt(N)  # eigenvalues ascending -> l descending; reversed: l = m..N-1
+        sign = np.sign(V[-1]) * (-1) ** m
+        out.append(V * np.where(sign == 0, 1.0, sign))
+    return tuple(out)
+
+
+def harmonics_to_matrix(omega: np.ndarray, N: int) -> np.ndarray:
+    r"""$W = \sum_{lm}\omega_{lm}T_{lm}$ from real coefficients `omega` `(N^2,)`, index
+    $l^2 + l + m$ (quflow's `shr2mat`)."""
+    omega = np.asarray(omega, dtype=np.float64)
+    if omega.shape != (N * N,):
+        raise ValueError(f"omega must hold the N^2 = {N * N} real coefficients omega_lm, l < N; got shape {omega.shape}")
+    basis = harmonic_basis(N)
+    W = np.zeros((N, N), dtype=np.complex128)
+    ls = np.arange(N)
+    W[np.diag_indices(N)] = 1j * (basis[0] @ omega[ls * ls + ls])
+    for m in range(1, N):
+        lm = np.arange(m, N)
+        c = (omega[lm * lm + lm + m] - 1j * omega[lm * lm + lm - m]) / math.sqrt(2.0)
+        dvec = (-1) ** m * (basis[m] @ c)
+        k = np.arange(N - m)
+        W[k, k + m] = 1j * dvec
+        W[k + m, k] = 1j * np.conj(dvec)
+    return W
+
+
+def matrix_to_harmonics(W: np.ndarray) -> np.ndarray:
+    r"""The real coefficients $\omega_{lm}$ `(N^2,)` of a skew-Hermitian `W` (quflow's
+    `mat2shr`), the inverse of `harmonics_to_matrix`."""
+    W = np.asarray(W)
+    N = W.shape[-1]
+    basis = harmonic_basis(N)
+    omega = np.zeros(N * N)
+    ls = np.arange(N)
+    omega[ls * ls + ls] = np.real(basis[0].T @ np.diag(W) / 1j) / N
+    for m in range(1, N):
+        k = np.arange(N - m)
+        z = basis[m].T @ W[k + m, k]
+        lm = np.arange(m, N)
+        omega[lm * lm + lm + m] = math.sqrt(2.0) * (-1) ** m * np.imag(z) / N
+        omega[lm * lm + lm - m] = -math.sqrt(2.0) * (-1) ** m * np.real(z) / N
+    return omega
+
+
+def vorticity_on_grid(W: np.ndarray, n_theta: int | None = None, n_phi: int | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""The vorticity field $\omega(\theta, \phi) = \sqrt{4\pi}\sum_{lm}\omega_{lm}Y^r_{lm}$ of
+    `W` on a grid: `(theta, phi, values)`, $\theta$ the colatitude (`n_theta` points, default
+    $2N$), $\phi \in [0, 2\pi)$ (`n_phi`, default $4N$); real harmonics from scipy's complex
+    ones with quflow's signs ($Y^r_{l,-m} = -\sqrt2(-1)^m\,\mathrm{Im}\,Y_l^m$)."""
+    W = np.asarray(W)
+    N = W.shape[-1]
+    omega = matrix_to_harmonics(W)
+    n_theta = 2 * N if n_theta is None else int(n_theta)
+    n_phi = 4 * N if n_phi is None else int(n_phi)
+    theta = (np.arange(n_theta) + 0.5) * np.pi / n_theta
+    phi = np.arange(n_phi) * 2 * np.pi / n_phi
+    T, F = np.meshgrid(theta, phi, indexing="ij")
+    f = np.zeros_like(T)
+    for l in range(N):
+        for m in range(l + 1):
+            Y = scipy.special.sph_harm_y(l, m, T, F)
+            if m == 0:
+                f += omega[l * l + l] * Y.real
+            else:
+                f += omega[l * l + l + m] * math.sqrt(2.0) * (-1) ** m * Y.real
+                f += omega[l * l + l - m] * (-math.sqrt(2.0)) * (-1) ** m * Y.imag
+    return theta, phi, math.sqrt(4 * np.pi) * f
