@@ -188,14 +188,16 @@ class IsospectralMidpoint(AbstractStepMap):
         W = self.system.algebra.matrix(check_state(y, self.system.dim))
         # Three steps back, each substep undoing one forward substep (in reverse order): the
         # stage it finds is that forward substep's, whose increment starts from the state it
-        # lands on.
-        found: list[list[jax.Array]] = [[] for _ in self.substeps]
-        Wb = W
-        for _ in range(3):
-            for index in reversed(range(len(self.substeps))):
-                Wn, D, _ = self._midpoint(Wb, -self.substeps[index] * self.h, jnp.zeros_like(Wb), None)
-                found[index].append(Wb + D - Wn)
-                Wb = Wn
+        # lands on. One traced substep, scanned over the 3 x len(substeps) of them.
+        S = len(self.substeps)
+        coefficients = jnp.asarray([-self.substeps[index] for _ in range(3) for index in reversed(range(S))])
+
+        def back(Wb, coefficient):
+            Wn, D, _ = self._midpoint(Wb, coefficient * self.h, jnp.zeros_like(Wb), None)
+            return Wn, Wb + D - Wn
+
+        _, increments = jax.lax.scan(back, W, coefficients)
+        found = [[increments[step * S + (S - 1 - index)] for step in range(3)] for index in range(S)]
         return W, tuple(tuple(history) for history in found)
 
     def step_carry(self, c: tuple[jax.Array, tuple[Any, ...]]) -> tuple[jax.Array, tuple[Any, ...]]:

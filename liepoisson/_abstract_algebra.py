@@ -75,7 +75,7 @@ class AbstractLieAlgebra(abc.ABC):
 
     @abc.abstractmethod
     def definition(self) -> dict[str, Any]:
-        """Everything that defines the algebra, as JSON values (`algebra_from_definition`
+        """Everything that defines the algebra, as JSON values (`liepoisson.algebra_from_definition`
         inverts it)."""
 
     @abc.abstractmethod
@@ -177,20 +177,6 @@ class AbstractLieAlgebra(abc.ABC):
         scale = max(1.0, float(np.max(np.abs(np.asarray(mu)))))
         rank = np.sum(s > rtol * scale * self._bracket_scale(), axis=-1)
         return int(rank) if np.ndim(rank) == 0 else rank
-
-    @staticmethod
-    def from_definition(definition: Any, what: str = "definition") -> AbstractLieAlgebra:
-        """The algebra of `definition()`, of either kind; `ValueError` naming `what` for a
-        malformed one."""
-        from ._algebra import LieAlgebra
-        from ._matrix_algebra import MatrixLieAlgebra
-
-        if isinstance(definition, dict) and definition.get("kind") == "MatrixLieAlgebra":
-            try:
-                return MatrixLieAlgebra(definition["family"], int(definition["N"]), sign=int(definition["sign"]))
-            except (KeyError, TypeError, ValueError) as err:
-                raise ValueError(f"{what} is not a valid matrix Lie algebra definition: {type(err).__name__}: {err}") from err
-        return LieAlgebra.from_definition(definition, what)
 
     def _bracket_scale(self) -> float:
         """The size of the bracket on unit vectors (rank thresholds are relative to it)."""

@@ -125,7 +125,7 @@ class LieAlgebra(AbstractLieAlgebra):
         }
 
     @classmethod
-    def from_definition(cls, definition: Any, what: str = "definition") -> LieAlgebra:  # type: ignore[override]
+    def from_definition(cls, definition: Any, what: str = "definition") -> LieAlgebra:
         """The algebra of `definition()`; `ValueError` naming `what` for a malformed one. The
         closed-form evaluators (`RodriguesFlow`, `SE3Flow`) are restored; any other evaluator
         is replaced by the matrix exponential (the same exact flow)."""

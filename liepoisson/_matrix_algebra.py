@@ -22,6 +22,7 @@ only).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -171,20 +172,12 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     def matrix(self, x: ArrayLike) -> jax.Array:
         r"""$X = \sum_a x_a E_a$, `(..., m, m)` for `x` `(..., n)` (an element of $\mathfrak g$
         or, through the pairing, of $\mathfrak g^*$)."""
-        x = jnp.asarray(x, jnp.float64)
-        batch = x.shape[:-1]
-        values = jnp.asarray(self._c, self._dtype) * x[..., self._a]
-        flat = jnp.zeros(batch + (self.size * self.size,), self._dtype).at[..., self._p].add(values)
-        return flat.reshape(batch + (self.size, self.size))
+        return _matrix(self, jnp.asarray(x, jnp.float64))
 
     def coordinates(self, X: ArrayLike) -> jax.Array:
         r"""$x_a = \langle X, E_a\rangle$, `(..., n)` for `X` `(..., m, m)`: the orthogonal
         projection onto the algebra, so it also takes any matrix to its nearest element."""
-        X = jnp.asarray(X)
-        batch = X.shape[:-2]
-        flat = X.reshape(batch + (self.size * self.size,))
-        values = self.kappa * jnp.real(jnp.conj(jnp.asarray(self._c, self._dtype)) * flat[..., self._p])
-        return jnp.zeros(batch + (self.dim,), jnp.float64).at[..., self._a].add(values)
+        return _coordinates(self, jnp.asarray(X))
 
     def _dagger(self, X: jax.Array) -> jax.Array:
         Xt = jnp.swapaxes(X, -1, -2)
@@ -250,7 +243,10 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         $k = 1..\lfloor N/2\rfloor$ (so(3): $|\Pi|^2$); u(N) $\mathrm{tr}\,(iM)^k$, $k = 1..N$
         (su(N): $2..N$); sp(2N) $\mathrm{tr}\,M^{2k}$, $k = 1..N$; gl(N) $\mathrm{tr}\,M^k$,
         $k = 1..N$ (sl(N): $2..N$). One matrix product per power."""
-        M = self.matrix(as_state(mu, "mu", self.dim))
+        return _casimirs(self, as_state(mu, "mu", self.dim))
+
+    def _casimir_values(self, mu: jax.Array) -> jax.Array:
+        M = self.matrix(mu)
         if self.complex:
             M = 1j * M
         if self.family == "so":
@@ -270,8 +266,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     def casimir_gradients(self, mu: ArrayLike) -> jax.Array:
         """Gradients by reverse-mode differentiation of `casimirs`, `(..., k, n)`."""
         mu = as_state(mu, "mu", self.dim)
-        flat = mu.reshape(-1, self.dim)
-        grads = jax.vmap(jax.jacrev(self.casimirs))(flat)
+        grads = _casimir_gradients(self, mu.reshape(-1, self.dim))
         return grads.reshape(mu.shape[:-1] + (self.n_casimirs, self.dim))
 
     def spectrum(self, mu: ArrayLike) -> jax.Array:
@@ -287,14 +282,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     # -- exact flows ------------------------------------------------------------------------------
     def _coadjoint_flow(self, alpha, t, mu):
-        A = self._dagger(self.matrix(t[..., None] * alpha))
-        M = self.matrix(mu)
-        U = jsl.expm(A)
-        if self.family in ("so", "u", "su"):
-            V = self._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
-        else:
-            V = jsl.expm(-A)
-        return self.coordinates(U @ M @ V)
+        return _coadjoint_flow(self, alpha, t, mu)
 
     def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
         if self.dim > FLOW_PARAMETERS_MAX_DIM:
@@ -324,6 +312,47 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     def _bracket_scale(self) -> float:
         return 2.0
+
+
+# Compiled once per algebra and shape (the algebra is static: equal algebras share the
+# program), so that eager calls do not pay one XLA compilation per primitive.
+@functools.partial(jax.jit, static_argnums=0)
+def _matrix(algebra: MatrixLieAlgebra, x: jax.Array) -> jax.Array:
+    batch = x.shape[:-1]
+    values = jnp.asarray(algebra._c, algebra._dtype) * x[..., algebra._a]
+    flat = jnp.zeros(batch + (algebra.size * algebra.size,), algebra._dtype).at[..., algebra._p].add(values)
+    return flat.reshape(batch + (algebra.size, algebra.size))
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _coordinates(algebra: MatrixLieAlgebra, X: jax.Array) -> jax.Array:
+    batch = X.shape[:-2]
+    flat = X.reshape(batch + (algebra.size * algebra.size,))
+    values = algebra.kappa * jnp.real(jnp.conj(jnp.asarray(algebra._c, algebra._dtype)) * flat[..., algebra._p])
+    return jnp.zeros(batch + (algebra.dim,), jnp.float64).at[..., algebra._a].add(values)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _casimirs(algebra: MatrixLieAlgebra, mu: jax.Array) -> jax.Array:
+    return algebra._casimir_values(mu)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _casimir_gradients(algebra: MatrixLieAlgebra, flat: jax.Array) -> jax.Array:
+    return jax.vmap(jax.jacrev(algebra._casimir_values))(flat)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, mu: jax.Array) -> jax.Array:
+    r"""$e^{tA^\dagger} M e^{-tA^\dagger}$ in coordinates (body convention)."""
+    A = algebra._dagger(algebra.matrix(t[..., None] * alpha))
+    M = algebra.matrix(mu)
+    U = jsl.expm(A)
+    if algebra.family in ("so", "u", "su"):
+        V = algebra._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
+    else:
+        V = jsl.expm(-A)
+    return algebra.coordinates(U @ M @ V)
 
 
 def so(N: int, sign: int = -1) -> MatrixLieAlgebra:

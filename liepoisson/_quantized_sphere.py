@@ -62,6 +62,7 @@ def _solver_arrays(N: int) -> tuple[np.ndarray, ...]:
     return tuple(np.concatenate(x) for x in (rows, cols, dl, d, du))
 
 
+@jax.jit
 def laplacian(W: jax.Array) -> jax.Array:
     r"""$\Delta_N W$ for `W` `(..., N, N)` (any complex matrices), entrywise in $O(N^2)$."""
     W = jnp.asarray(W)
@@ -77,6 +78,7 @@ def laplacian(W: jax.Array) -> jax.Array:
     return d * W + c * before + cp[2:, 2:] * after
 
 
+@jax.jit
 def solve_poisson(W: jax.Array) -> jax.Array:
     r"""$P = \Delta_N^{-1}W$ for skew-Hermitian `W` `(N, N)`: the traceless $P$ with
     $\Delta_N P = W - (\mathrm{tr}\,W/N)\,1$ (one tridiagonal solve per upper diagonal, real

@@ -61,11 +61,11 @@ def test_isospectral_midpoint_keeps_casimirs_and_spectrum_over_long_runs(make):
     y0 = np.random.default_rng(4).normal(size=g.dim)
     # steps well inside the stability region: h |Omega| ~ 0.1 (u3's weights reach 9, so |Omega| ~ 27)
     method = it.IsospectralMidpoint(system, 0.05 if g.family == "so" else 0.004)
-    ys = np.asarray(method.rollout(y0, 2000, save_every=20))
+    ys = np.asarray(method.rollout(y0, 1000, save_every=20))
     c = np.asarray(g.casimirs(ys))
     s = np.asarray(g.spectrum(ys))
     # each step is a conjugation by a Cayley transform, unitary to a few eps: a random walk of
-    # round-off over 2000 steps stays below 1e-13 of each Casimir's size sum_i |lambda_i|^k
+    # round-off over 1000 steps stays below 1e-13 of each Casimir's size sum_i |lambda_i|^k
     # (its value, for the even powers; an odd power's value may be much smaller)
     powers = [2 * k for k in range(1, g.n_casimirs + 1)] if g.family == "so" else range(1, g.n_casimirs + 1)
     size = np.array([np.sum(np.abs(s[0]) ** k) for k in powers]) / (2 if g.family == "so" else 1)
@@ -78,10 +78,10 @@ def test_isospectral_midpoint_keeps_casimirs_and_spectrum_over_long_runs(make):
     assert 1 <= mean <= most < 30
 
 
-def test_strang_keeps_the_casimirs_of_so5():
-    body = lp.systems.GeneralizedRigidBody((1.0, 1.2, 1.7, 2.0, 3.1))
+def test_strang_keeps_the_casimirs_of_so4():
+    body = lp.systems.GeneralizedRigidBody(J4)
     y0 = np.random.default_rng(5).normal(size=body.dim)
-    ys = np.asarray(it.splitting.Strang(body, 0.05).rollout(y0, 1000, save_every=50))
+    ys = np.asarray(it.splitting.Strang(body, 0.05).rollout(y0, 500, save_every=50))
     c = np.asarray(body.casimirs(ys))
     assert (np.abs(c - c[0]) / np.abs(c[0])).max() < 1e-13
 

@@ -190,7 +190,7 @@ def test_system_methods_validate_states(name):
         (lambda: lp.systems.ChargedParticle(field_strength=None), TypeError, "field_strength must be a finite real number"),
         (lambda: lp.systems.ChargedParticle(potential_strength=1j), TypeError, "potential_strength must be a finite real number"),
         (lambda: lp.systems.from_name("Pendulum"), ValueError, "unknown system 'Pendulum'; known systems are"),
-        (lambda: lp.systems.LiePoissonSystem(lp.levi_civita(), lambda y, xp: 0.0), TypeError, "algebra must be a LieAlgebra; got ndarray"),
+        (lambda: lp.systems.LiePoissonSystem(lp.levi_civita(), lambda y, xp: 0.0), TypeError, "algebra must be a liepoisson.LieAlgebra or MatrixLieAlgebra; got ndarray"),
         (lambda: lp.systems.LiePoissonSystem(lp.so3(), 3.0), TypeError, "hamiltonian must be callable"),
         (lambda: lp.systems.LiePoissonSystem(lp.so3(), lambda y, xp: xp.sin(y[0]) * y[1]).hamiltonian_splitting(), ValueError, "no automatic exact splitting"),
     ],

@@ -42,7 +42,7 @@ def test_laplacian_is_the_double_commutator_with_spectrum_minus_l_l_plus_1():
     np.testing.assert_allclose(eigenvalues, expected, atol=1e3 * EPS * N * N)
 
 
-@pytest.mark.parametrize("N", [2, 3, 8, 17])
+@pytest.mark.parametrize("N", [2, 3, 17])
 def test_poisson_solve_inverts_the_laplacian_on_traceless_matrices(N):
     W = _skew(N, N)
     P = np.asarray(qs.solve_poisson(W))
@@ -84,7 +84,7 @@ def test_vorticity_of_a_single_harmonic_on_the_grid():
 
 
 def test_zeitlin_hamiltonian_gradient_and_vector_field():
-    z = lp.systems.Zeitlin(6)
+    z = lp.systems.Zeitlin(4)
     y = z.random_state(0)
     g = z.algebra
     H = float(z.hamiltonian(y))
@@ -99,7 +99,7 @@ def test_zeitlin_hamiltonian_gradient_and_vector_field():
     P = z.stream_matrix(W)
     np.testing.assert_allclose(np.asarray(z.vector_field(y)), np.asarray(g.coordinates((P @ W - W @ P) / z.hbar)),
                                atol=64 * EPS * np.abs(np.asarray(z.vector_field(y))).max())
-    comps = z.hamiltonian_components([jnp.asarray(v) for v in y], lp.JAX)
+    comps = z.hamiltonian_components(list(y), lp.NUMPY)  # the quadratic form heyoka is built from
     assert abs(float(comps) - H) < 1e3 * EPS * H
 
 
@@ -112,7 +112,8 @@ def test_a_field_of_degree_one_is_steady():
     assert np.abs(np.asarray(z.vector_field(y))).max() < 64 * EPS
 
 
-@pytest.mark.parametrize(("method", "order"), [(it.IsospectralMidpoint, 2), (it.IsospectralTripleJump, 4)])
+@pytest.mark.parametrize(("method", "order"), [pytest.param(it.IsospectralMidpoint, 2, marks=pytest.mark.slow),
+                                               (it.IsospectralTripleJump, 4)])
 def test_isospectral_methods_on_zeitlin_against_heyoka(method, order):
     z = lp.systems.Zeitlin(5)
     y0 = z.random_state(2)
@@ -120,17 +121,18 @@ def test_isospectral_methods_on_zeitlin_against_heyoka(method, order):
     assert abs(conv.order - order) < 0.1
 
 
+@pytest.mark.slow
 def test_zeitlin_rollout_keeps_the_spectrum_with_a_fixed_iteration_count():
-    z = lp.systems.Zeitlin(12)
+    z = lp.systems.Zeitlin(8)
     y0 = z.random_state(3)
     adaptive = it.IsospectralMidpoint(z, 0.05, tol=1e-10)
     mean, most = adaptive.iterations_needed(y0, 20)
     assert 1 <= mean <= most
     fixed = it.IsospectralMidpoint(z, 0.05, tol=1e-10, iterations=most + 1)
-    ys = np.asarray(fixed.rollout(y0, 500, save_every=50))
+    ys = np.asarray(fixed.rollout(y0, 200, save_every=50))
     s = np.asarray(z.algebra.spectrum(ys))
     assert np.abs(s - s[0]).max() < 1e-13 * np.abs(s[0]).max()
-    ya = np.asarray(adaptive.rollout(y0, 500, save_every=50))
+    ya = np.asarray(adaptive.rollout(y0, 200, save_every=50))
     np.testing.assert_allclose(ys, ya, atol=1e-8 * np.abs(ya).max())  # both converged to tol
     # too few iterations: the step is NaN, and the rollout says what to do
     with pytest.raises(it.RolloutDivergedError, match="iterations="):

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._abstract_algebra import AbstractLieAlgebra
+from .._definitions import algebra_from_definition
 from .._groups import AbstractLieGroup
 from .._namespace import JAX
 from .._symbolic import (
@@ -179,7 +180,7 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
         """The system of `params` (as `params` returns them); `ValueError` naming `what` for a
         malformed definition."""
         try:
-            algebra = AbstractLieAlgebra.from_definition(params["algebra"], f"{what}['algebra']")
+            algebra = algebra_from_definition(params["algebra"], f"{what}['algebra']")
             hamiltonian = TreeFunction(params["hamiltonian"], algebra.dim)
             k = algebra.n_casimirs
             pieces = params.get("splitting")

@@ -9,6 +9,7 @@ import numpy as np
 
 from .._abstract_algebra import AbstractLieAlgebra
 from .._algebra import LieAlgebra
+from .._definitions import algebra_from_definition
 from .._jsonable import jsonable
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
@@ -74,7 +75,7 @@ def check_system_matches(system: AbstractPoissonSystem, name: str, params: dict[
             raise ValueError(f"{prefix}: the file holds a LiePoissonSystem, got a {type(system).__name__}")
         try:
             algebra = params["algebra"]
-            saved = AbstractLieAlgebra.from_definition(algebra, f"{where}: the algebra")
+            saved = algebra_from_definition(algebra, f"{where}: the algebra")
             y = np.asarray(params["probes"]["y"], dtype=np.float64)
             H = np.asarray(params["probes"]["H"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as err:
