@@ -8,6 +8,7 @@ _jax.config.update("jax_enable_x64", True)
 from ._abstract_algebra import AbstractLieAlgebra as AbstractLieAlgebra
 from ._algebra import LieAlgebra as LieAlgebra
 from ._definitions import algebra_from_definition as algebra_from_definition
+from ._direct_sum import DirectSum as DirectSum
 from ._matrix_algebra import (
     MatrixLieAlgebra as MatrixLieAlgebra,
     gl as gl,

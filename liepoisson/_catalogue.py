@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._abstract_algebra import AbstractLieAlgebra
 from ._algebra import LieAlgebra
 from ._coadjoint import DirectSumFlow, RodriguesFlow, SE3Flow
+from ._direct_sum import DirectSum
 from ._polynomial import Polynomial
 
 
@@ -108,14 +110,18 @@ def heisenberg(sign: int = -1) -> LieAlgebra:
     )
 
 
-def direct_sum(*algebras: LieAlgebra, name: str | None = None) -> LieAlgebra:
-    r"""$\mathfrak g_1 \oplus \dots \oplus \mathfrak g_k$: block structure constants, the union of
-    the Casimirs, and a blockwise coadjoint flow keeping each summand's fast path."""
+def direct_sum(*algebras: AbstractLieAlgebra, name: str | None = None) -> AbstractLieAlgebra:
+    r"""$\mathfrak g_1 \oplus \dots \oplus \mathfrak g_k$. Of `LieAlgebra`s: a `LieAlgebra` with
+    block structure constants, the union of the Casimirs, and a blockwise coadjoint flow keeping
+    each summand's fast path. With a `MatrixLieAlgebra` (or a sum) among them: a `DirectSum`,
+    every operation blockwise, no structure-constant tensor formed."""
     if not algebras:
         raise ValueError("direct_sum needs at least one algebra; got none")
     for i, g in enumerate(algebras):
-        if not isinstance(g, LieAlgebra):
-            raise TypeError(f"direct_sum arguments must be LieAlgebra; argument {i} is {type(g).__name__}")
+        if not isinstance(g, AbstractLieAlgebra):
+            raise TypeError(f"direct_sum arguments must be Lie algebras; argument {i} is {type(g).__name__}")
+    if not all(isinstance(g, LieAlgebra) for g in algebras):
+        return DirectSum(algebras, name)
     signs = {g.sign for g in algebras}
     if len(signs) != 1:
         raise ValueError("direct_sum needs summands with the same sign convention")
