@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._algebra import LieAlgebra
 from .._casimir_values import casimir_gradient_values, casimir_values
 from .._groups import AbstractLieGroup, default_group
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
@@ -302,7 +303,11 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
         return self.algebra.n_casimirs
 
     def poisson_tensor(self, y: ArrayLike) -> jax.Array:
-        """$\\mathbb{B}(y)$, shape `(..., dim, dim)`, the algebra's."""
+        """$\\mathbb{B}(y)$, shape `(..., dim, dim)`: from structure constants, entry by entry
+        (only the nonzero constants: the program XLA runs, and its flop count, are those of
+        the entries); from a matrix algebra, the algebra's."""
+        if isinstance(self.algebra, LieAlgebra):
+            return AbstractPoissonSystem.poisson_tensor(self, y)
         return self.algebra.poisson_tensor(as_state(y, "y", self.dim))
 
     def _test_flow(self, alpha, t, y):
@@ -311,7 +316,9 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
     def vector_field(self, y: ArrayLike) -> jax.Array:
         r"""$\dot\mu = \mathbb B(\mu)\,\xi(\mu)$, $\xi$ = `generator` ($\nabla H$ unless damped)."""
         y = self.check_regular(y)
-        return self.algebra.poisson_action(y, self.generator(y))
+        if isinstance(self.algebra, LieAlgebra):  # B(mu) entry by entry, as `poisson_tensor`
+            return jnp.einsum("...ab,...b->...a", self.poisson_tensor(y), self.generator(y))
+        return self.algebra.poisson_action(y, self.generator(y))  # matrix products, no n x n tensor
 
     def generator(self, y: ArrayLike) -> jax.Array:
         r"""The element $\xi(\mu)$ of $\mathfrak g$ with $\dot\mu = \mathbb B(\mu)\,\xi(\mu)$:
