@@ -43,6 +43,10 @@ class _ThreadCaches(threading.local):
 _CACHES = _ThreadCaches()
 
 
+#: Above this many state variables (variational ones included) heyoka compiles in compact mode.
+COMPACT_MODE_STATES = 32
+
+
 def _caches() -> tuple[dict[tuple[Any, ...], Any], weakref.WeakKeyDictionary]:
     return _CACHES.by_params, _CACHES.by_object
 
@@ -76,7 +80,10 @@ def taylor_integrator(
         n_state = len(ode)
         if variational:
             ode = hy.var_ode_sys(ode, hy.var_args.vars, order=1)
-        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol)
+        # Large systems compile in compact mode (functions per Taylor-coefficient formula instead of
+        # one unrolled program): Zeitlin's N = 8 (64 states) did not finish compiling in 5 minutes
+        # in the default mode, 0.2 s compact (BENCHMARKS.md, "Zeitlin's model").
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=len(ode) > COMPACT_MODE_STATES)
     return cache[key]
 
 
