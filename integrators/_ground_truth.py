@@ -43,7 +43,8 @@ class _ThreadCaches(threading.local):
 _CACHES = _ThreadCaches()
 
 
-#: Above this many state variables (variational ones included) heyoka compiles in compact mode.
+#: Above this many state variables of the system (its variational equations not counted) heyoka
+#: compiles in compact mode.
 COMPACT_MODE_STATES = 32
 
 
@@ -83,7 +84,7 @@ def taylor_integrator(
         # Large systems compile in compact mode (functions per Taylor-coefficient formula instead of
         # one unrolled program): Zeitlin's N = 8 (64 states) did not finish compiling in 5 minutes
         # in the default mode, 0.2 s compact (BENCHMARKS.md, "Zeitlin's model").
-        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=len(ode) > COMPACT_MODE_STATES)
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=n_state > COMPACT_MODE_STATES)
     return cache[key]
 
 
