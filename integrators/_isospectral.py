@@ -170,9 +170,9 @@ class IsospectralMidpoint(AbstractStepMap):
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
         """One step on the matrix $W$ `(m, m)` of the state, the stage started at $W$ and
-        iterated until `tol`."""
+        iterated until `tol` (or `iterations` times, when set)."""
         for c in self.substeps:
-            W, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), None)
+            W, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), self.iterations)
         return W
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -196,7 +196,9 @@ class IsospectralMidpoint(AbstractStepMap):
             Wn, D, _ = self._midpoint(Wb, coefficient * self.h, jnp.zeros_like(Wb), None)
             return Wn, Wb + D - Wn
 
-        _, increments = jax.lax.scan(back, W, coefficients)
+        # The history is only where the iteration starts: no derivative flows through it (so a
+        # rollout with a fixed `iterations` is reverse-differentiable: no while loop carries one).
+        _, increments = jax.lax.scan(back, jax.lax.stop_gradient(W), coefficients)
         found = [[increments[step * S + (S - 1 - index)] for step in range(3)] for index in range(S)]
         return W, tuple(tuple(history) for history in found)
 

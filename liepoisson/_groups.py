@@ -503,6 +503,9 @@ def default_group(algebra: Any) -> AbstractLieGroup | None:
     cached = algebra.__dict__.get("_default_group", False)
     if cached is not False:
         return cached
+    if algebra.dim not in (Rotations().dim, Poses().dim):  # no structure constants formed for others
+        algebra.__dict__["_default_group"] = None
+        return None
     C = np.asarray(algebra.structure_constants)
     found = None
     for group in (Rotations(), Poses()):

@@ -172,12 +172,15 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     def matrix(self, x: ArrayLike) -> jax.Array:
         r"""$X = \sum_a x_a E_a$, `(..., m, m)` for `x` `(..., n)` (an element of $\mathfrak g$
         or, through the pairing, of $\mathfrak g^*$)."""
-        return _matrix(self, jnp.asarray(x, jnp.float64))
+        return _matrix(self, as_state(x, "x", self.dim))
 
     def coordinates(self, X: ArrayLike) -> jax.Array:
         r"""$x_a = \langle X, E_a\rangle$, `(..., n)` for `X` `(..., m, m)`: the orthogonal
         projection onto the algebra, so it also takes any matrix to its nearest element."""
-        return _coordinates(self, jnp.asarray(X))
+        X = jnp.asarray(X)
+        if X.ndim < 2 or X.shape[-2:] != (self.size, self.size):
+            raise ValueError(f"X must have shape (..., {self.size}, {self.size}) for {self.name}; got shape {X.shape}")
+        return _coordinates(self, X)
 
     def _dagger(self, X: jax.Array) -> jax.Array:
         Xt = jnp.swapaxes(X, -1, -2)
@@ -222,10 +225,11 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
                 f"more than formed here (dimension <= {STRUCTURE_CONSTANTS_MAX_DIM}); its operations (bracket, "
                 "ad_star, poisson_action, coadjoint_flow) work on matrices and need none"
             )
-        E = np.asarray(self.matrix(np.eye(n)))
-        comm = np.einsum("aij,bjk->abik", E, E)
-        comm = comm - comm.transpose(1, 0, 2, 3)
-        C = np.array(self.coordinates(comm.reshape(n * n, self.size, self.size))).reshape(n, n, n)
+        with jax.ensure_compile_time_eval():  # concrete even when first asked for inside jit
+            E = np.asarray(self.matrix(np.eye(n)))
+            comm = np.einsum("aij,bjk->abik", E, E)
+            comm = comm - comm.transpose(1, 0, 2, 3)
+            C = np.array(self.coordinates(comm.reshape(n * n, self.size, self.size))).reshape(n, n, n)
         C[np.abs(C) < 1e2 * np.finfo(np.float64).eps] = 0.0  # exact zeros where round-off
         C.setflags(write=False)
         self.__dict__["_C"] = C

@@ -3,7 +3,8 @@ real spherical-harmonic coefficients and skew-Hermitian matrices (Zeitlin's mode
 
 Conventions follow the `quflow` code of Modin and Viviani (0-based indices, $s = (N-1)/2$):
 
-- $\Delta_N W = \sum_a [S_a, [S_a, W]]$ with the spin-$s$ generators $S_a$; entrywise
+- $\Delta_N W = \sum_a [S_a, [S_a, W]]$ with the skew-Hermitian spin-$s$ generators $S_a$
+  ($[S_1, S_2] = S_3$, cyclic; $-\sum_a [L_a, [L_a, W]]$ for Hermitian ones); entrywise
   $(\Delta_N W)_{ij} = d_{ij}W_{ij} + c_{ij}W_{i-1,j-1} + c_{i+1,j+1}W_{i+1,j+1}$,
   $d_{ij} = -[(N-1)(i+j+1) - 2ij]$, $c_{ij} = \sqrt{i(N-i)\,j(N-j)}$: each diagonal of $W$ is
   transformed by its own symmetric tridiagonal matrix. Spectrum $-l(l+1)$, $l = 0..N-1$, with

@@ -268,3 +268,14 @@ def test_two_coupled_bodies_on_a_direct_sum_keep_each_casimir():
     assert (np.abs(c - c[0]) / np.abs(c[0])).max() < 1e-13
     ys = np.asarray(it.RK4(body, 0.01).rollout(y0, 200))
     assert np.abs(ys[-1] - truth[-1]).max() < 1e-8
+
+
+def test_rank_with_round_off_in_the_constants_and_conversions_check_shapes():
+    noisy = lp.so(4).structure_constants + 1e-14 * np.random.default_rng(14).normal(size=(6, 6, 6))
+    noisy = 0.5 * (noisy - noisy.transpose(1, 0, 2))
+    assert lp.LieAlgebra(noisy).n_casimirs == 2  # constants with round-off keep their Casimirs
+    with pytest.raises(ValueError, match=r"x must have shape \(\.\.\., 3\)"):
+        lp.so(3).matrix(np.ones(2))
+    with pytest.raises(ValueError, match=r"X must have shape \(\.\.\., 3, 3\)"):
+        lp.so(3).coordinates(np.ones((4, 4)))
+    assert lp.systems.LiePoissonSystem(lp.u(12), lambda m, xp: m[0] ** 2).group is None  # no constants formed

@@ -71,6 +71,16 @@ class LearnedHamiltonian(AbstractPoissonSystem):
     def casimir_polynomials(self):
         return self.base.casimir_polynomials
 
+    def casimirs(self, y):
+        return self.base.casimirs(y)
+
+    def casimir_gradients(self, y):
+        return self.base.casimir_gradients(y)
+
+    @property
+    def n_casimirs(self):
+        return self.base.n_casimirs
+
     def _test_flow(self, alpha, t, y):
         return self.base._test_flow(alpha, t, y)
 

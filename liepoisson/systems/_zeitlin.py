@@ -81,7 +81,8 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
         """$K$ with $H = \\tfrac12 y^\\top K y$ (dense `(n, n)`, formed on first use)."""
         cached = self.__dict__.get("_K")
         if cached is None:
-            cached = np.asarray(jax.vmap(self.hamiltonian_gradient)(jnp.eye(self.dim)))
+            with jax.ensure_compile_time_eval():  # concrete even when first asked for inside jit
+                cached = np.asarray(jax.vmap(self.hamiltonian_gradient)(jnp.eye(self.dim)))
             cached = 0.5 * (cached + cached.T)
             cached[np.abs(cached) < 1e-14 * np.abs(cached).max()] = 0.0
             self.__dict__["_K"] = cached
@@ -96,8 +97,8 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
         return sum(terms)
 
     def hamiltonian_splitting(self):
-        """None: no splitting of the Zeitlin Hamiltonian into exactly solvable pieces is known
-        here; integrate with `integrators.IsospectralMidpoint`."""
+        """No pieces (`()`): no splitting of the Zeitlin Hamiltonian into exactly solvable pieces
+        is known here; integrate with `integrators.IsospectralMidpoint`."""
         return ()
 
     # -- heyoka --------------------------------------------------------------------------------------
@@ -114,6 +115,7 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
         eye = np.eye(n)
         Wmap = np.asarray(g.matrix(eye)).reshape(n, N * N)  # column a: the entries of E_a
         Pmap = np.asarray(jax.vmap(self.velocity_matrix)(g.matrix(eye))).reshape(n, N * N)
+        Pmap = np.where(np.abs(Pmap) > 1e-14 * np.abs(Pmap).max(), Pmap, 0.0)  # round-off of the solve: no terms
 
         def linear(coeffs: np.ndarray) -> tuple[Any, Any]:
             re = [float(c) * ys[a] for a, c in enumerate(coeffs.real) if c != 0.0]
@@ -165,6 +167,8 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
     def harmonics(self, y: ArrayLike) -> np.ndarray:
         r"""The real spherical-harmonic coefficients $\omega_{lm}$ of the state `y`."""
         y = np.asarray(as_state(y, "y", self.dim))
+        if y.ndim != 1:
+            raise ValueError(f"y must be one state of shape ({self.dim},); got shape {y.shape}")
         return matrix_to_harmonics(np.asarray(self.algebra.matrix(y)))
 
     def random_state(self, seed: int = 0, *, lmax: int | None = None, decay: float = 1.0) -> np.ndarray:
@@ -174,16 +178,26 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
         lmax = min(self.N - 1, 10) if lmax is None else positive_int(lmax, "lmax")
         if lmax > self.N - 1:
             raise ValueError(f"lmax must be <= N - 1 = {self.N - 1}; got {lmax}")
+        if not np.isfinite(decay) or decay < 0:
+            raise ValueError(f"decay must be a finite number >= 0; got {decay!r}")
         rng = np.random.default_rng(seed)
         omega = np.zeros(self.N * self.N)
         for l in range(1, lmax + 1):
             idx = np.arange(l * l, (l + 1) ** 2)
             omega[idx] = rng.normal(size=idx.size) / (l * (l + 1)) ** (decay / 2)
-        return self.state_from_harmonics(omega / np.linalg.norm(omega))
+        norm = np.linalg.norm(omega)
+        if not norm > 0:
+            raise ValueError(f"decay={decay!r} damps every coefficient to zero; use a smaller one")
+        return self.state_from_harmonics(omega / norm)
 
     def vorticity(self, y: ArrayLike, n_theta: int | None = None, n_phi: int | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""The vorticity field of state `y` on a colatitude-longitude grid:
         `(theta, phi, values)`, `values` `(n_theta, n_phi)`."""
         y = np.asarray(as_state(y, "y", self.dim))
+        if y.ndim != 1:
+            raise ValueError(f"y must be one state of shape ({self.dim},); got shape {y.shape}")
+        for name, value in (("n_theta", n_theta), ("n_phi", n_phi)):
+            if value is not None:
+                positive_int(value, name)
         return vorticity_on_grid(np.asarray(self.algebra.matrix(y)), n_theta, n_phi)
