@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from liepoisson import MatrixLieAlgebra
-from liepoisson.internals import positive_float, positive_int
+from liepoisson.internals import dagger, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
 from ._lie_group import check_lie_poisson
@@ -66,16 +66,6 @@ def check_isospectral(system: AbstractLiePoissonSystem, what: str = "system") ->
     if algebra.sign != -1:
         raise ValueError(f"{what} must be a body system (sign=-1); got sign={algebra.sign}")
     return system
-
-
-def velocity_matrix(system: AbstractLiePoissonSystem, W: jax.Array) -> jax.Array:
-    r"""$B(W)$ with $\dot W = [B(W), W]$: the system's own `velocity_matrix` when it has one
-    (Zeitlin's model: the stream matrix), else $-\Xi$, $\Xi$ the matrix of `generator`."""
-    own = getattr(system, "velocity_matrix", None)
-    if own is not None:
-        return own(W)
-    algebra = system.algebra
-    return -algebra.matrix(system.generator(algebra.coordinates(W)))
 
 
 class IsospectralMidpoint(AbstractStepMap):
@@ -133,9 +123,9 @@ class IsospectralMidpoint(AbstractStepMap):
 
     def _iterate(self, W, h, Wt):
         r"""One fixed-point iteration of the stage equation: `(new stage, B at Wt, moved)`."""
-        B = velocity_matrix(self.system, Wt)
+        B = self.system.velocity_matrix(Wt)
         X = B @ Wt  # [B, Wt] = X - X^dagger, B Wt B = X B (skew-Hermitian factors)
-        Wn = W + 0.5 * h * (X - _dagger(X)) + 0.25 * h * h * (X @ B)
+        Wn = W + 0.5 * h * (X - dagger(X)) + 0.25 * h * h * (X @ B)
         return Wn, B, jnp.max(jnp.abs(Wn - Wt))
 
     def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None
@@ -164,8 +154,8 @@ class IsospectralMidpoint(AbstractStepMap):
         B = 0.5 * h * B
         eye = jnp.eye(W.shape[-1], dtype=W.dtype)
         Q = jnp.linalg.solve(eye - B, eye + B)  # the Cayley transform: unitary (orthogonal)
-        W1 = Q @ W @ _dagger(Q)
-        W1 = 0.5 * (W1 - _dagger(W1))  # back onto the algebra (exact halving): no drift off it
+        W1 = Q @ W @ dagger(Q)
+        W1 = 0.5 * (W1 - dagger(W1))  # back onto the algebra (exact halving): no drift off it
         return jnp.where(moved <= scale, W1, jnp.nan), Wt - W, k
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
@@ -224,11 +214,6 @@ class IsospectralMidpoint(AbstractStepMap):
         n_steps = positive_int(n_steps, "n_steps")
         counts = np.asarray(_count_iterations(self, self.carry(jnp.asarray(y, jnp.float64)), n_steps))
         return float(counts.mean()), int(counts.max())
-
-
-def _dagger(X: jax.Array) -> jax.Array:
-    Xt = jnp.swapaxes(X, -1, -2)
-    return jnp.conj(Xt) if jnp.iscomplexobj(X) else Xt
 
 
 @eqx.filter_jit

@@ -45,6 +45,12 @@ FLOW_PARAMETERS_MAX_DIM = 400
 FAMILIES = ("so", "u", "su", "sp", "gl", "sl")
 
 
+def dagger(X: jax.Array) -> jax.Array:
+    r"""$X^\dagger$ over the last two axes (the transpose of a real matrix)."""
+    Xt = jnp.swapaxes(X, -1, -2)
+    return jnp.conj(Xt) if jnp.iscomplexobj(X) else Xt
+
+
 def _helmert(N: int) -> np.ndarray:
     """`(N, N - 1)`: orthonormal traceless diagonals, column k = (1, ..., 1, -k, 0, ...)/sqrt(k(k+1))."""
     H = np.zeros((N, N - 1))
@@ -183,8 +189,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         return _coordinates(self, X)
 
     def _dagger(self, X: jax.Array) -> jax.Array:
-        Xt = jnp.swapaxes(X, -1, -2)
-        return jnp.conj(Xt) if self.complex else Xt
+        return dagger(X)
 
     # -- Lie algebra operations ----------------------------------------------------------------
     def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:

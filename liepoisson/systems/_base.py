@@ -330,6 +330,13 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
         return self.algebra.coadjoint_flow_parameters(y0, y1, t, rtol=rtol, names=("y0", "y1"))
 
+    def velocity_matrix(self, W: jax.Array) -> jax.Array:
+        r"""On a matrix algebra: $B(W)$ with $\dot W = [B(W), W]$ for the matrix $W$ of the state,
+        $-\Xi$, $\Xi$ the matrix of `generator` (so(N), u(N): $\dot W = [W, \Xi]$). Systems
+        with a cheaper formula override it (`Zeitlin`: the stream matrix over $\hbar$)."""
+        algebra = self.algebra
+        return -algebra.matrix(self.generator(algebra.coordinates(W)))
+
     # -- configurations ---------------------------------------------------------------------
     @property
     def group(self) -> AbstractLieGroup | None:
