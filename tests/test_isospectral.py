@@ -52,8 +52,9 @@ def test_strang_splitting_of_the_generalized_rigid_body_against_heyoka():
 
 
 @pytest.mark.parametrize("make", [lambda: lp.systems.GeneralizedRigidBody((1.0, 1.2, 1.7, 2.0, 3.1)),
-                                  lambda: lp.systems.LiePoissonSystem(
-                                      lp.u(3), lambda m, xp: sum((k + 1.0) * m[k] ** 2 for k in range(9)) / 2)],
+                                  pytest.param(lambda: lp.systems.LiePoissonSystem(
+                                      lp.u(3), lambda m, xp: sum((k + 1.0) * m[k] ** 2 for k in range(9)) / 2),
+                                      marks=pytest.mark.slow)],
                          ids=["so5", "u3"])
 def test_isospectral_midpoint_keeps_casimirs_and_spectrum_over_long_runs(make):
     system = make()
@@ -78,6 +79,7 @@ def test_isospectral_midpoint_keeps_casimirs_and_spectrum_over_long_runs(make):
     assert 1 <= mean <= most < 30
 
 
+@pytest.mark.slow  # the benchmark measures it for N = 3..10 (BENCHMARKS.md)
 def test_strang_keeps_the_casimirs_of_so4():
     body = lp.systems.GeneralizedRigidBody(J4)
     y0 = np.random.default_rng(5).normal(size=body.dim)

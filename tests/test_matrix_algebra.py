@@ -13,8 +13,8 @@ import liepoisson as lp
 EPS = np.finfo(np.float64).eps
 # Every family at a small size by default (real and complex, compact and not, traceless); the
 # other sizes under -m slow.
-_DEFAULT = [lp.so(4), lp.u(3), lp.sp(2), lp.sl(3)]
-_MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.gl(3)]
+_DEFAULT = [lp.so(4), lp.u(3), lp.sl(3)]
+_MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3)]
 SMALL = _DEFAULT + _MORE
 ALGEBRAS = [pytest.param(g, id=g.name) for g in _DEFAULT] + [
     pytest.param(g, id=g.name, marks=pytest.mark.slow) for g in _MORE]
@@ -226,6 +226,7 @@ def test_manakov_body_as_a_lie_poisson_system_on_so4():
 
 
 # -- direct sums with matrix algebras ---------------------------------------------------------------
+@pytest.mark.slow  # the default run keeps the coupled bodies below (a DirectSum against heyoka)
 def test_direct_sum_of_matrix_algebras_is_blockwise_and_matches_structure_constants():
     parts = [lp.so(3), lp.u(2), lp.sp(1)]
     g = lp.direct_sum(*parts)
