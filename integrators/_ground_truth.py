@@ -82,8 +82,8 @@ def taylor_integrator(
         if variational:
             ode = hy.var_ode_sys(ode, hy.var_args.vars, order=1)
         # Large systems compile in compact mode (functions per Taylor-coefficient formula instead of
-        # one unrolled program): Zeitlin's N = 8 (64 states) did not finish compiling in 5 minutes
-        # in the default mode, 0.2 s compact (BENCHMARKS.md, "Zeitlin's model").
+        # one unrolled program): the default mode's compile time explodes with the expression's
+        # size (BENCHMARKS.md, "heyoka ground truth of Zeitlin's model").
         cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=n_state > COMPACT_MODE_STATES)
     return cache[key]
 

@@ -171,8 +171,8 @@ class IsospectralMidpoint(AbstractStepMap):
 
     # A rollout carries W itself, and each substep's last three stage increments: the next
     # step's iteration starts from their quadratic extrapolation, O(h^4) from the solution
-    # (quflow starts from the last increment, O(h^2)), which saves one to three iterations a
-    # step (BENCHMARKS.md, "Zeitlin's model"). Converting W to coordinates and back every step
+    # (quflow starts from the last increment, O(h^2)), which saves iterations (BENCHMARKS.md,
+    # "Zeitlin's model"). Converting W to coordinates and back every step
     # would cost a rounding per step (u(N)'s basis has entries 1/sqrt(2)) and bias the Casimirs.
     def carry(self, y: jax.Array) -> tuple[jax.Array, tuple[Any, ...]]:
         W = self.system.algebra.matrix(check_state(y, self.system.dim))

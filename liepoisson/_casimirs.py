@@ -38,14 +38,14 @@ _NULL_TOL = 1e-9
 # Budget of one degree of the search: bytes of the sparse conditions (before they are built)
 # and of the largest dense block with its SVD factors.
 CASIMIR_SEARCH_MEMORY = 500e6
-# Budget of one degree's SVDs, sum over blocks of rows * columns * min(rows, columns): 2e10 is
-# a few seconds on one core (measured: so(7), degree 4, 6.1e9 in 2.1 s; so(8) 5.6e10 in 17 s).
+# Budget of one degree's SVDs, sum over blocks of rows * columns * min(rows, columns): a few
+# seconds on one core (BENCHMARKS.md, "Matrix Lie algebras": the Casimir search's budgets).
 CASIMIR_SEARCH_FLOPS = 2e10
 
 # Peak bytes per entry of the sparse conditions while they are built and split into blocks:
 # row, column and value (24 B) in per-(a, b, d) pieces and concatenated, the CSR copy, its COO
-# copy and the row-column graph. Measured with tracemalloc: 62-70 B (so(6), so(7), degree 4;
-# so(5), so(6) in random orthonormal bases, where every C_abd is nonzero).
+# copy and the row-column graph; twice what tracemalloc measured (BENCHMARKS.md, "Matrix Lie
+# algebras": the Casimir search's budgets).
 _BYTES_PER_ENTRY = 128
 
 
@@ -185,8 +185,8 @@ def _null_space(A: scipy.sparse.csr_matrix, blocks: list[_Block]) -> np.ndarray:
     loose = _NULL_TOL * max(float(np.sqrt(norm1 * norm_inf)), 1.0)
     smax = 0.0
     candidates: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (columns, sigma, V^T)
-    # The blocks are small: OpenBLAS's threads cost more than they give on them (measured
-    # 0.2 s on one thread, 4-34 s with two on a busy 2-core machine, so(6) degree 4).
+    # The blocks are small: OpenBLAS's threads cost more than they give on them (BENCHMARKS.md,
+    # "Matrix Lie algebras": the Casimir search's budgets).
     with threadpool_limits(limits=1, user_api="blas"):
         for block in blocks:
             if block.rows.size == 0:

@@ -105,9 +105,9 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
     def heyoka_system(self) -> list[tuple[Any, Any]]:
         r"""$\dot\mu$ = coordinates of $[P, W]/\hbar$ as heyoka expressions in the $N^2$
         components: the products written entry by entry (the expression grows like $N^3$).
-        With heyoka in compact mode (`integrators.ground_truth` uses it above 32 states), a
-        ground truth to t = 100 takes 3 s at N = 16, 33 s at N = 32 and 4 minutes at N = 48
-        (BENCHMARKS.md, "Zeitlin's model")."""
+        `integrators.ground_truth` compiles it in heyoka's compact mode (more than 32 states);
+        how long that takes for each N: BENCHMARKS.md, "heyoka ground truth of Zeitlin's
+        model"."""
         import heyoka as hy
 
         g, N, n = self.algebra, self.N, self.dim
