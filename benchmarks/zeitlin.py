@@ -12,11 +12,12 @@ quflow's `estimate_stepsize`, $h = 0.1\pi\hbar/\|P\|_2$ in physical time, and th
 tolerance of the fixed-point iteration quflow's default, $\sqrt{\varepsilon}\,(h/\hbar)\,
 \|W_0\|_\infty$, converted to ours (relative to $\max|W_0|$; our residual, the largest entry,
 is never above quflow's row-sum norm, so the stop is at least as strict). One thread
-(`--xla_cpu_multi_thread_eigen=false`), like the quflow figures it is compared with. The
+(`--xla_cpu_multi_thread_eigen=false`, `OPENBLAS_NUM_THREADS=1`), like the quflow figures it is
+compared with. The
 matrix product is `A @ B` of two dense complex128 matrices, compiled, the fastest of repeats;
 a step is timed in a long run (`steady_step_seconds`: the first steps, whose start has no
 history, left out), iterating until the tolerance is met; the iterations a step are the mean
-and the most over the first 50 steps (`iterations_needed`).
+and the most over the first 200 steps (`iterations_needed`).
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+# The LU of the Cayley transform runs in LAPACK (OpenBLAS): its worker threads, left spinning
+# after each call, slowed the matrix products that follow by a third at N = 128-256
+# (BENCHMARKS.md, "Zeitlin's model"); one thread for it too.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import time
@@ -108,7 +113,7 @@ def setting(N: int, seed: int = 0) -> tuple[lp.systems.Zeitlin, np.ndarray, floa
 def measure_size(N: int) -> dict:
     z, y0, h, tol = setting(N)
     method = it.IsospectralMidpoint(z, h, tol=tol)
-    mean, most = method.iterations_needed(y0, n_steps=50)
+    mean, most = method.iterations_needed(y0, n_steps=200)
     product = matmul_seconds(N)
     step = steady_step_seconds(method, y0)
     return {"N": N, "dim": z.dim, "h": h, "tol": tol, "product_ms": product * 1e3, "step_ms": step * 1e3,
