@@ -25,6 +25,8 @@ For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a m
 
 from __future__ import annotations
 
+import functools
+import os
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -54,8 +56,30 @@ _G1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 _G0 = 1.0 - 2.0 * _G1
 
 
+@functools.cache
+def serial_lapack() -> None:
+    """Limit the OpenBLAS under JAX's CPU LAPACK kernels (SciPy's) to one thread, once per
+    process, unless the user set `OPENBLAS_NUM_THREADS`. With its default threads, a
+    forward-mode Jacobian of a batch of isospectral steps (the LU of each Cayley transform,
+    and of its tangents, called from XLA's threads) deadlocked (0% CPU, never returning), and
+    its workers, left spinning after each call, slowed the XLA products that follow by a
+    third (BENCHMARKS.md, "Zeitlin's model"). NumPy's own BLAS is left alone."""
+    if "OPENBLAS_NUM_THREADS" in os.environ:
+        return
+    import scipy.linalg.cython_lapack  # noqa: F401 (loads the library JAX's kernels call)
+    from threadpoolctl import ThreadpoolController
+
+    controller = ThreadpoolController()
+    paths = [info["filepath"] for info in controller.info()
+             if info["user_api"] == "blas" and "scipy" in os.path.basename(os.path.dirname(info["filepath"]))]
+    if paths:
+        controller.select(filepath=paths).limit(limits=1)
+
+
 def check_isospectral(system: AbstractLiePoissonSystem, what: str = "system") -> AbstractLiePoissonSystem:
-    """`system` if it lives on a compact matrix algebra (so, u, su) in the body convention."""
+    """`system` if it lives on a compact matrix algebra (so, u, su) in the body convention
+    (and JAX's LAPACK made serial: `serial_lapack`)."""
+    serial_lapack()
     check_lie_poisson(system, what)
     algebra = system.algebra
     if not isinstance(algebra, MatrixLieAlgebra) or algebra.family not in ("so", "u", "su"):
@@ -121,9 +145,14 @@ class IsospectralMidpoint(AbstractStepMap):
                 f"(a step that has not converged is NaN): use more, e.g. IsospectralMidpoint(..., "
                 f"iterations={self.iterations + 1}), or iterations=None to iterate until tol is met")
 
+    def velocity_matrix(self, W: jax.Array) -> jax.Array:
+        r"""$B(W)$ of $\dot W = [B(W), W]$ for `W` `(m, m)`: the system's
+        (`system.velocity_matrix`); a learned map on this step overrides it."""
+        return self.system.velocity_matrix(W)
+
     def _iterate(self, W, h, Wt):
         r"""One fixed-point iteration of the stage equation: `(new stage, B at Wt, moved)`."""
-        B = self.system.velocity_matrix(Wt)
+        B = self.velocity_matrix(Wt)
         X = B @ Wt  # [B, Wt] = X - X^dagger, B Wt B = X B (skew-Hermitian factors)
         Wn = W + 0.5 * h * (X - dagger(X)) + 0.25 * h * h * (X @ B)
         return Wn, B, jnp.max(jnp.abs(Wn - Wt))

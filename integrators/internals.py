@@ -24,6 +24,8 @@ these names may change with the library.
   strings, NaN as `nan`): the paper's metrics and the benchmarks' result files.
 - `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
   library's style.
+- `check_isospectral(system)`, `ISOSPECTRAL_TOL`, `ISOSPECTRAL_MAX_ITER`: what the isospectral
+  methods accept and their defaults (a learned map on the same step uses them).
 """
 
 from ._distributed import (
@@ -39,6 +41,9 @@ from ._files import atomic_path as atomic_path
 from ._files import atomic_write_text as atomic_write_text
 from ._files import open_hdf5 as open_hdf5
 from ._ground_truth import integrate_chunk as integrate_chunk
+from ._isospectral import DEFAULT_MAX_ITER as ISOSPECTRAL_MAX_ITER  # noqa: F401 (re-exported, renamed)
+from ._isospectral import DEFAULT_TOL as ISOSPECTRAL_TOL  # noqa: F401 (re-exported, renamed)
+from ._isospectral import check_isospectral as check_isospectral
 from ._json_values import json_values as json_values
 from ._observations import rms_size as rms_size
 from ._plots import figure as figure

@@ -10,6 +10,7 @@ from .. import _files as _checkpoint
 from ._base import AbstractLearnedMap
 from ._baseline import MLPBaseline, NeuralODE
 from ._glpnet import GLPNet
+from ._isospectral import IsospectralPolynomial
 from ._legacy import upgrade_attributes
 from ._lpnet import LPNet
 from ._reversible import Reversible
@@ -19,7 +20,7 @@ def load(path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -
     """Read a learned map written by `.save` (or the best weights of an Adam checkpoint),
     whatever its class (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`), from the class the
     file names; `system` as in `AbstractLearnedMap.load`."""
-    classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE)}
+    classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE, IsospectralPolynomial)}
     attrs, groups = _checkpoint.read(path)  # read once: the class is in the file
     attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
     name = attrs.get("class")

@@ -1,0 +1,82 @@
+"""learn.IsospectralPolynomial: the isospectral midpoint of a learned polynomial of the
+system's velocity operator (Zeitlin's model, the generalized rigid body)."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import integrators as it
+import learn
+import liepoisson as lp
+
+EPS = np.finfo(np.float64).eps
+
+
+def _spectrum(system, ys):
+    W = np.asarray(system.algebra.matrix(jnp.asarray(ys)))
+    return np.linalg.eigvalsh(1j * W)
+
+
+def test_theta_one_zero_is_the_classical_midpoint():
+    z = lp.systems.Zeitlin(6)
+    y = z.random_state(1)
+    model = learn.IsospectralPolynomial(z, degree=3, h=0.05)
+    classical = it.IsospectralMidpoint(z, 0.05)
+    a, b = np.asarray(model.rollout(y, 5)), np.asarray(classical.rollout(y, 5))
+    # theta = (1, 0, 0) adds exact zeros to S(W): the same floating-point operations
+    assert np.max(np.abs(a - b)) <= 4 * EPS * np.max(np.abs(b))
+
+
+def test_any_theta_keeps_the_spectrum_to_round_off():
+    z = lp.systems.Zeitlin(5)
+    y = z.random_state(2)
+    model = learn.IsospectralPolynomial(z, degree=3, theta=[0.8, -0.3, 0.2], h=0.1)
+    ys = np.asarray(model.rollout(y, 300))
+    spectrum = _spectrum(z, ys)
+    drift = np.max(np.abs(spectrum - spectrum[0])) / np.max(np.abs(spectrum[0]))
+    # a unitary conjugation a step: round-off random walk over 300 steps, ~ sqrt(300) * a few eps
+    assert drift <= 200 * EPS
+    # and the flow is not the classical one: theta changes the motion
+    classical = np.asarray(it.IsospectralMidpoint(z, 0.1).rollout(y, 300))
+    assert np.max(np.abs(ys - classical)) > 1e-3
+
+
+def test_fit_recovers_the_coefficients_that_made_the_data():
+    z = lp.systems.Zeitlin(4)
+    true = learn.IsospectralPolynomial(z, degree=2, theta=[1.3, 0.4], h=0.1, tol=1e-14)
+    starts = np.stack([z.random_state(seed) for seed in range(6)])
+    trajs = np.stack([np.asarray(true.rollout(y, 10)) for y in starts])
+    y0, y1 = trajs[:, :-1].reshape(-1, z.dim), trajs[:, 1:].reshape(-1, z.dim)
+    model = learn.IsospectralPolynomial(z, degree=2, h=0.1, tol=1e-14)
+    fitted, _ = learn.fit(model, (y0, y1), h=0.1, progress=False)
+    # noise-free data of the same family: the minimum is theta* itself, up to the stage
+    # iteration's tolerance (1e-14) propagated through a well-conditioned least squares
+    np.testing.assert_allclose(np.asarray(fitted.theta), [1.3, 0.4], rtol=1e-7)
+
+
+def test_generalized_rigid_body_is_accepted_and_saved(tmp_path):
+    body = lp.systems.GeneralizedRigidBody([1.0, 1.5, 2.0, 3.0])
+    model = learn.IsospectralPolynomial(body, degree=2, theta=[1.1, 0.05], h=0.05)
+    path = tmp_path / "iso.h5"
+    model.save(path)
+    loaded = learn.load(path)
+    assert isinstance(loaded, learn.IsospectralPolynomial)
+    np.testing.assert_array_equal(np.asarray(loaded.theta), [1.1, 0.05])
+    y = np.random.default_rng(0).normal(size=body.dim)
+    np.testing.assert_array_equal(np.asarray(loaded.step(y)), np.asarray(model.step(y)))
+
+
+def test_bad_input():
+    z = lp.systems.Zeitlin(4)
+    with pytest.raises(TypeError, match="compact matrix algebra"):
+        learn.IsospectralPolynomial(lp.systems.RigidBody(), degree=2)
+    with pytest.raises(ValueError, match="theta must be a finite array of shape"):
+        learn.IsospectralPolynomial(z, degree=2, theta=[1.0])
+    with pytest.raises(ValueError, match="theta must be a finite array"):
+        learn.IsospectralPolynomial(z, degree=2, theta=[1.0, np.nan])
+    with pytest.raises(ValueError, match="degree"):
+        learn.IsospectralPolynomial(z, degree=0)
+    with pytest.raises(ValueError, match="h"):
+        learn.IsospectralPolynomial(z, h=-0.1)
+    with pytest.raises(ValueError, match="step size|h"):
+        learn.IsospectralPolynomial(z).step(z.random_state(0))
