@@ -52,9 +52,14 @@ class AbstractLeastSquares(AbstractObjective):
         x, unravel = jax.flatten_util.ravel_pytree(params)
 
         def r(z):
-            return self.residuals(eqx.combine(unravel(z), static), args).reshape(-1)
+            value = self.residuals(eqx.combine(unravel(z), static), args).reshape(-1)
+            return value, value
 
-        return r(x), jax.jacfwd(r)(x)
+        # The residuals as the auxiliary output of the Jacobian's own forward pass: one
+        # evaluation, not two. Two in one program also ran concurrently on XLA's CPU threads,
+        # and two batches of LAPACK calls at once (the LU of an isospectral step) deadlocked.
+        J, value = jax.jacfwd(r, has_aux=True)(x)
+        return value, J
 
     def forward_passes(self, y: Any) -> int:
         """How many forward passes one Jacobian takes: one per trainable scalar of `y`."""
