@@ -5,6 +5,7 @@
     python -m paper run W1                  # the learned-vs-classical study (beyond the paper)
     python -m paper run W2 W3               # learning from observations; dissipation (beyond the paper)
     python -m paper run W4                  # attitude, pose and velocities in, momenta latent (beyond the paper)
+    python -m paper run W5                  # Zeitlin's fluid at N = 16, 32: a learned isospectral map (beyond the paper)
     python -m paper --profile smoke         # E1-E6 in seconds (meaningless numbers)
     python -m paper list                    # what is available
     python -m paper table                   # the verdict: each of the paper's claims, ours, reproduced?
