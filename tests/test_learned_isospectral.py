@@ -80,3 +80,12 @@ def test_bad_input():
         learn.IsospectralPolynomial(z, h=-0.1)
     with pytest.raises(ValueError, match="step size|h"):
         learn.IsospectralPolynomial(z).step(z.random_state(0))
+
+
+def test_a_system_whose_velocity_is_not_linear_is_refused():
+    # the polynomial of S is a Hamiltonian only when S is the linear gradient of a quadratic H
+    quadratic = lp.systems.LiePoissonSystem(lp.so(3), lambda y, xp: 0.5 * (y[0] ** 2 + 0.5 * y[1] ** 2 + 0.3 * y[2] ** 2))
+    learn.IsospectralPolynomial(quadratic, degree=2, h=0.1)  # accepted
+    quartic = lp.systems.LiePoissonSystem(lp.so(3), lambda y, xp: 0.25 * (y[0] ** 4 + 2 * y[1] ** 4 + 3 * y[2] ** 4))
+    with pytest.raises(ValueError, match="quadratic Hamiltonian"):
+        learn.IsospectralPolynomial(quartic, degree=2, h=0.1)
