@@ -235,8 +235,13 @@ class SegmentsObjective(AbstractStructuredJacobian):
         def residuals(w, s):
             return self.residuals(Fitted(eqx.combine(unravel(w), static), s), args)
 
-        r = residuals(flat, fitted.starts)
-        by_weight = jax.jacfwd(residuals)(flat, fitted.starts)  # (S, L, dim, p)
+        def with_value(w, s):
+            value = residuals(w, s)
+            return value, value
+
+        # the residuals from the weight Jacobian's own forward pass (one evaluation fewer; see
+        # `AbstractLeastSquares.jacobian` for the deadlock two concurrent ones caused)
+        by_weight, r = jax.jacfwd(with_value, has_aux=True)(flat, fitted.starts)  # (S, L, dim, p)
         n_seg, dim = fitted.starts.shape
 
         def push(direction):
