@@ -70,16 +70,47 @@ def test_bad_input():
     z = lp.systems.Zeitlin(4)
     with pytest.raises(TypeError, match="compact matrix algebra"):
         learn.IsospectralPolynomial(lp.systems.RigidBody(), degree=2)
-    with pytest.raises(ValueError, match="theta must be a finite array of shape"):
+    with pytest.raises(ValueError, match="theta has 1 coefficients but degree=2"):
         learn.IsospectralPolynomial(z, degree=2, theta=[1.0])
-    with pytest.raises(ValueError, match="theta must be a finite array"):
-        learn.IsospectralPolynomial(z, degree=2, theta=[1.0, np.nan])
-    with pytest.raises(ValueError, match="degree"):
+    with pytest.raises(ValueError, match="theta must be a non-empty finite 1-D array"):
+        learn.IsospectralPolynomial(z, theta=[1.0, np.nan])
+    with pytest.raises(ValueError, match="theta must be a non-empty finite 1-D array"):
+        learn.IsospectralPolynomial(z, theta=[])
+    with pytest.raises(ValueError, match="degree must be an integer >= 1; got 0"):
         learn.IsospectralPolynomial(z, degree=0)
-    with pytest.raises(ValueError, match="h"):
+    with pytest.raises(ValueError, match="h must be finite and > 0; got -0.1"):
         learn.IsospectralPolynomial(z, h=-0.1)
-    with pytest.raises(ValueError, match="step size|h"):
+    with pytest.raises(ValueError, match="has no step size h yet"):
         learn.IsospectralPolynomial(z).step(z.random_state(0))
+
+
+def test_the_degree_is_the_length_of_theta():
+    z = lp.systems.Zeitlin(4)
+    assert learn.IsospectralPolynomial(z, theta=[1.0, 0.2]).degree == 2
+    assert learn.IsospectralPolynomial(z).degree == 3  # the default: (1, 0, 0)
+
+
+def test_velocity_is_the_polynomial_of_the_systems_operator():
+    z = lp.systems.Zeitlin(5)
+    W = z.algebra.matrix(jnp.asarray(z.random_state(3)))
+    theta = [0.9, -0.4, 0.25]
+    model = learn.IsospectralPolynomial(z, theta=theta, h=0.1)
+    S = z.velocity_matrix
+    explicit = theta[0] * S(W) + theta[1] * S(S(W)) + theta[2] * S(S(S(W)))
+    # the same linear operations in another order (Horner): agreement to round-off of S's scale
+    np.testing.assert_allclose(np.asarray(model.velocity_matrix(W)), np.asarray(explicit),
+                               atol=64 * EPS * float(jnp.max(jnp.abs(S(W)))))
+
+
+def test_degree_one_is_the_classical_method_at_a_rescaled_step():
+    # an independent oracle: theta = (c) at step h solves dW/dt = [c S(W), W], which is the
+    # classical midpoint at step c h (same stage equation, the same Cayley transform)
+    z = lp.systems.Zeitlin(6)
+    y = z.random_state(4)
+    a = np.asarray(learn.IsospectralPolynomial(z, theta=[1.3], h=0.05, tol=1e-14).rollout(y, 8))
+    b = np.asarray(it.IsospectralMidpoint(z, 1.3 * 0.05, tol=1e-14).rollout(y, 8))
+    # products rounded in another order (c S(W) h vs S(W) (c h)) over 8 steps
+    assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(b))
 
 
 def test_a_system_whose_velocity_is_not_linear_is_refused():

@@ -40,6 +40,10 @@ def check_linear_velocity(system: AbstractLiePoissonSystem, what: str = "system"
         )
 
 
+#: The degree when neither `degree` nor `theta` is given.
+DEFAULT_DEGREE = 3
+
+
 class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
     r"""The isospectral midpoint step (`integrators.IsospectralMidpoint`) of a learned
     quadratic Hamiltonian: with $S$ the system's linear velocity operator ($\dot W = [S(W), W]$,
@@ -49,17 +53,20 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
 
     a polynomial of $S$ with learned coefficients $\theta$ (`degree` $K$). $S$ is self-adjoint
     for the pairing, so $B_\theta$ is the gradient of $H_\theta(W) = \tfrac12\sum_k\theta_k
-    \langle W, S^k W\rangle$ (up to the pairing's sign): every step is the isospectral midpoint
+    \langle W, S^k W\rangle$ (up to the pairing's sign and normalisation): every step is the isospectral midpoint
     of that Hamiltonian, a conjugation by the unitary Cayley transform of
     $\tfrac h2 B_\theta(\widetilde W)$. Casimirs ($\mathrm{tr}\,W^k$, the spectrum) are kept to
-    round-off whatever $\theta$; an LPNet on the matrix algebra whose $\alpha$ is a learned
-    equivariant linear function of the stage. For Zeitlin's model $B_\theta$ is diagonal in
+    round-off whatever $\theta$: like an LPNet's, each step moves on the coadjoint orbit, but
+    by the implicit midpoint of a learned Hamiltonian, not by composed exact flows. Degree 1 is
+    a rescaling of time: $\theta = (c)$ at step $h$ is the classical method at step $ch$. For
+    Zeitlin's model $B_\theta$ is diagonal in
     the quantized spherical harmonics, the function $\sum_k\theta_k(-1/(\hbar\,l(l+1)))^k$ of
     the degree $l$: the data can correct the midpoint's phase error degree by degree. $\theta =
     (1, 0, \dots)$ is the classical method.
 
     **Arguments:** `system` (so(N), u(N), su(N), body convention, quadratic Hamiltonian);
-    `degree` $K$ (default 3); `theta` (default $(1, 0, \dots, 0)$); `h`; `tol`, `iterations`,
+    `theta` (default $(1, 0, \dots, 0)$ of length `degree`, default `DEFAULT_DEGREE`; given,
+    its length is the degree); `h`; `tol`, `iterations`,
     `max_iter` as `IsospectralMidpoint` (default: iterate until `tol`). Fit by
     `learn.fit(model, (y0, y1), h=...)` on pairs with its default optimiser,
     Levenberg-Marquardt, whose forward-mode Jacobian passes through the iteration's while loop;
@@ -69,19 +76,22 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
     theta: jax.Array
     degree: int = eqx.field(static=True)
 
-    def __init__(self, system: AbstractLiePoissonSystem, *, degree: int = 3, theta: ArrayLike | None = None,
+    def __init__(self, system: AbstractLiePoissonSystem, *, degree: int | None = None, theta: ArrayLike | None = None,
                  h: float | None = None, tol: float = ISOSPECTRAL_TOL, iterations: int | None = None,
                  max_iter: int = ISOSPECTRAL_MAX_ITER, key: Any = None):
         self.system = check_isospectral(system)
         check_linear_velocity(system)
-        self.degree = positive_int(degree, "degree")
         if theta is None:
-            theta = np.zeros(self.degree)
+            degree = DEFAULT_DEGREE if degree is None else positive_int(degree, "degree")
+            theta = np.zeros(degree)
             theta[0] = 1.0
         theta = np.asarray(theta, dtype=np.float64)
-        if theta.shape != (self.degree,) or not np.all(np.isfinite(theta)):
-            raise ValueError(f"theta must be a finite array of shape ({self.degree},) (degree={self.degree}); "
-                             f"got {theta!r}")
+        if theta.ndim != 1 or theta.size == 0 or not np.all(np.isfinite(theta)):
+            raise ValueError(f"theta must be a non-empty finite 1-D array (theta_1..theta_K); got {theta!r}")
+        if degree is not None and positive_int(degree, "degree") != theta.size:
+            raise ValueError(f"theta has {theta.size} coefficients but degree={degree}; give one of them, or both "
+                             "consistent")
+        self.degree = int(theta.size)
         self.theta = jnp.asarray(theta)
         self.h = None if h is None else positive_float(h, "h")
         self.tol = positive_float(tol, "tol")
@@ -91,8 +101,10 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
     def velocity_matrix(self, W: jax.Array) -> jax.Array:
         r"""$B_\theta(W) = \sum_k\theta_k S^k(W)$ ($K$ applications of $S$)."""
         S = self.system.velocity_matrix
+        # the degree from theta itself (static under jit): a theta of another length swapped in
+        # by eqx.tree_at is evaluated as what it is
         inner = self.theta[-1] * W  # Horner: S(theta_1 W + S(theta_2 W + ... S(theta_K W)))
-        for k in range(self.degree - 2, -1, -1):
+        for k in range(self.theta.shape[0] - 2, -1, -1):
             inner = self.theta[k] * W + S(inner)
         return S(inner)
 
@@ -108,7 +120,8 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
         return {"degree": self.degree, "tol": self.tol, "iterations": self.iterations, "max_iter": self.max_iter}
 
     def reinitialised(self, key: int | jax.Array) -> IsospectralPolynomial:
-        return self  # no random initialisation: theta starts where it was given
+        """The map itself: theta has no random start (restarts of a fit repeat the same fit)."""
+        return self
 
     def default_optimiser(self):
         """Levenberg-Marquardt, 50 steps (a few coefficients; forward-mode Jacobian)."""
