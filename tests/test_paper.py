@@ -568,6 +568,7 @@ def test_w4_smoke_predicts_attitudes_from_attitudes_and_rates(tmp_path):
     assert (tmp_path / "W4" / "attitude_error_satellite.png").exists()
 
 
+@pytest.mark.slow  # the whole W5 pipeline, ~8 s (the map's properties: tests/test_learned_isospectral.py)
 def test_w5_smoke_learned_isospectral_map_keeps_casimirs(tmp_path):
     from paper.__main__ import main
 
