@@ -26,8 +26,8 @@ import os
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
 # The LU of the Cayley transform runs in LAPACK (OpenBLAS): its worker threads, left spinning
-# after each call, slowed the matrix products that follow by a third at N = 128-256
-# (BENCHMARKS.md, "Zeitlin's model"); one thread for it too.
+# after each call, slowed the matrix products that follow (BENCHMARKS.md, "Zeitlin's model");
+# one thread for it too.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse

@@ -62,7 +62,7 @@ def serial_lapack() -> None:
     default threads, a forward-mode Jacobian of a batch of isospectral steps (the LU of each
     Cayley transform, and of its tangents, called from XLA's threads) deadlocked (0% CPU,
     never returning), and its workers, left spinning after each call, slowed the XLA products
-    that follow by a third (BENCHMARKS.md, "Zeitlin's model"). SciPy's library is found by
+    that follow (BENCHMARKS.md, "Zeitlin's model": the figures). SciPy's library is found by
     its location (its package or the `scipy.libs` beside it); where none is found there (a
     conda or system OpenBLAS, shared with NumPy) every OpenBLAS is limited. Not cached: a
     `threadpool_limits` block that ends restores the threads, so each build checks again."""

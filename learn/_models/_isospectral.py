@@ -34,9 +34,8 @@ def check_linear_velocity(system: AbstractLiePoissonSystem, what: str = "system"
     rhs = 0.3 * Sa - 1.7 * Sb
     scale = float(jnp.max(jnp.abs(rhs)) + jnp.max(jnp.abs(Sa)) + jnp.max(jnp.abs(Sb)))
     # A linear operator in floating point agrees to round-off, which grows with the size of
-    # the solves inside (Zeitlin's tridiagonal Poisson solve: 0.7 eps of the scale at N = 16, 24
-    # at N = 512, measured): 64 sqrt(dim) eps, 1.6e-11 relative at dim = 10^6, far below the
-    # O(1) defect of a non-quadratic Hamiltonian.
+    # the solves inside (Zeitlin's tridiagonal Poisson solve; BENCHMARKS.md, "W5"): 64 sqrt(dim)
+    # eps of the scale, still far below the O(1) defect of a non-quadratic Hamiltonian.
     tol = 64 * np.sqrt(system.dim) * np.finfo(np.float64).eps * max(scale, np.finfo(np.float64).tiny)
     if not float(jnp.max(jnp.abs(lhs - rhs))) <= tol:
         raise ValueError(
