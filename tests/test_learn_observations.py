@@ -464,3 +464,27 @@ def test_lpnet_network_of_the_wrong_input_size_is_refused():
     with pytest.raises(ValueError, match=r"network must map states \(or states and the step, dim \+ 1\) to the "
                                          r"parameters of TestFlowParametrisation \(3 to 3\); got in_size=5"):
         learn.LPNet(BODY, network=learn.AffineMLP(5, N_PARAMS, (8,), key=0))
+
+
+def test_an_extension_of_a_family_that_misfits_is_skipped():
+    # principal axes 0.95 rad off the basis: the quadratic on the axes leaves residuals far
+    # above 100x those of any quadratic form, so its sigmoid extension ("general", pieces on the
+    # same axes) is not fitted; on the aligned body the axes hold it and it is fitted
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec([0.4, -0.7, 0.5]).as_matrix()
+    A = R @ np.diag(INVERSE_INERTIA) @ R.T
+    rotated = lp.systems.LiePoissonSystem(
+        lp.so3(), lambda m, xp: 0.5 * sum(A[i, j] * m[i] * m[j] for i in range(3) for j in range(3)), name="rotated")
+    families = [f for f in learn.FAMILIES if f.name in ("quadratic", "quadratic, any axes, even", "general")]
+    y0 = np.random.default_rng(0).normal(size=(4, 3))
+    times = 0.1 * np.arange(8)
+    for system, skipped in ((rotated, ["general"]), (BODY, [])):
+        obs = it.observe(system, y0 / np.linalg.norm(y0, axis=1, keepdims=True), times, noise=1e-3, seed=1)
+        _, records = learn.fit_splitting(system, obs, families=families, iterations=5, progress=False)
+        details = [r.stages[-1].details for r in records]
+        assert sorted(d["family"] for d in details) == sorted(f.name for f in families if f.name not in skipped)
+        assert details[-1]["skipped"] == skipped
+        if skipped:
+            ssr = {d["family"]: d["ssr"] for d in details}
+            assert ssr["quadratic"] > 100 * ssr["quadratic, any axes, even"]

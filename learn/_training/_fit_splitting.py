@@ -70,7 +70,8 @@ def fit_splitting(
     sigmoid pieces), each from its least-squares quadratic of the observations' finite
     differences (`learn.Family.start`; the terms selected by the criterion for "quadratic,
     selected", `learn.select_quadratic`), a sigmoid family from the fit of the quadratic family
-    it extends (`learn.Family.from_nested`); the one with the lowest Bayesian information criterion
+    it extends (`learn.Family.from_nested`; skipped when that family's residuals are `PRUNE_RATIO`
+    (100) times the best's so far); the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned: with noisy data, parameters the data do not need
     cost accuracy (conventions, [Observations][conventions-observations]). The records are
     those of every family fitted, the chosen one last; each last stage's `details` hold its
@@ -182,8 +183,11 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     # each family from the least-squares quadratic of the finite differences, in the data's units
     size = state_size(system, data)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
-    fits, fitted = [], {}
+    fits, fitted, ssr, skipped = [], {}, {}, []
     for family in families:
+        if extends_a_misfit(family, ssr):
+            skipped.append(family.name)
+            continue
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
         start = loss.problem(net, data, **split)
         warm_start = family.warm_start
@@ -195,19 +199,29 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
+        ssr[family.name] = criterion["ssr"]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": family.name}))
+            last.record, details={**last.record.details, **criterion, "family": family.name, "skipped": skipped}))
         fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
     best = min(fits, key=lambda f: (f[0], f[1]))
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
 
 
+def extends_a_misfit(family: Family, ssr: dict[str, float]) -> bool:
+    """Whether `family` extends a nested family whose fit's sum of squared residuals (`ssr`, by
+    family name, of the families fitted so far) is more than `PRUNE_RATIO` times the least:
+    its extra pieces lie along the same directions as the nested family's, which missed
+    structure they cannot supply (e.g. sigmoids on the basis axes for principal axes off them)."""
+    return family.nested in ssr and ssr[family.nested] > PRUNE_RATIO * min(ssr.values())
 
-#: On body observations, a family is skipped when the misfit of its quadratic start in the
-#: weak-form equations (`weak_form_quadratic`) is more than this many times the least of any
-#: family's, and a family that extends a nested one when the nested family's sum of squared
-#: residuals is more than this many times the best family's so far: a residual 10x larger in
+
+
+#: On observations and body observations, a family that extends a nested one is skipped when
+#: the nested family's sum of squared residuals is more than this many times the best family's
+#: so far (`extends_a_misfit`); on body observations also a family whose quadratic start
+#: misfits the weak-form equations (`weak_form_quadratic`) more than this many times the least
+#: of any family's. A residual 10x larger in
 #: RMS is structure (e.g. principal axes off the basis axes) that the family, or the
 #: extension's sigmoid pieces along the same directions, would have to remove (the misfits of
 #: rotated and aligned bodies: BENCHMARKS.md, "Families screened by their start").
@@ -243,8 +257,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     fits, fitted, ssr, skipped = [], {}, {}, []
     for family in families:
         A, b, misfit = starts[family.bias, family.any_axes]
-        if misfit > PRUNE_RATIO * least or (
-                family.nested in ssr and ssr[family.nested] > PRUNE_RATIO * min(ssr.values())):
+        if misfit > PRUNE_RATIO * least or extends_a_misfit(family, ssr):
             skipped.append(family.name)
             continue
         net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
