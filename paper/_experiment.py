@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+import contextvars
 import dataclasses
 import json
 import math
@@ -128,13 +129,21 @@ def row_from_json(cls: type, values: dict[str, Any]) -> Any:
                   for f in dataclasses.fields(cls) if f.name in values or absent(f)})
 
 
+#: Rows `saved_row` read from an earlier run during the current `execute` (its metrics'
+#: `resumed_rows`: `total_time_s` is the time of this run's rows only).
+_RESUMED: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("resumed_rows", default=None)
+
+
 def saved_row(cls: type, path: Path, compute: Callable[[], Any]) -> Any:
     """The row of type `cls` an earlier run saved at `path` (an interrupted study resumes: each
     row is saved when it is done), else `compute()`, saved there first. A file of another
     format is refitted, with a warning."""
     if path.exists():
         try:
-            return row_from_json(cls, json.loads(path.read_text()))
+            row = row_from_json(cls, json.loads(path.read_text()))
+            if (resumed := _RESUMED.get()) is not None:
+                resumed.append(path)
+            return row
         except (TypeError, json.JSONDecodeError) as err:
             import sys
 
@@ -214,10 +223,17 @@ class AbstractExperiment(abc.ABC):
         except OSError as err:  # made unwritable or a file since the check
             raise ValueError(f"out_dir {str(out_dir)!r}: cannot create the folder ({err.strerror})") from err
         t0 = time.perf_counter()
-        metrics = self.run(profile, out_dir, progress)
+        resumed: list[Path] = []
+        token = _RESUMED.set(resumed)
+        try:
+            metrics = self.run(profile, out_dir, progress)
+        finally:
+            _RESUMED.reset(token)
         metrics["experiment"] = self.id
         metrics["profile"] = profile
         metrics["total_time_s"] = time.perf_counter() - t0
+        if resumed:  # the time of the rows computed now; the others' are in their own files
+            metrics["resumed_rows"] = len(resumed)
         metrics = _jsonable(metrics)
         atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2) + "\n")
         atomic_write_text(out_dir / "table.md", self.markdown_table(metrics))

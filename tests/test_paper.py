@@ -486,6 +486,37 @@ def test_w2_smoke_writes_its_table_and_verdict(tmp_path):
     assert main(["run", "W2", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
     again = json.loads((tmp_path / "W2" / "metrics.json").read_text())
     assert next(r for r in again["rows"] if r["model"] == "G-LPNet")["state_error"] == 123.0
+    assert "resumed_rows" not in metrics and again["resumed_rows"] == len(again["rows"])
+
+
+def test_a_resumed_run_counts_the_rows_it_read(tmp_path):
+    # total_time_s of a resumed run covers only the rows computed in it: metrics say how many were read
+    import dataclasses
+
+    from paper._experiment import AbstractExperiment, saved_row
+
+    @dataclasses.dataclass(frozen=True)
+    class Row:
+        x: float
+
+    calls = []
+
+    class Tiny(AbstractExperiment):
+        id = "T"
+        title = "tiny"
+
+        def run(self, profile, out_dir, progress):
+            rows = [saved_row(Row, out_dir / f"{k}.json", lambda k=k: calls.append(k) or Row(float(k))) for k in range(3)]
+            return {"rows": [r.x for r in rows]}
+
+        def markdown_table(self, metrics):
+            return ""
+
+    first = Tiny().execute(progress=False, out_dir=tmp_path)
+    (tmp_path / "2.json").unlink()
+    second = Tiny().execute(progress=False, out_dir=tmp_path)
+    assert calls == [0, 1, 2, 2] and first["rows"] == second["rows"] == [0.0, 1.0, 2.0]
+    assert "resumed_rows" not in first and second["resumed_rows"] == 2
 
 
 @pytest.mark.slow  # heyoka, six classical integrators, an LPNet and a G-LPNet: ~40 s
