@@ -25,7 +25,6 @@ For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a m
 
 from __future__ import annotations
 
-import os
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -38,6 +37,7 @@ from liepoisson import MatrixLieAlgebra
 from liepoisson.internals import dagger, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
+from ._lapack import serial_lapack
 from ._lie_group import check_lie_poisson
 from ._step_map import AbstractStepMap, check_state
 
@@ -53,34 +53,6 @@ DEFAULT_MAX_ITER = 100
 # is of order 4 (Yoshida, Phys. Lett. A 150, 1990).
 _G1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 _G0 = 1.0 - 2.0 * _G1
-
-
-def serial_lapack() -> None:
-    """Limit the OpenBLAS under JAX's CPU LAPACK kernels (SciPy's) to one thread, unless the
-    user set `OPENBLAS_NUM_THREADS`: a process-wide setting (SciPy's own `scipy.linalg` calls
-    run on one thread too), applied by every isospectral method when it is built. With its
-    default threads, a forward-mode Jacobian of a batch of isospectral steps (the LU of each
-    Cayley transform, and of its tangents, called from XLA's threads) deadlocked (0% CPU,
-    never returning), and its workers, left spinning after each call, slowed the XLA products
-    that follow (BENCHMARKS.md, "Zeitlin's model": the figures). SciPy's library is found by
-    its location (its package or the `scipy.libs` beside it); where none is found there (a
-    conda or system OpenBLAS, shared with NumPy) every OpenBLAS is limited. Not cached: a
-    `threadpool_limits` block that ends restores the threads, so each build checks again."""
-    if "OPENBLAS_NUM_THREADS" in os.environ:
-        return
-    import scipy
-    import scipy.linalg.cython_lapack
-    from threadpoolctl import ThreadpoolController
-
-    controller = ThreadpoolController()
-    package = os.path.dirname(os.path.abspath(scipy.__file__))
-    places = (package + os.sep, package + ".libs" + os.sep)
-    openblas = [info for info in controller.info() if info["internal_api"] == "openblas"]
-    paths = [info["filepath"] for info in openblas if os.path.abspath(info["filepath"]).startswith(places)]
-    if not paths:
-        paths = [info["filepath"] for info in openblas]
-    if paths and any(info["num_threads"] != 1 for info in openblas if info["filepath"] in paths):
-        controller.select(filepath=paths).limit(limits=1)
 
 
 def check_isospectral(system: AbstractLiePoissonSystem, what: str = "system") -> AbstractLiePoissonSystem:

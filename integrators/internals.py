@@ -26,6 +26,8 @@ these names may change with the library.
   library's style.
 - `check_isospectral(system)`, `ISOSPECTRAL_TOL`, `ISOSPECTRAL_MAX_ITER`: what the isospectral
   methods accept and their defaults (a learned map on the same step uses them).
+- `serial_lapack()`, `serial_lapack_block()`: JAX's CPU LAPACK (SciPy's OpenBLAS) on one
+  thread, for the process or for a `with` block.
 """
 
 from ._distributed import (
@@ -45,6 +47,8 @@ from ._isospectral import DEFAULT_MAX_ITER as ISOSPECTRAL_MAX_ITER  # noqa: F401
 from ._isospectral import DEFAULT_TOL as ISOSPECTRAL_TOL  # noqa: F401 (re-exported, renamed)
 from ._isospectral import check_isospectral as check_isospectral
 from ._json_values import json_values as json_values
+from ._lapack import serial_lapack as serial_lapack
+from ._lapack import serial_lapack_block as serial_lapack_block
 from ._observations import rms_size as rms_size
 from ._plots import figure as figure
 from ._plots import series_styles as series_styles

@@ -27,6 +27,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from tqdm.auto import tqdm
 
+from integrators.internals import serial_lapack_block
 from liepoisson.internals import positive_int
 
 from .. import _files
@@ -112,9 +113,12 @@ class _Steps(AbstractIterationsStage):
             if context.checkpoint.resumable():
                 read = saved.read()
                 resumed = read if read["phase"] == context.phase else None
-        y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
-                              context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
-                              context.phase, resumed, context.earlier, context.on_step())
+        # JAX's Cholesky each step runs in SciPy's OpenBLAS, whose idle workers spin on the
+        # cores the Jacobian's XLA threads need (BENCHMARKS.md, "W2 `--full`: seven systems")
+        with serial_lapack_block():
+            y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
+                                  context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
+                                  context.phase, resumed, context.earlier, context.on_step())
         record = unselected_record("LevenbergMarquardt", len(values), start)
         return Result(y, record, history(values))
 
