@@ -31,9 +31,13 @@ from ._observations import (
     _per_trajectory,
     check_times,
     format_version,
+    long_columns,
     observation_plan,
     propagate_grids,
+    read_csv,
+    read_npz,
     rms_size,
+    rows_by_trajectory,
     times_per_trajectory,
 )
 from ._validation_split import validation_split
@@ -238,10 +242,59 @@ class BodyObservations:
             f.attrs["liepoisson_version"] = liepoisson.__version__
 
     @classmethod
+    def from_columns(cls, system: AbstractLiePoissonSystem, trajectory: ArrayLike, t: ArrayLike, *,
+                     configurations: ArrayLike | None = None, velocities: ArrayLike | None = None,
+                     metadata: dict[str, Any] | None = None, source: str = "the data") -> BodyObservations:
+        """From the long format (one row per observation, as a logger writes them): the
+        trajectory label of each row (any integers), its time, and its configuration
+        `(N, group.size)` and/or body velocity `(N, dim)`; rows in any order (sorted by time
+        within each trajectory; repeated times are refused)."""
+        measured = {k: v for k, v in (("configurations", configurations), ("velocities", velocities))
+                    if v is not None}
+        if not measured:
+            raise ValueError(f"{source}: give configurations, velocities or both: observations need something "
+                             "measured")
+        label, t, columns = long_columns(trajectory, t, measured, source)
+        times, per_trajectory = rows_by_trajectory(label, t, columns)
+        try:
+            return cls(system, times, **dict(zip(measured, per_trajectory)), metadata=metadata)
+        except ValueError as err:
+            raise ValueError(f"{source}: {err}") from None
+
+    @classmethod
     def load(cls, path: str | os.PathLike, system: AbstractLiePoissonSystem | None = None) -> BodyObservations:
-        """Read a file written by `save` (the system rebuilt from it, or `system` checked
-        against it); `ValueError` naming the file if it is of another kind or damaged."""
+        """Read body observations from a file:
+
+        - HDF5 (`.h5`, `.hdf5`) written by `save`: the system rebuilt from the file, or `system`
+          checked against it;
+        - NumPy `.npz` with arrays `trajectory`, `t` and `configurations` `(N, group.size)`
+          and/or `velocities` `(N, dim)`, or CSV with the header `trajectory,t,g0,...,xi0,...`
+          (configurations `g0..g{group.size-1}` then velocities `xi0..xi{dim-1}`, either
+          block alone too; one row per observation, rows in any order): the file holds no
+          system, so `system` is required. Configurations are as `BodyObservations` takes
+          them: unit quaternions $(x, y, z, w)$, scalar last, then the position for a pose.
+
+        A file of another kind, damaged or missing a field raises `ValueError` naming it."""
         path = os.fspath(path)
+        suffix = os.path.splitext(path)[1].lower()
+        if suffix in (".npz", ".csv"):
+            if system is None:
+                raise ValueError(f"{path!r} holds no system: pass system= (the body whose configurations and "
+                                 "velocities these are)")
+            system = _check_system(system)
+            if suffix == ".npz":
+                columns = read_npz(path, ("trajectory", "t"), "a body-observations .npz holds trajectory, t and "
+                                   "configurations (N, group.size) and/or velocities (N, dim)", optional=MEASURED)
+                if not any(k in columns for k in MEASURED):
+                    raise ValueError(f"{path!r} holds neither configurations nor velocities; a body-observations "
+                                     ".npz holds trajectory, t and one or both of them")
+                return cls.from_columns(system, columns["trajectory"], columns["t"],
+                                        **{k: columns[k] for k in MEASURED if k in columns}, source=repr(path))
+            g, xi = ("g", system.group.size), ("xi", system.dim)
+            layouts = ((g, xi), (g,), (xi,))
+            label, t, layout, blocks = read_csv(path, *layouts)
+            names = [{"g": "configurations", "xi": "velocities"}[prefix] for prefix, _ in layout]
+            return cls.from_columns(system, label, t, **dict(zip(names, blocks)), source=repr(path))
         f = open_hdf5(path, "liepoisson body observations (written by BodyObservations.save)")
         try:
             with f:

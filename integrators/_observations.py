@@ -358,24 +358,8 @@ class Observations:
         """From the long format (one row per observation): the trajectory label of each row
         (any integers), its time and its state `(N, dim)`; rows in any order (sorted by time
         within each trajectory; repeated times are refused)."""
-        columns = []
-        for name, value in (("trajectory", trajectory), ("t", t), ("states", states)):
-            try:
-                columns.append(_real_array(value, name))
-            except (TypeError, ValueError) as err:
-                raise type(err)(f"{source}: {err}") from None
-        label, t, y = columns
-        if y.ndim != 2 or label.shape != (y.shape[0],) or t.shape != (y.shape[0],):
-            raise ValueError(f"{source}: trajectory, t and states must have N, N and (N, dim) entries; got shapes "
-                             f"{label.shape}, {t.shape}, {y.shape}")
-        if label.size and not np.all(label == np.round(label.astype(np.float64))):
-            raise ValueError(f"{source}: trajectory labels must be integers; got {label[:5].tolist()}...")
-        times, states = [], []
-        for value in np.unique(label):
-            rows = np.flatnonzero(label == value)
-            rows = rows[np.argsort(t[rows], kind="stable")]
-            times.append(t[rows])
-            states.append(y[rows])
+        label, t, (y,) = long_columns(trajectory, t, {"states": states}, source)
+        times, (states,) = rows_by_trajectory(label, t, (y,))
         try:
             return cls(system, times, states, metadata=metadata)
         except ValueError as err:
@@ -400,8 +384,12 @@ class Observations:
             if not isinstance(system, AbstractPoissonSystem):
                 raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
             if suffix == ".npz":
-                return cls.from_columns(system, *_read_npz(path), source=repr(path))
-            return cls.from_columns(system, *_read_csv(path, system.dim), source=repr(path))
+                columns = read_npz(path, ("trajectory", "t", "states"), "an observations .npz holds trajectory, t "
+                                   "and states (N, dim)")
+                return cls.from_columns(system, columns["trajectory"], columns["t"], columns["states"],
+                                        source=repr(path))
+            label, t, _, (y,) = read_csv(path, (("y", system.dim),))
+            return cls.from_columns(system, label, t, y, source=repr(path))
         f = open_hdf5(path, "liepoisson observations (written by Observations.save), or a .npz/.csv file")
         try:
             with f:
@@ -467,16 +455,53 @@ def _column(value: Any, key: str, path: str) -> np.ndarray:
     return arr
 
 
-def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def long_columns(trajectory: ArrayLike, t: ArrayLike, measured: dict[str, Any],
+                 source: str) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The long format's columns checked: `trajectory` labels (integers) and `t` of `N` rows,
+    each array of `measured` `(N, width)`; errors name `source` and the column."""
+    columns = []
+    for name, value in (("trajectory", trajectory), ("t", t), *measured.items()):
+        try:
+            columns.append(_real_array(value, name))
+        except (TypeError, ValueError) as err:
+            raise type(err)(f"{source}: {err}") from None
+    label, t, *rest = columns
+    n = label.shape[0] if label.ndim == 1 else -1
+    if n < 0 or t.shape != (n,) or any(v.ndim != 2 or v.shape[0] != n for v in rest):
+        shapes = ", ".join(str(v.shape) for v in columns)
+        raise ValueError(f"{source}: {', '.join(['trajectory', 't', *measured])} must have N, N and (N, width) "
+                         f"entries; got shapes {shapes}")
+    if label.size and not np.all(label == np.round(label)):
+        raise ValueError(f"{source}: trajectory labels must be integers; got {label[:5].tolist()}...")
+    return label, t, rest
+
+
+def rows_by_trajectory(label: np.ndarray, t: np.ndarray,
+                       columns: Sequence[np.ndarray]) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
+    """`(times, per_column)`: the rows of each trajectory label (in label order), sorted by time
+    (stably: repeated times stay for the constructor to refuse)."""
+    times, out = [], [[] for _ in columns]
+    for value in np.unique(label):
+        rows = np.flatnonzero(label == value)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        times.append(t[rows])
+        for k, column in enumerate(columns):
+            out[k].append(column[rows])
+    return times, out
+
+
+def read_npz(path: str, required: Sequence[str], what: str, optional: Sequence[str] = ()) -> dict[str, np.ndarray]:
+    """The arrays `required` (and those of `optional` present) of a `.npz` file, by name;
+    `ValueError` naming the file if it is not one, or lacks a required array (`what` says
+    what the file should hold)."""
     import zipfile
 
     try:
         with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
-            missing = [k for k in ("trajectory", "t", "states") if k not in z]
+            missing = [k for k in required if k not in z]
             if missing:
-                raise ValueError(f"{path!r} lacks the array(s) {missing}; an observations .npz holds trajectory, t "
-                                 "and states (N, dim)")
-            return tuple(_column(z[key], key, path) for key in ("trajectory", "t", "states"))
+                raise ValueError(f"{path!r} lacks the array(s) {missing}; {what}")
+            return {key: _column(z[key], key, path) for key in (*required, *optional) if key in z}
     except ValueError as err:
         if str(err).startswith(repr(path)):
             raise
@@ -485,26 +510,38 @@ def _read_npz(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"{path!r} is not a readable .npz file: {err}") from err
 
 
-def _read_csv(path: str, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    expected = ["trajectory", "t", *(f"y{i}" for i in range(dim))]
+def read_csv(path: str, *layouts: Sequence[tuple[str, int]]) -> tuple[np.ndarray, np.ndarray, Any, list[np.ndarray]]:
+    """`(trajectory, t, layout, blocks)` of a CSV file whose header is `trajectory,t` and then,
+    for the one of the `layouts` (each a sequence of `(prefix, width)`) it matches, the columns
+    `prefix0, ..., prefix{width-1}` of each block: e.g. `(("y", 3),)` reads
+    `trajectory,t,y0,y1,y2`."""
+    headers = [["trajectory", "t", *(f"{prefix}{i}" for prefix, width in layout for i in range(width))]
+               for layout in layouts]
     try:
         with open(path, encoding="utf-8-sig") as f:  # a byte-order mark (spreadsheets write one) is skipped
             header = [h.strip() for h in f.readline().split(",")]
-            if header != expected:
-                raise ValueError(f"{path!r} has the header {','.join(header)!r}; expected {','.join(expected)!r}")
+            if header not in headers:
+                expected = " or ".join(repr(",".join(h)) for h in headers)
+                raise ValueError(f"{path!r} has the header {','.join(header)!r}; expected {expected}")
+            layout = layouts[headers.index(header)]
+            width = len(header)
             body = f.read()
-            rows = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2) if body.strip() else np.zeros((0, dim + 2))
+            rows = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2) if body.strip() else np.zeros((0, width))
     except (OSError, UnicodeDecodeError) as err:
         raise ValueError(f"{path!r} is not a readable CSV file: {err}") from err
     except ValueError as err:
         if "header" in str(err):
             raise
-        raise ValueError(f"{path!r}: a row is not {dim + 2} numbers: {err}") from err
+        raise ValueError(f"{path!r}: a row is not {width} numbers: {err}") from err
     if rows.size == 0:
         raise ValueError(f"{path!r} has a header and no observation")
-    if rows.shape[1] != dim + 2:
-        raise ValueError(f"{path!r}: rows have {rows.shape[1]} columns; expected {dim + 2}")
-    return rows[:, 0], rows[:, 1], rows[:, 2:]
+    if rows.shape[1] != width:
+        raise ValueError(f"{path!r}: rows have {rows.shape[1]} columns; expected {width}")
+    blocks, start = [], 2
+    for _, w in layout:
+        blocks.append(rows[:, start:start + w])
+        start += w
+    return rows[:, 0], rows[:, 1], layout, blocks
 
 
 def uneven_times(n_trajectories: int, n_observations: int, steps: tuple[float, float] = (0.05, 0.3), *,

@@ -66,6 +66,64 @@ def test_body_observations_round_trip_through_a_file(tmp_path):
         it.BodyObservations.load(tmp_path / "junk.h5")
 
 
+def _long(obs, rng):
+    """The observations as a logger writes them: one row per observation, rows shuffled."""
+    label = np.concatenate([np.full(t.size, 10 * j + 3) for j, t in enumerate(obs.times)])
+    order = rng.permutation(label.size)
+    columns = {k: np.concatenate(getattr(obs, k))[order] for k in obs.measured}
+    return label[order], np.concatenate(obs.times)[order], columns
+
+
+@pytest.mark.parametrize("measure", [("configurations", "velocities"), ("configurations",), ("velocities",)])
+@pytest.mark.parametrize("system", [ROTATED, lp.systems.Kirchhoff()], ids=["rotations", "poses"])
+def test_body_observations_from_npz_and_csv_files(tmp_path, system, measure):
+    y0 = unit_rows(3, system.dim, 0)
+    g0 = Rotation.random(3, random_state=1).as_quat()
+    if system.group.size == 7:
+        g0 = np.hstack([g0, np.zeros((3, 3))])
+    obs = it.observe_body(system, y0, g0, it.uneven_times(3, 6, (0.05, 0.3), seed=2), noise=1e-3, seed=3,
+                          measure=measure)
+    label, t, columns = _long(obs, np.random.default_rng(0))
+    np.savez(tmp_path / "log.npz", trajectory=label, t=t, **columns)
+    prefixes = {"configurations": ("g", system.group.size), "velocities": ("xi", system.dim)}
+    header = ["trajectory", "t", *(f"{prefixes[k][0]}{i}" for k in measure for i in range(prefixes[k][1]))]
+    rows = np.column_stack([label, t, *(columns[k] for k in measure)])
+    np.savetxt(tmp_path / "log.csv", rows, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+    for name in ("log.npz", "log.csv"):
+        back = it.BodyObservations.load(tmp_path / name, system)
+        assert back.measured == obs.measured and len(back) == len(obs)
+        for a, b in zip(back.times, obs.times):
+            np.testing.assert_array_equal(a, b)
+        for k in measure:  # %.17g round-trips a float64 exactly
+            for a, b in zip(getattr(back, k), getattr(obs, k)):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_body_observation_files_that_cannot_be_read_say_why(tmp_path):
+    q = Rotation.random(3, random_state=0).as_quat()
+    np.savez(tmp_path / "log.npz", trajectory=np.zeros(3), t=[0.0, 0.1, 0.2], configurations=q)
+    with pytest.raises(ValueError, match="holds no system: pass system="):
+        it.BodyObservations.load(tmp_path / "log.npz")
+    with pytest.raises(TypeError, match="system"):
+        it.BodyObservations.load(tmp_path / "log.npz", system=lp.so3())
+    np.savez(tmp_path / "bare.npz", trajectory=np.zeros(3), t=[0.0, 0.1, 0.2])
+    with pytest.raises(ValueError, match="holds neither configurations nor velocities"):
+        it.BodyObservations.load(tmp_path / "bare.npz", BODY)
+    np.savez(tmp_path / "short.npz", trajectory=np.zeros(3), t=[0.0, 0.1, 0.2], velocities=np.ones((2, 3)))
+    with pytest.raises(ValueError, match=r"short.npz.*got shapes \(3,\), \(3,\), \(2, 3\)"):
+        it.BodyObservations.load(tmp_path / "short.npz", BODY)
+    np.savez(tmp_path / "long.npz", trajectory=np.zeros(3), t=[0.0, 0.1, 0.2], configurations=2 * q)
+    with pytest.raises(ValueError, match=r"long.npz.*must hold a unit quaternion"):
+        it.BodyObservations.load(tmp_path / "long.npz", BODY)
+    (tmp_path / "log.csv").write_text("trajectory,t,q0,q1,q2,q3\n0,0,0,0,0,1\n")
+    with pytest.raises(ValueError, match=r"expected 'trajectory,t,g0,g1,g2,g3,xi0,xi1,xi2' or "
+                                         r"'trajectory,t,g0,g1,g2,g3' or 'trajectory,t,xi0,xi1,xi2'"):
+        it.BodyObservations.load(tmp_path / "log.csv", BODY)
+    (tmp_path / "text.csv").write_text("trajectory,t,xi0,xi1,xi2\n0,0,1,2,x\n")
+    with pytest.raises(ValueError, match="text.csv': a row is not 5 numbers"):
+        it.BodyObservations.load(tmp_path / "text.csv", BODY)
+
+
 def test_bad_body_observations_are_refused_with_what_was_wrong():
     t = np.array([0.0, 0.1, 0.2])
     q = Rotation.random(3, random_state=0).as_quat()
