@@ -19,7 +19,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 
-from liepoisson.internals import check_system, positive_float
+from liepoisson.internals import check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractLiePoissonSystem
 
 from ._step_map import AbstractStepMap, check_state
@@ -38,6 +38,7 @@ def check_lie_poisson(system, what: str = "system") -> AbstractLiePoissonSystem:
             f"{what} must be a Lie-Poisson system (RigidBody, HeavyTop, Kirchhoff, a LiePoissonSystem or "
             f"a DoubleBracket of one): Lie-group methods move by its coadjoint action; got {type(system).__name__}"
         )
+    refuse_nonholonomic(system, "a Lie-group method")
     return system
 
 

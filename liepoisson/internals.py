@@ -5,7 +5,8 @@ argument, and progress bars. Not a user API: these names may change with the lib
 - `as_state(y, name, dim)`, `states(y, name, dim)`, `pairs(y0, y1, dim)`: float64 arrays of
   states `(..., dim)`, finite, checked.
 - `positive_float(x, name)`, `positive_int(n, name, minimum=1)`, `fraction(x, name)`: scalars.
-- `check_system(system)`: a `liepoisson.systems.AbstractPoissonSystem`.
+- `check_system(system)`: a `liepoisson.systems.AbstractPoissonSystem`; `refuse_nonholonomic(system,
+  what)`: `ValueError` for a constrained system where `what` moves along coadjoint orbits.
 - `check_casimirs_agree(...)`: pairs whose Casimirs differ are named; `casimir_scale(gradients,
   y)`: |grad C_j(y)| |y|, the size a Casimir change is measured against.
 - `jsonable(value)`: `value` as reading it back from JSON gives it (tuples as lists).
@@ -38,3 +39,4 @@ from ._validation import (
     states as states,
 )
 from .systems._base import check_system as check_system
+from .systems._nonholonomic import refuse_nonholonomic as refuse_nonholonomic

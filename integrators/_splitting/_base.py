@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liepoisson.internals import check_system, positive_float
+from liepoisson.internals import check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import (
     AbstractDissipativeSystem,
     AbstractExactTerm,
@@ -313,6 +313,7 @@ class Splitting(AbstractReconstructingStepMap):
                 f"{system!r} is dissipative: a splitting of its Hamiltonian would integrate the undamped "
                 "system. Use integrators.DampedSplitting or a Lie-group method (integrators.CommutatorFree4, ...)"
             )
+        refuse_nonholonomic(system, "a splitting method")
         self.method = splitting_method(method)
         self.pieces = default_terms(system) if terms is None else check_splitting(system, terms, "terms")
         self.h = positive_float(h, "h")

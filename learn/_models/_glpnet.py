@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 from integrators.internals import check_state, composition_flops, splitting_method
 from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
 from liepoisson import JAX
-from liepoisson.internals import as_state, check_system, positive_float
+from liepoisson.internals import as_state, check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._solvers._quasi_newton import QuasiNewton
@@ -81,6 +81,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
         terms: RidgeTerms | None = None,
     ):
         self.system = check_system(system)
+        refuse_nonholonomic(system, "a G-LPNet")
         # Default: every basis direction twice (the paper's 6 modules for so(3)), so that any
         # algebra's G-LPNet can rotate about each axis on both sides of the others.
         terms = network_or_default(

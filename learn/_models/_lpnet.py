@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from integrators.internals import check_h, check_state
-from liepoisson.internals import check_system, positive_float
+from liepoisson.internals import check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._base import AbstractCasimirConservingMap, AbstractOneFlowMap
@@ -73,6 +73,7 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
         network: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
+        refuse_nonholonomic(system, "an LPNet")
         if parametrisation is None:
             parametrisation = default_parametrisation(system)
         elif isinstance(parametrisation, str):

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from integrators import BodyObservations, Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
-from liepoisson.internals import show_progress
+from liepoisson.internals import refuse_nonholonomic, show_progress
 from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
 
 from .._models._glpnet import GLPNet, check_method
@@ -114,7 +114,8 @@ def fit_splitting(
 
 def check_conservative(system: AbstractPoissonSystem) -> None:
     """`ValueError` for a dissipative `system`: a G-LPNet is a Poisson map, built on a
-    Hamiltonian system's bracket."""
+    Hamiltonian system's bracket; and for a nonholonomic one (its Casimirs change)."""
+    refuse_nonholonomic(system, "a G-LPNet")
     if isinstance(system, AbstractDissipativeSystem):  # a system of the right type, unsuitable
         raise ValueError(  # noqa: TRY004
             f"system is dissipative ({system!r}): a G-LPNet is a Poisson map and keeps the energy up to its error, "

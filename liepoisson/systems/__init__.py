@@ -1,5 +1,6 @@
 """Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle;
-double-bracket dissipation of any Lie-Poisson system."""
+double-bracket dissipation of any Lie-Poisson system; nonholonomic constraints on its body
+velocity (the Lie-Poisson-d'Alembert equations: the Suslov problem, the Chaplygin sleigh)."""
 
 from ._base import (
     AbstractDefinedByParams as AbstractDefinedByParams,
@@ -26,6 +27,13 @@ from ._generalized_rigid_body import GeneralizedRigidBody as GeneralizedRigidBod
 from ._heavy_top import HeavyTop as HeavyTop
 from ._kirchhoff import Kirchhoff as Kirchhoff
 from ._lie_poisson import LiePoissonSystem as LiePoissonSystem
+from ._nonholonomic import (
+    SE2_BASIS as SE2_BASIS,
+    LiePoissonDAlembert as LiePoissonDAlembert,
+    chaplygin_sleigh as chaplygin_sleigh,
+    sleigh_pose as sleigh_pose,
+    suslov as suslov,
+)
 from ._pendulum import ExtendedPendulum as ExtendedPendulum
 from ._registry import (
     SYSTEMS as SYSTEMS,

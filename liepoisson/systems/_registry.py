@@ -18,6 +18,7 @@ from ._generalized_rigid_body import GeneralizedRigidBody
 from ._heavy_top import HeavyTop
 from ._kirchhoff import Kirchhoff
 from ._lie_poisson import KIND, LiePoissonSystem
+from ._nonholonomic import LiePoissonDAlembert
 from ._pendulum import ExtendedPendulum
 from ._rigid_body import RigidBody
 from ._zeitlin import Zeitlin
@@ -42,9 +43,14 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
             raise ValueError("a DoubleBracket is rebuilt from its params (system, system_params, gamma, metric); "
                              f"got {params!r}")
         return DoubleBracket.from_params(params, from_name)
+    if name == LiePoissonDAlembert.name:
+        if not isinstance(params, dict):
+            raise ValueError("a LiePoissonDAlembert is rebuilt from its params (system, system_params, constraints); "
+                             f"got {params!r}")
+        return LiePoissonDAlembert.from_params(params, from_name)
     if name not in SYSTEMS:
         raise ValueError(
-            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket and user LiePoissonSystems "
+            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket, LiePoissonDAlembert and user LiePoissonSystems "
             "(saved with their definition). For a system class of your own, pass system=... to the loader"
         )
     return SYSTEMS[name](**(params or {}))
