@@ -45,13 +45,18 @@ class AbstractImplicitStepMap(AbstractStepMap):
     def iterate(self, context: Any, z: jax.Array) -> jax.Array:
         """One iteration $z \\mapsto G(c, z)$."""
 
+    def finish(self, context: Any, z: jax.Array) -> jax.Array:
+        """The next state from the converged iterate: `z` itself unless the iteration is on
+        something else (a Runge-Kutta method's stages)."""
+        return z
+
     def step(self, y: jax.Array) -> jax.Array:
         context, z = self.start(check_state(y, self.system.dim))
         z = jax.lax.fori_loop(0, self.iterations - 1, lambda _, z: self.iterate(context, z), z)
         z_next = self.iterate(context, z)
         moved = jnp.max(jnp.abs(z_next - z))
         converged = moved <= CONVERGENCE_RTOL * jnp.maximum(1.0, jnp.max(jnp.abs(z_next)))
-        return jnp.where(converged, z_next, jnp.nan)
+        return jnp.where(converged, self.finish(context, z_next), jnp.nan)
 
     def with_iterations(self, iterations: int) -> AbstractImplicitStepMap:
         """The same map with another iteration count (a large step contracts slowly)."""

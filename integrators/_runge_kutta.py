@@ -1,7 +1,9 @@
 r"""Classical Runge-Kutta step maps without splitting, the baselines of a comparison:
-RK4 (no geometric structure at all) and the implicit midpoint rule (symplectic for canonical
-systems; for a Lie-Poisson system it conserves every quadratic Casimir, e.g. $|\Pi|^2$, but it
-is not a Poisson map)."""
+RK4 (no geometric structure at all) and the Gauss-Legendre methods, the implicit midpoint rule
+and its two-stage order-4 sibling (symplectic for canonical systems; for a Lie-Poisson system
+they conserve every quadratic Casimir, e.g. $|\Pi|^2$, but are not Poisson maps; for a
+nonholonomic system with a quadratic $H$ they keep the constraint, linear in $\mu$, and the
+energy to round-off)."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from liepoisson.internals import check_system, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
@@ -95,6 +98,61 @@ class ImplicitMidpoint(AbstractImplicitStepMap):
         h, f = self.h, self.system.vector_field
         jac = jax.jacfwd(f)(0.5 * (y + z))
         return z - jnp.linalg.solve(jnp.eye(self.system.dim) - 0.5 * h * jac, z - y - h * f(0.5 * (y + z)))
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
+
+
+#: The two-stage Gauss-Legendre tableau: $c = \tfrac12 \mp \tfrac{\sqrt3}{6}$, $b = (\tfrac12, \tfrac12)$.
+_SQRT3_6 = np.sqrt(3.0) / 6.0
+GAUSS4_A = np.array([[0.25, 0.25 - _SQRT3_6], [0.25 + _SQRT3_6, 0.25]])
+GAUSS4_B = np.array([0.5, 0.5])
+
+
+class GaussLegendre4(AbstractImplicitStepMap):
+    r"""The two-stage Gauss-Legendre method (Hairer, Lubich, Wanner, *Geometric Numerical
+    Integration*, Sec. II.1.3): $Z_i = h\sum_j a_{ij} f(y + Z_j)$, $y_{n+1} = y + h\sum_i b_i
+    f(y + Z_i)$, $a = \begin{pmatrix}\tfrac14 & \tfrac14 - \tfrac{\sqrt3}6\\ \tfrac14 +
+    \tfrac{\sqrt3}6 & \tfrac14\end{pmatrix}$, $b = (\tfrac12, \tfrac12)$: order 4, symmetric,
+    and, like the implicit midpoint rule (the one-stage Gauss method), it conserves every
+    linear and quadratic first integral exactly (Thm. IV.2.2): the quadratic Casimirs of a
+    Lie-Poisson system; the constraint $C\mathbb M^{-1}\mu = 0$ and the energy
+    $\tfrac12\mu^\top\mathbb M^{-1}\mu$ of a nonholonomic system with a quadratic Hamiltonian
+    (`liepoisson.systems.suslov`, `chaplygin_sleigh`), to the round-off of the stage solve.
+
+    The stages are solved by `iterations` Newton steps on the $2\,$`dim` equations from
+    $Z = 0$; a step whose last Newton step still moves them is NaN.
+
+    **Arguments:** `system`; `h` > 0; `iterations` >= 1 (default 8).
+    """
+
+    system: AbstractPoissonSystem = eqx.field(static=True)
+    h: float
+    iterations: int = eqx.field(static=True)
+
+    def __init__(self, system: AbstractPoissonSystem, h: float, iterations: int = 8):
+        self.system = check_system(system)
+        self.h = positive_float(h, "h")
+        self.iterations = positive_int(iterations, "iterations")
+
+    def _residual(self, y: jax.Array, Z: jax.Array) -> jax.Array:
+        F = jax.vmap(self.system.vector_field)(y + Z)  # (2, dim)
+        return Z - self.h * jnp.asarray(GAUSS4_A) @ F
+
+    def start(self, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        return y, jnp.zeros((2, y.shape[-1]), dtype=y.dtype)
+
+    def iterate(self, y: jax.Array, Z: jax.Array) -> jax.Array:
+        r"""One Newton step on the stage equations $Z - h\,(a\otimes I)\,F(y + Z) = 0$."""
+        n = 2 * y.shape[-1]
+        flat = Z.reshape(n)
+        jac = jax.jacfwd(lambda z: self._residual(y, z.reshape(Z.shape)).reshape(n))(flat)
+        return (flat - jnp.linalg.solve(jac, self._residual(y, Z).reshape(n))).reshape(Z.shape)
+
+    def finish(self, y: jax.Array, Z: jax.Array) -> jax.Array:
+        F = jax.vmap(self.system.vector_field)(y + Z)
+        return y + self.h * jnp.asarray(GAUSS4_B) @ F
 
     @property
     def exact_flows_per_step(self) -> int:
