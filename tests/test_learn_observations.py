@@ -466,6 +466,7 @@ def test_lpnet_network_of_the_wrong_input_size_is_refused():
         learn.LPNet(BODY, network=learn.AffineMLP(5, N_PARAMS, (8,), key=0))
 
 
+@pytest.mark.slow  # two fit_splitting calls of three families: 8 s
 def test_an_extension_of_a_family_that_misfits_is_skipped():
     # principal axes 0.95 rad off the basis: the quadratic on the axes leaves residuals far
     # above 100x those of any quadratic form, so its sigmoid extension ("general", pieces on the

@@ -153,7 +153,7 @@ def test_what_moves_along_coadjoint_orbits_refuses_a_nonholonomic_system():
             build()
     # RK4 integrates the field with its reaction: the constraint to its error, O(h^4)
     y0 = np.asarray(suslov.project(np.array([0.6, -0.2, 0.9])))
-    states = it.RK4(suslov, 0.05).rollout(y0, 400)
+    states = it.RK4(suslov, 0.05).rollout(y0, 100)
     assert np.max(np.asarray(suslov.relative_constraint(states))) < 1e-6
 
 
@@ -168,7 +168,7 @@ def _observed_orders(method, system, y0, hs, t_end):
 def test_classical_integrators_have_their_order_on_the_suslov_problem(method, order):
     suslov = lp.systems.suslov(INERTIA, A)
     y0 = np.asarray(suslov.project(np.array([1.5, -1.0, 2.0])))
-    orders, errors = _observed_orders(method, suslov, y0, (0.2, 0.1, 0.05), 5.0)
+    orders, errors = _observed_orders(method, suslov, y0, (0.2, 0.1), 5.0)
     assert min(errors) > 1e-11  # above heyoka's round-off, so the ratios measure the method
     assert np.all(np.abs(orders - order) <= 0.1), (orders, errors)
 
@@ -180,16 +180,16 @@ def test_gauss_legendre_methods_keep_the_constraint_and_the_energy(system):
     # Gauss-Legendre method keeps both exactly; RK4 keeps the linear constraint too, not the energy
     y0 = np.asarray(system.project(np.array([1.5, -1.0, 2.0])))
     for method in (it.ImplicitMidpoint, it.GaussLegendre4):
-        states = np.asarray(method(system, 0.2).rollout(y0, 2000))
+        states = np.asarray(method(system, 0.2).rollout(y0, 500))
         energy = np.asarray(system.hamiltonian(states))
         # exact in exact arithmetic; the round-off of each step (the stage solve, y + z) drifts
         # linearly, by about one eps a step (measured 4.7e-13 over 2000 steps on Suslov):
         # allow 4 eps a step
-        assert np.max(np.abs(energy - energy[0]) / energy[0]) <= 4 * 2000 * EPS
+        assert np.max(np.abs(energy - energy[0]) / energy[0]) <= 4 * 500 * EPS
         assert np.max(np.asarray(system.relative_constraint(states))) <= 1e-13
-    rk4 = np.asarray(it.RK4(system, 0.2).rollout(y0, 2000))
+    rk4 = np.asarray(it.RK4(system, 0.2).rollout(y0, 500))
     energy = np.asarray(system.hamiltonian(rk4))
-    assert np.max(np.abs(energy - energy[0]) / energy[0]) > 1e3 * 2000 * EPS  # RK4's truncation error
+    assert np.max(np.abs(energy - energy[0]) / energy[0]) > 1e3 * 500 * EPS  # RK4's truncation error
 
 
 def test_gauss_legendre4_on_a_lie_poisson_system():

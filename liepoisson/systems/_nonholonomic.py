@@ -22,6 +22,7 @@ What a step must keep is the constraint $C\nabla H = 0$ and the energy.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import Any
 
@@ -155,7 +156,9 @@ class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
 
     def multipliers(self, y: ArrayLike) -> jax.Array:
         r"""$\lambda(\mu)$, shape `(..., m)`: the reaction is $C^\top\lambda$."""
-        y = self.check_regular(y)
+        return _multipliers(self, self.check_regular(y))
+
+    def _multipliers(self, y: jax.Array) -> jax.Array:
         C = jnp.asarray(self.constraints)
         hess = self._hessian(y)
         CH = jnp.einsum("ia,...ab->...ib", C, hess)
@@ -274,6 +277,13 @@ def _cramer(S: list[list[Any]], r: list[Any]) -> list[Any]:
         raise ValueError(f"heyoka's right-hand side is written for at most 4 constraints (Cramer's rule); got {m}")
     det = _det(S)
     return [_det([[r[i] if j == k else S[i][j] for j in range(m)] for i in range(m)]) / det for k in range(m)]
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _multipliers(system: LiePoissonDAlembert, y: jax.Array) -> jax.Array:
+    """`system.multipliers` compiled once per system and shape (a Hessian traced eagerly at
+    every call cost ~0.2 s)."""
+    return system._multipliers(y)
 
 
 def refuse_nonholonomic(system: Any, what: str) -> None:
