@@ -164,7 +164,9 @@ def _observed_orders(method, system, y0, hs, t_end):
     return np.log2(np.asarray(errors[:-1]) / np.asarray(errors[1:])), errors
 
 
-@pytest.mark.parametrize(("method", "order"), [(it.RK4, 4), (it.ImplicitMidpoint, 2), (it.GaussLegendre4, 4)])
+@pytest.mark.parametrize(("method", "order"), [
+    pytest.param(it.RK4, 4, marks=pytest.mark.slow), pytest.param(it.ImplicitMidpoint, 2, marks=pytest.mark.slow),
+    (it.GaussLegendre4, 4)])  # all three: python -m benchmarks.nonholonomic
 def test_classical_integrators_have_their_order_on_the_suslov_problem(method, order):
     suslov = lp.systems.suslov(INERTIA, A)
     y0 = np.asarray(suslov.project(np.array([1.5, -1.0, 2.0])))
@@ -173,8 +175,9 @@ def test_classical_integrators_have_their_order_on_the_suslov_problem(method, or
     assert np.all(np.abs(orders - order) <= 0.1), (orders, errors)
 
 
-@pytest.mark.parametrize("system", [lp.systems.suslov(INERTIA, A), lp.systems.chaplygin_sleigh()],
-                         ids=["suslov", "sleigh"])
+@pytest.mark.parametrize("system", [
+    pytest.param(lp.systems.suslov(INERTIA, A), id="suslov"),
+    pytest.param(lp.systems.chaplygin_sleigh(), id="sleigh", marks=pytest.mark.slow)])
 def test_gauss_legendre_methods_keep_the_constraint_and_the_energy(system):
     # H quadratic: the constraint C M^-1 mu is linear and the energy quadratic, so every
     # Gauss-Legendre method keeps both exactly; RK4 keeps the linear constraint too, not the energy
@@ -192,6 +195,7 @@ def test_gauss_legendre_methods_keep_the_constraint_and_the_energy(system):
     assert np.max(np.abs(energy - energy[0]) / energy[0]) > 1e3 * 500 * EPS  # RK4's truncation error
 
 
+@pytest.mark.slow  # 2 s; the order on the Suslov problem runs by default
 def test_gauss_legendre4_on_a_lie_poisson_system():
     # order 4 against the rigid body's exact flow, the Casimir |Pi|^2 kept (quadratic)
     body = lp.systems.RigidBody(INERTIA)
