@@ -51,7 +51,7 @@ def test_suslov_ground_truth_keeps_the_constraint_and_the_energy_to_t_200():
     y0 = np.asarray(suslov.project(np.array([[0.6, -0.2, 0.9], [1.0, 0.5, -0.3], [-0.4, 0.8, 0.1]])))
     states = it.ground_truth(suslov, y0, 0.1, 2000).states  # heyoka at tolerance eps
     energy = np.asarray(suslov.hamiltonian(states))
-    # issue 44 asks 1e-13; measured 1.2e-15 with the stabilisation of the constraint (1.0e-13 without)
+    # issue 44 asks 1e-13; measured ~1e-15 with the stabilisation of the constraint (1.0e-13 without)
     assert np.max(np.abs(energy - energy[:, :1]) / energy[:, :1]) <= 1e-14
     assert np.max(np.asarray(suslov.relative_constraint(states))) <= 1e-13
     # the Casimir |Pi|^2 is not conserved (the reaction is not a coadjoint motion)
@@ -185,10 +185,10 @@ def test_gauss_legendre_methods_keep_the_constraint_and_the_energy(system):
     for method in (it.ImplicitMidpoint, it.GaussLegendre4):
         states = np.asarray(method(system, 0.2).rollout(y0, 500))
         energy = np.asarray(system.hamiltonian(states))
-        # exact in exact arithmetic; the round-off of each step (the stage solve, y + z) drifts
-        # linearly, by about one eps a step (measured 4.7e-13 over 2000 steps on Suslov):
-        # allow 4 eps a step
-        assert np.max(np.abs(energy - energy[0]) / energy[0]) <= 4 * 500 * EPS
+        # exact in exact arithmetic, and no drift of round-off: the stabilised constraint keeps
+        # its offset from feeding the energy (without it 4.7e-13 over 2000 steps, about one eps
+        # a step; with it 3e-15 over 1e5 steps: python -m benchmarks.nonholonomic)
+        assert np.max(np.abs(energy - energy[0]) / energy[0]) <= 64 * EPS
         assert np.max(np.asarray(system.relative_constraint(states))) <= 1e-13
     rk4 = np.asarray(it.RK4(system, 0.2).rollout(y0, 500))
     energy = np.asarray(system.hamiltonian(rk4))
