@@ -13,6 +13,7 @@ from ._glpnet import GLPNet
 from ._isospectral import IsospectralPolynomial
 from ._legacy import upgrade_attributes
 from ._lpnet import LPNet
+from ._nonholonomic import DAlembertMap
 from ._reversible import Reversible
 
 
@@ -20,7 +21,8 @@ def load(path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -
     """Read a learned map written by `.save` (or the best weights of an Adam checkpoint),
     whatever its class (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`), from the class the
     file names; `system` as in `AbstractLearnedMap.load`."""
-    classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE, IsospectralPolynomial)}
+    classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE, IsospectralPolynomial,
+                                                    DAlembertMap)}
     attrs, groups = _checkpoint.read(path)  # read once: the class is in the file
     attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
     name = attrs.get("class")

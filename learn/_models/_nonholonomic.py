@@ -1,0 +1,144 @@
+r"""A learned step of a nonholonomic system that keeps the constraint and a learned energy
+exactly, for any weights ([Nonholonomic constraints][conventions-nonholonomic]).
+
+The state is the body velocity $\xi$ (what a gyroscope or an odometer reads), not the momentum:
+the constraint $C\xi = 0$ is known physics (the Suslov body's vector $a$, the sleigh's knife
+edge), while the momentum needs the inertia that is to be learned. With $N$ an orthonormal
+basis of $\mathfrak d = \ker C$ ($k = $ `dim` $- m$ columns), $w = N^\top\xi$, a learned
+lower-triangular $L$ ($\det L = 1$: the energy's scale is not identifiable), $u = L^\top w$:
+
+$$u' = \exp\bigl(h\,\Omega(w)\bigr)\,u, \qquad \xi' = N L^{-\top}u',$$
+
+$\Omega(w)$ a skew-symmetric $k\times k$ matrix from a network. So $C\xi' = 0$ to round-off and
+$\tfrac12|u|^2 = \tfrac12 w^\top LL^\top w$, a kinetic energy on $\mathfrak d$, is conserved
+exactly, for any weights: the map moves on the ellipsoid of the learned energy inside the
+constraint subspace; the true energy is conserved when $LL^\top$ is proportional to the true
+metric $N^\top\mathbb M N$ (for $\dot\xi$ of a quadratic $H = \tfrac12\mu^\top\mathbb M^{-1}\mu$,
+$\mu = \mathbb M\xi$). What it does not have: the Casimirs (the motion changes them) or a
+Poisson structure (there is none).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from integrators.internals import check_h, check_state
+from liepoisson.internals import positive_float
+from liepoisson.systems import LiePoissonDAlembert
+
+from ._base import AbstractLearnedMap
+from ._mlp import AffineMLP
+from ._network_spec import network_from_spec
+from ._networks import AbstractNetwork, check_network
+
+
+def constraint_basis(system: LiePoissonDAlembert) -> np.ndarray:
+    r"""$N$ `(dim, k)`: an orthonormal basis of $\ker C$, the admissible velocities (the right
+    singular vectors of $C$ beyond its rank)."""
+    C = system.constraints
+    return np.linalg.svd(C)[2][C.shape[0]:].T.copy()
+
+
+class DAlembertMap(AbstractLearnedMap):
+    r"""A learned step $\xi \mapsto \xi'$ of the body velocity of a `LiePoissonDAlembert`
+    system that keeps its constraint and a learned quadratic energy on the constraint subspace
+    exactly (module docstring). Fitted by `learn.fit` to `integrators.Trajectories` whose states
+    are **body velocities** (`system.body_velocity` of the momenta, or a gyroscope's readings).
+
+    **Arguments:** `system`, a `liepoisson.systems.LiePoissonDAlembert`; `hidden`, `activation`,
+    `key`: the network from $w$ ($k$) to the $k(k-1)/2$ entries of $\Omega$ (default two hidden
+    layers of 16, tanh); `h`; or `network`, any `learn.AbstractNetwork` of those sizes.
+    """
+
+    network: AbstractNetwork
+    log_diagonal: jax.Array
+    lower: jax.Array
+    system: LiePoissonDAlembert = eqx.field(static=True)
+    h: float | None
+
+    def __init__(self, system: LiePoissonDAlembert, hidden: Sequence[int] | None = None,
+                 activation: str | None = None, key: int | jax.Array | None = None, h: float | None = None, *,
+                 network: AbstractNetwork | None = None):
+        if not isinstance(system, LiePoissonDAlembert):
+            raise TypeError(f"system must be a liepoisson.systems.LiePoissonDAlembert (a nonholonomic system: the "
+                            f"map keeps its constraint); got {type(system).__name__}")
+        self.system = system
+        k = self.k
+        if k < 2:
+            raise ValueError(f"{system!r} admits a {k}-dimensional space of velocities: a step that keeps a "
+                             "quadratic energy there moves nothing (k >= 2 needed)")
+        n_out = k * (k - 1) // 2
+        if network is None:
+            network = AffineMLP(k, n_out, hidden=tuple(hidden) if hidden is not None else (16, 16),
+                                activation=activation or "tanh", key=0 if key is None else key)
+        elif hidden is not None or activation is not None or key is not None:
+            raise ValueError("give network= or hidden/activation/key, not both")
+        self.network = check_network(network, k, n_out, "admissible velocities to the rotation's generator")
+        self.log_diagonal = jnp.zeros(k)
+        self.lower = jnp.zeros(n_out)
+        self.h = None if h is None else positive_float(h, "h")
+
+    @property
+    def k(self) -> int:
+        """The dimension of the admissible velocities, `dim` minus the constraints."""
+        return self.system.dim - self.system.constraints.shape[0]
+
+    def metric_factor(self) -> jax.Array:
+        r"""$L$ `(k, k)`, lower triangular with $\det L = 1$: the learned energy is
+        $\tfrac12|L^\top N^\top\xi|^2$."""
+        k = self.k
+        d = self.log_diagonal - jnp.mean(self.log_diagonal)
+        rows, cols = np.tril_indices(k, -1)
+        return jnp.diag(jnp.exp(d)).at[rows, cols].set(self.lower)
+
+    def energy(self, xi: jax.Array) -> jax.Array:
+        r"""The learned energy $\tfrac12|L^\top N^\top\xi|^2$ (its scale fixed by $\det L = 1$),
+        shape `(...)`: what every step keeps."""
+        u = jnp.einsum("...a,ak,kj->...j", jnp.asarray(xi), jnp.asarray(constraint_basis(self.system)),
+                       self.metric_factor())
+        return 0.5 * jnp.sum(u * u, axis=-1)
+
+    def generator(self, w: jax.Array) -> jax.Array:
+        r"""$\Omega(w)$, the skew-symmetric `(k, k)` generator per unit time at the admissible
+        velocity $w = N^\top\xi$."""
+        k = self.k
+        rows, cols = np.tril_indices(k, -1)
+        entries = self.network(w)
+        G = jnp.zeros((k, k), dtype=entries.dtype).at[rows, cols].set(entries)
+        return G - G.T
+
+    def step(self, xi: jax.Array) -> jax.Array:
+        xi = check_state(xi, self.system.dim)
+        h = check_h(self)
+        N = jnp.asarray(constraint_basis(self.system))
+        L = self.metric_factor()
+        w = N.T @ xi
+        u = L.T @ w
+        A = h * self.generator(w)
+        if self.k == 2:  # the rotation in closed form: orthogonal to round-off
+            c, s = jnp.cos(A[1, 0]), jnp.sin(A[1, 0])
+            u_next = jnp.stack([c * u[0] - s * u[1], s * u[0] + c * u[1]])
+        else:
+            u_next = jax.scipy.linalg.expm(A) @ u
+        w_next = jax.scipy.linalg.solve_triangular(L.T, u_next, lower=False)
+        return N @ w_next
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
+
+    def hyperparameters(self) -> dict[str, Any]:
+        return {"network": self.network.spec()}
+
+    def reinitialised(self, key):
+        return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))
+
+    @classmethod
+    def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
+        return cls(system, h=h, network=network_from_spec(hyperparameters["network"], key))
