@@ -76,7 +76,7 @@ def _long(obs, rng):
 
 @pytest.mark.parametrize(("system", "measure"), [
     pytest.param(ROTATED, ("configurations", "velocities"), id="rotations, both"),
-    pytest.param(ROTATED, ("velocities",), id="rotations, velocities"),
+    pytest.param(ROTATED, ("velocities",), id="rotations, velocities", marks=pytest.mark.slow),
     pytest.param(lp.systems.Kirchhoff(), ("configurations",), id="poses, configurations")])
 def test_body_observations_from_npz_and_csv_files(tmp_path, system, measure):
     y0 = unit_rows(3, system.dim, 0)

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_h, check_state
 from liepoisson.internals import positive_float
 from liepoisson.systems import LiePoissonDAlembert
@@ -45,11 +46,16 @@ def constraint_basis(system: LiePoissonDAlembert) -> np.ndarray:
     return np.linalg.svd(C)[2][C.shape[0]:].T.copy()
 
 
-class DAlembertMap(AbstractLearnedMap):
+class DAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
     r"""A learned step $\xi \mapsto \xi'$ of the body velocity of a `LiePoissonDAlembert`
     system that keeps its constraint and a learned quadratic energy on the constraint subspace
-    exactly (module docstring). Fitted by `learn.fit` to `integrators.Trajectories` whose states
-    are **body velocities** (`system.body_velocity` of the momenta, or a gyroscope's readings).
+    exactly (module docstring). Fitted by `learn.fit` to `integrators.Trajectories` or
+    `integrators.Observations` whose states are **body velocities** (`system.body_velocity` of
+    the momenta, or a gyroscope's readings).
+
+    `lifted_step(g, xi)` carries the configuration with the mean velocity of the step,
+    $g' = g\exp\bigl(\tfrac h2(\xi + \xi')\bigr)$ (order 2; admissible, so a knife edge does
+    not slip sideways within the step): where the sleigh is and where it points.
 
     **Arguments:** `system`, a `liepoisson.systems.LiePoissonDAlembert`; `hidden`, `activation`,
     `key`: the network from $w$ ($k$) to the $k(k-1)/2$ entries of $\Omega$ (default two hidden
@@ -128,6 +134,11 @@ class DAlembertMap(AbstractLearnedMap):
             u_next = jax.scipy.linalg.expm(A) @ u
         w_next = jax.scipy.linalg.solve_triangular(L.T, u_next, lower=False)
         return N @ w_next
+
+    def lifted_step(self, g: jax.Array, xi: jax.Array) -> tuple[jax.Array, jax.Array]:
+        xi_next = self.step(xi)
+        h = check_h(self)
+        return self.system.require_group().right_exp(g, 0.5 * h * (xi + xi_next)), xi_next
 
     @property
     def exact_flows_per_step(self) -> int:
