@@ -86,3 +86,18 @@ def test_a_fit_to_suslov_velocities_recovers_the_energy_and_the_motion(tmp_path)
     fitted.save(tmp_path / "map.h5")
     again = learn.load(tmp_path / "map.h5", SUSLOV)
     np.testing.assert_array_equal(np.asarray(again.rollout(truth[0], 10)), np.asarray(fitted.rollout(truth[0], 10)))
+
+
+def test_the_lifted_step_moves_the_sleigh_with_the_mean_admissible_velocity():
+    sleigh = lp.systems.chaplygin_sleigh()
+    model = learn.DAlembertMap(sleigh, key=3, h=0.1)
+    xi0 = np.asarray(sleigh.body_velocity(sleigh.project(np.array([0.8, 0.5, 0.3]))))
+    g, xi = model.lifted_rollout(np.eye(3).reshape(9), xi0, 200)
+    g, xi = np.asarray(g).reshape(-1, 3, 3), np.asarray(xi)
+    # on SE(2): a rotation block and the row (0, 0, 1), to round-off of 200 products
+    R = g[:, :2, :2]
+    np.testing.assert_allclose(np.einsum("tji,tjk->tik", R, R), np.broadcast_to(np.eye(2), R.shape), atol=200 * EPS)
+    np.testing.assert_array_equal(g[:, 2], np.broadcast_to([0.0, 0.0, 1.0], (201, 3)))
+    # the heading advances by h times the mean turning rate of the step (exp of a twist)
+    heading = np.unwrap(lp.systems.sleigh_pose(g.reshape(-1, 9))[:, 0])
+    np.testing.assert_allclose(np.diff(heading), 0.05 * (xi[1:, 0] + xi[:-1, 0]), atol=1e-13)
