@@ -70,6 +70,7 @@ def test_automatic_splitting_has_strang_order(name):
     assert abs(study.order - 2.0) < 0.1
 
 
+@pytest.mark.slow  # ~5 s; by default the G-LPNet is trained on the diamond below, LPNets on the catalogue elsewhere
 @TRAINED
 def test_lpnet_trains_and_rolls_out_on_the_orbit(name):
     system, data = system_and_data(name)

@@ -77,7 +77,7 @@ def _long(obs, rng):
 @pytest.mark.parametrize(("system", "measure"), [
     pytest.param(ROTATED, ("configurations", "velocities"), id="rotations, both"),
     pytest.param(ROTATED, ("velocities",), id="rotations, velocities", marks=pytest.mark.slow),
-    pytest.param(lp.systems.Kirchhoff(), ("configurations",), id="poses, configurations")])
+    pytest.param(lp.systems.Kirchhoff(), ("configurations",), id="poses, configurations", marks=pytest.mark.slow)])
 def test_body_observations_from_npz_and_csv_files(tmp_path, system, measure):
     y0 = unit_rows(3, system.dim, 0)
     g0 = Rotation.random(3, random_state=1).as_quat()

@@ -88,6 +88,7 @@ def test_a_fit_to_suslov_velocities_recovers_the_energy_and_the_motion(tmp_path)
     np.testing.assert_array_equal(np.asarray(again.rollout(truth[0], 10)), np.asarray(fitted.rollout(truth[0], 10)))
 
 
+@pytest.mark.slow  # ~4 s (a lifted rollout compiled); the default run keeps the constraint tests
 def test_the_lifted_step_moves_the_sleigh_with_the_mean_admissible_velocity():
     sleigh = lp.systems.chaplygin_sleigh()
     model = learn.DAlembertMap(sleigh, key=3, h=0.1)

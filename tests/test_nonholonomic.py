@@ -170,9 +170,9 @@ def test_classical_integrators_have_their_order_on_the_suslov_problem(method, or
     assert np.all(np.abs(orders - order) <= 0.1), (orders, errors)
 
 
-@pytest.mark.parametrize("system", [
-    pytest.param(lp.systems.suslov(INERTIA, A), id="suslov"),
-    pytest.param(lp.systems.chaplygin_sleigh(), id="sleigh", marks=pytest.mark.slow)])
+@pytest.mark.slow  # ~3 s each (compiling three methods); the figures: python -m benchmarks.nonholonomic
+@pytest.mark.parametrize("system", [lp.systems.suslov(INERTIA, A), lp.systems.chaplygin_sleigh()],
+                         ids=["suslov", "sleigh"])
 def test_gauss_legendre_methods_keep_the_constraint_and_the_energy(system):
     # H quadratic: the constraint C M^-1 mu is linear and the energy quadratic, so every
     # Gauss-Legendre method keeps both exactly; RK4 keeps the linear constraint too, not the energy
