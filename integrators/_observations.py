@@ -148,6 +148,14 @@ def poisson_structure_difference(a: AbstractPoissonSystem, b: AbstractPoissonSys
         return None
     if a.dim != b.dim:
         return f"the dimensions differ ({a.dim} and {b.dim})"
+    from liepoisson.systems import LiePoissonDAlembert
+
+    for x, y in ((a, b), (b, a)):
+        if isinstance(x, LiePoissonDAlembert) and not (
+                isinstance(y, LiePoissonDAlembert) and np.array_equal(x.constraints, y.constraints)
+                and poisson_structure_difference(x.system, y.system) is None):
+            return (f"{x!r} is nonholonomic: its motion (the constraint's reaction force) is not that of "
+                    f"{y!r}'s bracket")
     random = np.random.default_rng(0).standard_normal((4, a.dim))
     ys = np.concatenate([np.eye(a.dim), random])
     Ba, Bb = np.asarray(a.poisson_tensor(ys)), np.asarray(b.poisson_tensor(ys))

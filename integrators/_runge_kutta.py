@@ -117,9 +117,11 @@ class GaussLegendre4(AbstractImplicitStepMap):
     \tfrac{\sqrt3}6 & \tfrac14\end{pmatrix}$, $b = (\tfrac12, \tfrac12)$: order 4, symmetric,
     and, like the implicit midpoint rule (the one-stage Gauss method), it conserves every
     linear and quadratic first integral exactly (Thm. IV.2.2): the quadratic Casimirs of a
-    Lie-Poisson system; the constraint $C\mathbb M^{-1}\mu = 0$ and the energy
-    $\tfrac12\mu^\top\mathbb M^{-1}\mu$ of a nonholonomic system with a quadratic Hamiltonian
-    (`liepoisson.systems.suslov`, `chaplygin_sleigh`), to the round-off of the stage solve.
+    Lie-Poisson system. On a nonholonomic system with a quadratic Hamiltonian
+    (`liepoisson.systems.suslov`, `chaplygin_sleigh`) the constraint $g = C\mathbb M^{-1}\mu$
+    obeys the linear $\dot g = -\kappa g$ (Baumgarte's term), so every stage of a state on it
+    stays on it, and there the energy $\tfrac12\mu^\top\mathbb M^{-1}\mu$ is a quadratic
+    invariant: both kept to the round-off of the stage solve.
 
     The stages are solved by `iterations` Newton steps on the $2\,$`dim` equations from
     $Z = 0$; a step whose last Newton step still moves them is NaN.

@@ -53,7 +53,9 @@ def test_at_rest_nothing_moves_and_bad_input_is_refused():
         learn.DAlembertMap(SUSLOV, hidden=(4,), network=model.network)
 
 
-def test_the_constraint_basis_is_orthonormal_and_admissible():
+def test_the_constraint_basis_is_orthonormal_admissible_and_fixed():
+    # the sleigh's is the first two basis vectors, whatever LAPACK returns: maps saved in it load anywhere
+    np.testing.assert_array_equal(constraint_basis(lp.systems.chaplygin_sleigh()), np.eye(3)[:, :2])
     for system in (SUSLOV, VEHICLE):
         N = constraint_basis(system)
         assert N.shape == (system.dim, system.dim - system.constraints.shape[0])

@@ -138,8 +138,12 @@ def test_a_system_that_is_not_lie_poisson_is_refused():
         lp.systems.LiePoissonDAlembert(lp.systems.suslov(), (1.0, 0.0, 0.0))
     with pytest.raises(TypeError, match="conservative"):
         lp.systems.LiePoissonDAlembert(lp.systems.damped_rigid_body(), (1.0, 0.0, 0.0))
-    with pytest.raises(ValueError, match="mass and inertia"):
+    with pytest.raises(ValueError, match="mass"):
         lp.systems.chaplygin_sleigh(mass=0.0)
+    with pytest.raises(TypeError, match="a must be a real number"):
+        lp.systems.chaplygin_sleigh(a=[1.0, 2.0])
+    with pytest.raises(ValueError, match=r"shape \(\.\.\., 9\)"):
+        lp.systems.sleigh_pose(np.eye(3))
 
 
 def test_what_moves_along_coadjoint_orbits_refuses_a_nonholonomic_system():
@@ -202,3 +206,42 @@ def test_gauss_legendre4_on_a_lie_poisson_system():
     states = np.asarray(it.GaussLegendre4(body, 0.1).rollout(y0, 500))
     casimir = np.sum(states**2, axis=-1)
     assert np.max(np.abs(casimir - casimir[0])) <= 500 * EPS
+
+
+def test_the_stabilised_constraint_decays_at_its_rate_off_the_constraint():
+    # d/dt (C grad H) = C Hess f = -kappa C grad H for any state, admissible or not
+    import jax
+
+    for system in (lp.systems.suslov(INERTIA, A), lp.systems.chaplygin_sleigh()):
+        y = np.array([0.7, -0.4, 1.1])  # not admissible
+        hess = np.asarray(jax.hessian(system.hamiltonian)(y))
+        rate = system.constraints @ hess @ np.asarray(system.vector_field(y))
+        np.testing.assert_allclose(rate, -system.STABILISATION * np.asarray(system.constraint(y)), rtol=0,
+                                   atol=64 * EPS)
+
+
+def test_data_and_models_of_another_motion_are_refused():
+    import learn
+
+    suslov = lp.systems.suslov(INERTIA, A)
+    y0 = np.asarray(suslov.project(np.array([[0.6, -0.2, 0.9], [1.0, 0.5, -0.3]])))
+    obs = it.Observations(suslov, 0.1 * np.arange(4), list(it.ground_truth(suslov, y0, 0.1, 3).states))
+    # a rigid body's bracket moves the momenta without the reaction: not the observations' motion
+    with pytest.raises(ValueError, match="nonholonomic"):
+        obs.check_system(lp.systems.RigidBody(INERTIA))
+    with pytest.raises(ValueError, match="nonholonomic"):
+        learn.ParametricHamiltonian(suslov, lambda y, t: 0.5 * jnp_sum(y, t), (1.0, 2.0, 3.0))
+    # momenta are not the velocities a DAlembertMap steps
+    with pytest.raises(ValueError, match="not admissible body velocities"):
+        learn.fit(learn.DAlembertMap(suslov, key=0, h=0.1), obs, optimiser=learn.LevenbergMarquardt(1))
+
+
+def jnp_sum(y, theta):
+    return (theta * y * y).sum()
+
+
+def test_gauss_legendre4_keeps_a_quadratic_casimir():
+    body = lp.systems.RigidBody(INERTIA)
+    states = np.asarray(it.GaussLegendre4(body, 0.1).rollout(np.array([0.3, -0.8, 0.5]), 20))
+    casimir = np.sum(states**2, axis=-1)
+    assert np.max(np.abs(casimir - casimir[0])) <= 20 * 8 * EPS  # exact up to the stage solve's round-off

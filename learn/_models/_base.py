@@ -50,6 +50,10 @@ class AbstractLearnedMap(AbstractStepMap):
         constructor's keyword arguments)."""
         return cls(system, key=key, h=h, **hyperparameters)
 
+    def check_data(self, states: np.ndarray, what: str) -> None:
+        """`ValueError` if the training `states` `(N, dim)` cannot be this map's states (every
+        state can, unless a subclass says)."""
+
     def training_prediction(self, y0: jax.Array, y1: jax.Array) -> jax.Array:
         """What the state loss compares with $y_1$ for the pair $(y_0, y_1)$ (one sample each):
         `step(y0)`; a map with an implicit step returns an explicit residual form instead that

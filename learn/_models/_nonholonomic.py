@@ -40,10 +40,26 @@ from ._networks import AbstractNetwork, check_network
 
 
 def constraint_basis(system: LiePoissonDAlembert) -> np.ndarray:
-    r"""$N$ `(dim, k)`: an orthonormal basis of $\ker C$, the admissible velocities (the right
-    singular vectors of $C$ beyond its rank)."""
+    r"""$N$ `(dim, k)`: an orthonormal basis of $\ker C$, the admissible velocities, the same on
+    every machine (a saved map's weights are in it): the basis vectors $e_i$ projected onto
+    $\ker C$ and orthonormalised in order (Gram-Schmidt, twice), those that add less than
+    $10^{-6}$ skipped, each signed so that its largest entry is positive."""
     C = system.constraints
-    return np.linalg.svd(C)[2][C.shape[0]:].T.copy()
+    dim, k = C.shape[1], C.shape[1] - C.shape[0]
+    P = np.eye(dim) - C.T @ np.linalg.solve(C @ C.T, C)
+    basis: list[np.ndarray] = []
+    for i in range(dim):
+        v = P[:, i].copy()
+        for _ in range(2):
+            for b in basis:
+                v -= (b @ v) * b
+        norm = np.linalg.norm(v)
+        if norm > 1e-6:
+            v /= norm
+            basis.append(v if v[np.argmax(np.abs(v))] > 0 else -v)
+        if len(basis) == k:
+            break
+    return np.stack(basis, axis=1)
 
 
 class DAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
@@ -89,6 +105,23 @@ class DAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
         self.log_diagonal = jnp.zeros(k)
         self.lower = jnp.zeros(n_out)
         self.h = None if h is None else positive_float(h, "h")
+
+    #: Training states whose largest relative constraint defect $|C\xi| / (|c_i||\xi|)$
+    #: exceeds this are refused: they are not velocities of the system (momenta, most likely),
+    #: or noisier than a tenth of their size.
+    DATA_DEFECT_MAX = 0.1
+
+    def check_data(self, states: np.ndarray, what: str) -> None:
+        """`ValueError` unless `states` are admissible body velocities (to `DATA_DEFECT_MAX`)."""
+        C = self.system.constraints
+        size = np.linalg.norm(states, axis=-1, keepdims=True)
+        defect = np.abs(states @ C.T) / (np.linalg.norm(C, axis=1) * np.where(size > 0, size, 1.0))
+        worst = float(np.max(defect, initial=0.0))
+        if worst > self.DATA_DEFECT_MAX:
+            raise ValueError(
+                f"{what} are not admissible body velocities of {self.system!r}: a state's constraint defect "
+                f"|C xi| / (|c| |xi|) is {worst:.3g} (at most {self.DATA_DEFECT_MAX} accepted). A DAlembertMap steps "
+                "body velocities (system.body_velocity of the momenta, or a gyroscope's readings), not momenta")
 
     @property
     def k(self) -> int:
@@ -148,7 +181,10 @@ class DAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
         return {"network": self.network.spec()}
 
     def reinitialised(self, key):
-        return eqx.tree_at(lambda m: m.network, self, self.network.reinitialised(key))
+        """Fresh network weights from `key` and the identity metric."""
+        return eqx.tree_at(lambda m: (m.network, m.log_diagonal, m.lower), self,
+                           (self.network.reinitialised(key), jnp.zeros_like(self.log_diagonal),
+                            jnp.zeros_like(self.lower)))
 
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):

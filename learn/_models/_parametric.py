@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators.internals import check_h, check_state, rk4_steps
-from liepoisson.internals import check_system, positive_float, positive_int
+from liepoisson.internals import check_system, positive_float, positive_int, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
 
 from .._solvers._quasi_newton import QuasiNewton
@@ -46,6 +46,7 @@ class ParametricHamiltonian(AbstractBodyMap):
     def __init__(self, system: AbstractPoissonSystem, hamiltonian: Callable[[jax.Array, jax.Array], jax.Array],
                  theta: ArrayLike, *, substeps: int = 10, h: float | None = None, key: Any = None):
         self.system = check_system(system)
+        refuse_nonholonomic(system, "a ParametricHamiltonian (B grad H, without the reaction force)")
         if not callable(hamiltonian):
             raise TypeError(f"hamiltonian must be a function (y, theta) -> scalar; got {hamiltonian!r}")
         theta = np.asarray(theta, dtype=np.float64)

@@ -88,6 +88,7 @@ class AbstractPairsLoss(AbstractLoss, AbstractLeastSquares):
         self.check_model(model)
         pairs = prepare(data, model.system, h, validation_fraction, seed,
                         conserves_casimirs=isinstance(model, AbstractCasimirConservingMap))
+        model.check_data(np.concatenate([np.asarray(pairs.y0), np.asarray(pairs.y1)]), "data")
         if model.h is not None and abs(model.h - pairs.h) > 1e-12 * pairs.h:
             raise ValueError(
                 f"the model's step h={model.h} differs from the data's h={pairs.h}; fit a model built "

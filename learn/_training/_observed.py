@@ -87,6 +87,7 @@ class TrajectoryLoss(AbstractLoss):
         data.check_system(model.system, "the model's system")  # the same bracket and Casimirs
         if isinstance(model, AbstractCasimirConservingMap):
             check_leaves(data, "data")
+        model.check_data(np.concatenate(data.states), "data")
         train, val = data.split(validation_fraction, seed)
         substeps = substeps_for(data, self.max_step)
         if h is not None:

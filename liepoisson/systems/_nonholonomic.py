@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 
 from .._groups import AbstractLieGroup, MatrixGroup
 from .._namespace import HEYOKA
+from .._validation import positive_float
 from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem, AbstractPoissonSystem
 
 #: Constraint covectors whose smallest singular value is below this fraction of the largest
@@ -145,8 +146,8 @@ class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
     def hamiltonian_splitting(self):
         raise ValueError(
             f"{self!r} is nonholonomic: its flow is not a composition of Hamiltonian flows (the Casimirs change), so "
-            "the splitting methods of integrators.splitting cannot integrate it; integrators.ground_truth (heyoka) "
-            "and integrators.RK4 can")
+            "the splitting methods of integrators.splitting cannot integrate it; integrators.GaussLegendre4, "
+            "ImplicitMidpoint (the constraint and, for a quadratic H, the energy kept), RK4 and ground_truth can")
 
     # -- the constraint ------------------------------------------------------------------
     def _hessian(self, y: jax.Array) -> jax.Array:
@@ -298,8 +299,8 @@ def refuse_nonholonomic(system: Any, what: str) -> None:
         raise ValueError(  # noqa: TRY004 (a system of the right type, unsuitable)
             f"{system!r} is nonholonomic: {what} moves along the coadjoint orbit (its Casimirs kept), while the "
             "constraint's reaction force changes the Casimirs, so it would follow the unconstrained system. "
-            "Integrate it with integrators.ground_truth (heyoka) or integrators.RK4; learned maps and classical "
-            "integrators that keep the constraint are not implemented yet")
+            "Integrate it with integrators.GaussLegendre4 or ImplicitMidpoint (they keep the constraint and, for a "
+            "quadratic H, the energy), RK4 or ground_truth (heyoka); learn it with learn.DAlembertMap")
 
 
 # -- the named examples ----------------------------------------------------------------------
@@ -338,9 +339,10 @@ def chaplygin_sleigh(mass: float = 1.0, inertia: float = 1.0, a: float = 0.5) ->
     from .._catalogue import se2
     from ._lie_poisson import LiePoissonSystem
 
-    m, J, a = (float(np.asarray(x, dtype=np.float64)) for x in (mass, inertia, a))
-    if not (np.isfinite(m) and m > 0.0 and np.isfinite(J) and J > 0.0):
-        raise ValueError(f"mass and inertia must be finite and > 0; got mass={mass!r}, inertia={inertia!r}")
+    m, J = positive_float(mass, "mass"), positive_float(inertia, "inertia")
+    if isinstance(a, (bool, str, bytes)) or np.ndim(a) != 0:
+        raise TypeError(f"a must be a real number (the distance of the centre of mass along the blade); got {a!r}")
+    a = float(a)
     if not np.isfinite(a):
         raise ValueError(f"a must be finite (the distance of the centre of mass along the blade); got {a!r}")
     M = np.array([[J + m * a * a, 0.0, m * a], [0.0, m, 0.0], [m * a, 0.0, m]])
@@ -356,6 +358,10 @@ def chaplygin_sleigh(mass: float = 1.0, inertia: float = 1.0, a: float = 0.5) ->
 def sleigh_pose(g: ArrayLike) -> np.ndarray:
     r"""`(heading, x, y)` of SE(2) configurations `(..., 9)` (3x3 matrices row by row): the
     angle of the blade from the x axis and the position of the contact point."""
-    g = np.asarray(g, dtype=np.float64).reshape(np.shape(g)[:-1] + (3, 3))
+    g = np.asarray(g, dtype=np.float64)
+    if g.ndim < 1 or g.shape[-1] != 9:
+        raise ValueError(f"g must hold SE(2) configurations as 3x3 matrices row by row, shape (..., 9); got shape "
+                         f"{g.shape}")
+    g = g.reshape(g.shape[:-1] + (3, 3))
     return np.stack([np.arctan2(g[..., 1, 0], g[..., 0, 0]), g[..., 0, 2], g[..., 1, 2]], axis=-1)
 
