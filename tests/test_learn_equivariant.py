@@ -182,6 +182,7 @@ def test_casimirs_exact_and_save_load_roundtrip(tmp_path):
     assert learn.LPNet(SO4, hidden=(8, 8), key=5).hyperparameters()["network"]["kind"] == "AffineMLP"
 
 
+@pytest.mark.slow  # 1000 epochs (~4 s); the symmetry for any weights is tested by default above
 def test_training_keeps_the_symmetry_and_fits():
     data = it.ground_truth(RB, Y, h=0.1, n_steps=20, progress=False)
     net = equivariant(RB, key=0, h=None)

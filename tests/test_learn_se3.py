@@ -105,6 +105,7 @@ def test_errors_name_the_arguments_y0_y1(system):
         param.params_from_pair(y0, y0[:5], H)
 
 
+@pytest.mark.slow  # a training run (~4 s); the Casimirs for any parameters are tested by default above
 def test_lpnet_with_se3_rotation_shear(system):
     """An LPNet on this parametrisation trains a few epochs and conserves the Casimirs."""
     import integrators as it
