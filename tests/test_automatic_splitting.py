@@ -44,6 +44,7 @@ def diamond_with_ridges() -> LiePoissonSystem:
     )
 
 
+@pytest.mark.slow  # ~3 s; the pieces-sum and order tests below run by default
 def test_diagonal_quadratic_gives_the_axis_splitting_of_the_catalogue():
     """The user-built rigid body splits into the three axis rotations, in the catalogue's order:
     Strang equals the hand-written RigidBody splitting to round-off."""

@@ -41,6 +41,7 @@ def test_any_theta_keeps_the_spectrum_to_round_off():
     assert np.max(np.abs(ys - classical)) > 1e-3
 
 
+@pytest.mark.slow  # a fit (~4 s); the step's oracles (theta = (c), the explicit polynomial) run by default
 def test_fit_recovers_the_coefficients_that_made_the_data():
     z = lp.systems.Zeitlin(4)
     true = learn.IsospectralPolynomial(z, degree=2, theta=[1.3, 0.4], h=0.1, tol=1e-14)
