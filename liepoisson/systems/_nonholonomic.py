@@ -212,11 +212,9 @@ class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
     #: so $\frac{d}{dt}C\nabla H = -\kappa\,C\nabla H$ (Baumgarte's stabilisation), in
     #: `vector_field` and heyoka's right-hand side alike. On the constraint the equations are
     #: unchanged; off it, the round-off that leaves it decays instead of feeding the energy
-    #: ($\dot H = \langle C\nabla H, \lambda\rangle$). Without it a Runge-Kutta method, which
-    #: keeps the (linear) constraint's round-off offset exactly, drifts the energy linearly:
-    #: on the Suslov problem over 10^5 steps of 0.1 the implicit midpoint rule's energy error
-    #: is 3.1e-15 with it and 2.4e-11 without, heyoka's to t = 200 1.9e-15 instead of 1.0e-13
-    #: (the rates 1 and 10 alike; `python -m benchmarks.nonholonomic`).
+    #: ($\dot H = \langle C\nabla H, \lambda\rangle$): a Runge-Kutta method keeps the (linear)
+    #: constraint's round-off offset exactly and would drift the energy linearly without it
+    #: (BENCHMARKS.md, "Nonholonomic systems", with and without).
     STABILISATION = 1.0
 
     def heyoka_system(self) -> list[tuple[Any, Any]]:
@@ -286,8 +284,8 @@ def _cramer(S: list[list[Any]], r: list[Any]) -> list[Any]:
 
 @functools.partial(jax.jit, static_argnums=0)
 def _multipliers(system: LiePoissonDAlembert, y: jax.Array) -> jax.Array:
-    """`system.multipliers` compiled once per system and shape (a Hessian traced eagerly at
-    every call cost ~0.2 s)."""
+    """`system.multipliers` compiled once per system and shape (not a Hessian traced eagerly at
+    every call)."""
     return system._multipliers(y)
 
 
