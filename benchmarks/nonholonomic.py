@@ -2,7 +2,7 @@ r"""Nonholonomic systems (the Suslov problem, the Chaplygin sleigh): heyoka's gr
 the classical integrators' observed orders, constraint and energy over long runs, and cost a
 step (BENCHMARKS.md, "Nonholonomic systems").
 
-    python -m benchmarks.nonholonomic [--steps 100000] [--h 0.1] [--learned-noise 0 1e-3]
+    python -m benchmarks.nonholonomic [--steps 100000] [--h 0.1]
     python -m benchmarks.nonholonomic --report
 
 Protocol: the Suslov problem with I = (1, 2, 3) and a = (1, 1, 1) (not an eigenvector of the
@@ -14,15 +14,8 @@ heyoka at h = 0.2, 0.1, 0.05 (log2 of successive ratios), then `--steps` steps o
 largest relative energy error, its value at the end (drift), the largest relative constraint,
 and the microseconds a step (compiled rollout, the second of two runs).
 
-Learned (`--learned-noise`): `learn.DAlembertMap` on each system's body velocities, 100
-trajectories x 20 steps of 0.1 from |Pi| = 1 (projected), Gaussian noise of the given fraction
-of the velocities' RMS size, fitted by `learn.fit` with 200 Levenberg-Marquardt steps on the
-trajectory loss (`integrators.Observations` of the velocities, starts fitted); 12 held-out
-starts rolled out to t = 200 against heyoka: the true energy's largest relative error, the
-relative error of the state at t = 200 (the asymptotic steady rotation; mean and largest), the
-constraint; for the sleigh, lifted from the identity, the speed and the heading at t = 200
-(the asymptotic straight line). Beside it `learn.NeuralODE` (two hidden layers of 16) fitted to the same data by
-500 BFGS iterations.
+The learned maps on the same systems (`learn.DAlembertMap`, a neural ODE) are study W6:
+`python -m paper run W6 --full`.
 """
 
 from __future__ import annotations
@@ -33,17 +26,12 @@ import time
 import numpy as np
 
 import integrators as it
-import liepoisson as lp
+from paper.w6_nonholonomic import systems
 
 from ._report import add_output_arguments, saved_results, write_json
 
 NAME = "nonholonomic"
 METHODS = {"RK4": (it.RK4, 4), "implicit midpoint": (it.ImplicitMidpoint, 2), "GaussLegendre4": (it.GaussLegendre4, 4)}
-
-
-def systems() -> dict[str, lp.systems.LiePoissonDAlembert]:
-    return {"Suslov": lp.systems.suslov((1.0, 2.0, 3.0), (1.0, 1.0, 1.0)),
-            "Chaplygin sleigh": lp.systems.chaplygin_sleigh(1.0, 1.0, 0.5)}
 
 
 def initial_state(system) -> np.ndarray:
@@ -88,87 +76,8 @@ def measure_method(system, name: str, steps: int, h: float) -> dict:
             "us_per_step": 1e6 * seconds / steps}
 
 
-def measure_learned(name: str, noise: float, seed: int = 0) -> list[dict]:
-    """The learned map and the neural ODE on the body velocities of `name` (module docstring)."""
-    import jax
-
-    import learn
-
-    system = systems()[name]
-    rng = np.random.default_rng(seed)
-    # H = mu^T M^-1 mu / 2 with mu = M xi: the true energy of a velocity is xi^T M xi / 2
-    M = np.linalg.inv(np.asarray(jax.hessian(lambda y: system.hamiltonian(y))(np.zeros(system.dim))))
-
-    def starts(n):
-        y = rng.normal(size=(n, system.dim))
-        return np.asarray(system.project(y / np.linalg.norm(y, axis=1, keepdims=True)))
-
-    def energy(x):
-        return 0.5 * np.einsum("...a,ab,...b->...", x, M, x)
-
-    xi = np.asarray(system.body_velocity(it.ground_truth(system, starts(100), 0.1, 20).states))
-    rms = float(np.sqrt(np.mean(np.sum(xi**2, axis=-1))))
-    noisy = xi + noise * rms * np.random.default_rng(seed + 1).normal(size=xi.shape)
-    data = it.Observations(system, 0.1 * np.arange(21), list(noisy))
-    z0 = starts(12)
-    sleigh = system.group is not None and system.group.size == 9
-    g0 = np.tile(np.eye(3).reshape(1, 9), (12, 1)) if sleigh else None
-    truth = it.ground_truth(system, z0, 0.1, 2000, **({"g0": g0} if sleigh else {}))
-    test = np.asarray(system.body_velocity(truth.states))
-    out = []
-    for label, model, optimiser in (
-            ("DAlembertMap", learn.DAlembertMap(system, key=seed, h=0.1), learn.LevenbergMarquardt(200)),
-            ("neural ODE", learn.NeuralODE(system, hidden=(16, 16), key=seed, h=0.1),
-             learn.QuasiNewton(500, "bfgs"))):
-        start = time.perf_counter()
-        fitted, _ = learn.fit(model, data, optimiser=optimiser, validation_fraction=0.0, progress=False)
-        seconds = time.perf_counter() - start
-        row = {"system": name, "model": label, "noise": noise, "fit_seconds": seconds}
-        try:
-            if sleigh and isinstance(fitted, learn.DAlembertMap):
-                g, pred = fitted.lifted_rollout(g0, test[:, 0], 2000)
-                pose, true_pose = lp.systems.sleigh_pose(np.asarray(g)[:, -1]), lp.systems.sleigh_pose(
-                    truth.configurations[:, -1])
-                turn = np.abs(np.angle(np.exp(1j * (pose[:, 0] - true_pose[:, 0]))))
-                row |= {"heading_error_max_rad": float(np.max(turn)),
-                        "heading_error_max_rel": float(np.max(turn / np.abs(true_pose[:, 0]))),
-                        "speed_error_max_rel": float(np.max(np.abs(np.asarray(pred)[:, -1, 1] - test[:, -1, 1])
-                                                            / np.abs(test[:, -1, 1])))}
-            else:
-                pred = np.stack([np.asarray(fitted.rollout(x, 2000)) for x in test[:, 0]])
-        except it.RolloutDivergedError as err:  # a diverging baseline: reported as such
-            out.append(row | {"diverged": str(err)[:200]})
-            continue
-        pred = np.asarray(pred)
-        final = np.linalg.norm(pred[:, -1] - test[:, -1], axis=-1) / np.linalg.norm(test[:, -1], axis=-1)
-        C = system.constraints
-        out.append(row | {
-            "energy_max": float(np.max(np.abs(energy(pred) - energy(test)) / energy(test))),
-            "final_state_max": float(np.max(final)), "final_state_mean": float(np.mean(final)),
-            "constraint": float(np.max(np.abs(pred @ C.T) / np.linalg.norm(pred, axis=-1, keepdims=True)
-                                       / np.linalg.norm(C, axis=1)))})
-    return out
-
-
 def report(results: dict) -> None:
-    learned = results.get("learned", [])
-    if learned:
-        print("| system | learned | noise | fit [s] | true energy, max rel. error to t = 200 | state at t = 200, "
-              "max (mean) rel. error | constraint | sleigh: speed, heading at t = 200 |")
-        print("|---|---|---|---|---|---|---|---|")
-        for r in learned:
-            head = f"| {r.get('system', 'Suslov')} | {r['model']} | {r['noise']:g} | {r['fit_seconds']:.0f}"
-            if "diverged" in r:
-                print(f"{head} | diverged | | | |")
-                continue
-            sleigh = (f"{r['speed_error_max_rel']:.1e}, {r['heading_error_max_rad']:.1e} rad "
-                      f"({r['heading_error_max_rel']:.1e} of the turn)" if "speed_error_max_rel" in r else "")
-            print(f"{head} | {r['energy_max']:.2e} | {r['final_state_max']:.2e} ({r['final_state_mean']:.2e}) | "
-                  f"{r['constraint']:.2e} | {sleigh} |")
-        print()
     for name, r in results.items():
-        if name == "learned":
-            continue
         truth = r.get("ground_truth")
         if truth:
             print(f"{name}: heyoka to t = {truth['t_end']:g}: energy drift {truth['energy_drift']:.2e}, constraint "
@@ -187,19 +96,13 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument("--h", type=float, default=0.1)
-    parser.add_argument("--learned-noise", type=float, nargs="*", default=[],
-                        help="fit the learned map and the neural ODE at these noise levels (e.g. 0 1e-3)")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
     if args.report:
         report(saved_results(args.out))
         return
     results: dict = {}
-    if args.learned_noise:
-        results["learned"] = [row for name in systems() for noise in args.learned_noise
-                              for row in measure_learned(name, noise)]
-        report({"learned": results["learned"]})
-    for name, system in systems().items() if args.steps else ():
+    for name, system in systems().items():
         results[name] = {"ground_truth": measure_ground_truth(system), "methods": []}
         for method in METHODS:
             results[name]["methods"].append(measure_method(system, method, args.steps, args.h))

@@ -11,11 +11,12 @@ from .w2_observations import EXPERIMENT as _W2
 from .w3_dissipation import EXPERIMENT as _W3
 from .w4_bodies import EXPERIMENT as _W4
 from .w5_zeitlin import EXPERIMENT as _W5
+from .w6_nonholonomic import EXPERIMENT as _W6
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5, _W6)}
 
 #: What `python -m paper` runs without a subcommand: the paper's six experiments. The studies
 #: beyond the paper (W1, an hour-scale sweep; W2, learning from observations; W3, dissipation;
 #: W4, bodies observed by their attitude, pose and velocities; W5, Zeitlin's fluid at N = 16
-#: and 32) run on request: `python -m paper run W1 W2 W3 W4 W5`.
+#: and 32; W6, nonholonomic systems) run on request: `python -m paper run W1 W2 W3 W4 W5 W6`.
 PAPER_EXPERIMENTS = tuple(i for i in EXPERIMENTS if i.startswith("E"))

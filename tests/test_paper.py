@@ -620,3 +620,60 @@ def test_w5_smoke_learned_isospectral_map_keeps_casimirs(tmp_path):
     assert sum("N = 6, learned" in v and "Casimirs kept to" in v for v in metrics["verdict"]) == 2
     # resumable: the rows of N = 6 are read back, not refitted
     assert (tmp_path / "W5" / "rows" / "N6.json").exists()
+
+
+def test_w6_headings_and_settling_times_on_closed_forms():
+    from paper import w6_nonholonomic as w6
+
+    t = 0.1 * np.arange(51)
+    # the trapezoid rule is exact for an angular velocity linear in time: theta = 0.3 t + 0.1 t^2
+    omega = np.stack([0.3 + 0.2 * t, np.full_like(t, -1.0)])
+    np.testing.assert_allclose(w6.headings(omega, 0.1), np.stack([0.3 * t + 0.1 * t**2, -t]), rtol=0,
+                               atol=50 * EPS * 5.0)  # 50 additions of values up to 5
+    # a state (1, e^-t - e^-5, 0) that reaches (1, 0, 0) at t = 5: within 1% of it once
+    # e^-t - e^-5 <= 0.01, from t* = -log(0.01 + e^-5) = 4.09 on: the first output after t*
+    x = np.stack([np.ones_like(t), np.exp(-t) - np.exp(-5.0), np.zeros_like(t)], axis=-1)[None]
+    t_star = -np.log(0.01 + np.exp(-5.0))
+    assert w6.settling_times(x, 0.1)[0] == pytest.approx(0.1 * np.ceil(t_star / 0.1))
+    diverged = x.copy()
+    diverged[0, 30:] = np.nan
+    assert w6.settling_times(diverged, 0.1)[0] == np.inf
+
+
+def test_w6_measure_reports_a_divergence_and_an_exact_copy():
+    from paper import w6_nonholonomic as w6
+
+    system = w6.systems()["Chaplygin sleigh"]
+    # heyoka's straight line at unit speed: the velocity (0, 1, 0), never turning
+    line = np.tile(np.array([0.0, 1.0, 0.0]), (2, 21, 1))
+    truth = w6.Truth(line, np.zeros((2, 21)), 1.0)
+    exact = w6.measure("sleigh", system, "copy", "learned", line, truth)
+    assert exact.energy_error_max == exact.constraint_max == exact.final_state_max == 0.0
+    assert exact.heading_error_max_rel == 0.0 and exact.diverged_at is None
+    broken = line.copy()
+    broken[1, 7:] = np.inf
+    bad = w6.measure("sleigh", system, "broken", "baseline", broken, truth)
+    assert bad.diverged_at == pytest.approx(0.7)
+    assert bad.energy_error_max == bad.final_state_max == bad.heading_error_max_rad == np.inf
+    # turning where heyoka did not: infinitely far relative to heyoka's zero turn
+    turning = line.copy()
+    turning[..., 0] = 0.01
+    assert w6.measure("sleigh", system, "turning", "learned", turning, truth).heading_error_max_rel == np.inf
+
+
+@pytest.mark.slow  # the whole W6 pipeline, ~20 s (the maps' properties: tests/test_learned_nonholonomic.py)
+def test_w6_smoke_keeps_the_constraint_where_the_neural_ode_does_not(tmp_path):
+    assert main(["run", "W6", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
+    metrics = json.loads((tmp_path / "W6" / "metrics.json").read_text())
+    rows = metrics["rows"]
+    assert {r["system"] for r in rows} == {"Suslov", "Chaplygin sleigh"}
+    for r in rows:
+        if r["kind"] == "baseline":  # no structure: it leaves the constraint
+            assert r["constraint_max"] > 1e-3
+        else:  # heyoka, the Runge-Kutta methods (a linear invariant), the learned map: round-off
+            assert r["constraint_max"] < 20 * EPS, r
+        if r["model"] in ("heyoka", "implicit midpoint", "GaussLegendre4"):  # quadratic energy kept
+            assert r["energy_error_max"] < 20 * EPS * 20, r  # 20 steps of a few roundings
+    assert sum("[constraint <= 1e-13" in v for v in metrics["verdict"]) == 4
+    assert (tmp_path / "W6" / "nonholonomic.png").exists()
+    assert len(list((tmp_path / "W6" / "rows").glob("*.json"))) == len(rows)
