@@ -20,7 +20,9 @@ from ._models._baseline import MLPBaseline as MLPBaseline, NeuralODE as NeuralOD
 from ._models._equivariant import GroupAveraged as GroupAveraged
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._models._isospectral import IsospectralPolynomial as IsospectralPolynomial
+from ._models._nonholonomic import AbstractDAlembertMap as AbstractDAlembertMap
 from ._models._nonholonomic import DAlembertMap as DAlembertMap
+from ._models._nonholonomic import QuadraticDAlembertMap as QuadraticDAlembertMap
 from ._models._learned_system import LearnedHamiltonian as LearnedHamiltonian
 from ._models._learned_terms import RidgeTerms as RidgeTerms
 from ._models._load import load as load

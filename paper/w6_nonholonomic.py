@@ -11,8 +11,10 @@ with Gaussian noise of a fraction `noise` of their RMS size. Test: `n_test` furt
 t = `t_end` against heyoka, every model stepping h = 0.1: the classical integrators on the
 momenta (RK4, the implicit midpoint rule, `integrators.GaussLegendre4`), `learn.DAlembertMap`
 (its constraint and learned energy kept for any weights; `lm_steps` Levenberg-Marquardt steps on
-the trajectory loss) and `learn.NeuralODE` (two hidden layers of 16; `bfgs_steps` BFGS
-iterations) on the velocities.
+the trajectory loss), `learn.QuadraticDAlembertMap` (the family of every quadratic energy,
+four parameters, stepped by its exact flow; fitted the same way) and `learn.NeuralODE` (two
+hidden layers of 16; `bfgs_steps` BFGS iterations) on the velocities. Beside the classical
+integrators, the exact flow in closed form (`QuadraticDAlembertMap.from_system`).
 
 Figures, each the largest over the test starts: the relative error of the true energy
 $\tfrac12\xi^\top\mathbb M\xi$ against its value at the start (it is constant: the reaction
@@ -272,15 +274,22 @@ def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6
                                    us_per_step=1e6 * truth().seconds / (n_steps * P.n_test),
                                    heading=truth().headings))
     momenta0 = starts(system, P.n_test, TEST_SEED)
-    for label, cls in CLASSICAL.items():
-        def classical(cls=cls, label=label):
-            mu, us = timed_rollout(cls(system, H), momenta0, n_steps)
+    for label, make in CLASSICAL.items():
+        def classical(make=make, label=label):
+            mu, us = timed_rollout(make(system, H), momenta0, n_steps)
             return measure(name, system, label, "classical", np.asarray(system.body_velocity(mu)), truth(),
                            us_per_step=us)
         keep(label.lower().replace(" ", "_"), classical)
+
+    def exact_flow():
+        xi, us = timed_rollout(learn.QuadraticDAlembertMap.from_system(system, H), truth().velocities[:, 0], n_steps)
+        return measure(name, system, "exact flow", "classical", xi, truth(), us_per_step=us)
+    keep("exact_flow", exact_flow)
     for noise in P.noises:
         for label, kind, make, optimiser in (
                 ("DAlembertMap", "learned", lambda: learn.DAlembertMap(system, key=DATA_SEED, h=H),
+                 learn.LevenbergMarquardt(P.lm_steps)),
+                ("QuadraticDAlembertMap", "learned", lambda: learn.QuadraticDAlembertMap(system, h=H),
                  learn.LevenbergMarquardt(P.lm_steps)),
                 ("neural ODE", "baseline", lambda: learn.NeuralODE(system, hidden=(16, 16), key=DATA_SEED, h=H),
                  learn.QuasiNewton(P.bfgs_steps, "bfgs"))):

@@ -104,3 +104,89 @@ def test_the_lifted_step_moves_the_sleigh_with_the_mean_admissible_velocity():
     # the heading advances by h times the mean turning rate of the step (exp of a twist)
     heading = np.unwrap(lp.systems.sleigh_pose(g.reshape(-1, 9))[:, 0])
     np.testing.assert_allclose(np.diff(heading), 0.05 * (xi[1:, 0] + xi[:-1, 0]), atol=1e-13)
+
+
+@settings(max_examples=5, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.floats(1e-3, 2.0))
+def test_the_quadratic_family_steps_by_the_exact_flow_of_its_field(seed, h):
+    """`advance` against an independent integration of du/dt = (c . u) J u (DOP853 at 1e-13)."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(seed)
+    c, u = 2.0 * rng.normal(size=2), rng.normal(size=2)
+    model = eqx.tree_at(lambda m: m.rate, learn.QuadraticDAlembertMap(SUSLOV, h=h), jax.numpy.asarray(c))
+    J = np.array([[0.0, -1.0], [1.0, 0.0]])
+    reference = solve_ivp(lambda t, y: (c @ y) * (J @ y), (0.0, h), u, method="DOP853", rtol=1e-13,
+                          atol=1e-15).y[:, -1]
+    got = np.asarray(model.advance(jax.numpy.asarray(u), None))
+    # the reference's tolerance 1e-13, times the growth of |c||u|h up to ~10 over the step
+    np.testing.assert_allclose(got, reference, rtol=0, atol=1e-11 * np.linalg.norm(u))
+    # a rotation: |u| kept to a few roundings
+    assert abs(np.linalg.norm(got) - np.linalg.norm(u)) <= 8 * EPS * np.linalg.norm(u)
+
+
+def test_the_quadratic_family_is_smooth_where_it_does_not_move():
+    model = eqx.tree_at(lambda m: m.rate, learn.QuadraticDAlembertMap(SUSLOV, h=0.1), jax.numpy.asarray([0.3, -0.2]))
+    u = jax.numpy.asarray([0.4, 0.6])  # c . u = 0: an equilibrium of du/dt = (c . u) J u
+    np.testing.assert_allclose(np.asarray(model.advance(u, None)), np.asarray(u), rtol=0, atol=4 * EPS)
+    for point in (jax.numpy.zeros(2), u, 1e-9 * u + jax.numpy.asarray([1e-9, 0.0])):  # at rest, near the series
+        grad = jax.jacfwd(lambda m, point=point: m.advance(point, None))(model)
+        assert np.all(np.isfinite(np.asarray(grad.rate))) and np.all(np.isfinite(np.asarray(model.advance(point, None))))
+    # the series and the closed form agree across the switch x = h|c||u| = 1e-4
+    c = jax.numpy.asarray([1.0, 0.5])
+    near = eqx.tree_at(lambda m: m.rate, model, c)
+    for scale in (0.999e-4, 1.001e-4):
+        v = scale / (0.1 * np.linalg.norm(c)) * jax.numpy.asarray([0.6, 0.8])  # x = scale
+        step = np.asarray(near.advance(v, None))
+        # the angle turned, against the angle psi of u from c in closed form:
+        # sin psi(h) = tanh(x + artanh sin psi_0) (c . v > 0: psi stays in (-pi/2, pi/2))
+        angle = np.arctan2(v[0] * step[1] - v[1] * step[0], v @ step)
+        s0 = float(c[0] * v[1] - c[1] * v[0]) / (np.linalg.norm(c) * np.linalg.norm(v))
+        expected = np.arcsin(np.tanh(scale + np.arctanh(s0))) - np.arcsin(s0)
+        # an angle of ~1e-4 from differences of O(1) numbers: ~1e-16 absolute, 1e-11 relative
+        assert angle == pytest.approx(expected, rel=1e-9)
+
+
+# the Suslov problem (~3 s, heyoka's compilation) under -m slow; its exact flow's figures are
+# W6's (python -m paper run W6), the sleigh's by default
+@pytest.mark.parametrize("which", [pytest.param("suslov", marks=pytest.mark.slow), "sleigh"])
+def test_from_system_is_the_exact_flow_of_the_suslov_problem_and_the_sleigh(which):
+    system = {"suslov": SUSLOV, "sleigh": lp.systems.chaplygin_sleigh(1.0, 1.0, 0.5)}[which]
+    exact = learn.QuadraticDAlembertMap.from_system(system, h=0.1)
+    mu0 = np.asarray(system.project(np.random.default_rng(4).normal(size=(3, 3))))
+    truth = it.ground_truth(system, mu0, 0.1, 500)
+    xi = np.asarray(system.body_velocity(truth.states))
+    predicted = np.asarray(exact.rollout(xi[:, 0], 500))
+    # heyoka at eps and a closed-form step: round-off over 500 steps, amplified by the transient
+    # (the Suslov body leaves an unstable rotation): 1e-12 of the velocities' size
+    np.testing.assert_allclose(predicted, xi, rtol=0, atol=1e-12 * np.max(np.abs(xi)))
+
+
+def test_the_quadratic_family_refuses_what_it_cannot_hold():
+    with pytest.raises(ValueError, match="k = 2"):
+        learn.QuadraticDAlembertMap(VEHICLE)
+    quartic = lp.systems.LiePoissonDAlembert(
+        lp.systems.LiePoissonSystem(lp.so3(), lambda y, xp: 0.5 * (y[0] ** 2 + y[1] ** 2 + y[2] ** 2) + 0.1 * y[0] ** 4),
+        (1.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="not quadratic"):
+        learn.QuadraticDAlembertMap.from_system(quartic, h=0.1)
+    with pytest.raises(TypeError, match="LiePoissonDAlembert"):
+        learn.QuadraticDAlembertMap(lp.systems.RigidBody((1.0, 2.0, 3.0)))
+
+
+def test_a_fit_of_the_quadratic_family_to_exact_velocities_is_the_exact_flow(tmp_path):
+    rng = np.random.default_rng(0)
+    mu0 = np.asarray(SUSLOV.project(rng.normal(size=(8, 3))))
+    xi = np.asarray(SUSLOV.body_velocity(it.ground_truth(SUSLOV, mu0, 0.1, 10).states))
+    data = it.Observations(SUSLOV, 0.1 * np.arange(11), list(xi))
+    fitted, _ = learn.fit(learn.QuadraticDAlembertMap(SUSLOV, h=0.1), data, optimiser=learn.LevenbergMarquardt(40),
+                          validation_fraction=0.0, progress=False)
+    exact = learn.QuadraticDAlembertMap.from_system(SUSLOV, h=0.1)
+    # four identifiable parameters from 80 exact pairs: the system's, to the data's round-off
+    # amplified by the fit's conditioning
+    for name in ("rate", "log_diagonal", "lower"):
+        np.testing.assert_allclose(np.asarray(getattr(fitted, name)), np.asarray(getattr(exact, name)), atol=1e-9)
+    fitted.save(tmp_path / "q.h5")
+    again = learn.load(tmp_path / "q.h5", SUSLOV)
+    assert isinstance(again, learn.QuadraticDAlembertMap)
+    np.testing.assert_array_equal(np.asarray(again.rate), np.asarray(fitted.rate))

@@ -77,7 +77,9 @@ _ALL = ("LieEuler", "CommutatorFree4", "DampedSplitting", "RK4")
 
 
 @pytest.mark.parametrize(("name", "methods"), [
-    ("so3", _ALL), ("se3", ("CommutatorFree4", "DampedSplitting")), ("sl2", ("LieEuler",)),
+    # se3's (~4 s) under -m slow: so3 runs every method by default, sl2 and so3+heisenberg other algebras
+    ("so3", _ALL), pytest.param("se3", ("CommutatorFree4", "DampedSplitting"), marks=pytest.mark.slow),
+    ("sl2", ("LieEuler",)),
     ("so3+heisenberg", ("LieEuler",)),
     pytest.param("se3", ("LieEuler", "RK4"), marks=pytest.mark.slow),
     pytest.param("sl2", ("CommutatorFree4", "RK4"), marks=pytest.mark.slow),

@@ -13,7 +13,7 @@ from ._glpnet import GLPNet
 from ._isospectral import IsospectralPolynomial
 from ._legacy import upgrade_attributes
 from ._lpnet import LPNet
-from ._nonholonomic import DAlembertMap
+from ._nonholonomic import DAlembertMap, QuadraticDAlembertMap
 from ._reversible import Reversible
 
 
@@ -22,7 +22,7 @@ def load(path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -
     whatever its class (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`), from the class the
     file names; `system` as in `AbstractLearnedMap.load`."""
     classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE, IsospectralPolynomial,
-                                                    DAlembertMap)}
+                                                    DAlembertMap, QuadraticDAlembertMap)}
     attrs, groups = _checkpoint.read(path)  # read once: the class is in the file
     attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
     name = attrs.get("class")
