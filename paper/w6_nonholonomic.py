@@ -208,8 +208,8 @@ def measure(system_label: str, system, name: str, kind: str, xi: np.ndarray, tru
         with np.errstate(divide="ignore", invalid="ignore"):  # a start that does not turn: 0 of 0, else inf
             heading_rel = float(np.max(np.where(turn == 0.0, 0.0, turn / turned)))
 
-    def series(x):
-        return [float(v) for v in np.max(x, axis=0)[::EVERY]]
+    def series(x):  # for the figure: four digits
+        return [float(f"{v:.4g}") for v in np.max(x, axis=0)[::EVERY]]
 
     return W6Row(system=system_label, model=name, kind=kind, noise=noise,
                  energy_error_max=float(np.max(energy_error)), constraint_max=float(np.max(constraint)),
