@@ -489,3 +489,9 @@ def test_an_extension_of_a_family_that_misfits_is_skipped():
         if skipped:
             ssr = {d["family"]: d["ssr"] for d in details}
             assert ssr["quadratic"] > 100 * ssr["quadratic, any axes, even"]
+        else:  # the extension must beat the best criterion so far: a loss below its nested family's,
+            # whose parameters it has and more (exp((BIC* - k log n) / n) with BIC* <= the nested's)
+            by_name = {d["family"]: d for d in details}
+            nested = by_name["quadratic"]
+            assert 0 < by_name["general"]["target_loss"] < nested["ssr"] / nested["n"]
+            assert nested["target_loss"] is None  # a family that extends none has no target

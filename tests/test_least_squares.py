@@ -81,6 +81,24 @@ def test_levenberg_marquardt_keeps_the_start_when_it_cannot_improve():
     np.testing.assert_array_equal(np.asarray(fitted.theta), np.asarray(truth))
 
 
+def test_a_target_out_of_reach_stops_levenberg_marquardt_and_one_in_reach_changes_nothing():
+    from learn._solvers._levenberg_marquardt import TARGET_AFTER
+
+    x = np.linspace(0.0, 1.0, 40)
+    y = jnp.asarray(2.0 * np.exp(-1.5 * x) + 0.3 + 1e-2 * np.random.default_rng(0).normal(size=x.size))
+    free, free_record, free_history = _fit_curve([1.0, 0.0, 0.0], y, learn.LevenbergMarquardt(200, rtol=0.0))
+    floor = free_record.train_loss  # the noise's floor, ~1e-4
+    assert free_record.iterations > TARGET_AFTER  # without a target it runs past the judged steps
+    # a tenth of the floor: no fit reaches it; judged after TARGET_AFTER steps, at the floor's flat rate
+    _, record, history = _fit_curve([1.0, 0.0, 0.0], y, learn.LevenbergMarquardt(200, rtol=0.0, target=0.1 * floor))
+    assert record.iterations == TARGET_AFTER and history["train_loss"][-1] > 0.1 * floor
+    # a target the fit reaches: the same steps, bit for bit
+    reached, _, reached_history = _fit_curve([1.0, 0.0, 0.0], y,
+                                             learn.LevenbergMarquardt(200, rtol=0.0, target=2.0 * floor))
+    np.testing.assert_array_equal(np.asarray(reached.theta), np.asarray(free.theta))
+    np.testing.assert_array_equal(reached_history["train_loss"], free_history["train_loss"])
+
+
 def test_levenberg_marquardt_refuses_a_non_finite_start():
     x = jnp.linspace(0.0, 1.0, 40)
     with pytest.raises(FloatingPointError, match="the loss at the start is not finite; check the weights and the data"):
@@ -100,6 +118,8 @@ def test_levenberg_marquardt_is_deterministic():
     ({"rtol": -1e-3}, ValueError, r"LevenbergMarquardt.rtol must be a number in \[0, 1\)"),
     ({"rtol": True}, ValueError, "LevenbergMarquardt.rtol"),
     ({"warm_start": "yes"}, TypeError, "LevenbergMarquardt.warm_start must be True or False"),
+    ({"target": -1.0}, ValueError, "LevenbergMarquardt.target must be None or a loss >= 0"),
+    ({"target": True}, ValueError, "LevenbergMarquardt.target"),
 ])
 def test_bad_levenberg_marquardt_settings(kwargs, error, match):
     with pytest.raises(error, match=match):

@@ -62,6 +62,10 @@ LAMBDA_RANGE = (1e-16, 1e16)
 #: `LevenbergMarquardt(rtol=...)` compares the loss with its value this many steps earlier.
 WINDOW = 3
 
+#: `LevenbergMarquardt(target=...)` judges the loss's rate after this many steps at the
+#: earliest: the first steps, while the damping settles, say little about the rate.
+TARGET_AFTER = 6
+
 
 class _Residuals(AbstractAtStructure):
     r"""The residuals $r(x)$ `(n,)` and Jacobian $J(x)$ `(n, p)` of `objective` for the `y`
@@ -104,6 +108,7 @@ class _Steps(AbstractIterationsStage):
 
     iterations: int
     rtol: float
+    target: float | None = None
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         start = time.perf_counter()
@@ -118,7 +123,7 @@ class _Steps(AbstractIterationsStage):
         with serial_lapack_block():
             y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
                                   context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
-                                  context.phase, resumed, context.earlier, context.on_step())
+                                  context.phase, resumed, context.earlier, context.on_step(), self.target)
         record = unselected_record("LevenbergMarquardt", len(values), start)
         return Result(y, record, history(values))
 
@@ -143,7 +148,11 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     `iterations`: steps at most; `rtol`: stop once the loss has fallen by less than `rtol` of
     its value over the last 3 steps (0: only when no damping lowers it); `warm_start`: as
     `QuasiNewton`'s (half the steps on the simpler problem a G-LPNet offers, then the rest
-    from its fit: `learn.WarmStart`). The result is kept only if it lowers the selection loss
+    from its fit: `learn.WarmStart`); `target`: a loss that only matters if reached (a fit
+    that must beat another's information criterion): stop once, falling at its rate over
+    the last 3 steps for all the steps left, the loss would stay above it (judged after 6
+    steps; the rate of a converging fit only slows, so the rule stops no fit that would
+    reach it at a steady or slowing pace). The result is kept only if it lowers the selection loss
     (validation, or training without a validation set: `learn.KeepIfBetter`). Deterministic;
     resumable with a `learn.Checkpoint`.
     """
@@ -151,18 +160,22 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     iterations: int = 200
     rtol: float = 1e-10
     warm_start: bool = False
+    target: float | None = None
 
     def __post_init__(self):
         positive_int(self.iterations, "LevenbergMarquardt.iterations")
         if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
             raise ValueError(f"LevenbergMarquardt.rtol must be a number in [0, 1); got {self.rtol!r}")
+        if self.target is not None and (isinstance(self.target, bool) or not isinstance(self.target, (int, float))
+                                        or not self.target >= 0):
+            raise ValueError(f"LevenbergMarquardt.target must be None or a loss >= 0; got {self.target!r}")
         if not isinstance(self.warm_start, (bool, np.bool_)):
             raise TypeError(f"LevenbergMarquardt.warm_start must be True or False; got {self.warm_start!r}")
 
     def composed(self) -> AbstractStage:
         """The stage as wrappers around the steps: keep-if-better, after the warm start if
         asked."""
-        steps: AbstractStage = _Steps(self.iterations, self.rtol)
+        steps: AbstractStage = _Steps(self.iterations, self.rtol, self.target)
         return KeepIfBetter(WarmStart(steps) if self.warm_start else steps)
 
     def check(self, problem: AbstractProblem, context: Context) -> None:
@@ -222,12 +235,13 @@ class _Saved:
 
 
 def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=None, phase=1, resumed=None,
-              earlier=(), on_step=None):
+              earlier=(), on_step=None, target=None):
     """`(model, losses)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
     once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
     or no damping finds a lower loss; the loss after each step. With `saved`, the state is
     written every `saved.every` steps and at the end; `resumed` continues from a read state;
-    `on_step(steps done, loss)` after every step."""
+    `on_step(steps done, loss)` after every step; with `target`, also once the loss cannot
+    reach it at its recent rate (`_out_of_reach`)."""
     start = time.perf_counter()
     if resumed is not None:
         model = _files.replace_array_leaves(model, resumed["weights"], "weights")
@@ -254,7 +268,7 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
     bar = tqdm(total=iterations, initial=len(values), disable=not progress, desc=desc, unit="it", leave=False)
     try:
         while len(values) < iterations:
-            if not np.isfinite(cost) or _converged(values, rtol):
+            if not np.isfinite(cost) or _converged(values, rtol) or _out_of_reach(values, target, iterations):
                 break
             A, g = _normal_equations(r, J)
             if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
@@ -314,6 +328,19 @@ def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> None:
             f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
             "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
         )
+
+
+def _out_of_reach(values, target, iterations) -> bool:
+    """Whether the loss, falling by its factor over the last `WINDOW` steps again every
+    `WINDOW` steps until `iterations`, would stay above `target` (after `TARGET_AFTER` steps)."""
+    if target is None or len(values) < max(TARGET_AFTER, WINDOW + 1) or values[-1] <= target:
+        return False
+    before = values[-1 - WINDOW]
+    if not before > 0:
+        return False
+    factor = min(values[-1] / before, 1.0)  # per WINDOW steps
+    left = (iterations - len(values)) / WINDOW
+    return values[-1] * factor**left > target
 
 
 def _converged(values, rtol) -> bool:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -191,22 +192,45 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             continue
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
         start = loss.problem(net, data, **split)
-        warm_start = family.warm_start
+        warm_start, target = family.warm_start, None
         if family.nested in fitted:  # from the nested family's fit, map and initial states
             nested = fitted[family.nested]
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
             start = start.with_start(Fitted(net, nested.starts))
             warm_start = False
-        problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start),), context)
+            target = catch_up_target(start, [f[0] for f in fits])
+        problem, results = solve(
+            start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
         ssr[family.name] = criterion["ssr"]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": family.name, "skipped": skipped}))
+            last.record, details={**last.record.details, **criterion, "family": family.name, "skipped": skipped,
+                                  "target_loss": target}))
         fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
     best = min(fits, key=lambda f: (f[0], f[1]))
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
+
+
+def catch_up_target(start: Any, bics: Sequence[float]) -> float | None:
+    r"""The loss an extension family started at `start` (its nested family's fit) must reach
+    to beat the best information criterion of the families fitted so far (`bics`; `None` if
+    none):
+    $\exp((\mathrm{BIC}^* - k\log n)/n)$, the loss $\mathrm{SSR}/n$ at which
+    $n\log(\mathrm{SSR}/n) + k\log n = \mathrm{BIC}^*$, with $k$ its effective parameters at
+    the start (its extra pieces, started flat, have not yet all come into play, so $k$ is at
+    most the fitted family's and the target at least its own). Levenberg-Marquardt stops a fit
+    whose loss, at its recent rate, would not reach it (`LevenbergMarquardt(target=...)`): its
+    extra parameters cost more than its loss repays. Only extensions: they start at a
+    converged fit, so their rate from the start is their pace; a family from a least-squares
+    start may fall slowly for its first steps, then fast (measured: the diamond's "quadratic,
+    any axes" at noise 0, whose stop at step 6 changed the family chosen)."""
+    if not bics:
+        return None
+    criterion = information_criterion(start, start.y0)
+    n, k = criterion["n"], criterion["effective_parameters"]
+    return math.exp((min(bics) - k * math.log(n)) / n)
 
 
 def extends_a_misfit(family: Family, ssr: dict[str, float]) -> bool:
@@ -262,16 +286,18 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
             skipped.append(family.name)
             continue
         net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
-        start = loss.problem(net, data, **split)
+        start, target = loss.problem(net, data, **split), None
         if family.nested in fitted:  # from the nested family's fit, map and starts
             nested = fitted[family.nested]
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
             start = start.with_start(Fitted(net, nested.starts))
-        problem, results = solve(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),), context)
+            target = catch_up_target(start, [f[0] for f in fits])
+        problem, results = solve(
+            start, (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
         ssr[family.name] = criterion["ssr"]
-        fits.append((criterion["bic"], len(fits), problem, results, family.name, criterion))
+        fits.append((criterion["bic"], len(fits), problem, results, family.name, {**criterion, "target_loss": target}))
     best = min(fits, key=lambda f: (f[0], f[1]))
     records = []
     for f in fits:
