@@ -265,6 +265,7 @@ def test_bad_arguments():
         learn.fit(reversible(), data, loss="alpha", epochs=1, progress=False)
 
 
+@pytest.mark.slow  # a training (~3.5 s); the step's reversibility and leaf for any weights run by default
 def test_training_on_the_residual_trains_the_step():
     data = it.ground_truth(RB, Y, h=0.1, n_steps=20, progress=False)
     net = learn.Reversible(learn.LPNet(RB, hidden=(8, 8), key=0), symmetry=reversing_symmetry(RB))

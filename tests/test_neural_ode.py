@@ -27,6 +27,7 @@ def test_a_step_is_classical_runge_kutta_on_its_field():
     assert np.abs(z - y).max() > 1e-3  # a real step
 
 
+@pytest.mark.slow  # a fit (~4 s); the step's Runge-Kutta property runs by default, and W2, W4 and W6 fit it (-m slow)
 def test_it_learns_uneven_observations_and_conserves_no_casimir(tmp_path):
     y0 = np.random.default_rng(0).normal(size=(4, 3))
     y0 /= np.linalg.norm(y0, axis=1, keepdims=True)
