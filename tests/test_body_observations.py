@@ -186,6 +186,8 @@ def predicted_attitude_error(net, h, t_end=10.0, n=6):
     return float(np.mean(np.asarray(lp.rotation_angle(g[:, -1], truth.configurations[:, -1]))))
 
 
+@pytest.mark.slow  # a fit on attitudes alone (~8 s); by default the body fit on attitudes and rates
+# (test_families_that_cannot_hold_the_rotated_body_are_skipped) and the files of attitudes alone run
 def test_a_fit_on_attitudes_alone_learns_the_rotated_body():
     obs = observations(n=4, measure="configurations")
     net, _ = learn.fit_splitting(ROTATED, obs, families=[learn.FAMILIES[3]], iterations=30, progress=False)

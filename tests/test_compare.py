@@ -16,6 +16,7 @@ EPS = np.finfo(np.float64).eps
 Y0S = np.array([[1 / np.sqrt(2), -1 / np.sqrt(2), 1.0], [0.5, 1.0, -0.2]])
 
 
+@pytest.mark.slow  # four maps compiled (~3.5 s); compare on a diverging map and rollout_figures run by default
 def test_compare_measures_every_map_against_the_same_reference(tmp_path):
     body = system("RigidBody")
     maps = {

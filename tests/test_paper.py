@@ -186,6 +186,8 @@ def e5_run_by_the_cli_without_its_baseline(tmp_path_factory):
     return before, _tree(package), work / "paper-results"
 
 
+@pytest.mark.slow  # with the test below, one E5 smoke run through the CLI (~7 s); the refusal to write into
+# the reference folder runs by default
 def test_cli_run_writes_only_to_out(e5_run_by_the_cli_without_its_baseline):
     before, after, results = e5_run_by_the_cli_without_its_baseline
     metrics = json.loads((results / "E5" / "metrics.json").read_text())
@@ -538,6 +540,7 @@ def test_w3_smoke_measures_dissipation(tmp_path):
     assert (tmp_path / "W3" / "energy.png").exists()
 
 
+@pytest.mark.slow  # shares the E5 CLI run above
 def test_e5_without_its_baseline(e5_run_by_the_cli_without_its_baseline):
     """E5's quick profile trains no baseline: the smoke run without one writes the LPNet's
     figures, a table whose baseline column is empty, and says why in the notes."""
