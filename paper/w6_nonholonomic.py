@@ -12,7 +12,8 @@ t = `t_end` against heyoka, every model stepping h = 0.1: the classical integrat
 momenta (RK4, the implicit midpoint rule, `integrators.GaussLegendre4`), `learn.DAlembertMap`
 (its constraint and learned energy kept for any weights; `lm_steps` Levenberg-Marquardt steps on
 the trajectory loss), `learn.QuadraticDAlembertMap` (the family of every quadratic energy,
-four parameters, stepped by its exact flow; fitted the same way) and `learn.NeuralODE` (two
+four parameters, stepped by its exact flow; fitted the same way; for the sleigh also with its
+mirror symmetry, `reflection=0`) and `learn.NeuralODE` (two
 hidden layers of 16; `bfgs_steps` BFGS iterations) on the velocities. Beside the classical
 integrators, the exact flow in closed form (`QuadraticDAlembertMap.from_system`).
 
@@ -58,6 +59,9 @@ H = 0.1
 SETTLED = 0.01  # the settling time: the state stays within this relative distance of its final value
 EVERY = 10  # the series of the figure: every EVERY-th step
 DATA_SEED, NOISE_SEED, TEST_SEED = 0, 1, 2
+#: The basis direction of the admissible velocities a mirror symmetry flips, per system that has
+#: one (`learn.QuadraticDAlembertMap(reflection=...)`): the sleigh's omega -> -omega.
+MIRRORS = {"Chaplygin sleigh": 0}
 CLASSICAL = {"RK4": it.RK4, "implicit midpoint": it.ImplicitMidpoint, "GaussLegendre4": it.GaussLegendre4}
 
 
@@ -286,13 +290,18 @@ def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6
         return measure(name, system, "exact flow", "classical", xi, truth(), us_per_step=us)
     keep("exact_flow", exact_flow)
     for noise in P.noises:
-        for label, kind, make, optimiser in (
-                ("DAlembertMap", "learned", lambda: learn.DAlembertMap(system, key=DATA_SEED, h=H),
-                 learn.LevenbergMarquardt(P.lm_steps)),
-                ("QuadraticDAlembertMap", "learned", lambda: learn.QuadraticDAlembertMap(system, h=H),
-                 learn.LevenbergMarquardt(P.lm_steps)),
-                ("neural ODE", "baseline", lambda: learn.NeuralODE(system, hidden=(16, 16), key=DATA_SEED, h=H),
-                 learn.QuasiNewton(P.bfgs_steps, "bfgs"))):
+        models = [
+            ("DAlembertMap", "learned", lambda: learn.DAlembertMap(system, key=DATA_SEED, h=H),
+             learn.LevenbergMarquardt(P.lm_steps)),
+            ("QuadraticDAlembertMap", "learned", lambda: learn.QuadraticDAlembertMap(system, h=H),
+             learn.LevenbergMarquardt(P.lm_steps)),
+            ("neural ODE", "baseline", lambda: learn.NeuralODE(system, hidden=(16, 16), key=DATA_SEED, h=H),
+             learn.QuasiNewton(P.bfgs_steps, "bfgs"))]
+        if name in MIRRORS:  # the family with the body's mirror symmetry
+            models.insert(2, ("QuadraticDAlembertMap, mirror", "learned",
+                              lambda: learn.QuadraticDAlembertMap(system, h=H, reflection=MIRRORS[name]),
+                              learn.LevenbergMarquardt(P.lm_steps)))
+        for label, kind, make, optimiser in models:
             def learned(label=label, kind=kind, make=make, optimiser=optimiser, noise=noise):
                 data = observations(system, P, noise)
                 begin = time.perf_counter()
@@ -300,7 +309,7 @@ def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6
                 seconds = time.perf_counter() - begin
                 xi, us = timed_rollout(fitted, truth().velocities[:, 0], n_steps)
                 return measure(name, system, label, kind, xi, truth(), noise=noise, us_per_step=us, fit_seconds=seconds)
-            keep(f"{label.lower().replace(' ', '_')}_noise{noise:g}", learned)
+            keep(f"{label.lower().replace(',', '').replace(' ', '_')}_noise{noise:g}", learned)
     return rows
 
 

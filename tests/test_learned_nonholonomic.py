@@ -190,3 +190,37 @@ def test_a_fit_of_the_quadratic_family_to_exact_velocities_is_the_exact_flow(tmp
     again = learn.load(tmp_path / "q.h5", SUSLOV)
     assert isinstance(again, learn.QuadraticDAlembertMap)
     np.testing.assert_array_equal(np.asarray(again.rate), np.asarray(fitted.rate))
+
+
+@settings(max_examples=3, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0, 1]))
+def test_a_mirror_symmetric_family_commutes_with_its_reflection_for_any_weights(seed, i):
+    sleigh = lp.systems.chaplygin_sleigh()
+    rng = np.random.default_rng(seed)
+
+    def randomised(model):
+        return eqx.tree_at(lambda m: (m.rate, m.log_diagonal, m.lower), model,
+                           tuple(jax.numpy.asarray(rng.normal(size=n)) for n in (2, 2, 1)))
+
+    mirror = randomised(learn.QuadraticDAlembertMap(sleigh, h=0.3, reflection=i))
+    n = mirror.basis[:, i]
+    S = np.eye(3) - 2.0 * np.outer(n, n)  # flips the i-th admissible direction
+    xi = np.asarray(sleigh.body_velocity(sleigh.project(rng.normal(size=3))))
+    # a closed-form step of a few roundings on either side
+    np.testing.assert_allclose(np.asarray(mirror.step(S @ xi)), S @ np.asarray(mirror.step(xi)), rtol=0,
+                               atol=64 * EPS * np.linalg.norm(xi))
+    # the unrestricted family with the same weights is not symmetric (the test can fail)
+    free = eqx.tree_at(lambda m: (m.rate, m.log_diagonal, m.lower), learn.QuadraticDAlembertMap(sleigh, h=0.3),
+                       (mirror.rate, mirror.log_diagonal, mirror.lower))
+    assert np.max(np.abs(np.asarray(free.step(S @ xi)) - S @ np.asarray(free.step(xi)))) > 1e-6 * np.linalg.norm(xi)
+
+
+def test_the_mirror_family_is_saved_with_its_reflection_and_bad_ones_are_refused(tmp_path):
+    sleigh = lp.systems.chaplygin_sleigh()
+    model = learn.QuadraticDAlembertMap(sleigh, h=0.1, reflection=0)
+    model.save(tmp_path / "m.h5")
+    again = learn.load(tmp_path / "m.h5", sleigh)
+    assert isinstance(again, learn.QuadraticDAlembertMap) and again.reflection == 0
+    for bad in (2, -1, True, "0", 0.0):
+        with pytest.raises(ValueError, match="reflection must be None or the index 0 or 1"):
+            learn.QuadraticDAlembertMap(sleigh, reflection=bad)

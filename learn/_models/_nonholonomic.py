@@ -116,6 +116,12 @@ class AbstractDAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
                 "body velocities (system.body_velocity of the momenta, or a gyroscope's readings), not momenta")
 
     @property
+    def basis(self) -> np.ndarray:
+        r"""$N$ `(dim, k)`: the orthonormal basis of the admissible velocities $\ker C$ in which
+        the map works, $w = N^\top\xi$ (the same on every machine: `constraint_basis`)."""
+        return constraint_basis(self.system)
+
+    @property
     def k(self) -> int:
         """The dimension of the admissible velocities, `dim` minus the constraints."""
         return self.system.dim - self.system.constraints.shape[0]
@@ -248,9 +254,19 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
     round-off. Fitted like `DAlembertMap` (body velocities); `from_system` gives the exact flow
     of a known system. `lifted_step` is `DAlembertMap`'s (order 2 in the configuration).
 
+    **A mirror symmetry** (`reflection=i`): the motions of a body symmetric under the
+    reflection $S$ that flips the $i$-th direction of the basis $N$ (`basis`) are mapped to
+    motions by $S$. The family's members with that symmetry are those with a diagonal $L$ and
+    $c$ along $e_i$ ($JS = -SJ$ in the plane, so $f(Sw) = Sf(w)$ needs $Sc = -c$); with
+    `reflection` the others are left out, and the steady motions $c\cdot u = 0$ lie exactly on
+    the mirror line $w_i = 0$ for any fitted weights. The Chaplygin sleigh ($N = (e_\omega,
+    e_v)$) with `reflection=0`: $\omega \to -\omega$ (the reflection of the plane through the
+    blade), so its straight line ($\omega = 0$) is exact, however noisy the data.
+
     **Arguments:** `system`, a `liepoisson.systems.LiePoissonDAlembert` with $k = 2$ and a
     quadratic Hamiltonian; `h`; `key` is accepted and unused (the fit starts at $c = 0$, the
-    identity metric: restarts repeat the same fit).
+    identity metric: restarts repeat the same fit); `reflection`: `None` (default) or the
+    index 0 or 1 of the basis direction a mirror symmetry flips.
     """
 
     rate: jax.Array
@@ -258,14 +274,21 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
     lower: jax.Array
     system: LiePoissonDAlembert = eqx.field(static=True)
     h: float | None
+    reflection: int | None = eqx.field(static=True)
 
-    def __init__(self, system: LiePoissonDAlembert, key: int | jax.Array | None = None, h: float | None = None):
+    def __init__(self, system: LiePoissonDAlembert, key: int | jax.Array | None = None, h: float | None = None,
+                 reflection: int | None = None):
         del key  # the family's start is fixed
         self.system = _checked_system(system)
         if self.k != 2:
             raise ValueError(f"{system!r} admits a {self.k}-dimensional space of velocities: the quadratic family's "
                              "exact flow is in closed form for k = 2 (the Suslov problem, the Chaplygin sleigh); "
                              "use learn.DAlembertMap, whose network generator takes any k")
+        if reflection is not None and (isinstance(reflection, (bool, np.bool_)) or not isinstance(
+                reflection, (int, np.integer)) or reflection not in (0, 1)):
+            raise ValueError(f"reflection must be None or the index 0 or 1 of the basis direction of the admissible "
+                             f"velocities that a mirror symmetry flips (QuadraticDAlembertMap.basis); got {reflection!r}")
+        self.reflection = None if reflection is None else int(reflection)
         self.rate = jnp.zeros(2)
         self.log_diagonal = jnp.zeros(2)
         self.lower = jnp.zeros(1)
@@ -302,9 +325,17 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
             rate.append(np.array([-u[1], u[0]]) @ u_dot)
         return eqx.tree_at(lambda m: m.rate, model, jnp.asarray(rate))
 
+    def metric_factor(self) -> jax.Array:
+        L = super().metric_factor()
+        return L if self.reflection is None else jnp.diag(jnp.diag(L))
+
+    def rate_vector(self) -> jax.Array:
+        r"""$c$ of $\dot u = (c\cdot u)\,Ju$: the fitted `rate`, along $e_i$ alone with `reflection=i`."""
+        return self.rate if self.reflection is None else self.rate * jnp.eye(2)[self.reflection]
+
     def advance(self, u: jax.Array, w: jax.Array) -> jax.Array:
         h = check_h(self)
-        c = self.rate
+        c = self.rate_vector()
         p = c @ u
         q = c[0] * u[1] - c[1] * u[0]
         r2 = u @ u
@@ -325,7 +356,7 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
         return _rotate(u, angle)
 
     def hyperparameters(self) -> dict[str, Any]:
-        return {}
+        return {"reflection": self.reflection}
 
     def reinitialised(self, key):
         """The map itself: the family starts at c = 0 whatever the key."""
