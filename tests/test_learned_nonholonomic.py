@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 import integrators as it
 import learn
 import liepoisson as lp
-from learn._models._nonholonomic import constraint_basis
 
 EPS = np.finfo(np.float64).eps
 INERTIA = np.array([1.0, 2.0, 3.0])
@@ -55,9 +54,9 @@ def test_at_rest_nothing_moves_and_bad_input_is_refused():
 
 def test_the_constraint_basis_is_orthonormal_admissible_and_fixed():
     # the sleigh's is the first two basis vectors, whatever LAPACK returns: maps saved in it load anywhere
-    np.testing.assert_array_equal(constraint_basis(lp.systems.chaplygin_sleigh()), np.eye(3)[:, :2])
+    np.testing.assert_array_equal(lp.systems.chaplygin_sleigh().admissible_basis(), np.eye(3)[:, :2])
     for system in (SUSLOV, VEHICLE):
-        N = constraint_basis(system)
+        N = system.admissible_basis()
         assert N.shape == (system.dim, system.dim - system.constraints.shape[0])
         np.testing.assert_allclose(N.T @ N, np.eye(N.shape[1]), atol=8 * EPS)
         assert np.max(np.abs(system.constraints @ N)) <= 8 * EPS
@@ -72,7 +71,7 @@ def test_a_fit_to_suslov_velocities_recovers_the_energy_and_the_motion(tmp_path)
     fitted, _ = learn.fit(learn.DAlembertMap(SUSLOV, key=0, h=0.1), it.Trajectories(xi, 0.1, SUSLOV),
                           optimiser=learn.LevenbergMarquardt(100), validation_fraction=0.0)
     # the energy metric on the constraint plane, det 1: N^T I N normalised
-    N = constraint_basis(SUSLOV)
+    N = SUSLOV.admissible_basis()
     true = N.T @ np.diag(INERTIA) @ N
     true /= np.sqrt(np.linalg.det(true))
     L = np.asarray(fitted.metric_factor())
@@ -170,6 +169,8 @@ def test_the_quadratic_family_refuses_what_it_cannot_hold():
         (1.0, 1.0, 1.0))
     with pytest.raises(ValueError, match="not quadratic"):
         learn.QuadraticDAlembertMap.from_system(quartic, h=0.1)
+    with pytest.raises(ValueError, match="not quadratic"):
+        quartic.kinetic_metric()
     with pytest.raises(TypeError, match="LiePoissonDAlembert"):
         learn.QuadraticDAlembertMap(lp.systems.RigidBody((1.0, 2.0, 3.0)))
 

@@ -245,3 +245,45 @@ def test_gauss_legendre4_keeps_a_quadratic_casimir():
     states = np.asarray(it.GaussLegendre4(body, 0.1).rollout(np.array([0.3, -0.8, 0.5]), 20))
     casimir = np.sum(states**2, axis=-1)
     assert np.max(np.abs(casimir - casimir[0])) <= 20 * 8 * EPS  # exact up to the stage solve's round-off
+
+
+@pytest.mark.slow  # ~6 s (a Newton solve through a matrix exponential, compiled twice); the benchmark prints the
+# orders, and the default run keeps the discrete velocities' constraint
+@pytest.mark.parametrize("system", [lp.systems.suslov(INERTIA, A), lp.systems.chaplygin_sleigh()], ids=["suslov", "sleigh"])
+def test_discrete_lagrange_dalembert_has_order_two_at_the_nodes(system):
+    y0 = np.asarray(system.project(np.array([1.5, -1.0, 2.0])))
+    reference = np.asarray(it.ground_truth(system, y0[None], 5.0, 1).states[0, -1])
+    errors = []
+    for h in (0.2, 0.1):
+        method = it.DiscreteLagrangeDAlembert(system, h)
+        errors.append(np.linalg.norm(np.asarray(method.node_momentum(method.rollout(y0, round(5.0 / h))[-1]))
+                                     - reference))
+    assert abs(np.log2(errors[0] / errors[1]) - 2.0) <= 0.1, errors
+    # one small step follows the vector field (consistency, independently of heyoka): the node
+    # momentum after it, to O(h)
+    tiny = it.DiscreteLagrangeDAlembert(system, 1e-4)
+    moved = (np.asarray(tiny.node_momentum(tiny.step(y0))) - y0) / 1e-4
+    np.testing.assert_allclose(moved, np.asarray(system.vector_field(y0)), atol=1e-3)
+
+
+def test_discrete_lagrange_dalembert_velocities_keep_the_constraint():
+    suslov = lp.systems.suslov(INERTIA, A)
+    method = it.DiscreteLagrangeDAlembert(suslov, 0.1)
+    p = np.asarray(method.rollout(suslov.project(np.array([1.5, -1.0, 2.0])), 20))
+    xi = np.asarray(method.velocity(p))
+    # xi = N w with N orthonormal in ker C: a few roundings of |xi|
+    assert np.max(np.abs(xi @ A) / (np.linalg.norm(A) * np.linalg.norm(xi, axis=1))) <= 8 * EPS
+    # the arriving node momenta are not admissible: the reaction's impulse, O(h)
+    assert np.max(np.asarray(suslov.relative_constraint(p[1:]))) > 1e-3
+
+
+def test_discrete_lagrange_dalembert_refuses_what_it_cannot_integrate():
+    with pytest.raises(TypeError, match="LiePoissonDAlembert"):
+        it.DiscreteLagrangeDAlembert(lp.systems.RigidBody(INERTIA), 0.1)
+    quartic = lp.systems.LiePoissonDAlembert(
+        lp.systems.LiePoissonSystem(lp.so3(), lambda y, xp: 0.5 * (y[0] ** 2 + y[1] ** 2 + y[2] ** 2) + 0.1 * y[0] ** 4),
+        A)
+    with pytest.raises(ValueError, match="not quadratic"):
+        it.DiscreteLagrangeDAlembert(quartic, 0.1)
+    with pytest.raises(ValueError, match="h"):
+        it.DiscreteLagrangeDAlembert(lp.systems.suslov(INERTIA, A), 0.0)

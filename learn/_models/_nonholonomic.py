@@ -41,29 +41,6 @@ from ._network_spec import network_from_spec
 from ._networks import AbstractNetwork, check_network
 
 
-def constraint_basis(system: LiePoissonDAlembert) -> np.ndarray:
-    r"""$N$ `(dim, k)`: an orthonormal basis of $\ker C$, the admissible velocities, the same on
-    every machine (a saved map's weights are in it): the basis vectors $e_i$ projected onto
-    $\ker C$ and orthonormalised in order (Gram-Schmidt, twice), those that add less than
-    $10^{-6}$ skipped, each signed so that its largest entry is positive."""
-    C = system.constraints
-    dim, k = C.shape[1], C.shape[1] - C.shape[0]
-    P = np.eye(dim) - C.T @ np.linalg.solve(C @ C.T, C)
-    basis: list[np.ndarray] = []
-    for i in range(dim):
-        v = P[:, i].copy()
-        for _ in range(2):
-            for b in basis:
-                v -= (b @ v) * b
-        norm = np.linalg.norm(v)
-        if norm > 1e-6:
-            v /= norm
-            basis.append(v if v[np.argmax(np.abs(v))] > 0 else -v)
-        if len(basis) == k:
-            break
-    return np.stack(basis, axis=1)
-
-
 def _checked_system(system: Any) -> LiePoissonDAlembert:
     """`system` if it is a nonholonomic system with at least two admissible directions."""
     if not isinstance(system, LiePoissonDAlembert):
@@ -118,8 +95,8 @@ class AbstractDAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
     @property
     def basis(self) -> np.ndarray:
         r"""$N$ `(dim, k)`: the orthonormal basis of the admissible velocities $\ker C$ in which
-        the map works, $w = N^\top\xi$ (the same on every machine: `constraint_basis`)."""
-        return constraint_basis(self.system)
+        the map works, $w = N^\top\xi$ (the same on every machine: `LiePoissonDAlembert.admissible_basis`)."""
+        return self.system.admissible_basis()
 
     @property
     def k(self) -> int:
@@ -137,14 +114,14 @@ class AbstractDAlembertMap(AbstractLearnedMap, AbstractReconstructingStepMap):
     def energy(self, xi: jax.Array) -> jax.Array:
         r"""The learned energy $\tfrac12|L^\top N^\top\xi|^2$ (its scale fixed by $\det L = 1$),
         shape `(...)`: what every step keeps."""
-        u = jnp.einsum("...a,ak,kj->...j", jnp.asarray(xi), jnp.asarray(constraint_basis(self.system)),
+        u = jnp.einsum("...a,ak,kj->...j", jnp.asarray(xi), jnp.asarray(self.system.admissible_basis()),
                        self.metric_factor())
         return 0.5 * jnp.sum(u * u, axis=-1)
 
     def step(self, xi: jax.Array) -> jax.Array:
         xi = check_state(xi, self.system.dim)
         check_h(self)  # a map without a step refuses here
-        N = jnp.asarray(constraint_basis(self.system))
+        N = jnp.asarray(self.system.admissible_basis())
         L = self.metric_factor()
         w = N.T @ xi
         u_next = self.advance(L.T @ w, w)
@@ -301,17 +278,8 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
         quadratic $H$), $c$ from the vector field at two velocities. `ValueError` if $H$ is
         not quadratic."""
         model = cls(system, h=h)
-        dim = system.dim
-        rng = np.random.default_rng(0)
-        points = rng.normal(size=(2, dim))
-        hessians = [np.asarray(jax.hessian(system.hamiltonian)(jnp.asarray(y))) for y in (np.zeros(dim), *points)]
-        scale = max(1.0, float(np.max(np.abs(hessians[0]))))
-        if any(np.max(np.abs(H - hessians[0])) > 1e3 * np.finfo(np.float64).eps * scale for H in hessians[1:]):
-            # a quadratic H has one Hessian: only round-off (a thousand roundings) may differ
-            raise ValueError(f"system {system!r} has a Hamiltonian that is not quadratic (its Hessian changes "
-                             "with the state): the quadratic family holds kinetic energies; use learn.DAlembertMap")
-        M = np.linalg.inv(hessians[0])
-        N = constraint_basis(system)
+        M = system.kinetic_metric()
+        N = system.admissible_basis()
         Mw = N.T @ M @ N
         L = np.linalg.cholesky(Mw / np.sqrt(np.linalg.det(Mw)))
         model = eqx.tree_at(lambda m: (m.log_diagonal, m.lower), model,

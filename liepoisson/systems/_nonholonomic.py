@@ -149,6 +149,44 @@ class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
             "the splitting methods of integrators.splitting cannot integrate it; integrators.GaussLegendre4, "
             "ImplicitMidpoint (the constraint and, for a quadratic H, the energy kept), RK4 and ground_truth can")
 
+    # -- the admissible velocities and a kinetic energy's metric -------------------------
+    def admissible_basis(self) -> np.ndarray:
+        r"""$N$ `(dim, k)`: an orthonormal basis of $\ker C$, the admissible velocities, the same
+        on every machine (a learned map's weights are in it): the basis vectors $e_i$ projected
+        onto $\ker C$ and orthonormalised in order (Gram-Schmidt, twice), those that add less
+        than $10^{-6}$ skipped, each signed so that its largest entry is positive."""
+        C = self.constraints
+        dim, k = C.shape[1], C.shape[1] - C.shape[0]
+        P = np.eye(dim) - C.T @ np.linalg.solve(C @ C.T, C)
+        basis: list[np.ndarray] = []
+        for i in range(dim):
+            v = P[:, i].copy()
+            for _ in range(2):
+                for b in basis:
+                    v -= (b @ v) * b
+            norm = np.linalg.norm(v)
+            if norm > 1e-6:
+                v /= norm
+                basis.append(v if v[np.argmax(np.abs(v))] > 0 else -v)
+            if len(basis) == k:
+                break
+        return np.stack(basis, axis=1)
+
+    def kinetic_metric(self) -> np.ndarray:
+        r"""$\mathbb M$ `(dim, dim)` of a quadratic $H = \tfrac12\mu^\top\mathbb M^{-1}\mu$ (a
+        kinetic energy: the body velocity is $\xi = \mathbb M^{-1}\mu$), the inverse of its
+        Hessian. `ValueError` if $H$ is not quadratic (its Hessian changes with the state)."""
+        dim = self.dim
+        points = np.random.default_rng(0).normal(size=(2, dim))
+        hessians = [np.asarray(jax.hessian(self.system.hamiltonian)(jnp.asarray(y)))
+                    for y in (np.zeros(dim), *points)]
+        scale = max(1.0, float(np.max(np.abs(hessians[0]))))
+        # one Hessian for a quadratic H: only round-off (a thousand roundings) may differ
+        if any(np.max(np.abs(H - hessians[0])) > 1e3 * np.finfo(np.float64).eps * scale for H in hessians[1:]):
+            raise ValueError(f"{self!r} has a Hamiltonian that is not quadratic (its Hessian changes with the "
+                             "state): a kinetic energy's metric, and what is built on it, needs a quadratic H")
+        return np.linalg.inv(hessians[0])
+
     # -- the constraint ------------------------------------------------------------------
     def _hessian(self, y: jax.Array) -> jax.Array:
         flat = y.reshape((-1, self.dim))

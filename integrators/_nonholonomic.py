@@ -1,0 +1,140 @@
+r"""The discrete Lagrange-d'Alembert method on Lie groups (Fedorov & Zenkov, *Nonlinearity*
+18, 2005; the discrete Euler-Poincaré equations of Bou-Rabee & Marsden, *Found. Comput. Math.*
+9, 2009, with the reaction): a variational integrator of a nonholonomic system
+([Nonholonomic constraints][conventions-nonholonomic]) whose discrete velocities keep the
+constraint exactly.
+
+For a kinetic energy $\ell(\xi) = \tfrac12\xi^\top\mathbb M\xi$ (a quadratic $H$), steps
+$g_{k+1} = g_k\exp(h\xi_k)$ with the discrete velocities $\xi_k \in \mathfrak d = \ker C$, and
+the discrete principle of Lagrange-d'Alembert (variations in $\mathfrak d$):
+
+$$g\bigl(hK(\xi_k)\bigr)\,\mathbb M\xi_k = p_k + C^\top\lambda_k, \qquad
+p_{k+1} = g\bigl(-hK(\xi_k)\bigr)\,\mathbb M\xi_k, \qquad g(z) = \frac{z}{e^z - 1},$$
+
+$K(\xi)$ the matrix of $\mu \mapsto \mathbb B(\mu)\xi$ (so $\dot\mu = K(\xi)\mu$ is the
+unconstrained equation; $g(\pm hK)$ is the dual of $\mathrm{dexp}^{-1}_{\pm h\xi}$), $p_k$ the
+discrete momentum arriving at node $k$. The state of the step map is $p_k$; the momentum at
+the node to order 2 is `node_momentum(p)`, the mean of $p_k$ and the departing $p_k +
+C^\top\lambda_k$ (they differ by the reaction's impulse, $O(h)$). What it keeps: the
+constraint holds for the discrete velocities $\xi_k$ (`velocity`) to round-off, not for the
+node momenta; the energy is not conserved exactly (a variational integrator's is bounded for a
+Hamiltonian system; Fedorov & Zenkov study what the discrete Suslov problem keeps).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from liepoisson.internals import positive_float, positive_int
+from liepoisson.systems import LiePoissonDAlembert
+
+from ._implicit import AbstractImplicitStepMap
+
+
+def _phi1(A: jax.Array) -> jax.Array:
+    r"""$\varphi_1(A) = \sum_n A^n/(n+1)! = \int_0^1 e^{sA}\,ds$: the upper right block of
+    $\exp\begin{pmatrix}A & I\\ 0 & 0\end{pmatrix}$ (exact at $A = 0$, no division)."""
+    n = A.shape[0]
+    block = jnp.zeros((2 * n, 2 * n), dtype=A.dtype).at[:n, :n].set(A).at[:n, n:].set(jnp.eye(n))
+    return jax.scipy.linalg.expm(block)[:n, n:]
+
+
+def _g(A: jax.Array, v: jax.Array) -> jax.Array:
+    r"""$g(A)\,v$, $g(z) = z/(e^z - 1) = 1/\varphi_1(z)$."""
+    return jnp.linalg.solve(_phi1(A), v)
+
+
+class DiscreteLagrangeDAlembert(AbstractImplicitStepMap):
+    r"""The discrete Lagrange-d'Alembert method (module docstring): order 2, symmetric,
+    variational; the discrete velocities $\xi_k$ keep the constraint to round-off.
+
+    The state is the discrete momentum $p_k$ at node $k$ (an approximation of $\mu(t_k)$;
+    start from the system's momentum). Each step solves the $k = \dim\ker C$ equations
+    $N^\top\bigl(g(hK(Nw))\,\mathbb MNw - p_k\bigr) = 0$ for $\xi_k = Nw$ ($N$ the
+    system's `admissible_basis`: the multipliers drop out) by `iterations` Newton steps from
+    $w = N^\top\mathbb M^{-1}p_k$; `velocity(p)` returns that $\xi_k$.
+
+    **Arguments:** `system`, a `liepoisson.systems.LiePoissonDAlembert` with a quadratic
+    Hamiltonian (a kinetic energy); `h` > 0; `iterations` >= 1 (default 8).
+    """
+
+    system: LiePoissonDAlembert = eqx.field(static=True)
+    h: float
+    iterations: int = eqx.field(static=True)
+    metric: jax.Array  # M, from the system
+    basis: jax.Array  # N, from the system
+
+    def __init__(self, system: LiePoissonDAlembert, h: float, iterations: int = 8):
+        if not isinstance(system, LiePoissonDAlembert):
+            raise TypeError(f"system must be a liepoisson.systems.LiePoissonDAlembert (a nonholonomic system); got "
+                            f"{type(system).__name__}")
+        self.metric = jnp.asarray(system.kinetic_metric())  # a quadratic H, or a ValueError saying why not
+        self.basis = jnp.asarray(system.admissible_basis())
+        self.system = system
+        self.h = positive_float(h, "h")
+        self.iterations = positive_int(iterations, "iterations")
+
+    def _generator(self, xi: jax.Array) -> jax.Array:
+        r"""$K(\xi)$: $K(\xi)\mu = \mathbb B(\mu)\xi$ of the unconstrained system (linear in $\mu$)."""
+        unconstrained = self.system.system
+        return jax.jacfwd(lambda mu: unconstrained.poisson_tensor(mu) @ xi)(jnp.zeros_like(xi))
+
+    def _residual(self, p: jax.Array, w: jax.Array) -> jax.Array:
+        N, M = self.basis, self.metric
+        xi = N @ w
+        return N.T @ (_g(self.h * self._generator(xi), M @ xi) - p)
+
+    def start(self, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        N, M = self.basis, self.metric
+        return y, N.T @ jnp.linalg.solve(M, y)
+
+    def iterate(self, p: jax.Array, w: jax.Array) -> jax.Array:
+        """One Newton step on $N^\\top(g(hK(Nw))\\,\\mathbb MNw - p) = 0$."""
+        return w - jnp.linalg.solve(jax.jacfwd(lambda v: self._residual(p, v))(w), self._residual(p, w))
+
+    def finish(self, p: jax.Array, w: jax.Array) -> jax.Array:
+        r"""$p_{k+1} = g(-hK(\xi_k))\,\mathbb M\xi_k$."""
+        N, M = self.basis, self.metric
+        xi = N @ w
+        return _g(-self.h * self._generator(xi), M @ xi)
+
+    def node_momentum(self, p: jax.Array) -> jax.Array:
+        r"""$\tfrac12(p_k + p_k^+)$ `(..., dim)`, $p_k^+ = p_k + C^\top\lambda_k =
+        g(hK(\xi_k))\,\mathbb M\xi_k$: the momentum at node $k$ to order 2 (the arriving
+        momentum $p_k$ and the departing one differ by the reaction's impulse, $O(h)$)."""
+        p = jnp.asarray(p, dtype=jnp.float64)
+        return _node_momenta(self, p.reshape((-1, self.system.dim))).reshape(p.shape)
+
+    def velocity(self, p: jax.Array) -> jax.Array:
+        r"""$\xi_k$ `(..., dim)`: the discrete velocity of the step from the node momentum $p_k$
+        (admissible to round-off)."""
+        p = jnp.asarray(p, dtype=jnp.float64)
+        return _velocities(self, p.reshape((-1, self.system.dim))).reshape(p.shape)
+
+    def _velocity(self, p: jax.Array) -> jax.Array:
+        context, w = self.start(p)
+        w = jax.lax.fori_loop(0, self.iterations, lambda _, v: self.iterate(context, v), w)
+        return self.basis @ w
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
+
+
+# One state after the other (`lax.map`, not `vmap`): batched over ~1000 states the solves
+# and matrix exponentials of the Newton steps stalled XLA's CPU runtime (idle, never returning;
+# 100 states took 1.5 s).
+@eqx.filter_jit
+def _velocities(method: DiscreteLagrangeDAlembert, p: jax.Array) -> jax.Array:
+    return jax.lax.map(method._velocity, p)
+
+
+@eqx.filter_jit
+def _node_momenta(method: DiscreteLagrangeDAlembert, p: jax.Array) -> jax.Array:
+    def one(q):
+        xi = method._velocity(q)
+        return 0.5 * (q + _g(method.h * method._generator(xi), method.metric @ xi))
+
+    return jax.lax.map(one, p)
