@@ -38,15 +38,15 @@ METHODS = {"RK4": (it.RK4, 4), "implicit midpoint": (it.ImplicitMidpoint, 2), "G
 
 
 def nodes(method, states: np.ndarray) -> np.ndarray:
-    """The momenta at the nodes of `method`'s states: the states themselves, but for the
-    discrete Lagrange-d'Alembert method, whose state is the arriving momentum."""
-    return np.asarray(method.node_momentum(states)) if isinstance(method, it.DiscreteLagrangeDAlembert) else states
+    """The momenta at the nodes of `method`'s states: the states themselves, but for a
+    staggered method (the discrete Lagrange-d'Alembert method), whose state is the arriving momentum."""
+    return np.asarray(method.node_momentum(states)) if isinstance(method, it.AbstractStaggeredStepMap) else states
 
 
 def velocities(system, method, states: np.ndarray) -> np.ndarray:
     """The body velocities the method keeps admissible: $\nabla H$ of its states, or the
     discrete Lagrange-d'Alembert method's discrete velocities."""
-    if isinstance(method, it.DiscreteLagrangeDAlembert):
+    if isinstance(method, it.AbstractStaggeredStepMap):
         return np.asarray(method.velocity(states))
     return np.asarray(system.body_velocity(states))
 

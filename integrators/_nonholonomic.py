@@ -23,6 +23,8 @@ Hamiltonian system; Fedorov & Zenkov study what the discrete Suslov problem keep
 
 from __future__ import annotations
 
+import abc
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -46,7 +48,22 @@ def _g(A: jax.Array, v: jax.Array) -> jax.Array:
     return jnp.linalg.solve(_phi1(A), v)
 
 
-class DiscreteLagrangeDAlembert(AbstractImplicitStepMap):
+class AbstractStaggeredStepMap(AbstractImplicitStepMap):
+    r"""A step map whose state is not the momentum at the node: a variational integrator's
+    momentum arriving at node $k$, with the velocity of the step after it in between.
+    `node_momentum(states)` is the momentum at the nodes (what compares with $\mu(t_k)$) and
+    `velocity(states)` the velocities the method keeps admissible."""
+
+    @abc.abstractmethod
+    def node_momentum(self, p: jax.Array) -> jax.Array:
+        """The momentum at the nodes of states `(..., dim)`."""
+
+    @abc.abstractmethod
+    def velocity(self, p: jax.Array) -> jax.Array:
+        """The velocities of the steps from states `(..., dim)`."""
+
+
+class DiscreteLagrangeDAlembert(AbstractStaggeredStepMap):
     r"""The discrete Lagrange-d'Alembert method (module docstring): order 2, symmetric,
     variational; the discrete velocities $\xi_k$ keep the constraint to round-off.
 
@@ -124,8 +141,8 @@ class DiscreteLagrangeDAlembert(AbstractImplicitStepMap):
 
 
 # One state after the other (`lax.map`, not `vmap`): batched over ~1000 states the solves
-# and matrix exponentials of the Newton steps stalled XLA's CPU runtime (idle, never returning;
-# 100 states took 1.5 s).
+# and matrix exponentials of the Newton steps stalled XLA's CPU runtime (BENCHMARKS.md,
+# "Nonholonomic systems").
 @eqx.filter_jit
 def _velocities(method: DiscreteLagrangeDAlembert, p: jax.Array) -> jax.Array:
     return jax.lax.map(method._velocity, p)
