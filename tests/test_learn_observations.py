@@ -237,6 +237,40 @@ def test_max_step_runs_each_interval_in_equal_sub_steps():
     assert observed_objective(net, data, learn.TrajectoryLoss(max_step=dt_max), None, 0.0, 0)[4].description.substeps == 1
 
 
+def _diamond() -> lp.systems.LiePoissonSystem:
+    """A body on the solvable "diamond" algebra from its structure constants ([p, q] = z,
+    [n, p] = p, [n, q] = -q): its coadjoint flows are `expm_action`'s, not a closed form."""
+    C = np.zeros((4, 4, 4))
+    for a, b, d, v in ((0, 1, 2, 1.0), (3, 0, 0, 1.0), (3, 1, 1, -1.0)):
+        C[a, b, d], C[b, a, d] = v, -v
+    g = lp.LieAlgebra(C, "diamond", ("p", "q", "z", "n"))
+    return lp.systems.LiePoissonSystem(g, lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 + m[3] ** 2), name="diamond")
+
+
+def test_trajectory_loss_on_a_generic_algebra_is_the_rollout_whichever_path_the_batch_takes():
+    # The segments are mapped as samples: every coadjoint flow of a step takes the Taylor path
+    # (or the matrix exponential) that the batch's largest |t M(alpha)| picks. Segments of
+    # sizes 0.02 and 3 in one batch: the small one goes through the large one's path, and
+    # must still be its own rollout. By hand: one step at a time outside any sample axis (the
+    # matrix exponential by scaling and squaring).
+    system = _diamond()
+    y0 = np.array([[0.02, -0.01, 0.015, 0.01], [3.0, -2.0, 1.0, 2.5]])
+    data = it.observe(system, y0, it.uneven_times(2, 8, (0.05, 0.3), seed=3))
+    net = learn.GLPNet(system, terms=learn.RidgeTerms(4, 4, key=1, activation="identity"), method=TripleJump)
+    fitted, train, _, loss_fn, _ = observed_objective(net, data, learn.TrajectoryLoss(latent=False), None, 0.0, 0)
+    predicted = np.asarray(loss_fn.residuals(fitted, train)) + np.asarray(train.states)
+    for j, (t, y) in enumerate(zip(data.times, data.states)):
+        z, by_hand = jnp.asarray(y[0]), [y[0]]
+        for d in np.diff(t):
+            z = _step(fitted.model.with_h(float(d)), z)
+            by_hand.append(np.asarray(z))
+        # 7 steps of 9 flows, each exact to a few eps relative in either form (Taylor on
+        # vectors or scaling and squaring), on states growing by e^{|t M|} at most: 256 eps of
+        # the segment's own size (a wrong path, e.g. degree 10 at |t M| = 1, is off by ~1e-8)
+        size = np.max(np.abs(by_hand))
+        np.testing.assert_allclose(predicted[j, : t.size], np.array(by_hand), rtol=0, atol=256 * EPS * size)
+
+
 # -- 4. Casimirs ------------------------------------------------------------------------------------
 def test_map_fitted_to_noisy_observations_keeps_the_casimir(noisy_fit):
     data, model, records = noisy_fit
@@ -359,6 +393,19 @@ def test_quadratic_part_bad_input():
 
 
 # -- 7. information criterion -------------------------------------------------------------------------
+def test_criteria_the_criterion_cannot_tell_apart_choose_the_fewest_parameters_then_the_first():
+    from learn._training._criterion import BIC_RESOLUTION, lowest
+
+    # a clear winner wins, whatever its parameters
+    assert lowest([(-100.0, 3), (-105.0, 20), (-90.0, 1)]) == 1
+    # within the resolution of the lowest: fewer effective parameters first ...
+    assert lowest([(-100.0, 5), (-100.0 - BIC_RESOLUTION / 2, 8), (-100.0 + BIC_RESOLUTION / 4, 3)]) == 2
+    # ... then the first fitted, even when a later one is lower by round-off
+    assert lowest([(-45774.3654, 3), (-45774.3654 - 1e-9, 3)]) == 0
+    # a fit just beyond the resolution is not a tie
+    assert lowest([(-100.0, 3), (-100.0 - 2 * BIC_RESOLUTION, 8)]) == 1
+
+
 def test_redundant_weights_count_once_in_the_information_criterion():
     data = _observations(noise=1e-2, size=1.0, n=4)
     criteria, n_parameters = {}, {}

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import BodyObservations
+from liepoisson import vmap_samples
 from liepoisson.internals import positive_float
 
 from .._models._base import AbstractBodyMap
@@ -126,8 +127,9 @@ class BodyObjective(SegmentsObjective):
         mu0 = fitted.starts[:, :dim]
         has_g = "configurations" in args.measured
         g0 = group.right_exp(args.first, fitted.starts[:, dim:]) if has_g else args.first
-        gs, mus = jax.vmap(lifted_segment, in_axes=(None, 0, 0, 0, 0, None))(
-            model, g0, mu0, args.dt, args.mask, args.substeps)
+        substeps = args.substeps  # over the segments as samples (see `SegmentsObjective`)
+        gs, mus = vmap_samples(lambda g, m, d, present: lifted_segment(model, g, m, d, present, substeps))(
+            g0, mu0, args.dt, args.mask)
         parts = []
         if has_g:
             parts.append(group.difference(args.configurations, gs) * args.weights)

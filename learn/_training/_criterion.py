@@ -4,8 +4,14 @@ parameters and the one formula, shared by the trajectory fits and the selection 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+
+#: Two criteria closer than this are equal: a difference $n\log(\mathrm{SSR}/n)$ cannot tell
+#: from none (a relative change of the SSR by 0.1/$n$), such as round-off between two families
+#: that give the same map ("quadratic, even" and a selection that kept every term).
+BIC_RESOLUTION = 0.1
 
 
 def effective_parameters(jacobian: np.ndarray) -> int:
@@ -22,3 +28,11 @@ def effective_parameters(jacobian: np.ndarray) -> int:
 def bic(ssr: float, n: int, k: int) -> float:
     r"""$n\log(\mathrm{SSR}/n) + k\log n$: `n` residual components, `k` effective parameters."""
     return n * math.log(ssr / n) + k * math.log(n)
+
+
+def lowest(criteria: Sequence[tuple[float, int]]) -> int:
+    """The index of the chosen fit among `(bic, effective parameters)` pairs: the lowest
+    criterion, and of those within `BIC_RESOLUTION` of it the one with the fewest effective
+    parameters, then the first (so that round-off does not decide between equal fits)."""
+    best = min(b for b, _ in criteria)
+    return min((k, i) for i, (b, k) in enumerate(criteria) if b <= best + BIC_RESOLUTION)[1]

@@ -26,6 +26,7 @@ from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
 from ._body import BodyLoss, weak_form_quadratic
+from ._criterion import BIC_RESOLUTION, lowest
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._observed import TrajectoryLoss, information_criterion
@@ -73,8 +74,9 @@ def fit_splitting(
     selected", `learn.select_quadratic`), a sigmoid family from the fit of the quadratic family
     it extends (`learn.Family.from_nested`; skipped when that family's residuals are `PRUNE_RATIO`
     (100) times the best's so far); the one with the lowest Bayesian information criterion
-    (`information_criterion`) is returned: with noisy data, parameters the data do not need
-    cost accuracy (conventions, [Observations][conventions-observations]). The records are
+    (`information_criterion`) is returned (of criteria within 0.1 of the lowest, which the
+    criterion cannot tell apart, the one with the fewest effective parameters, then the first
+    fitted): with noisy data, parameters the data do not need cost accuracy (conventions, [Observations][conventions-observations]). The records are
     those of every family fitted, the chosen one last; each last stage's `details` hold its
     criterion.
 
@@ -163,11 +165,9 @@ BFGS_ITERATIONS, LM_ITERATIONS = 1000, 200
 #: exact data keep lowering it by more (BENCHMARKS.md, "Learning from observations").
 RTOL = 1e-10
 
-#: ... or by less than this change of the information criterion $n\log(\mathrm{SSR}/n)$ over
-#: those steps ($n$ the observed components): a decrease the criterion cannot tell from none,
-#: while the weights creep along directions the data barely fix (learned directions of equal
-#: eigenvalues rotating into each other). A relative decrease of `BIC_RESOLUTION`/$n$.
-BIC_RESOLUTION = 0.1
+# ... or by less than `BIC_RESOLUTION` of the information criterion over those steps: a
+# decrease the criterion cannot tell from none, while the weights creep along directions the
+# data barely fix (learned directions of equal eigenvalues rotating into each other).
 
 @_recipe.register
 def _(data: Observations, system, method, loss, activation, iterations, key, common, families=None):
@@ -209,7 +209,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             last.record, details={**last.record.details, **criterion, "family": family.name, "skipped": skipped,
                                   "target_loss": target}))
         fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
-    best = min(fits, key=lambda f: (f[0], f[1]))
+    best = fits[lowest([(f[0], f[3].stages[-1].details["effective_parameters"]) for f in fits])]
     return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
 
 
@@ -298,7 +298,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         criterion = information_criterion(problem, problem.y0)
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family.name, {**criterion, "target_loss": target}))
-    best = min(fits, key=lambda f: (f[0], f[1]))
+    best = fits[lowest([(f[0], f[5]["effective_parameters"]) for f in fits])]
     records = []
     for f in fits:
         problem, results, name, criterion = f[2], list(f[3]), f[4], f[5]

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from integrators import Observations
+from liepoisson import vmap_samples
 from liepoisson.internals import casimir_scale, positive_float, positive_int
 
 from .._models._base import AbstractCasimirConservingMap
@@ -264,8 +265,10 @@ class SegmentsObjective(AbstractStructuredJacobian):
         else:
             observed = index < 0
             start = jnp.where(observed[:, None], targets[:, 0], fitted.starts[jnp.clip(index, 0)])
-        predicted = jax.vmap(segment_predictions, in_axes=(None, 0, 0, 0, None))(
-            fitted.model, start, dt, mask, args.substeps)
+        # over the segments as samples: the coadjoint flows take `expm_action`'s paths for the
+        # whole batch (Taylor on vectors at a data step), not the matrix exponential of each
+        model, substeps = fitted.model, args.substeps
+        predicted = vmap_samples(lambda s, d, m: segment_predictions(model, s, d, m, substeps))(start, dt, mask)
         # a start taken as observed is not a prediction: it is left out of the mean
         mask = mask.at[:, 0].set(jnp.where(observed, 0.0, mask[:, 0]))
         return (predicted - targets) * mask[..., None], mask
