@@ -517,3 +517,25 @@ def default_group(algebra: Any) -> AbstractLieGroup | None:
             found = group
     algebra.__dict__["_default_group"] = found
     return found
+
+
+def group_definition(group: AbstractLieGroup) -> dict[str, Any] | None:
+    """`group` as JSON values (`group_from_definition` rebuilds it), or `None` for a group no
+    file can hold (a user's own subclass)."""
+    if type(group) in (Rotations, Poses):
+        return {"kind": type(group).__name__}
+    if type(group) is MatrixGroup:
+        return {"kind": "MatrixGroup", "basis": group.basis.tolist(), "name": group.name}
+    return None
+
+
+def group_from_definition(definition: dict[str, Any]) -> AbstractLieGroup:
+    """The group of `group_definition`'s values; `ValueError` for a malformed one."""
+    kind = definition.get("kind") if isinstance(definition, dict) else None
+    if kind == "Rotations":
+        return Rotations()
+    if kind == "Poses":
+        return Poses()
+    if kind == "MatrixGroup":
+        return MatrixGroup(definition["basis"], name=definition.get("name", "matrix group"))
+    raise ValueError(f"not a group definition (a dict with kind Rotations, Poses or MatrixGroup): {definition!r}")

@@ -222,6 +222,11 @@ def test_the_mirror_family_is_saved_with_its_reflection_and_bad_ones_are_refused
     model.save(tmp_path / "m.h5")
     again = learn.load(tmp_path / "m.h5", sleigh)
     assert isinstance(again, learn.QuadraticDAlembertMap) and again.reflection == 0
+    # without system=: the sleigh rebuilt from the file, its SE(2) too, so the pose still moves
+    alone = learn.load(tmp_path / "m.h5")
+    g, xi = np.eye(3).reshape(9), np.array([0.3, 1.0, 0.0])
+    np.testing.assert_allclose(np.asarray(alone.lifted_step(g, xi)[0]), np.asarray(model.lifted_step(g, xi)[0]),
+                               rtol=0, atol=0)
     for bad in (2, -1, True, "0", 0.0):
         with pytest.raises(ValueError, match="reflection must be None or the index 0 or 1"):
             learn.QuadraticDAlembertMap(sleigh, reflection=bad)

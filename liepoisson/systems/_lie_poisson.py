@@ -10,7 +10,7 @@ import numpy as np
 
 from .._abstract_algebra import AbstractLieAlgebra
 from .._definitions import algebra_from_definition
-from .._groups import AbstractLieGroup
+from .._groups import AbstractLieGroup, group_definition, group_from_definition
 from .._namespace import JAX
 from .._symbolic import (
     SYMBOLIC,
@@ -98,7 +98,8 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
       but are not saved: load such files with `system=` to get the splitting back.
     - `group` (keyword): the configuration group (`liepoisson.MatrixGroup(basis)`, ...),
       checked to represent `algebra`; default: `Rotations` for so(3), `Poses` for se(3), none
-      otherwise. Not saved in files (it moves configurations, not momenta).
+      otherwise. Saved in files with the system when given (a user's own `AbstractLieGroup`
+      subclass is not: load with `system=`).
     """
 
     def __init__(
@@ -167,13 +168,17 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
         splitting (None where a piece cannot be saved), and the Hamiltonian at probe points."""
         k = self.algebra.n_casimirs
         pieces = [_piece_definition(t, k) for t in self._splitting]
-        return {
+        params = {
             "kind": KIND,
             "algebra": self.algebra.definition(),
             "hamiltonian": self._tree,
             "splitting": None if any(p is None for p in pieces) else pieces,
             "probes": self._probes,
         }
+        group = None if self._group is None else group_definition(self._group)
+        if group is not None:  # a group given (only then: files without one stay as they were)
+            params["group"] = group
+        return params
 
     @classmethod
     def from_params(cls, name: str, params: dict[str, Any], what: str = "params") -> LiePoissonSystem:
@@ -185,7 +190,8 @@ class LiePoissonSystem(AbstractLiePoissonSystem, AbstractDefinedByParams):
             k = algebra.n_casimirs
             pieces = params.get("splitting")
             splitting = () if not pieces else tuple(_piece_from_definition(p, k) for p in pieces)
-            system = cls(algebra, hamiltonian, name, splitting)
+            group = group_from_definition(params["group"]) if params.get("group") is not None else None
+            system = cls(algebra, hamiltonian, name, splitting, group=group)
         except (KeyError, TypeError, ValueError, IndexError) as err:
             raise ValueError(f"{what} is not a valid LiePoissonSystem definition: {type(err).__name__}: {err}") from err
         if "splitting" in params and params["splitting"] is None:  # pieces no file could hold
