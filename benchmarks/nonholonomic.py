@@ -9,9 +9,10 @@ Protocol: the Suslov problem with I = (1, 2, 3) and a = (1, 1, 1) (not an eigenv
 inertia), the Chaplygin sleigh with m = 1, I = 1, a = 0.5; the initial momentum (1.5, -1, 2)
 projected onto the constraint (`LiePoissonDAlembert.project`). heyoka at tolerance eps to
 t = 200: the largest relative energy drift and relative constraint. Each integrator (RK4, the
-implicit midpoint rule, GaussLegendre4, the discrete Lagrange-d'Alembert method, whose node
-momenta are `node_momentum` of its states and whose energy and constraint are those of its
-discrete velocities): the observed order from the errors at t = 5 against
+implicit midpoint rule, GaussLegendre4, the discrete Lagrange-d'Alembert method and its
+symmetric compositions by TripleJump and Yoshida6 (`ComposedLagrangeDAlembert`), whose node
+momenta are `node_momentum` of their states and whose energy and constraint are those of their
+`velocity`): the observed order from the errors at t = 5 against
 heyoka at h = 0.2, 0.1, 0.05 (log2 of successive ratios), then `--steps` steps of `--h`: the
 largest relative energy error, its value at the end (drift), the largest relative constraint,
 and the microseconds a step (compiled rollout, the second of two runs).
@@ -28,24 +29,28 @@ import time
 import numpy as np
 
 import integrators as it
+from integrators.splitting import Yoshida6
 from paper.w6_nonholonomic import systems
 
 from ._report import add_output_arguments, saved_results, write_json
 
 NAME = "nonholonomic"
 METHODS = {"RK4": (it.RK4, 4), "implicit midpoint": (it.ImplicitMidpoint, 2), "GaussLegendre4": (it.GaussLegendre4, 4),
-           "discrete Lagrange-d'Alembert": (it.DiscreteLagrangeDAlembert, 2)}
+           "discrete Lagrange-d'Alembert": (it.DiscreteLagrangeDAlembert, 2),
+           "DLA, TripleJump": (it.ComposedLagrangeDAlembert, 4),
+           "DLA, Yoshida6": (lambda system, h: it.ComposedLagrangeDAlembert(system, h, Yoshida6()), 6)}
 
 
 def nodes(method, states: np.ndarray) -> np.ndarray:
     """The momenta at the nodes of `method`'s states: the states themselves, but for a
-    staggered method (the discrete Lagrange-d'Alembert method), whose state is the arriving momentum."""
+    staggered method (the discrete Lagrange-d'Alembert method and its compositions), whose state
+    is the arriving momentum."""
     return np.asarray(method.node_momentum(states)) if isinstance(method, it.AbstractStaggeredStepMap) else states
 
 
 def velocities(system, method, states: np.ndarray) -> np.ndarray:
-    """The body velocities the method keeps admissible: $\nabla H$ of its states, or the
-    discrete Lagrange-d'Alembert method's discrete velocities."""
+    """The body velocities the method keeps admissible: $\nabla H$ of its states, or a
+    staggered method's `velocity` (the discrete velocities; a composition's node velocities)."""
     if isinstance(method, it.AbstractStaggeredStepMap):
         return np.asarray(method.velocity(states))
     return np.asarray(system.body_velocity(states))

@@ -49,6 +49,7 @@ from ._noise import (
     UniformNoise as UniformNoise,
 )
 from ._nonholonomic import AbstractStaggeredStepMap as AbstractStaggeredStepMap
+from ._nonholonomic import ComposedLagrangeDAlembert as ComposedLagrangeDAlembert
 from ._nonholonomic import DiscreteLagrangeDAlembert as DiscreteLagrangeDAlembert
 from ._runge_kutta import GaussLegendre4 as GaussLegendre4, ImplicitMidpoint as ImplicitMidpoint, RK4 as RK4
 from ._plots import (

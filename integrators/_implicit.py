@@ -52,11 +52,16 @@ class AbstractImplicitStepMap(AbstractStepMap):
 
     def step(self, y: jax.Array) -> jax.Array:
         context, z = self.start(check_state(y, self.system.dim))
+        z, converged = self.solve(context, z)
+        return jnp.where(converged, self.finish(context, z), jnp.nan)
+
+    def solve(self, context: Any, z: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """`(z, converged)`: the iterate after `iterations` iterations from `z`, and whether the
+        last one moved it by at most the module's tolerance."""
         z = jax.lax.fori_loop(0, self.iterations - 1, lambda _, z: self.iterate(context, z), z)
         z_next = self.iterate(context, z)
         moved = jnp.max(jnp.abs(z_next - z))
-        converged = moved <= CONVERGENCE_RTOL * jnp.maximum(1.0, jnp.max(jnp.abs(z_next)))
-        return jnp.where(converged, self.finish(context, z_next), jnp.nan)
+        return z_next, moved <= CONVERGENCE_RTOL * jnp.maximum(1.0, jnp.max(jnp.abs(z_next)))
 
     def with_iterations(self, iterations: int) -> AbstractImplicitStepMap:
         """The same map with another iteration count (a large step contracts slowly)."""

@@ -33,6 +33,9 @@ from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import LiePoissonDAlembert
 
 from ._implicit import AbstractImplicitStepMap
+from ._splitting._composition import AbstractCompositionMethod
+from ._splitting._composition import TripleJump as _TripleJump
+from ._step_map import AbstractStepMap, check_state
 
 
 def _phi1(A: jax.Array) -> jax.Array:
@@ -48,7 +51,7 @@ def _g(A: jax.Array, v: jax.Array) -> jax.Array:
     return jnp.linalg.solve(_phi1(A), v)
 
 
-class AbstractStaggeredStepMap(AbstractImplicitStepMap):
+class AbstractStaggeredStepMap(AbstractStepMap):
     r"""A step map whose state is not the momentum at the node: a variational integrator's
     momentum arriving at node $k$, with the velocity of the step after it in between.
     `node_momentum(states)` is the momentum at the nodes (what compares with $\mu(t_k)$) and
@@ -63,15 +66,26 @@ class AbstractStaggeredStepMap(AbstractImplicitStepMap):
         """The velocities of the steps from states `(..., dim)`."""
 
 
-class DiscreteLagrangeDAlembert(AbstractStaggeredStepMap):
-    r"""The discrete Lagrange-d'Alembert method (module docstring): order 2, symmetric,
-    variational; the discrete velocities $\xi_k$ keep the constraint to round-off.
+class DiscreteLagrangeDAlembert(AbstractStaggeredStepMap, AbstractImplicitStepMap):
+    r"""The discrete Lagrange-d'Alembert method (module docstring): order 2, symmetric and
+    reversible (below), variational; the discrete velocities $\xi_k$ keep the constraint to
+    round-off.
 
     The state is the discrete momentum $p_k$ at node $k$ (an approximation of $\mu(t_k)$;
     start from the system's momentum). Each step solves the $k = \dim\ker C$ equations
     $N^\top\bigl(g(hK(Nw))\,\mathbb MNw - p_k\bigr) = 0$ for $\xi_k = Nw$ ($N$ the
     system's `admissible_basis`: the multipliers drop out) by `iterations` Newton steps from
     $w = N^\top\mathbb M^{-1}p_k$; `velocity(p)` returns that $\xi_k$.
+
+    The step depends on $p_k$ only through $N^\top p_k$ (a reaction impulse $C^\top\lambda$
+    added to $p_k$ changes $\lambda_k$ only), and as a map of $N^\top p$ it is
+    **symmetric**, $\Phi_{-h} = \Phi_h^{-1}$ (the step at $-h$ from $p_{k+1}$ solves its
+    equation with $\xi_k$ and no impulse, and arrives at $p_k + C^\top\lambda_k$), and
+    **reversible** under $\mu\mapsto-\mu$ ($K$ is linear in $\xi$): the property that
+    McLachlan & Perlmutter (*J. Nonlinear Sci.* 16, 2006) found behind nonholonomic
+    integrators' good energy behaviour, and Modin & Verdier (*Numer. Math.* 144, 2020) showed
+    to be what makes them work on reversible systems such as these. Its map of discrete
+    velocities is symmetric too, and composes to higher orders: `ComposedLagrangeDAlembert`.
 
     **Arguments:** `system`, a `liepoisson.systems.LiePoissonDAlembert` with a quadratic
     Hamiltonian (a kinetic energy); `h` > 0; `iterations` >= 1 (default 8).
@@ -155,3 +169,86 @@ def _node_momenta(method: DiscreteLagrangeDAlembert, p: jax.Array) -> jax.Array:
         return 0.5 * (q + _g(method.h * method._generator(xi), method.metric @ xi))
 
     return jax.lax.map(one, p)
+
+
+class ComposedLagrangeDAlembert(AbstractStepMap):
+    r"""Symmetric compositions of the discrete Lagrange-d'Alembert method, in its velocities:
+    $\Phi_h = F_{\gamma_sh}\circ\cdots\circ F_{\gamma_1h}$ with the palindromic table
+    $\gamma$ of a composition method (`integrators.splitting.TripleJump`, the default,
+    `Suzuki`, `McLachlan4`: order 4; `Yoshida6`: order 6; Hairer, Lubich & Wanner, Sec. II.4)
+    and $F_h$ the method's map of discrete velocities, $\xi_k\mapsto\xi_{k+1}$:
+
+    $$N^\top g\bigl(hK(\xi_{k+1})\bigr)\,\mathbb M\xi_{k+1} = N^\top g\bigl(-hK(\xi_k)\bigr)\,\mathbb M\xi_k,$$
+
+    the equation of two consecutive steps of `DiscreteLagrangeDAlembert` with the multiplier
+    eliminated. $F_h$ is symmetric ($F_{-h} = F_h^{-1}$: the equation is the same read
+    backwards) and of order 2, so the composition has the table's order; and every steady
+    motion ($K(\xi)\mathbb M\xi \in \operatorname{im}C^\top$) is a fixed point of $F_h$ for
+    every $h$ ($g(z) - g(-z) = -z$), so of the composition too. (Composed in the arriving
+    momenta instead, each sub-step would read the momentum arriving from a sub-step of
+    another length: the steady motions drift, the energy by $O(h^4)$ per unit time with
+    TripleJump, 5.5e-3 over $10^5$ steps of 0.1 on the Suslov problem.)
+
+    The state is the momentum $\mathbb M\xi$ of the velocity $\xi = Nw \in \ker C$ (a
+    rollout carries $w$); a state off the constraint is read by its class $N^\top y$ (as
+    `system.project`). Every sub-step's velocity is in $\ker C$ to round-off.
+
+    **Arguments:** `system` and `iterations` as `DiscreteLagrangeDAlembert`'s (each sub-step's
+    Newton steps, from the velocity before it); `h` > 0; `method`, an `integrators.splitting`
+    composition method.
+    """
+
+    base: DiscreteLagrangeDAlembert
+    h: float
+    method: AbstractCompositionMethod = eqx.field(static=True)
+
+    def __init__(self, system: LiePoissonDAlembert, h: float, method: AbstractCompositionMethod | None = None,
+                 iterations: int = 8):
+        method = _TripleJump() if method is None else method
+        if not isinstance(method, AbstractCompositionMethod):
+            raise TypeError(f"method must be a composition method of integrators.splitting (TripleJump, Suzuki, "
+                            f"McLachlan4, Yoshida6): a table of sub-steps; got {method!r}")
+        self.base = DiscreteLagrangeDAlembert(system, h, iterations)
+        self.h = self.base.h
+        self.method = method
+
+    @property
+    def system(self) -> LiePoissonDAlembert:
+        return self.base.system
+
+    @property
+    def order(self) -> int:
+        """The composition method's order."""
+        return self.method.order
+
+    def carry(self, y: jax.Array) -> jax.Array:
+        r"""$w$ with $N^\top\mathbb MNw = N^\top y$: the velocity $Nw$ of the admissible
+        momentum with the class of `y`."""
+        N, M = self.base.basis, self.base.metric
+        return jnp.linalg.solve(N.T @ M @ N, N.T @ y)
+
+    def uncarry(self, w: jax.Array) -> jax.Array:
+        return self.base.metric @ (self.base.basis @ w)
+
+    def step_carry(self, w: jax.Array) -> jax.Array:
+        def substep(w, gamma):  # F at gamma h: from the momentum arriving from a step of gamma h
+            m = eqx.tree_at(lambda m: m.h, self.base, gamma * self.h)
+            w, converged = m.solve(m.finish(None, w), w)
+            return jnp.where(converged, w, jnp.nan), None
+
+        return jax.lax.scan(substep, w, jnp.asarray(self.method.coefficients))[0]
+
+    def step(self, y: jax.Array) -> jax.Array:
+        return self.uncarry(self.step_carry(self.carry(check_state(y, self.system.dim))))
+
+    @property
+    def label(self) -> str:
+        return f"ComposedLagrangeDAlembert({type(self.method).__name__})"
+
+    @property
+    def exact_flows_per_step(self) -> int:
+        return 0
+
+    def step_flops(self) -> float:
+        """One sub-step's count times the sub-steps (XLA counts a scan's body once)."""
+        return len(self.method.coefficients) * self.base.step_flops()

@@ -11,7 +11,9 @@ with Gaussian noise of a fraction `noise` of their RMS size. Test: `n_test` furt
 t = `t_end` against heyoka, every model stepping h = 0.1: the classical integrators on the
 momenta (RK4, the implicit midpoint rule, `integrators.GaussLegendre4`; the discrete
 Lagrange-d'Alembert method, measured on its discrete velocities, which it keeps admissible, its
-heading $\theta_{k+1} = \theta_k + h\omega_k$ its own reconstruction), `learn.DAlembertMap`
+heading $\theta_{k+1} = \theta_k + h\omega_k$ its own reconstruction; its symmetric composition
+by TripleJump in the velocities, `integrators.ComposedLagrangeDAlembert`, order 4, without a
+heading), `learn.DAlembertMap`
 (its constraint and learned energy kept for any weights; `lm_steps` Levenberg-Marquardt steps on
 the trajectory loss), `learn.QuadraticDAlembertMap` (the family of every quadratic energy,
 four parameters, stepped by its exact flow; fitted the same way; for the sleigh also with its
@@ -295,6 +297,12 @@ def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6
         return measure(name, system, "discrete Lagrange-d'Alembert", "classical", xi, truth(), us_per_step=us,
                        heading=heading)
     keep("discrete_lagrange_dalembert", discrete_lagrange_dalembert)
+
+    def composed_lagrange_dalembert():  # no heading: its sub-steps' poses are not kept
+        mu, us = timed_rollout(it.ComposedLagrangeDAlembert(system, H), momenta0, n_steps)
+        return measure(name, system, "DLA, TripleJump", "classical", np.asarray(system.body_velocity(mu)), truth(),
+                       us_per_step=us)
+    keep("dla_triplejump", composed_lagrange_dalembert)
 
     def exact_flow():
         xi, us = timed_rollout(learn.QuadraticDAlembertMap.from_system(system, H), truth().velocities[:, 0], n_steps)
