@@ -246,6 +246,12 @@ class ComposedLagrangeDAlembert(AbstractStepMap):
         return f"ComposedLagrangeDAlembert({type(self.method).__name__})"
 
     @property
+    def divergence_hint(self) -> str:
+        return (f"The map left the finite range, or a sub-step's Newton iteration did not converge in "
+                f"iterations={self.base.iterations} (such a sub-step is NaN, never its last iterate): build it with "
+                f"more iterations= or a smaller h (the table's sub-steps reach {max(abs(self.method.coefficients)):.2f} h)")
+
+    @property
     def exact_flows_per_step(self) -> int:
         return 0
 

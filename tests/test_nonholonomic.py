@@ -358,6 +358,9 @@ def test_composed_lagrange_dalembert_refuses_what_is_not_a_composition():
         it.ComposedLagrangeDAlembert(suslov, -0.1)
     with pytest.raises(TypeError, match="LiePoissonDAlembert"):
         it.ComposedLagrangeDAlembert(lp.systems.RigidBody(INERTIA), 0.1)
+    # a sub-step that cannot converge in one Newton iteration is a divergence that says what to do
+    with pytest.raises(it.RolloutDivergedError, match=r"iterations=1 .*more iterations= or a smaller h"):
+        it.ComposedLagrangeDAlembert(suslov, 0.5, iterations=1).rollout(suslov.project(np.array([1.5, -1.0, 2.0])), 3)
 
 
 @pytest.mark.slow  # ~10 s (three compositions compiled); the orders are printed by python -m benchmarks.nonholonomic
