@@ -127,9 +127,13 @@ class DiscreteLagrangeDAlembert(AbstractStaggeredStepMap, AbstractImplicitStepMa
 
     def finish(self, p: jax.Array, w: jax.Array) -> jax.Array:
         r"""$p_{k+1} = g(-hK(\xi_k))\,\mathbb M\xi_k$."""
-        N, M = self.basis, self.metric
-        xi = N @ w
-        return _g(-self.h * self._generator(xi), M @ xi)
+        return self.arriving(w)
+
+    def arriving(self, w: jax.Array) -> jax.Array:
+        r"""$g(-hK(\xi))\,\mathbb M\xi$, $\xi = Nw$: the momentum a step of velocity $\xi$
+        arrives with."""
+        xi = self.basis @ w
+        return _g(-self.h * self._generator(xi), self.metric @ xi)
 
     def node_momentum(self, p: jax.Array) -> jax.Array:
         r"""$\tfrac12(p_k + p_k^+)$ `(..., dim)`, $p_k^+ = p_k + C^\top\lambda_k =
@@ -186,8 +190,8 @@ class ComposedLagrangeDAlembert(AbstractStepMap):
     motion ($K(\xi)\mathbb M\xi \in \operatorname{im}C^\top$) is a fixed point of $F_h$ for
     every $h$ ($g(z) - g(-z) = -z$), so of the composition too. (Composed in the arriving
     momenta instead, each sub-step would read the momentum arriving from a sub-step of
-    another length: the steady motions drift, the energy by $O(h^4)$ per unit time with
-    TripleJump, 5.5e-3 over $10^5$ steps of 0.1 on the Suslov problem.)
+    another length: the steady motions drift, the energy by $O(h^p)$ per unit time;
+    BENCHMARKS.md, "Nonholonomic systems".)
 
     The state is the momentum $\mathbb M\xi$ of the velocity $\xi = Nw \in \ker C$ (a
     rollout carries $w$); a state off the constraint is read by its class $N^\top y$ (as
@@ -233,7 +237,7 @@ class ComposedLagrangeDAlembert(AbstractStepMap):
     def step_carry(self, w: jax.Array) -> jax.Array:
         def substep(w, gamma):  # F at gamma h: from the momentum arriving from a step of gamma h
             m = eqx.tree_at(lambda m: m.h, self.base, gamma * self.h)
-            w, converged = m.solve(m.finish(None, w), w)
+            w, converged = m.solve(m.arriving(w), w)
             return jnp.where(converged, w, jnp.nan), None
 
         return jax.lax.scan(substep, w, jnp.asarray(self.method.coefficients))[0]

@@ -76,8 +76,8 @@ def fit_splitting(
     (100) times the best's so far); the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned (of criteria within 0.1 of the lowest, which the
     criterion cannot tell apart, the one with the fewest effective parameters, then the first
-    fitted): with noisy data, parameters the data do not need cost accuracy (conventions, [Observations][conventions-observations]). The records are
-    those of every family fitted, the chosen one last; each last stage's `details` hold its
+    fitted): with noisy data, parameters the data do not need cost accuracy (conventions,
+    [Observations][conventions-observations]). The records are those of every family fitted, the chosen one last; each last stage's `details` hold its
     criterion.
 
     With `integrators.BodyObservations` (configurations and/or body velocities, what a star
