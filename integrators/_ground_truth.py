@@ -148,6 +148,8 @@ class _Job:
             "chunk_size": self.chunk_size, "seed": self.seed,
             "y0_sha256": hashlib.sha256(np.ascontiguousarray(self.y0).tobytes()).hexdigest(),
             "n_traj": self.y0.shape[0],
+            **({} if self.g0 is None else
+               {"g0_sha256": hashlib.sha256(np.ascontiguousarray(self.g0).tobytes()).hexdigest()}),
         }, sort_keys=True)
 
     def trajectories(self, states: np.ndarray) -> Trajectories:
@@ -298,6 +300,7 @@ def save_ground_truth(
     progress: bool | None = None,
     max_steps: int = 0,
     seed: int | None = None,
+    g0: ArrayLike | None = None,
 ) -> str:
     r"""`ground_truth(...)` written chunk by chunk to the HDF5 file `path` (the format of
     `Trajectories.save`), never holding more than a few chunks in memory: for ensembles
@@ -311,9 +314,10 @@ def save_ground_truth(
     or a part of them with `Trajectories.load(path, select=...)`.
 
     Arguments as in `ground_truth`; `chunk_size` trajectories per chunk (default about 16 MiB
-    of output each). **Returns** `path`.
+    of output each); with `g0` the configurations are written beside the momenta (the
+    `configurations` data set of `Trajectories.save`). **Returns** `path`.
     """
-    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size)
+    job = _job(system, y0, h, n_steps, tol, max_steps, seed, progress, chunk_size, g0)
     client = check_client(client)
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a file name (str or os.PathLike); got {type(path).__name__}")
@@ -328,13 +332,16 @@ def save_ground_truth(
         for k, states in map_unordered(integrate_chunk, job.chunks(skip=done), client=client, shared=(job.system,)):
             start = k * job.chunk_size
             with h5py.File(partial, "r+") as f:  # closed after every chunk: a crash loses no chunk written
-                f["trajectories"][start : start + states.shape[0]] = states
+                f["trajectories"][start : start + states.shape[0]] = states[..., : system.dim]
+                if job.g0 is not None:
+                    f["configurations"][start : start + states.shape[0]] = states[..., system.dim :]
                 f["chunk_done"][k] = True
             bar.update(states.shape[0])
     with h5py.File(partial, "r+") as f:
         del f["chunk_done"]
         del f.attrs["job"]
-        write_attributes(f, job.trajectories(job.y0[:1, None]).metadata)
+        first = job.y0[:1, None] if job.g0 is None else np.concatenate([job.y0[:1, None], job.g0[:1, None]], axis=-1)
+        write_attributes(f, job.trajectories(first).metadata)
     with open(partial, "rb+") as fh:  # on disk before the rename makes it visible
         os.fsync(fh.fileno())
     os.replace(partial, path)  # the same folder: atomic
@@ -346,6 +353,16 @@ def _partial_path(path: str) -> str:
     return os.path.join(directory, f".{name}.partial.h5")
 
 
+def _partial_shapes(source: Any) -> dict[str, tuple[int, ...]]:
+    """The shapes of the data sets of a partial file (`h5py.File`) or of a job's: the momenta
+    and, with configurations, the configurations."""
+    if isinstance(source, _Job):
+        n, m, width = source.shape
+        dim = source.system.dim
+        return {"trajectories": (n, m, dim), **({} if width == dim else {"configurations": (n, m, width - dim)})}
+    return {name: source[name].shape for name in ("trajectories", "configurations") if name in source}
+
+
 def _open_partial(partial: str, job: _Job) -> set[int]:
     """The chunks already in the partial file of this job; creates it (over a partial file of
     another job, or a damaged one) if needed."""
@@ -353,16 +370,17 @@ def _open_partial(partial: str, job: _Job) -> set[int]:
     if os.path.exists(partial):
         try:
             with h5py.File(partial, "r") as f:
-                if f.attrs.get("job") == fingerprint and f["trajectories"].shape == job.shape:
+                if f.attrs.get("job") == fingerprint and _partial_shapes(f) == _partial_shapes(job):
                     return {int(k) for k in np.flatnonzero(f["chunk_done"][...])}
         except (OSError, KeyError, ValueError):  # damaged by a crash mid-write: start over
             pass
         log.info("ground truth: starting %s over (it was of another request or damaged)", partial)
     os.makedirs(os.path.dirname(partial), exist_ok=True)
     with h5py.File(partial, "w") as f:
-        per_traj = job.shape[1] * job.shape[2]
-        f.create_dataset("trajectories", shape=job.shape, dtype=np.float64,
-                         chunks=(max(1, min(job.shape[0], 2**17 // per_traj)), *job.shape[1:]))
+        for name, shape in _partial_shapes(job).items():
+            per_traj = shape[1] * shape[2]
+            f.create_dataset(name, shape=shape, dtype=np.float64,
+                             chunks=(max(1, min(shape[0], 2**17 // per_traj)), *shape[1:]))
         f.create_dataset("times", data=job.grid)
         f.create_dataset("chunk_done", data=np.zeros(job.n_chunks, dtype=bool))
         f.attrs["job"] = fingerprint

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import cloudpickle
 import distributed
+import h5py
 import jax
 import numpy as np
 import pytest
@@ -399,3 +400,36 @@ def test_the_readme_dask_example_runs_as_a_script(tmp_path):
     assert proc.stdout.count("\n| ") >= 8  # a row per grid point
     assert integrators.Trajectories.load(tmp_path / "truth.h5").n_traj == 2000
     assert len(learn.Sweep.load(tmp_path / "sweep")) == 8
+
+
+def test_save_ground_truth_with_configurations_writes_what_ground_truth_gives_and_resumes_only_its_own(tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    y0 = _y0(5, seed=3)
+    g0 = Rotation.random(5, random_state=4).as_quat()
+    reference = integrators.ground_truth(BODY, y0, 0.1, 20, g0=g0)
+    path = integrators.save_ground_truth(tmp_path / "truth.h5", BODY, y0, 0.1, 20, chunk_size=2, g0=g0)
+    loaded = integrators.Trajectories.load(path)
+    np.testing.assert_array_equal(loaded.states, reference.states)
+    np.testing.assert_array_equal(loaded.configurations, reference.configurations)
+    np.testing.assert_array_equal(integrators.Trajectories.load(path, select=[1, 4]).configurations,
+                                  reference.configurations[[1, 4]])
+    # a partial file of the same momenta from other configurations is started over, not resumed
+    other = _ground_truth._job(BODY, y0, 0.1, 20, None, 0, None, False, 2, Rotation.random(5, random_state=5).as_quat())
+    partial = _ground_truth._partial_path(os.fspath(tmp_path / "again.h5"))
+    _ground_truth._open_partial(partial, other)
+    with h5py.File(partial, "r+") as f:  # chunk 0 "done" with wrong values
+        f["configurations"][0:2] = 0.5
+        f["chunk_done"][0] = True
+    again = integrators.Trajectories.load(
+        integrators.save_ground_truth(tmp_path / "again.h5", BODY, y0, 0.1, 20, chunk_size=2, g0=g0))
+    np.testing.assert_array_equal(again.configurations, reference.configurations)
+    # ... and one of the same request is resumed: its chunk 0 is kept as written
+    same = _ground_truth._job(BODY, y0, 0.1, 20, None, 0, None, False, 2, g0)
+    _ground_truth._open_partial(partial, same)
+    with h5py.File(partial, "r+") as f:
+        f["configurations"][0:2] = 0.5
+        f["chunk_done"][0] = True
+    resumed = integrators.Trajectories.load(
+        integrators.save_ground_truth(tmp_path / "again.h5", BODY, y0, 0.1, 20, chunk_size=2, g0=g0))
+    np.testing.assert_array_equal(resumed.configurations[2:], reference.configurations[2:])
