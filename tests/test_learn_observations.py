@@ -542,3 +542,74 @@ def test_an_extension_of_a_family_that_misfits_is_skipped():
             nested = by_name["quadratic"]
             assert 0 < by_name["general"]["target_loss"] < nested["ssr"] / nested["n"]
             assert nested["target_loss"] is None  # a family that extends none has no target
+
+
+def test_families_contain_the_simpler_ones_as_their_definitions_say():
+    by = {f.name: f for f in learn.FAMILIES}
+    holds = {  # each member of the right-hand family is one of the left-hand one's, by the Family fields
+        ("quadratic", "quadratic, even"), ("quadratic, any axes", "quadratic"),
+        ("quadratic, any axes, even", "quadratic, even"), ("general", "quadratic"),
+        ("general, any axes", "quadratic, any axes"), ("general, any axes", "general"),
+        ("quadratic", "quadratic, selected"),
+    }
+    fails = {  # no linear terms; no learned directions; sigmoids; nothing inside a selection
+        ("quadratic, any axes, even", "quadratic"), ("general", "quadratic, any axes"),
+        ("quadratic, any axes", "general"), ("quadratic, selected", "quadratic, even"),
+    }
+    for big, small in holds:
+        assert by[big].contains(by[small]), (big, small)
+    for big, small in fails:
+        assert not by[big].contains(by[small]), (big, small)
+    for f in learn.FAMILIES:
+        assert not f.contains(f)
+        for g in learn.FAMILIES:  # a partial order: never both ways, and transitive
+            assert not (f.contains(g) and g.contains(f))
+            for k in learn.FAMILIES:
+                assert not (f.contains(g) and g.contains(k)) or f.contains(k)
+
+
+def test_the_discretisation_error_is_the_methods_own_and_falls_with_its_order():
+    # a G-LPNet (TripleJump, order 4) of the true H on exact data: the difference of its
+    # predictions at s and 2s sub-steps falls 2^4 per doubling in size, so 2^8 in the SSR
+    # (within 20%: the next order's term), and the map's SSR against exact data is that
+    # difference's (2^4 / (2^4 - 1))^2 times, within the same margin
+    from learn._training._observed import discretisation_ssr
+
+    data = _observations(0.0, size=1.0, n=4)
+    net = learn.GLPNet(BODY, terms=learn.FAMILIES[0].terms_of(BODY, np.diag(INVERSE_INERTIA), np.zeros(3), 1.0),
+                       method=TripleJump())
+    ssr = {}
+    for substeps, max_step in ((1, None), (2, 0.15)):
+        start, train, _, objective, problem = observed_objective(
+            net, data, learn.TrajectoryLoss(max_step=max_step), None, 0.0, 0)
+        start = eqx.tree_at(lambda f: f.starts, start, jnp.asarray(np.stack([s[0] for s in data.states])))
+        assert train.substeps == substeps
+        ssr[substeps] = (discretisation_ssr(problem, start), float(jnp.sum(objective.residuals(start, train) ** 2)))
+    assert 0.8 * 2**8 < ssr[1][0] / ssr[2][0] < 1.2 * 2**8
+    for floor, error in ssr.values():
+        assert 0.8 < error / (floor * (16 / 15) ** 2) < 1.2
+
+
+def test_exact_data_a_family_explains_within_its_step_skip_its_extensions_along_the_same_directions():
+    # the aligned rigid body's exact trajectories: "quadratic, even" holds its H, its residuals
+    # are within its own discretisation error, and the families adding terms along the same axes
+    # are skipped; learned directions are still fitted (another splitting of the same H). The
+    # logarithmic term of another body is outside it: residuals far above, nothing skipped
+    names = ("quadratic, even", "quadratic", "quadratic, any axes, even", "general")
+    families = [f for f in learn.FAMILIES if f.name in names]
+    exact = _observations(0.0, size=1.0, n=4)
+    _, records = learn.fit_splitting(BODY, exact, families=families, iterations=20, progress=False)
+    details = {r.stages[-1].details["family"]: r.stages[-1].details for r in records}
+    assert sorted(details) == ["quadratic, any axes, even", "quadratic, even"]
+    assert records[-1].stages[-1].details["skipped"] == ["quadratic", "general"]
+    assert details["quadratic, even"]["ssr"] <= details["quadratic, even"]["discretisation_ssr"]
+    kappa, v = 0.3, np.array([0.6, 0.0, 0.8])
+    log_body = lp.systems.LiePoissonSystem(
+        lp.so3(), lambda m, xp: 0.5 * sum(INVERSE_INERTIA[i] * m[i] ** 2 for i in range(3))
+        + kappa * xp.log(1.0 + (v[0] * m[0] + v[2] * m[2]) ** 2), name="logarithmic")
+    obs = it.observe(log_body, _starts(4, 1.0), it.uneven_times(4, N_OBS, (0.05, 0.3), seed=1), noise=0.0, seed=0)
+    _, records = learn.fit_splitting(log_body, obs, families=families, iterations=20, progress=False)
+    details = [r.stages[-1].details for r in records]
+    assert details[-1]["skipped"] == [] and len(details) == 4
+    first = next(d for d in details if d["family"] == "quadratic, even")
+    assert first["ssr"] > 100 * first["discretisation_ssr"]

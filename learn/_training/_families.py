@@ -51,6 +51,16 @@ class Family:
                             (jnp.zeros_like(fitted.a), fitted.c, fitted.a_values()))
         return terms if fitted.b is None else eqx.tree_at(lambda t: t.b, terms, fitted.bias_values())
 
+    def contains(self, other: Family) -> bool:
+        r"""Whether every member of `other` (another family) is one of this family's: its pieces
+        are along learned directions if this family's are, it has linear terms if `other` has,
+        and a quadratic $\Phi_s$ is a general one with $a_s = 0$. A family of selected terms
+        is contained in those holding all of its terms, and contains none."""
+        return (other is not self and not self.select
+                and (self.any_axes or not other.any_axes)
+                and (self.bias or not other.bias)
+                and (self.activation == other.activation or (other.activation == "identity" and self.linear_term)))
+
     @property
     def warm_start(self) -> bool:
         """Whether the fit starts from the same pieces with the identity activation."""

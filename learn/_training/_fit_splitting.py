@@ -29,7 +29,7 @@ from ._body import BodyLoss, weak_form_quadratic
 from ._criterion import BIC_RESOLUTION, lowest
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
-from ._observed import TrajectoryLoss, information_criterion
+from ._observed import TrajectoryLoss, discretisation_ssr, information_criterion
 from ._problem import Fitted
 from ._units import state_size
 
@@ -73,7 +73,10 @@ def fit_splitting(
     differences (`learn.Family.start`; the terms selected by the criterion for "quadratic,
     selected", `learn.select_quadratic`), a sigmoid family from the fit of the quadratic family
     it extends (`learn.Family.from_nested`; skipped when that family's residuals are `PRUNE_RATIO`
-    (100) times the best's so far); the one with the lowest Bayesian information criterion
+    (100) times the best's so far); a family containing one whose residuals are within that
+    family's own discretisation error (exact data it explains as far as its step allows:
+    `Family.contains`, `discretisation_ssr`) is skipped too, since it could only fit the
+    step's error; the one with the lowest Bayesian information criterion
     (`information_criterion`) is returned (of criteria within 0.1 of the lowest, which the
     criterion cannot tell apart, the one with the fewest effective parameters, then the first
     fitted): with noisy data, parameters the data do not need cost accuracy (conventions,
@@ -86,8 +89,9 @@ def fit_splitting(
     and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
     the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
     momenta); a family whose start misfits the weak-form equations `PRUNE_RATIO` (100) times
-    more than the best start, or that extends one whose residuals are 100 times the best's,
-    is skipped (named in each record's `details["skipped"]`).
+    more than the best start, that extends one whose residuals are 100 times the best's, or
+    that contains one fitted within its discretisation error is skipped (named in each
+    record's `details["skipped"]`).
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
@@ -185,9 +189,9 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     # each family from the least-squares quadratic of the finite differences, in the data's units
     size = state_size(system, data)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
-    fits, fitted, ssr, skipped = [], {}, {}, []
-    for family in families:
-        if extends_a_misfit(family, ssr):
+    fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
+    for k, family in enumerate(families):
+        if extends_a_misfit(family, ssr) or contains_an_explanation(family, explained):
             skipped.append(family.name)
             continue
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
@@ -203,6 +207,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
+        criterion.update(step_accuracy(problem, family, families[k + 1 :], criterion["ssr"], explained))
         ssr[family.name] = criterion["ssr"]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
@@ -242,6 +247,38 @@ def extends_a_misfit(family: Family, ssr: dict[str, float]) -> bool:
 
 
 
+def step_accuracy(problem: Any, family: Family, later: Sequence[Family], ssr: float,
+                  explained: list[Family]) -> dict[str, Any]:
+    """`{"discretisation_ssr": ...}` of a fitted family that a `later` family contains (none
+    otherwise: nothing would be skipped on it), and `family` appended to `explained` when its
+    sum of squared residuals `ssr` is within that discretisation error (`discretisation_ssr`)."""
+    if not any(extends_along_its_directions(f, family) for f in later):
+        return {}
+    floor = discretisation_ssr(problem, problem.y0)
+    if ssr <= floor:
+        explained.append(family)
+    return {"discretisation_ssr": floor}
+
+
+def contains_an_explanation(family: Family, explained: Sequence[Family]) -> bool:
+    """Whether `family` extends, along the same directions, one that fitted the observations
+    to within its own discretisation error (`explained`): data that family explains as far as
+    its step allows, exact data of a Hamiltonian it holds. More terms along the same pieces'
+    directions (linear terms, sigmoids) could only fit the step's error (terms of the method's
+    modified Hamiltonian), not more of the body, and the criterion, whose likelihood takes the
+    residuals for noise, would choose them for that. Learned directions are still fitted
+    after a family on the axes: they split the same Hamiltonian into other pieces, whose
+    composition may err less at the data's steps (BENCHMARKS.md, "Exact data: families
+    explained within the step's error")."""
+    return any(extends_along_its_directions(family, f) for f in explained)
+
+
+def extends_along_its_directions(family: Family, other: Family) -> bool:
+    """Whether `family` contains `other` (`Family.contains`) with its pieces along the same
+    kind of directions (both on the axes, or both learned)."""
+    return family.contains(other) and family.any_axes == other.any_axes
+
+
 #: On observations and body observations, a family that extends a nested one is skipped when
 #: the nested family's sum of squared residuals is more than this many times the best family's
 #: so far (`extends_a_misfit`); on body observations also a family whose quadratic start
@@ -279,10 +316,11 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     starts = {(f.bias, f.any_axes): weak_form_quadratic(data, linear=f.bias, diagonal=not f.any_axes)
               for f in families}
     least = min(misfit for _, _, misfit in starts.values())
-    fits, fitted, ssr, skipped = [], {}, {}, []
-    for family in families:
+    fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
+    for k, family in enumerate(families):
         A, b, misfit = starts[family.bias, family.any_axes]
-        if misfit > PRUNE_RATIO * least or extends_a_misfit(family, ssr):
+        if (misfit > PRUNE_RATIO * least or extends_a_misfit(family, ssr)
+                or contains_an_explanation(family, explained)):
             skipped.append(family.name)
             continue
         net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
@@ -296,6 +334,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
             start, (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
+        criterion.update(step_accuracy(problem, family, families[k + 1 :], criterion["ssr"], explained))
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family.name, {**criterion, "target_loss": target}))
     best = fits[lowest([(f[0], f[5]["effective_parameters"]) for f in fits])]
