@@ -78,6 +78,7 @@ from ._training._families import (
     select_quadratic as select_quadratic,
 )
 from ._training._fit_splitting import fit_splitting as fit_splitting
+from ._training._phase import fit_phase as fit_phase
 from ._training._identify import (
     PrincipalAxes as PrincipalAxes,
     QuadraticPart as QuadraticPart,

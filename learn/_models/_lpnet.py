@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from integrators import AbstractReconstructingStepMap
 from integrators.internals import check_h, check_state
 from liepoisson.internals import check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
@@ -29,7 +30,7 @@ from ._parametrisation import (
 )
 
 
-class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
+class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstructingStepMap):
     r"""Local Lie-Poisson network: $y \mapsto \mathbb T(h, \alpha(y))\,y$, a system, an
     $\alpha$-network and a parametrisation $\mathbb T$ of exact steps.
 
@@ -51,10 +52,13 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
     or `network`, any `learn.AbstractNetwork` from `dim` to `n_params` instead (then none of
     those may be given); `parametrisation` (an `AbstractStepParametrisation` or its class name;
     default `default_parametrisation(system)`); `h`, the time step (`None`: set by `learn.fit`
-    from the data).
+    from the data); `phase`: a network from states to one rate per Casimir, the part of the
+    configuration's motion that momenta cannot fix (`lifted_step`; `learn.fit_phase` fits it
+    to configurations; `None`: no lifted step).
     """
 
     network: AbstractNetwork
+    phase: AbstractNetwork | None
     parametrisation: AbstractStepParametrisation = eqx.field(static=True)
     system: AbstractPoissonSystem = eqx.field(static=True)
     h: float | None
@@ -71,6 +75,7 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
         output_scaling: Scaling | None = None,
         *,
         network: AbstractNetwork | None = None,
+        phase: AbstractNetwork | None = None,
     ):
         self.system = check_system(system)
         refuse_nonholonomic(system, "an LPNet")
@@ -97,6 +102,8 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
         for group in network.sign_groups():  # every GroupAveraged, at any depth
             check_group_law(system, parametrisation, group)
         self.network = network
+        self.phase = None if phase is None else check_network(
+            phase, system.dim, system.n_casimirs, "states to one phase rate per Casimir")
         self.h = None if h is None else positive_float(h, "h")
 
     @property
@@ -131,12 +138,43 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
         y = check_state(y, self.system.dim)
         return self.parametrisation.step(self.alpha(y), y, self.h)
 
+    def phase_velocity(self, y: jax.Array) -> jax.Array:
+        r"""$\sum_k\beta_k(y)\nabla C_k(y)$ `(dim,)` for one state: the body velocity along the
+        Casimir gradients that the step's configuration moves with besides $\alpha(y)$ (zero
+        without a phase network or Casimirs)."""
+        if self.phase is None or self.system.n_casimirs == 0:
+            return jnp.zeros_like(y)
+        return self.phase(y) @ self.system.casimir_gradients(y)
+
+    def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+        r"""The step on $(g, \mu)$: $g \mapsto g\exp(h\,\beta(\mu)\cdot\nabla C(\mu))
+        \exp(h\,\alpha(\mu))$, $\mu \mapsto \mathrm{Ad}^*_{\exp(h\alpha)}\mu$. The test flow
+        fixes the configuration's step only up to the stabiliser of $\mu$, whose directions
+        at a regular point are the Casimir gradients (turning $g$ along them moves no
+        momentum): for a rigid body, the rotation about the angular momentum. The phase
+        network $\beta$ gives that part (`learn.fit_phase`, from configurations). Each factor
+        is an exact lifted flow, so the spatial momentum is kept to round-off for any weights.
+        `ValueError` without a phase network on a system with Casimirs (conventions,
+        [Configurations][conventions-configurations])."""
+        group = self.system.require_group()
+        if self.phase is None and self.system.n_casimirs:
+            raise ValueError(
+                "this LPNet has no phase network: fitted to momenta, its step fixes the configuration's motion only "
+                "up to the Casimir gradients (for a rigid body, the rotation about the angular momentum), which "
+                "momenta cannot see. Fit that part to configurations: net, _ = learn.fit_phase(net, trajectories) "
+                "with trajectories holding configurations (integrators.ground_truth(..., g0=...))")
+        y = check_state(y, self.system.dim)
+        h = check_h(self)
+        g = group.right_exp(group.check(g, "g"), h * self.phase_velocity(y))
+        return self.parametrisation.lifted_step(self.alpha(y), g, y, h)
+
     @property
     def exact_flows_per_step(self) -> int:
         return self.parametrisation.exact_flows
 
     def hyperparameters(self) -> dict[str, Any]:
-        return {"network": self.network.spec(), "parametrisation": type(self.parametrisation).__name__}
+        out = {"network": self.network.spec(), "parametrisation": type(self.parametrisation).__name__}
+        return out if self.phase is None else {**out, "phase": self.phase.spec()}
 
     @property
     def output_scales(self) -> jax.Array:
@@ -153,7 +191,8 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap):
     @classmethod
     def from_hyperparameters(cls, system, hyperparameters, *, key=0, h=None):
         network = network_from_spec(hyperparameters["network"], key)
-        return cls(system, parametrisation=hyperparameters["parametrisation"], h=h, network=network)
+        phase = None if "phase" not in hyperparameters else network_from_spec(hyperparameters["phase"], key)
+        return cls(system, parametrisation=hyperparameters["parametrisation"], h=h, network=network, phase=phase)
 
     def normalised(self, y0, y1, h, targets=None, *, fraction: float = 1.0):
         r"""Scalings from the data: inputs the mean/std of $y_0$, outputs those of `targets`

@@ -53,6 +53,13 @@ class AbstractStepParametrisation(abc.ABC):
         naming the pair when no step connects them (different Casimirs).
         """
 
+    def lifted_step(self, params: jax.Array, g: jax.Array, y: jax.Array, h: float) -> tuple[jax.Array, jax.Array]:
+        r"""`step` lifted to the configuration, $(g\gamma, \mathbb T(\alpha)\,y)$ with
+        $\gamma$ the group element of the step's exact flows; `ValueError` for a
+        parametrisation that does not say it (the default)."""
+        raise ValueError(f"{type(self).__name__} does not carry a configuration; an LPNet with the "
+                         "TestFlowParametrisation (one test flow a step) does")
+
     def params_estimate(self, y0: ArrayLike, y1: ArrayLike, h: float) -> np.ndarray:
         r"""First-order estimate $\alpha \approx \mathbb B(y_0)^+ (y_1 - y_0)/h$ (minimum norm,
         hence orthogonal to the Casimir gradients); not validated. Used to scale networks."""
@@ -113,6 +120,11 @@ class TestFlowParametrisation(AbstractInvertibleParametrisation):
 
     def step(self, params, y, h):
         return self.system.test_flow(params, h, y)
+
+    def lifted_step(self, params, g, y, h):
+        r"""$(g\exp(h\alpha),\ \mathrm{Ad}^*_{\exp(h\alpha)}y)$: the test flow's body
+        velocity is $\alpha$ throughout (`system.lifted_test_flow`)."""
+        return self.system.lifted_test_flow(params, h, g, y)
 
     def inverse_step(self, params, y, h):
         r"""The test flow of $-\alpha$: the flow of a linear Hamiltonian run backwards."""
