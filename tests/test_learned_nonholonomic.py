@@ -175,6 +175,7 @@ def test_the_quadratic_family_refuses_what_it_cannot_hold():
         learn.QuadraticDAlembertMap(lp.systems.RigidBody((1.0, 2.0, 3.0)))
 
 
+@pytest.mark.slow  # a fit: 5 s; from_system's exact flow is tested in the default run
 def test_a_fit_of_the_quadratic_family_to_exact_velocities_is_the_exact_flow(tmp_path):
     rng = np.random.default_rng(0)
     mu0 = np.asarray(SUSLOV.project(rng.normal(size=(8, 3))))

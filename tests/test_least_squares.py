@@ -226,7 +226,8 @@ def glpnet_pairs():
 
 # every 5 steps: writes at steps 5, 10 and (the end) 12 of the warm start, then 5, 10, 12 after
 # it; (which write is interrupted, steps left to take after the resume)
-@pytest.mark.parametrize(("interrupt_at", "left"), [(2, 14), (3, 12), (5, 2)],
+@pytest.mark.parametrize(("interrupt_at", "left"),
+                         [(2, 14), pytest.param(3, 12, marks=pytest.mark.slow), (5, 2)],  # 5 s each
                          ids=["in the warm start", "at its end", "after it"])
 def test_interrupted_levenberg_marquardt_fit_resumes_bit_identically(glpnet_pairs, tmp_path, monkeypatch,
                                                                      interrupt_at, left):
