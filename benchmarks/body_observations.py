@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> None:
                                    "true_principal_values": true_values.tolist(),
                                    "axes_angle_deg_mean": angles.mean(0).tolist(),
                                    "axes_angle_deg_std": angles.std(0, ddof=1).tolist()}
-                    print(key, "bootstrap of the inertia (trace 3):", json.dumps(spread[key]))
+                    print(key, f"bootstrap of the inertia (trace {truth.shape[0]}):", json.dumps(spread[key]))
     write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.verdict(rows),
                                 "bootstrap": spread})
 

@@ -439,7 +439,7 @@ def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int,
     """The G-LPNet's inertia (`learned_inertia`) over `n` fits to the trajectories of `data`
     resampled with replacement (seeded), `(n, dim, dim)`; the family the full data chose is
     refitted (`families=`), not chosen again."""
-    net = LearnedBodyModel("G-LPNet").fit(protocol, data, steps)
+    net = GLPNetBodyModel().fit(protocol, data, steps)
     family = next(f for f in learn.FAMILIES if not f.select and f.any_axes == net.terms.full_vectors
                   and f.bias == net.terms.bias and f.activation == net.terms.activation)
     rng = np.random.default_rng(seed)

@@ -273,3 +273,17 @@ def test_a_damped_body_is_not_reconstructed_and_says_so():
     assert damped.group is None
     with pytest.raises(ValueError, match="dissipative: reconstructing its configuration is not implemented"):
         it.ground_truth(damped, [0.0, 0.6, 0.8], 0.1, 2, g0=[0.0, 0.0, 0.0, 1.0])
+
+
+@pytest.mark.slow  # three small fits: 15 s
+def test_the_bootstrap_of_the_inertia_refits_the_chosen_family_on_resampled_trajectories():
+    from paper import w4_bodies as w4
+
+    satellite = w4.protocols()["satellite"]
+    obs = w4.observations(satellite, 1e-3, "uneven", n_trajectories=6, n_observations=11)
+    M = w4.bootstrap_inertia(satellite, obs, 2, steps=10)
+    assert M.shape == (2, 3, 3)
+    np.testing.assert_allclose(np.trace(M, axis1=1, axis2=2), 3.0, rtol=1e-12)  # the gauge: trace n
+    # the rotated body's principal moments (trace 3) within 1% from 6 noisy trajectories
+    truth = np.linalg.eigvalsh(np.linalg.inv(satellite.A) * 3 / np.trace(np.linalg.inv(satellite.A)))
+    np.testing.assert_allclose(np.linalg.eigvalsh(M), np.broadcast_to(truth, (2, 3)), rtol=1e-2)
