@@ -32,6 +32,7 @@ from ._models._networks import AbstractNetwork as AbstractNetwork, AbstractWrapp
 from ._models._parametric import ParametricHamiltonian as ParametricHamiltonian
 from ._models._parametrisation import (
     AbstractInvertibleParametrisation as AbstractInvertibleParametrisation,
+    AbstractLiftedParametrisation as AbstractLiftedParametrisation,
     AbstractStepParametrisation as AbstractStepParametrisation,
     SE3RotationShear as SE3RotationShear,
     TestFlowParametrisation as TestFlowParametrisation,

@@ -560,6 +560,13 @@ def test_families_contain_the_simpler_ones_as_their_definitions_say():
         assert by[big].contains(by[small]), (big, small)
     for big, small in fails:
         assert not by[big].contains(by[small]), (big, small)
+    # a sigmoid family without the linear term e_s x holds no member that has it, and
+    # conversely; an equal family is not contained
+    bare, full = (learn.Family(name, "sigmoid", linear_term=lt, bias=True) for name, lt in (("bare", False),
+                                                                                          ("full", True)))
+    assert full.contains(bare) and not bare.contains(full)
+    assert not by["general"].contains(learn.Family("general", "sigmoid", linear_term=True, bias=True,
+                                                   nested="quadratic"))
     for f in learn.FAMILIES:
         assert not f.contains(f)
         for g in learn.FAMILIES:  # a partial order: never both ways, and transitive

@@ -24,6 +24,7 @@ from ._mlp import AffineMLP, Scaling
 from ._network_spec import network_from_spec
 from ._networks import AbstractNetwork, check_network, network_or_default
 from ._parametrisation import (
+    AbstractLiftedParametrisation,
     AbstractStepParametrisation,
     default_parametrisation,
     parametrisation_from_name,
@@ -102,8 +103,11 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
         for group in network.sign_groups():  # every GroupAveraged, at any depth
             check_group_law(system, parametrisation, group)
         self.network = network
+        if phase is not None and not isinstance(parametrisation, AbstractLiftedParametrisation):
+            raise ValueError(f"phase= turns the configuration of a lifted step, which {type(parametrisation).__name__} "
+                             "has not (its parameters are not a body velocity); use the TestFlowParametrisation")
         self.phase = None if phase is None else check_network(
-            phase, system.dim, system.n_casimirs, "states to one phase rate per Casimir")
+            phase, system.dim, system.n_casimirs, "states to one phase rate per Casimir (phase=)")
         self.h = None if h is None else positive_float(h, "h")
 
     @property
@@ -165,6 +169,10 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
                 "with trajectories holding configurations (integrators.ground_truth(..., g0=...))")
         y = check_state(y, self.system.dim)
         h = check_h(self)
+        if not isinstance(self.parametrisation, AbstractLiftedParametrisation):
+            raise ValueError(  # noqa: TRY004 (a right-type net without the capability)
+                f"{type(self.parametrisation).__name__} does not carry a configuration; an LPNet with the "
+                             "TestFlowParametrisation (one test flow a step) does")
         g = group.right_exp(group.check(g, "g"), h * self.phase_velocity(y))
         return self.parametrisation.lifted_step(self.alpha(y), g, y, h)
 

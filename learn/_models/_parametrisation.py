@@ -53,13 +53,6 @@ class AbstractStepParametrisation(abc.ABC):
         naming the pair when no step connects them (different Casimirs).
         """
 
-    def lifted_step(self, params: jax.Array, g: jax.Array, y: jax.Array, h: float) -> tuple[jax.Array, jax.Array]:
-        r"""`step` lifted to the configuration, $(g\gamma, \mathbb T(\alpha)\,y)$ with
-        $\gamma$ the group element of the step's exact flows; `ValueError` for a
-        parametrisation that does not say it (the default)."""
-        raise ValueError(f"{type(self).__name__} does not carry a configuration; an LPNet with the "
-                         "TestFlowParametrisation (one test flow a step) does")
-
     def params_estimate(self, y0: ArrayLike, y1: ArrayLike, h: float) -> np.ndarray:
         r"""First-order estimate $\alpha \approx \mathbb B(y_0)^+ (y_1 - y_0)/h$ (minimum norm,
         hence orthogonal to the Casimir gradients); not validated. Used to scale networks."""
@@ -90,7 +83,17 @@ class AbstractInvertibleParametrisation(AbstractStepParametrisation):
         r"""$\mathbb T(\alpha)^{-1}\,y$ for one sample."""
 
 
-class TestFlowParametrisation(AbstractInvertibleParametrisation):
+class AbstractLiftedParametrisation(AbstractStepParametrisation):
+    r"""A parametrisation whose step carries the configuration: its parameters are the body
+    velocity of its exact flow (what `LPNet.lifted_step` and `learn.fit_phase` need)."""
+
+    @abc.abstractmethod
+    def lifted_step(self, params: jax.Array, g: jax.Array, y: jax.Array, h: float) -> tuple[jax.Array, jax.Array]:
+        r"""`step` lifted to the configuration: $(g\gamma, \mathbb T(\alpha)\,y)$, $\gamma$ the
+        group element of the step's exact flow."""
+
+
+class TestFlowParametrisation(AbstractInvertibleParametrisation, AbstractLiftedParametrisation):
     r"""Any system with exact test flows (Lie-Poisson on any algebra, or the affine/canonical
     systems of the paper): one step is $y \mapsto \mathbb T(h, \alpha)\,y$ =
     `system.test_flow(alpha, h, y)`, $\alpha\in\mathbb R^n$.

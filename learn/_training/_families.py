@@ -52,14 +52,19 @@ class Family:
         return terms if fitted.b is None else eqx.tree_at(lambda t: t.b, terms, fitted.bias_values())
 
     def contains(self, other: Family) -> bool:
-        r"""Whether every member of `other` (another family) is one of this family's: its pieces
-        are along learned directions if this family's are, it has linear terms if `other` has,
-        and a quadratic $\Phi_s$ is a general one with $a_s = 0$. A family of selected terms
-        is contained in those holding all of its terms, and contains none."""
-        return (other is not self and not self.select
-                and (self.any_axes or not other.any_axes)
-                and (self.bias or not other.bias)
-                and (self.activation == other.activation or (other.activation == "identity" and self.linear_term)))
+        r"""Whether every member of `other` (another family) is one of this family's: this
+        family's pieces are along learned directions if `other`'s are, it has linear terms
+        $b_s$ if `other` has, and its $\Phi_s'$ holds `other`'s (the same activation with a
+        linear term $e_sx$ if `other` has one, or a quadratic $\Phi_s$ inside a general one with
+        $a_s = 0$). A family of selected terms is contained in those holding all of its terms,
+        and contains none."""
+        if other == self or self.select:
+            return False
+        if self.activation == other.activation:
+            holds = self.activation == "identity" or self.linear_term or not other.linear_term
+        else:
+            holds = other.activation == "identity" and self.linear_term
+        return holds and (self.any_axes or not other.any_axes) and (self.bias or not other.bias)
 
     @property
     def warm_start(self) -> bool:

@@ -96,7 +96,8 @@ def fit_splitting(
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
     families to choose from on observations (default `learn.FAMILIES`; e.g.
-    `(learn.FAMILIES[3],)` for any quadratic form alone). The other arguments are `learn.fit`'s.
+    `(learn.FAMILIES[3],)` for any quadratic form alone), fitted in the order given (the
+    skipping rules look back only). The other arguments are `learn.fit`'s.
     """
     check_conservative(system)
     if method is not None:  # a wrong method fails before the first fit

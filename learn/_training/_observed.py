@@ -283,7 +283,8 @@ class SegmentsObjective(AbstractStructuredJacobian):
 def discretisation_ssr(problem: FittedProblem, fitted: Fitted) -> float:
     r"""The sum of squared differences between the map's predictions of the training
     observations at the problem's sub-steps per interval and at twice as many: its own
-    discretisation error to leading order (for a method of order $p$, $1 - 2^{-p}$ of it),
+    discretisation error to leading order (for a method of order $p$, $(1 - 2^{-p})^2$ of its
+    sum of squares),
     in the units of the residuals' sum of squares. Exact data fitted to within it are fitted
     as far as the step allows."""
     objective, args = problem.objective, problem.train

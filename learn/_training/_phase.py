@@ -1,12 +1,12 @@
 r"""The part of an LPNet's lifted step that momenta cannot fix, fitted to configurations.
 
 An LPNet step is the test flow $\mu_1 = \mathrm{Ad}^*_{\exp(h\alpha)}\mu_0$. The group elements
-carrying $\mu_0$ to $\mu_1$ form a coset $\exp(h\alpha)\,\mathrm{Stab}(\mu_0)$ (from the right of
-the stabiliser's action), whose directions at a regular point are the Casimir gradients: the
-configuration's true step is $g_1 = g_0\exp(h\,\beta\cdot\nabla C(\mu_0))\exp(h\hat\alpha)$ for
-some rates $\beta$, with $\hat\alpha$ the Casimir-projected parameters of the pair
-(`params_from_pair`). Each configuration pair gives its $\beta$ in closed form; a network
-$\beta(\mu)$ is fitted to them by Levenberg-Marquardt.
+carrying $\mu_0$ to $\mu_1$ (in the lifted step's order: a turn first, then the flow) are
+$\mathrm{Stab}(\mu_0)\exp(h\alpha)$, whose directions at a regular point are the Casimir
+gradients: the configuration's true step is $g_1 = g_0\exp(h\,\beta\cdot\nabla C(\mu_0))
+\exp(h\alpha)$ for some rates $\beta$, for the net's own $\alpha$ (any member of the family,
+Casimir-projected or not, if it carries $\mu_0$ to $\mu_1$). Each configuration pair gives its
+$\beta$ in closed form; a network $\beta(\mu)$ is fitted to them by Levenberg-Marquardt.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from liepoisson.internals import positive_int, show_progress
 
 from .._models._lpnet import LPNet
 from .._models._mlp import AffineMLP
+from .._models._parametrisation import AbstractLiftedParametrisation
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
@@ -42,11 +43,25 @@ class PhaseNetwork(eqx.Module):
     h: float
 
 
+def _turns(group, g0, g1, alpha, h, grads):
+    r"""`(rates (N, k), off (N,), turn (N, dim))`: $\log(g_0^{-1}g_1\exp(-h\alpha))$ and its
+    least-squares rates on the Casimir gradients `grads` `(N, k, dim)` (divided by `h`), and
+    what is left of it off their span."""
+    turn = group.log_between(g0, np.asarray(group.right_exp(jnp.asarray(g1), jnp.asarray(-h * alpha))))
+    pinv = np.linalg.pinv(np.transpose(grads, (0, 2, 1)))  # (N, k, dim)
+    rates = np.einsum("nkd,nd->nk", pinv, turn) / h
+    off = np.linalg.norm(turn - h * np.einsum("nk,nkd->nd", rates, grads), axis=1)
+    return rates, off, turn
+
+
 def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]:
     r"""`(states (N, dim), rates (N, k))`: for every consecutive pair of `data` (states and
-    configurations), the $\beta$ with $g_1 = g_0\exp(h\beta\cdot\nabla C(\mu_0))\exp(h\hat\alpha)$
-    ($\hat\alpha$ from `net.params_from_pair`), by least squares on the Casimir gradients.
-    `ValueError` naming a pair whose configuration step is off those directions."""
+    configurations), the $\beta$ with $g_1 \approx g_0\exp(h\beta\cdot\nabla C(\mu_0))
+    \exp(h\alpha(\mu_0))$, $\alpha$ the net's own (what its lifted step applies), by least
+    squares on the Casimir gradients (exact when $\exp(h\alpha)$ carries $\mu_0$ to $\mu_1$).
+    `ValueError` naming a pair whose configuration step, against the pair's exact parameters
+    $\hat\alpha$ (`net.params_from_pair`), leaves those directions: no motion with these
+    momenta."""
     system = net.system
     group = system.require_group()
     h = float(data.h)
@@ -54,12 +69,10 @@ def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]
     y1 = data.states[:, 1:].reshape(-1, system.dim)
     g0 = data.configurations[:, :-1].reshape(-1, group.size)
     g1 = data.configurations[:, 1:].reshape(-1, group.size)
-    alpha = np.asarray(net.params_from_pair(y0, y1, h))
-    rest = group.log_between(g0, np.asarray(group.right_exp(jnp.asarray(g1), jnp.asarray(-h * alpha))))
     grads = np.asarray(system.casimir_gradients(y0))  # (N, k, dim)
-    rates = np.stack([np.linalg.lstsq(G.T, v, rcond=None)[0] for G, v in zip(grads, rest, strict=True)]) / h
-    off = np.linalg.norm(rest - h * np.einsum("nk,nkd->nd", rates, grads), axis=1)
-    size = h * np.linalg.norm(alpha, axis=1) + np.linalg.norm(rest, axis=1)
+    exact = np.asarray(net.params_from_pair(y0, y1, h))
+    _, off, turn = _turns(group, g0, g1, exact, h, grads)
+    size = h * np.linalg.norm(exact, axis=1) + np.linalg.norm(turn, axis=1)
     worst = int(np.argmax(off / np.maximum(size, np.finfo(float).tiny)))
     if off[worst] > OFF_ORBIT * max(size[worst], np.finfo(float).tiny):
         n_steps = data.states.shape[1] - 1
@@ -67,6 +80,8 @@ def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]
             f"data: the configuration of trajectory {worst // n_steps}, step {worst % n_steps}, moves off the "
             f"directions its momenta allow ({off[worst]:.3g} of a step of size {size[worst]:.3g}): these "
             f"configurations are not a motion with these momenta on {group.name} (noisy, or of another system)")
+    alpha = np.asarray(jax.vmap(net.alpha)(jnp.asarray(y0)))
+    rates, _, _ = _turns(group, g0, g1, alpha, h, grads)
     return y0, rates
 
 
@@ -88,12 +103,20 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
         raise TypeError(f"net must be a learn.LPNet; got {type(net).__name__}")
     if not isinstance(data, Trajectories):
         raise TypeError(f"data must be integrators.Trajectories with configurations; got {type(data).__name__}")
+    if data.states.shape[1] < 2:
+        raise ValueError("data holds one time per trajectory: the phase is fitted to pairs of consecutive "
+                         "configurations; give at least two times")
     if data.configurations is None:
         raise ValueError("data holds no configurations: the phase is what configurations show and momenta do not; "
                          "integrate them with integrators.ground_truth(system, y0, h, n, g0=...)")
     if data.system.group != net.system.require_group():
         raise ValueError(f"data's configurations are on {data.system.group!r}; the net's system moves them on "
                          f"{net.system.group!r}")
+    if not isinstance(net.parametrisation, AbstractLiftedParametrisation):
+        raise ValueError(  # noqa: TRY004 (a right-type net without the capability)
+            f"the net's parametrisation {type(net.parametrisation).__name__} does not carry a "
+                         "configuration (its parameters are not a body velocity); build the LPNet with "
+                         "parametrisation='TestFlowParametrisation'")
     if net.system.n_casimirs == 0:
         raise ValueError(f"{net.system!r} has no Casimirs: the test flow fixes the configuration's step, there is "
                          "no phase to fit")
