@@ -353,14 +353,12 @@ def _partial_path(path: str) -> str:
     return os.path.join(directory, f".{name}.partial.h5")
 
 
-def _partial_shapes(source: Any) -> dict[str, tuple[int, ...]]:
-    """The shapes of the data sets of a partial file (`h5py.File`) or of a job's: the momenta
-    and, with configurations, the configurations."""
-    if isinstance(source, _Job):
-        n, m, width = source.shape
-        dim = source.system.dim
-        return {"trajectories": (n, m, dim), **({} if width == dim else {"configurations": (n, m, width - dim)})}
-    return {name: source[name].shape for name in ("trajectories", "configurations") if name in source}
+def _partial_shapes(job: _Job) -> dict[str, tuple[int, ...]]:
+    """The data sets of a job's partial file and their shapes: the momenta and, with
+    configurations, the configurations."""
+    n, m, width = job.shape
+    dim = job.system.dim
+    return {"trajectories": (n, m, dim), **({} if width == dim else {"configurations": (n, m, width - dim)})}
 
 
 def _open_partial(partial: str, job: _Job) -> set[int]:
@@ -370,7 +368,8 @@ def _open_partial(partial: str, job: _Job) -> set[int]:
     if os.path.exists(partial):
         try:
             with h5py.File(partial, "r") as f:
-                if f.attrs.get("job") == fingerprint and _partial_shapes(f) == _partial_shapes(job):
+                shapes = {name: f[name].shape for name in ("trajectories", "configurations") if name in f}
+                if f.attrs.get("job") == fingerprint and shapes == _partial_shapes(job):
                     return {int(k) for k in np.flatnonzero(f["chunk_done"][...])}
         except (OSError, KeyError, ValueError):  # damaged by a crash mid-write: start over
             pass
