@@ -70,8 +70,22 @@ SYSTEMS = list(SYSTEM_FACTORIES)
 # Lie-Poisson systems and the algebra they live on.
 LIE_POISSON_SYSTEMS = ["RigidBody", "HeavyTop", "Kirchhoff"]
 
-algebra_names = pytest.mark.parametrize("name", ALGEBRAS)
-system_names = pytest.mark.parametrize("name", SYSTEMS)
+
+
+def slow_except(values, default):
+    """`values` to parametrize over, those not in `default` marked slow (run with -m slow): the
+    default run keeps a representative few."""
+    return [v if v in default else pytest.param(v, marks=pytest.mark.slow) for v in values]
+
+
+# By default the algebras with their own code paths (so(3), se(3): closed forms; sl(2): not
+# compact; a direct sum; so(3) from its constants alone: the generic path) and the systems on
+# them; so(3) with the spatial sign, se(2), Heisenberg (also inside the direct sum), the heavy
+# top (se(3) like Kirchhoff) and the extended pendulum with -m slow.
+algebra_names = pytest.mark.parametrize(
+    "name", slow_except(ALGEBRAS, {"so3", "se3", "sl2", "so3+heisenberg", "generic_so3"}))
+system_names = pytest.mark.parametrize(
+    "name", slow_except(SYSTEMS, {"RigidBody", "Kirchhoff", "ChargedParticle"}))
 
 
 # -- hypothesis strategies -------------------------------------------------------------------

@@ -9,7 +9,7 @@ import zlib
 
 import numpy as np
 import pytest
-from helpers import ALGEBRAS, EPS, algebra, system, vectors
+from helpers import EPS, algebra, algebra_names, system, vectors
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -72,7 +72,7 @@ def test_gamma_zero_is_the_undamped_system():
 
 # Each example checks a batch of 4 states in one call of each method (eager dispatch costs per
 # call, not per state): 6 examples check 24 states and 6 dissipation strengths per algebra.
-@pytest.mark.parametrize("name", ALGEBRAS)
+@algebra_names
 @settings(max_examples=6, deadline=None)
 @given(ys=st.lists(vectors(8, 2.0), min_size=4, max_size=4), gamma=st.floats(0.0, 3.0))
 def test_casimirs_kept_and_energy_decays_on_every_algebra(name, ys, gamma):
@@ -94,7 +94,7 @@ def test_casimirs_kept_and_energy_decays_on_every_algebra(name, ys, gamma):
         assert abs(grad_h[k] @ f[k] - rate) <= 1e3 * EPS * max(1.0, float(np.linalg.norm(grad_h[k]))) * scale
 
 
-@pytest.mark.parametrize("name", ALGEBRAS)
+@algebra_names
 def test_heyoka_trajectory_keeps_casimirs_and_loses_energy_on_every_algebra(name):
     damped = DoubleBracket(_quadratic_system(name), 0.5)
     y0 = np.random.default_rng(3).normal(size=damped.dim)

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import ALGEBRAS, EPS, SYSTEMS, algebra, system, vectors
+from helpers import EPS, algebra, algebra_names, system, system_names, vectors
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
@@ -77,7 +77,7 @@ def _generic_direct_sum():
 
 
 # -- round trips: every algebra, every system ------------------------------------------------
-@pytest.mark.parametrize("name", ALGEBRAS)
+@algebra_names
 def test_coadjoint_flow_parameters_round_trip(name):
     g = algebra(name)
     rng = np.random.default_rng(0)
@@ -90,7 +90,7 @@ def test_coadjoint_flow_parameters_round_trip(name):
         _check_round_trip(g.coadjoint_flow, grads, found, t, mu0, mu1)
 
 
-@pytest.mark.parametrize("name", ALGEBRAS)
+@algebra_names
 def test_coadjoint_flow_parameters_on_a_basis_axis(name):
     """mu0 parallel to the last basis vector (a regular point of every algebra listed): many
     exact zeros in the cross products and Casimir gradients."""
@@ -105,7 +105,7 @@ def test_coadjoint_flow_parameters_on_a_basis_axis(name):
     )
 
 
-@pytest.mark.parametrize("name", SYSTEMS)
+@system_names
 def test_test_flow_parameters_round_trip(name):
     s = system(name)
     rng = np.random.default_rng(2)
@@ -264,7 +264,7 @@ def test_gauss_newton_parameters_with_any_flow():
 
 
 # -- rejected pairs and input checks --------------------------------------------------------
-@pytest.mark.parametrize("name", ALGEBRAS)
+@algebra_names
 def test_different_casimir_levels_are_rejected(name):
     g = algebra(name)
     rng = np.random.default_rng(8)

@@ -433,8 +433,11 @@ class _WeightedStateLoss(learn.AbstractPairsLoss):
         return "weighted state"
 
 
-@pytest.mark.parametrize("optimiser", [learn.Adam(200, learning_rate=1e-2), learn.QuasiNewton(60, "bfgs"),
-                                       learn.LevenbergMarquardt(20)], ids=["Adam", "BFGS", "Levenberg-Marquardt"])
+# by default through Levenberg-Marquardt (residuals) and BFGS (the loss's gradient); Adam
+# (the same gradient, minibatched) with -m slow
+@pytest.mark.parametrize("optimiser", [pytest.param(learn.Adam(200, learning_rate=1e-2), marks=pytest.mark.slow),
+                                       learn.QuasiNewton(60, "bfgs"), learn.LevenbergMarquardt(20)],
+                         ids=["Adam", "BFGS", "Levenberg-Marquardt"])
 def test_a_new_loss_is_one_class_and_trains_through_every_solver(rb, pairs, optimiser):
     weights = jnp.array([1.0, 10.0, 100.0])
     loss = _WeightedStateLoss(weights)

@@ -27,7 +27,9 @@ def _truth(system, n, steps, seed, h=0.1):
     return it.ground_truth(system, y0, h, steps, g0=g0)
 
 
-@pytest.mark.parametrize("system", [BODY, lp.systems.Kirchhoff()], ids=["rigid body", "Kirchhoff"])
+# Kirchhoff's poses with -m slow
+@pytest.mark.parametrize("system", [BODY, pytest.param(lp.systems.Kirchhoff(), marks=pytest.mark.slow)],
+                         ids=["rigid body", "Kirchhoff"])
 def test_the_phase_rates_of_heyokas_pairs_rebuild_its_configurations(system):
     # g1 = g0 exp(h beta . grad C(mu0)) exp(h alpha) with alpha the pair's Casimir-projected
     # parameters and beta from their turn (`_turns`): heyoka's next configuration to 1e-11 (its own

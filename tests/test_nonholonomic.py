@@ -279,6 +279,9 @@ def test_discrete_lagrange_dalembert_has_order_two_at_the_nodes(system):
     np.testing.assert_allclose(moved, np.asarray(system.vector_field(y0)), atol=1e-3)
 
 
+# ~6 s (the implicit step's compilation) with -m slow; the composed method's velocities keep
+# the constraint by default (test_composed_lagrange_dalembert_keeps_the_constraint_...)
+@pytest.mark.slow
 def test_discrete_lagrange_dalembert_velocities_keep_the_constraint():
     suslov = lp.systems.suslov(INERTIA, A)
     method = it.DiscreteLagrangeDAlembert(suslov, 0.1)
