@@ -199,6 +199,47 @@ def test_a_fit_on_attitudes_alone_learns_the_rotated_body():
     assert predicted_attitude_error(net, 0.02) < 1e-2
 
 
+def test_each_interval_is_rolled_out_in_its_own_count_of_sub_steps():
+    from learn._training._body import BodyObjective, body_segments, lifted_segment, sub_steps
+
+    intervals = np.array([0.05, 0.3, 0.12, 0.1 + 1e-14, 0.1 - 1e-14, 0.1 + 1e-9])
+    steps, reached = sub_steps(intervals, 0.05)
+    counts = np.diff(np.concatenate([[-1], reached]))
+    # times' rounding (0.1 +- 1e-14) does not add a sub-step; a longer interval does
+    np.testing.assert_array_equal(counts, [1, 6, 3, 2, 2, 3])
+    np.testing.assert_allclose([steps[a + 1 : b + 1].sum() for a, b in zip(np.concatenate([[-1], reached[:-1]]),
+                                                                           reached)], intervals, rtol=4 * EPS)
+    assert steps.max() <= 0.05 * (1 + 1e-12)
+    # a segment's prediction at each observation is the lifted step taken count_k times at
+    # interval_k / count_k, one interval after the other; trajectories of other lengths padded
+    obs = observations(BODY, n=3, m=5)
+    obs = it.BodyObservations(BODY, [obs.times[0], obs.times[1][:3], obs.times[2]],
+                              configurations=[obs.configurations[0], obs.configurations[1][:3], obs.configurations[2]],
+                              velocities=[obs.velocities[0], obs.velocities[1][:3], obs.velocities[2]])
+    net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True),
+                       method=it.splitting.TripleJump())
+    args = body_segments(obs, 0.1)
+    g0, mu0 = np.asarray(obs.configurations[1][0]), np.array([0.3, -0.8, 0.5])
+    gs, mus = lifted_segment(net, g0, mu0, args.steps[1], args.at[1])
+    g, mu = g0, mu0
+    for k, d in enumerate(np.diff(obs.times[1])):
+        n = int(np.ceil(d / 0.1 - 1e-12))
+        for _ in range(n):
+            g, mu = net.with_h(d / n).lifted_step(g, mu)
+        # the same operations in another program: a few roundings of unit-size states
+        np.testing.assert_allclose(np.asarray(gs[k + 1]), np.asarray(g), rtol=0, atol=16 * EPS)
+        np.testing.assert_allclose(np.asarray(mus[k + 1]), np.asarray(mu), rtol=0, atol=16 * EPS)
+    np.testing.assert_array_equal(np.asarray(gs[3:]), np.asarray(gs[2:3]).repeat(2, axis=0))  # padding: the last
+    # twice the sub-steps (the discretisation error's reference) is each sub-step halved
+    finer = lifted_segment(net, g0, mu0, args.steps[1], args.at[1], 2)
+    g, mu = g0, mu0
+    for d in np.asarray(args.steps[1][: int(args.at[1][2]) + 1]):
+        for _ in range(2):
+            g, mu = net.with_h(d / 2).lifted_step(g, mu)
+    np.testing.assert_allclose(np.asarray(finer[0][2]), np.asarray(g), rtol=0, atol=16 * EPS)
+    assert BodyObjective().count(None, args) == (5 + 3 + 5) * 3 * 2
+
+
 @pytest.mark.slow  # a fit, then a rollout (~10 s); the property is by construction, checked by default on an
 # untrained G-LPNet in test_configurations.py
 def test_the_learned_step_keeps_the_spatial_momentum_of_its_latent_momentum():

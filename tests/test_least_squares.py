@@ -99,6 +99,22 @@ def test_a_target_out_of_reach_stops_levenberg_marquardt_and_one_in_reach_change
     np.testing.assert_array_equal(reached_history["train_loss"], free_history["train_loss"])
 
 
+def test_a_target_beyond_a_converging_fits_limit_is_out_of_reach_and_one_within_it_is_not():
+    from learn._solvers._levenberg_marquardt import TARGET_AFTER, _out_of_reach
+
+    # a linearly converging loss: L_k = L* (1 + 0.01 rho^k), its decreases shrinking by rho
+    # per step; at a steady pace for 190 more steps it would fall ~1e-3 below L*
+    limit, rho = 1e-4, 0.8
+    values = [limit * (1 + 0.01 * rho**k) for k in range(1, 11)]
+    assert _out_of_reach(values, limit * (1 - 1e-4), 200)  # below its limit: never reached
+    assert not _out_of_reach(values, limit * (1 + 0.01 * rho**13), 200)  # reached in 3 more steps
+    # the steady pace stays the rule while the decreases do not shrink: a loss falling by
+    # 1% per step reaches L/10 in ~230 steps, not in 190, and L/5 in ~160
+    steady = [0.99**k for k in range(1, 11)]
+    assert _out_of_reach(steady, 0.1, 200) and not _out_of_reach(steady, 0.2, 200)
+    assert not _out_of_reach(values[: TARGET_AFTER - 1], 0.0, 200)  # not judged before TARGET_AFTER
+
+
 def test_levenberg_marquardt_refuses_a_non_finite_start():
     x = jnp.linspace(0.0, 1.0, 40)
     with pytest.raises(FloatingPointError, match="the loss at the start is not finite; check the weights and the data"):
@@ -151,6 +167,31 @@ def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observa
     # (10 sub-steps of at most 0.03) moves them by ~1e-10 (the same test with BFGS: 2e-10)
     np.testing.assert_allclose(theta[:, None] - theta[None, :], want[:, None] - want[None, :], rtol=0, atol=1e-8)
     assert record.stages[-1].optimiser == "LevenbergMarquardt" and record.train_loss < 1e-18
+
+
+def test_the_last_jacobian_is_read_again_only_at_the_same_point_of_the_same_data(monkeypatch):
+    """The criterion reads the fitted map's Jacobian where Levenberg-Marquardt left it; a
+    kept Jacobian is never returned for another point, other data or another structure."""
+    from learn._solvers import _levenberg_marquardt as lm
+
+    x = jnp.linspace(0.0, 1.0, 40)
+    args = (x, 2.0 * jnp.exp(-1.5 * x) + 0.3)
+    fn = lm.residuals_of(_CurveLoss(), _Curve(jnp.zeros(3)))
+    calls = []
+    monkeypatch.setattr(fn, "_jacobian_jit", lambda z, a: calls.append(1) or jax.jit(fn._jacobian)(z, a))
+    theta = jnp.array([1.0, -1.0, 0.0])
+    r, J = fn.jacobian(theta, args)
+    again = fn.jacobian(jnp.array([1.0, -1.0, 0.0]), args)  # an equal x, another array: kept
+    assert len(calls) == 1 and again[1] is J
+    np.testing.assert_array_equal(np.asarray(fn.residuals(theta, args)), np.asarray(r))
+    fn.jacobian(theta + jnp.array([0.0, 0.0, 1e-300]), args)  # another point (by one ulp of 0)
+    fn.jacobian(theta, (args[0], args[1] + 0.0))  # equal data in another object
+    assert len(calls) == 3
+    moved = theta.at[2].set(0.5)
+    np.testing.assert_allclose(np.asarray(fn.residuals(moved, (args[0], args[1] + 0.0))),
+                               np.asarray(r) + 0.5, rtol=0, atol=4 * EPS)  # c shifts every residual
+    other = lm.residuals_of(_CurveLoss(), _Curve(jnp.zeros(4)))  # another structure: its own
+    assert other._kept(jnp.zeros(3), args) is None
 
 
 def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():

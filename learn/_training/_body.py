@@ -37,13 +37,18 @@ from ._problem import Description, Fitted, FittedProblem
 
 class BodySegments(eqx.Module):
     """Body observations as a training problem's `args`, one segment per trajectory (padded to
-    the longest): `index` `(S,)` (the row of fitted starts), `dt` `(S, L-1)`, `mask` `(S, L)`,
-    `first` `(S, size)` the first observed configuration (the identity without configurations),
-    `configurations` `(S, L, size)`, `velocities` `(S, L, dim)`, `weights` `(dim,)` of the
-    configuration residual, `velocity_scale`; `measured` which of the two are compared."""
+    the longest): `index` `(S,)` (the row of fitted starts), `steps` `(S, N)` the sub-steps
+    each trajectory is rolled out by (each interval in `ceil(interval / max_step)` equal ones,
+    0 where padded), `at` `(S, L)` the sub-step after which each observation is reached (-1
+    for the first), `mask` `(S, L)`, `first` `(S, size)` the first observed configuration (the
+    identity without configurations), `configurations` `(S, L, size)`, `velocities`
+    `(S, L, dim)`, `weights` `(dim,)` of the configuration residual, `velocity_scale`;
+    `measured` which of the two are compared; `substeps`: each sub-step taken in this many
+    equal steps (1; 2 for `discretisation_ssr`)."""
 
     index: jax.Array
-    dt: jax.Array
+    steps: jax.Array
+    at: jax.Array
     mask: jax.Array
     first: jax.Array
     configurations: jax.Array
@@ -54,18 +59,24 @@ class BodySegments(eqx.Module):
     measured: tuple[str, ...] = eqx.field(static=True)
 
 
-def body_segments(data: BodyObservations, substeps: int) -> BodySegments:
-    """Every trajectory of `data` as one segment."""
+def body_segments(data: BodyObservations, max_step: float | None) -> BodySegments:
+    """Every trajectory of `data` as one segment, each interval in equal sub-steps of at most
+    `max_step` (one per interval with `None`)."""
     group, dim = data.group, data.dim
     length = max(t.size for t in data.times)
     S = len(data)
-    fill = float(np.median(data.intervals()))
-    dt = np.full((S, length - 1), fill)
+    schedules = [sub_steps(np.diff(t), max_step) for t in data.times]
+    n_steps = max(1, max(steps.size for steps, _ in schedules))
+    steps = np.zeros((S, n_steps))
+    at = np.full((S, length), -1)
     mask = np.zeros((S, length))
     gs = np.tile(group.identity(), (S, length, 1))
     vs = np.zeros((S, length, dim))
     for j, t in enumerate(data.times):
-        dt[j, : t.size - 1] = np.diff(t)
+        h, reached = schedules[j]
+        steps[j, : h.size] = h
+        at[j, 1 : t.size] = reached
+        at[j, t.size :] = at[j, t.size - 1]
         mask[j, : t.size] = 1.0
         if data.configurations is not None:
             gs[j, : t.size] = data.configurations[j]
@@ -76,30 +87,40 @@ def body_segments(data: BodyObservations, substeps: int) -> BodySegments:
     position = data.position_scale()
     if position is not None:  # positions relative to their RMS size, as their noise
         weights[3:] = 1.0 / position
-    return BodySegments(jnp.arange(S, dtype=jnp.int32), jnp.asarray(dt), jnp.asarray(mask), jnp.asarray(gs[:, 0]),
-                        jnp.asarray(gs), jnp.asarray(vs), jnp.asarray(weights),
-                        jnp.asarray(data.velocity_scale()), substeps, data.measured)
+    return BodySegments(jnp.arange(S, dtype=jnp.int32), jnp.asarray(steps), jnp.asarray(at, dtype=jnp.int32),
+                        jnp.asarray(mask), jnp.asarray(gs[:, 0]), jnp.asarray(gs), jnp.asarray(vs),
+                        jnp.asarray(weights), jnp.asarray(data.velocity_scale()), 1, data.measured)
 
 
-def lifted_segment(model, g0: jax.Array, mu0: jax.Array, dt: jax.Array, mask: jax.Array,
-                   substeps: int) -> tuple[jax.Array, jax.Array]:
+def sub_steps(intervals: np.ndarray, max_step: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """`(steps, reached)`: each interval in `ceil(interval / max_step)` equal sub-steps (one
+    with `None`), one after the other; `reached[k]` the index of the sub-step that ends
+    interval `k`. Each interval its own count: uneven intervals from [0.05, 0.3] at
+    `max_step` 0.05 take 4 sub-steps on average, where the longest's count for every interval
+    took 6."""
+    counts = np.ones(intervals.size, dtype=int) if max_step is None else np.maximum(
+        1, np.ceil(intervals / max_step - 1e-12).astype(int))
+    return np.repeat(intervals / counts, counts), np.cumsum(counts) - 1
+
+
+def lifted_segment(model, g0: jax.Array, mu0: jax.Array, steps: jax.Array, at: jax.Array,
+                   substeps: int = 1) -> tuple[jax.Array, jax.Array]:
     """`(configurations (L, size), momenta (L, dim))` of one segment rolled out by
-    `model.lifted_step` from `(g0, mu0)` over its intervals (padding repeats the last)."""
+    `model.lifted_step` from `(g0, mu0)` over its sub-steps `steps` (each in `substeps` equal
+    steps; a padded sub-step, 0, keeps the state), read after the sub-steps `at` (-1: the
+    start)."""
 
-    def advance(gy, d):
-        m = eqx.tree_at(lambda m: m.h, model, d / substeps, is_leaf=lambda v: v is None)
+    def body(gy, h):
+        m = eqx.tree_at(lambda m: m.h, model, h / substeps, is_leaf=lambda v: v is None)
         if substeps == 1:
-            return m.lifted_step(*gy)
-        return jax.lax.fori_loop(0, substeps, lambda _, z: m.lifted_step(*z), gy)
-
-    def body(gy, inputs):
-        d, present = inputs
-        moved = advance(gy, d)
-        gy = jax.tree_util.tree_map(lambda new, old: jnp.where(present > 0, new, old), moved, gy)
+            moved = m.lifted_step(*gy)
+        else:
+            moved = jax.lax.fori_loop(0, substeps, lambda _, z: m.lifted_step(*z), gy)
+        gy = jax.tree_util.tree_map(lambda new, old: jnp.where(h > 0, new, old), moved, gy)
         return gy, gy
 
-    _, (gs, ys) = jax.lax.scan(body, (g0, mu0), (dt, mask[1:]))
-    return jnp.concatenate([g0[None], gs]), jnp.concatenate([mu0[None], ys])
+    _, (gs, ys) = jax.lax.scan(body, (g0, mu0), steps)
+    return jnp.concatenate([g0[None], gs])[at + 1], jnp.concatenate([mu0[None], ys])[at + 1]
 
 
 class BodyObjective(SegmentsObjective):
@@ -128,8 +149,8 @@ class BodyObjective(SegmentsObjective):
         has_g = "configurations" in args.measured
         g0 = group.right_exp(args.first, fitted.starts[:, dim:]) if has_g else args.first
         substeps = args.substeps  # over the segments as samples (see `SegmentsObjective`)
-        gs, mus = vmap_samples(lambda g, m, d, present: lifted_segment(model, g, m, d, present, substeps))(
-            g0, mu0, args.dt, args.mask)
+        gs, mus = vmap_samples(lambda g, m, steps, at: lifted_segment(model, g, m, steps, at, substeps))(
+            g0, mu0, args.steps, args.at)
         parts = []
         if has_g:
             parts.append(group.difference(args.configurations, gs) * args.weights)
@@ -142,9 +163,11 @@ class BodyObjective(SegmentsObjective):
 class BodyLoss(AbstractLoss):
     r"""How `learn.fit` compares a G-LPNet with `integrators.BodyObservations`: whole
     trajectories rolled out by its lifted step from fitted starts $(g_0\exp(\delta), \mu_0)$
-    (`BodyObjective`). `max_step`: each interval in equal steps of at most this (`None`: one
-    step per interval). No held-out trajectories: their momenta would be unknowns too (the
-    information criterion chooses between families, `learn.fit_splitting`)."""
+    (`BodyObjective`). `max_step`: each interval in the fewest equal steps of at most this,
+    counted per interval (`sub_steps`; `None`: one step per interval); `TrajectoryLoss` takes
+    the largest interval's count for every interval. No held-out trajectories: their momenta
+    would be unknowns too (the information criterion chooses between families,
+    `learn.fit_splitting`)."""
 
     max_step: float | None = eqx.field(static=True, default=None)
 
@@ -168,11 +191,11 @@ class BodyLoss(AbstractLoss):
         if model.system.group != data.group:
             raise ValueError(f"the model's system moves configurations on {model.system.group!r}; the observations "
                              f"are on {data.group!r}")
-        substeps = substeps_for_body(data, self.max_step)
+        substeps = substeps_for_body(data, self.max_step)  # the most of any interval (described)
         h = positive_float(h, "h") if h is not None else (
             float(model.h) if model.h is not None else float(np.median(data.intervals())))
         model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)
-        args = body_segments(data, substeps)
+        args = body_segments(data, self.max_step)
         description = Description(loss=self.name, h=h, n_train=int(data.n_observations), n_val=0, seed=int(seed),
                                   validation_fraction=0.0, max_step=self.max_step, substeps=substeps)
         return FittedProblem(BodyObjective(), Fitted(model, latent_starts(model, data)), args, None, description)

@@ -88,7 +88,7 @@ def fit_splitting(
     Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
     and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
     the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
-    momenta); a family whose start misfits the weak-form equations `PRUNE_RATIO` (100) times
+    momenta); a family whose start misfits the weak-form equations `SCREEN_RATIO` (10) times
     more than the best start, that extends one whose residuals are 100 times the best's, or
     that contains one fitted within its discretisation error is skipped (named in each
     record's `details["skipped"]`).
@@ -282,13 +282,18 @@ def extends_along_its_directions(family: Family, other: Family) -> bool:
 
 #: On observations and body observations, a family that extends a nested one is skipped when
 #: the nested family's sum of squared residuals is more than this many times the best family's
-#: so far (`extends_a_misfit`); on body observations also a family whose quadratic start
-#: misfits the weak-form equations (`weak_form_quadratic`) more than this many times the least
-#: of any family's. A residual 10x larger in
-#: RMS is structure (e.g. principal axes off the basis axes) that the family, or the
-#: extension's sigmoid pieces along the same directions, would have to remove (the misfits of
-#: rotated and aligned bodies: BENCHMARKS.md, "Families screened by their start").
+#: so far (`extends_a_misfit`). A residual 10x larger in RMS is structure (e.g. principal axes
+#: off the basis axes) that the extension's sigmoid pieces along the same directions would
+#: have to remove.
 PRUNE_RATIO = 100.0
+
+#: On body observations, a family whose quadratic start misfits the weak-form equations
+#: (`weak_form_quadratic`) more than this many times the least of any family's is skipped.
+#: The misfit is the least squared singular value of the same equations with fewer columns:
+#: where the family holds the body, noise alone, within 2x of the fuller family's; W4's
+#: rotated bodies on the axes: 94-98x at noise 1e-2 and regular steps, 180-1.2e3x at the other
+#: noisy protocols, 1e8-6e14x at noise 0 (BENCHMARKS.md, "Families screened by their start").
+SCREEN_RATIO = 10.0
 
 
 @_recipe.register
@@ -320,7 +325,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
     for k, family in enumerate(families):
         A, b, misfit = starts[family.bias, family.any_axes]
-        if (misfit > PRUNE_RATIO * least or extends_a_misfit(family, ssr)
+        if (misfit > SCREEN_RATIO * least or extends_a_misfit(family, ssr)
                 or contains_an_explanation(family, explained)):
             skipped.append(family.name)
             continue
