@@ -8,7 +8,13 @@ momenta latent. The G-LPNet beside the parametric limit, SINDy and weak SINDy.
 
 `--time-unit 1e-3` gives the learned maps the same observations in milliseconds (times x 1000,
 velocities / 1000; the predictions are converted back): the figures must not change. The
-protocols, models and figures are `paper.w4_bodies`'s.
+protocols, models and figures are `paper.w4_bodies`'s; `--trajectories`, `--observations`,
+`--t-end` and `--n-test` change their sizes, e.g. the protocol of Latent Lie-Poisson Neural
+Networks (200 trajectories x 101 observations at h = 0.1, noise 0.005, 50 test trajectories
+of 2001 points):
+
+    python -m benchmarks.body_observations --noise 0.005 --sampling regular --trajectories 200
+        --observations 101 --t-end 200 --n-test 50 --models G-LPNet limit
 """
 
 from __future__ import annotations
@@ -38,6 +44,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--bootstrap", type=int, default=0,
                         help="also refit the G-LPNet's family on N resamples of the trajectories: the spread of its "
                              "inertia's principal values and axes")
+    parser.add_argument("--trajectories", type=int, default=None, help="training trajectories (the protocol's)")
+    parser.add_argument("--observations", type=int, default=None, help="observations per trajectory")
+    parser.add_argument("--t-end", type=float, default=None, help="the predictions' horizon (the protocol's)")
+    parser.add_argument("--n-test", type=int, default=w4.N_TEST, help="held-out initial conditions")
     parser.add_argument("--out", default=default_out("body_observations"))
     args = parser.parse_args(argv)
     models = [m for m in w4.models() if m.label in args.models]
@@ -47,10 +57,11 @@ def main(argv: list[str] | None = None) -> None:
     protocols = w4.protocols()
     for system in args.systems:
         protocol = protocols[system]
-        test = w4.test_set(protocol)
+        test = w4.test_set(protocol, args.t_end, args.n_test)
         for sampling in args.sampling:
             for noise in args.noise:
-                data = w4.observations(protocol, noise, sampling)
+                data = w4.observations(protocol, noise, sampling, n_trajectories=args.trajectories,
+                                       n_observations=args.observations)
                 for model in models:
                     start = time.perf_counter()
                     row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling,
@@ -65,8 +76,9 @@ def main(argv: list[str] | None = None) -> None:
             protocol = protocols[system]
             for sampling in args.sampling:
                 for noise in args.noise:
-                    M = w4.bootstrap_inertia(protocol, w4.observations(protocol, noise, sampling), args.bootstrap,
-                                             steps=args.steps)
+                    data = w4.observations(protocol, noise, sampling, n_trajectories=args.trajectories,
+                                           n_observations=args.observations)
+                    M = w4.bootstrap_inertia(protocol, data, args.bootstrap, steps=args.steps)
                     values, axes = np.linalg.eigh(M)
                     truth = np.linalg.inv(protocol.A)
                     true_values, true_axes = np.linalg.eigh(truth * truth.shape[0] / np.trace(truth))

@@ -195,9 +195,7 @@ def test_the_last_jacobian_is_read_again_only_at_the_same_point_of_the_same_data
 
 
 def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
-    data = it.observe(BODY, np.eye(3), it.uneven_times(3, 7, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
-    net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True), method=TripleJump)
-    problem = learn.TrajectoryLoss().problem(net, data, h=None, validation_fraction=0.0, seed=0, normalise=False)
+    problem = _trajectory_problem()
     fitted, segments, objective = problem.y0, problem.train, problem.objective
     params, static = eqx.partition(fitted, eqx.is_inexact_array)
     flat, unravel = jax.flatten_util.ravel_pytree(params)
@@ -220,6 +218,78 @@ def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
     for j in range(3):
         for k in range(3):
             assert (np.count_nonzero(starts_columns[j, :, k]) > 0) == (j == k)
+
+
+def _trajectory_problem():
+    """A G-LPNet fitted to 3 noisy trajectories of the rigid body at uneven steps, starts fitted."""
+    data = it.observe(BODY, np.eye(3), it.uneven_times(3, 7, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
+    net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True), method=TripleJump)
+    return learn.TrajectoryLoss().problem(net, data, h=None, validation_fraction=0.0, seed=0, normalise=False)
+
+
+def _body_problem(n=3, m=7):
+    """A G-LPNet (Strang, one step per interval) on body observations of the rigid body:
+    attitudes and angular velocities."""
+    from scipy.spatial.transform import Rotation
+
+    y0 = np.random.default_rng(3).normal(size=(n, 3))
+    data = it.observe_body(BODY, y0 / np.linalg.norm(y0, axis=1, keepdims=True),
+                           Rotation.random(n, random_state=4).as_quat(), it.uneven_times(n, m, (0.05, 0.3), seed=5),
+                           noise=1e-3, seed=6)
+    net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=2, activation="identity", full_vectors=True,
+                                                    bias=True), method=Strang())
+    return learn.BodyLoss().problem(net, data, h=None, validation_fraction=0.0, seed=0, normalise=False)
+
+
+# body observations (their blocks are the same code) with -m slow: a heyoka integrator of
+# (g, mu) to compile (~6 s)
+@pytest.mark.parametrize("loss", ["trajectories", pytest.param("body", marks=pytest.mark.slow)])
+def test_normal_equations_from_the_blocks_are_those_of_the_whole_jacobian(loss):
+    problem = _trajectory_problem() if loss == "trajectories" else _body_problem()
+    fitted, args, objective = problem.y0, problem.train, problem.objective
+    r, J = eqx.filter_jit(objective.jacobian)(fitted, args)
+    r_blocks, A, g = eqx.filter_jit(objective.normal_equations)(fitted, args)
+    np.testing.assert_array_equal(np.asarray(r_blocks), np.asarray(r))
+    J, r = np.asarray(J), np.asarray(r)
+    # sums of the same products in another order: round-off of the largest |J|^2 times n
+    scale = r.size * np.max(np.abs(J)) ** 2
+    np.testing.assert_allclose(np.asarray(A), J.T @ J, rtol=0, atol=100 * EPS * scale)
+    np.testing.assert_allclose(np.asarray(g), J.T @ r, rtol=0, atol=100 * EPS * r.size * np.max(np.abs(J))
+                               * np.max(np.abs(r)))
+    n_unknowns = J.shape[1]
+    assert objective.block_entries(fitted, args) == r.size * objective.forward_passes(fitted) + n_unknowns**2
+
+
+def test_levenberg_marquardt_on_the_blocks_takes_the_dense_steps_and_fits_what_the_dense_could_not(monkeypatch):
+    from learn._solvers import _levenberg_marquardt as lm
+
+    problem = _trajectory_problem()
+    stage = learn.LevenbergMarquardt(5, rtol=0.0)
+    dense = stage.run(problem, learn.Context())
+    assert not lm.check_size(problem.objective, problem.y0, problem.train)
+    monkeypatch.setattr(lm, "DENSE_JACOBIAN", 0)  # every structured Jacobian summed from its blocks
+    assert lm.check_size(problem.objective, problem.y0, problem.train)
+    blocks = stage.run(problem, learn.Context())
+    # the same steps: the normal equations agree to round-off (above), and 5 damped steps of a
+    # well-conditioned fit keep that to ~1e-10 of the loss
+    np.testing.assert_allclose(blocks.history["train_loss"], dense.history["train_loss"], rtol=1e-9)
+    # the criterion reads the weights' block alone: the same rank and residuals
+    from learn._training._observed import information_criterion
+
+    fitted = problem.with_start(blocks.y)
+    on_blocks = information_criterion(fitted, blocks.y)
+    monkeypatch.setattr(lm, "DENSE_JACOBIAN", 10**12)
+    on_dense = information_criterion(fitted, blocks.y)
+    assert on_blocks["effective_parameters"] == on_dense["effective_parameters"]
+    np.testing.assert_allclose(on_blocks["ssr"], on_dense["ssr"], rtol=1e-12)
+    # a Jacobian too large to hold whose blocks fit: fitted, not refused
+    entries = problem.objective.block_entries(problem.y0, problem.train)
+    monkeypatch.setattr(lm, "DENSE_JACOBIAN", 0)
+    monkeypatch.setattr(lm, "MAX_JACOBIAN", entries)
+    assert lm.check_size(problem.objective, problem.y0, problem.train)
+    monkeypatch.setattr(lm, "MAX_JACOBIAN", entries - 1)
+    with pytest.raises(ValueError, match="residuals x"):
+        lm.check_size(problem.objective, problem.y0, problem.train)
 
 
 # -- IndexedFlows: a G-LPNet's modules composed in a scan ---------------------------------------

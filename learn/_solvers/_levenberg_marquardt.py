@@ -3,7 +3,9 @@ of a least-squares objective (`learn.AbstractLeastSquares`: its `residuals(y, ar
 square is the loss), over the flat trainable leaves $x$ of $y$.
 
 Each step evaluates $r$ and its Jacobian $J$ once (one compiled call: `jax.jacfwd`, or the
-objective's own `jacobian` where it knows a block structure (`learn.AbstractStructuredJacobian`), e.g. fitted starts), then solves the
+objective's own `jacobian` where it knows a block structure (`learn.AbstractStructuredJacobian`),
+e.g. fitted starts; past `DENSE_JACOBIAN` entries such an objective's $J^TJ$ and $J^Tr$ summed
+from the blocks, never holding $J$), then solves the
 damped normal equations $(J^TJ + \lambda D)\delta = -J^Tr$, $D = \mathrm{diag}(J^TJ)$ (the
 largest seen: Marquardt's scaling, Moré 1978), by a lineax Cholesky, trying larger $\lambda$ until
 the step lowers $\|r\|^2$; $\lambda$ is updated by Nielsen's rule. The loop runs on the host
@@ -34,7 +36,7 @@ from liepoisson.internals import positive_int
 from .. import _files
 from ._checkpoint import read_resumable
 from ._compiled import AbstractAtStructure, compiled
-from ._problem import AbstractLeastSquares, AbstractProblem
+from ._problem import AbstractLeastSquares, AbstractProblem, AbstractStructuredJacobian
 from ._stage import (
     AbstractIterationsStage,
     AbstractResumableStage,
@@ -52,6 +54,12 @@ MAX_TRIALS = 30
 
 #: The largest Jacobian (residuals x unknowns) a step may hold: 1.6 GB of float64.
 MAX_JACOBIAN = 200_000_000
+
+#: Past this many Jacobian entries (residuals x unknowns) a structured objective's normal
+#: equations are summed block by block (`AbstractStructuredJacobian.normal_equations`), never
+#: holding $J$: 20M (160 MB), above every W study's (W4's vehicle: 19680 x 528 = 10.4M),
+#: whose steps stay those of $J^TJ$ from one matrix.
+DENSE_JACOBIAN = 20_000_000
 
 #: The most forward passes (Jacobian columns computed at once) a step may take: `jax.jacfwd`
 #: holds every pass's intermediates together.
@@ -86,6 +94,7 @@ class _Residuals(AbstractAtStructure):
         super().__init__(objective, y)
         self._residuals_jit = jax.jit(self._residuals)
         self._jacobian_jit = jax.jit(self._jacobian)
+        self.normal_equations = jax.jit(self._normal_equations)
 
     def residuals(self, x: jax.Array, args: Any) -> jax.Array:
         kept = self._kept(x, args)
@@ -108,6 +117,9 @@ class _Residuals(AbstractAtStructure):
 
     def _jacobian(self, x, args):
         return self.objective.jacobian(self.model(x), args)
+
+    def _normal_equations(self, x, args):
+        return self.objective.normal_equations(self.model(x), args)
 
 
 def residuals_of(objective: AbstractLeastSquares, y: Any) -> _Residuals:
@@ -277,8 +289,16 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
         model = _files.replace_array_leaves(model, resumed["weights"], "weights")
     fn = residuals_of(objective, model)
     x = ravel_pytree(eqx.filter(model, eqx.is_inexact_array))[0]
-    check_size(objective, model, args)
-    r, J = fn.jacobian(x, args)
+    blockwise = check_size(objective, model, args)
+
+    def linearised(x):
+        """`(r, J)` at `x`, or `(r, (J^T J, J^T r))` from the Jacobian's blocks (`blockwise`)."""
+        if blockwise:
+            r, A, g = fn.normal_equations(x, args)
+            return r, (A, g)
+        return fn.jacobian(x, args)
+
+    r, J = linearised(x)
     cost = float(r @ r)  # always from the Jacobian's call: a resumed run starts from the same number
     if not np.isfinite(cost):
         raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
@@ -300,7 +320,7 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
         while len(values) < iterations:
             if not np.isfinite(cost) or _converged(values, rtol) or _out_of_reach(values, target, iterations):
                 break
-            A, g = _normal_equations(r, J)
+            A, g = J if blockwise else _normal_equations(r, J)
             if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
                 raise FloatingPointError(f"{desc}: the Jacobian after step {len(values)} is not finite (the map's "
                                          "derivatives overflow at these weights); try fewer iterations or another start")
@@ -327,7 +347,7 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
             if not accepted:  # no damping lowers the loss: a minimum to round-off
                 break
             x = x_new
-            r, J = fn.jacobian(x, args)
+            r, J = linearised(x)
             cost = float(r @ r)
             values.append(cost / scale)
             bar.update(1)
@@ -344,20 +364,27 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
     return fn.model(x), values
 
 
-def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> None:
-    """`ValueError` if a Levenberg-Marquardt step on `y` would hold a Jacobian too large for
-    memory (`MAX_JACOBIAN` entries or `MAX_PASSES` forward passes)."""
-    fn = _Residuals(objective, y)
+def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
+    """Whether a Levenberg-Marquardt step on `y` sums its normal equations block by block (a
+    structured objective whose Jacobian has more than `DENSE_JACOBIAN` entries); `ValueError`
+    if it would hold too much for memory (`MAX_JACOBIAN` numbers, of the Jacobian or of the
+    blocks and the normal equations) or take more than `MAX_PASSES` forward passes."""
+    fn = residuals_of(objective, y)
     x = ravel_pytree(eqx.filter(y, eqx.is_inexact_array))[0]
     n_unknowns = x.size
-    n_residuals = jax.eval_shape(fn.residuals, x, args).shape[0]
+    n_residuals = jax.eval_shape(fn._residuals_jit, x, args).shape[0]
     passes = objective.forward_passes(y)
-    if n_residuals * n_unknowns > MAX_JACOBIAN or passes > MAX_PASSES:
+    entries = n_residuals * n_unknowns
+    blockwise = isinstance(objective, AbstractStructuredJacobian) and entries > DENSE_JACOBIAN
+    if blockwise:
+        entries = objective.block_entries(y, args)
+    if entries > MAX_JACOBIAN or passes > MAX_PASSES:
         raise ValueError(
             f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {n_unknowns} unknowns, "
             f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
             "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
         )
+    return blockwise
 
 
 def _out_of_reach(values, target, iterations) -> bool:

@@ -67,9 +67,10 @@ class AbstractLeastSquares(AbstractObjective):
 
 
 class AbstractStructuredJacobian(AbstractLeastSquares):
-    """A least-squares objective whose Jacobian has a block structure that saves forward
+    r"""A least-squares objective whose Jacobian has a block structure that saves forward
     passes (e.g. segments that each depend on their own fitted start): it overrides
-    `jacobian` and `forward_passes`."""
+    `jacobian` and `forward_passes`, and gives the normal equations $J^TJ$, $J^Tr$ from the
+    blocks without holding $J$ (`normal_equations`, `block_entries`)."""
 
     @abc.abstractmethod
     def jacobian(self, y: Any, args: Any) -> tuple[jax.Array, jax.Array]:
@@ -78,6 +79,15 @@ class AbstractStructuredJacobian(AbstractLeastSquares):
     @abc.abstractmethod
     def forward_passes(self, y: Any) -> int:
         """The forward passes the blocks need."""
+
+    @abc.abstractmethod
+    def normal_equations(self, y: Any, args: Any) -> tuple[jax.Array, jax.Array, jax.Array]:
+        r"""`(r (n,), A (p, p), g (p,))`: $A = J^TJ$ and $g = J^Tr$ summed block by block (the
+        same sums as from `jacobian`, in another order)."""
+
+    @abc.abstractmethod
+    def block_entries(self, y: Any, args: Any) -> int:
+        """How many numbers `normal_equations` holds at once (its blocks and $A$)."""
 
 
 @dataclasses.dataclass(frozen=True)
