@@ -103,7 +103,7 @@ def test_a_target_beyond_a_converging_fits_limit_is_out_of_reach_and_one_within_
     from learn._solvers._levenberg_marquardt import TARGET_AFTER, _out_of_reach
 
     # a linearly converging loss: L_k = L* (1 + 0.01 rho^k), its decreases shrinking by rho
-    # per step; at a steady pace for 190 more steps it would fall ~1e-3 below L*
+    # per step; at its last rate for the 190 steps left it would fall ~6% below L*
     limit, rho = 1e-4, 0.8
     values = [limit * (1 + 0.01 * rho**k) for k in range(1, 11)]
     assert _out_of_reach(values, limit * (1 - 1e-4), 200)  # below its limit: never reached
@@ -113,6 +113,7 @@ def test_a_target_beyond_a_converging_fits_limit_is_out_of_reach_and_one_within_
     steady = [0.99**k for k in range(1, 11)]
     assert _out_of_reach(steady, 0.1, 200) and not _out_of_reach(steady, 0.2, 200)
     assert not _out_of_reach(values[: TARGET_AFTER - 1], 0.0, 200)  # not judged before TARGET_AFTER
+    assert _out_of_reach(values, 0.0, 200)  # a loss of 0: out of reach of a falling positive one
 
 
 def test_levenberg_marquardt_refuses_a_non_finite_start():
@@ -183,10 +184,19 @@ def test_the_last_jacobian_is_read_again_only_at_the_same_point_of_the_same_data
     r, J = fn.jacobian(theta, args)
     again = fn.jacobian(jnp.array([1.0, -1.0, 0.0]), args)  # an equal x, another array: kept
     assert len(calls) == 1 and again[1] is J
-    np.testing.assert_array_equal(np.asarray(fn.residuals(theta, args)), np.asarray(r))
-    fn.jacobian(theta + jnp.array([0.0, 0.0, 1e-300]), args)  # another point (by one ulp of 0)
+    # the kept residuals are those of the point
+    np.testing.assert_array_equal(np.asarray(fn.residuals(theta, args)), np.asarray(fn._residuals_jit(theta, args)))
+    fn.jacobian(theta + jnp.array([0.0, 0.0, 1e-300]), args)  # another point (by 1e-300)
+    fn.jacobian(theta.at[2].set(-0.0), args)  # -0.0 is another point to the bit
     fn.jacobian(theta, (args[0], args[1] + 0.0))  # equal data in another object
-    assert len(calls) == 3
+    assert len(calls) == 4
+    # data of NumPy arrays may change in place: never kept
+    mutable = (np.asarray(args[0]), np.asarray(args[1]).copy())
+    fn.jacobian(theta, mutable)
+    mutable[1][:] += 1.0
+    r_changed, _ = fn.jacobian(theta, mutable)
+    assert len(calls) == 6
+    np.testing.assert_allclose(np.asarray(r_changed), np.asarray(r) - 1.0, rtol=0, atol=4 * EPS)
     moved = theta.at[2].set(0.5)
     np.testing.assert_allclose(np.asarray(fn.residuals(moved, (args[0], args[1] + 0.0))),
                                np.asarray(r) + 0.5, rtol=0, atol=4 * EPS)  # c shifts every residual
@@ -220,11 +230,13 @@ def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
             assert (np.count_nonzero(starts_columns[j, :, k]) > 0) == (j == k)
 
 
-def _trajectory_problem():
-    """A G-LPNet fitted to 3 noisy trajectories of the rigid body at uneven steps, starts fitted."""
-    data = it.observe(BODY, np.eye(3), it.uneven_times(3, 7, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
+def _trajectory_problem(m=7, latent=True):
+    """A G-LPNet fitted to 3 noisy trajectories of `m` observations of the rigid body at uneven
+    steps, starts fitted (`latent`) or taken as observed."""
+    data = it.observe(BODY, np.eye(3), it.uneven_times(3, m, (0.05, 0.3), seed=2), noise=1e-3, seed=0)
     net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=1, linear_term=True), method=TripleJump)
-    return learn.TrajectoryLoss().problem(net, data, h=None, validation_fraction=0.0, seed=0, normalise=False)
+    return learn.TrajectoryLoss(latent=latent).problem(net, data, h=None, validation_fraction=0.0, seed=0,
+                                                       normalise=False)
 
 
 def _body_problem(n=3, m=7):
@@ -262,34 +274,41 @@ def test_normal_equations_from_the_blocks_are_those_of_the_whole_jacobian(loss):
 
 def test_levenberg_marquardt_on_the_blocks_takes_the_dense_steps_and_fits_what_the_dense_could_not(monkeypatch):
     from learn._solvers import _levenberg_marquardt as lm
+    from learn._training import _observed
 
-    problem = _trajectory_problem()
+    # 3 trajectories of 20 observations: 180 residuals, 21 unknowns of which 9 starts; the
+    # blocks (180 x 15 + 21^2) hold fewer numbers than the Jacobian (180 x 21)
+    problem = _trajectory_problem(20)
+    objective, y0, train = problem.objective, problem.y0, problem.train
+    dense_entries = 180 * 21
+    assert objective.block_entries(y0, train) == 180 * 15 + 21**2 < dense_entries
     stage = learn.LevenbergMarquardt(5, rtol=0.0)
     dense = stage.run(problem, learn.Context())
-    assert not lm.check_size(problem.objective, problem.y0, problem.train)
-    monkeypatch.setattr(lm, "DENSE_JACOBIAN", 0)  # every structured Jacobian summed from its blocks
-    assert lm.check_size(problem.objective, problem.y0, problem.train)
+    assert not lm.check_size(objective, y0, train)  # small: the whole Jacobian
+    monkeypatch.setattr(lm, "DENSE_JACOBIAN", dense_entries - 1)  # past it: the blocks
+    assert lm.check_size(objective, y0, train)
     blocks = stage.run(problem, learn.Context())
     # the same steps: the normal equations agree to round-off (above), and 5 damped steps of a
     # well-conditioned fit keep that to ~1e-10 of the loss
     np.testing.assert_allclose(blocks.history["train_loss"], dense.history["train_loss"], rtol=1e-9)
     # the criterion reads the weights' block alone: the same rank and residuals
-    from learn._training._observed import information_criterion
-
-    fitted = problem.with_start(blocks.y)
-    on_blocks = information_criterion(fitted, blocks.y)
+    on_blocks = _observed.information_criterion(problem, blocks.y)
     monkeypatch.setattr(lm, "DENSE_JACOBIAN", 10**12)
-    on_dense = information_criterion(fitted, blocks.y)
+    on_dense = _observed.information_criterion(problem, blocks.y)
     assert on_blocks["effective_parameters"] == on_dense["effective_parameters"]
     np.testing.assert_allclose(on_blocks["ssr"], on_dense["ssr"], rtol=1e-12)
-    # a Jacobian too large to hold whose blocks fit: fitted, not refused
-    entries = problem.objective.block_entries(problem.y0, problem.train)
+    # a Jacobian too large to hold whose blocks fit: fitted, not refused; blocks too large: refused
     monkeypatch.setattr(lm, "DENSE_JACOBIAN", 0)
-    monkeypatch.setattr(lm, "MAX_JACOBIAN", entries)
-    assert lm.check_size(problem.objective, problem.y0, problem.train)
-    monkeypatch.setattr(lm, "MAX_JACOBIAN", entries - 1)
-    with pytest.raises(ValueError, match="residuals x"):
-        lm.check_size(problem.objective, problem.y0, problem.train)
+    monkeypatch.setattr(lm, "MAX_JACOBIAN", 180 * 15 + 21**2)
+    assert lm.check_size(objective, y0, train)
+    monkeypatch.setattr(lm, "MAX_JACOBIAN", 180 * 15 + 21**2 - 1)
+    with pytest.raises(ValueError, match="numbers of its blocks"):
+        lm.check_size(objective, y0, train)
+    # without fitted starts there are no blocks to save: the whole Jacobian, and its criterion
+    observed = _trajectory_problem(20, latent=False)
+    assert observed.y0.starts is None
+    assert not lm.check_size(observed.objective, observed.y0, observed.train)
+    assert _observed.information_criterion(observed, observed.y0)["effective_parameters"] > 0
 
 
 # -- IndexedFlows: a G-LPNet's modules composed in a scan ---------------------------------------

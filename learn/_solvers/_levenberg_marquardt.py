@@ -87,8 +87,9 @@ class _Residuals(AbstractAtStructure):
     The last Jacobian computed (of any structure: one kept, `_LAST`) is kept with its `x` and
     `args`: the criterion and the discretisation error read the fitted map's residuals and
     Jacobian where Levenberg-Marquardt's last step computed them (a Jacobian of the vehicle's
-    body observations costs ~5 s); the same structure, the same `args` object and equal `x`
-    return them without evaluating."""
+    body observations costs ~5 s); the same structure, the same `args` object (of JAX arrays
+    only: immutable) and the same `x` to the bit return them without evaluating. Jacobians
+    of more than `DENSE_JACOBIAN` entries are not kept."""
 
     def __init__(self, objective: AbstractLeastSquares, y: Any):
         super().__init__(objective, y)
@@ -104,13 +105,14 @@ class _Residuals(AbstractAtStructure):
         kept = self._kept(x, args)
         if kept is None:
             kept = self._jacobian_jit(x, args)
-            _LAST[:] = [self, np.asarray(x).copy(), args, kept]
+            if _keepable(x, args) and kept[1].size <= DENSE_JACOBIAN:
+                _LAST[:] = [self, np.asarray(x).tobytes(), args, kept]
         return kept
 
     def _kept(self, x, args) -> tuple[jax.Array, jax.Array] | None:
-        if not _LAST or _LAST[0] is not self or _LAST[2] is not args or isinstance(x, jax.core.Tracer):
+        if not _LAST or _LAST[0] is not self or _LAST[2] is not args or not _keepable(x, args):
             return None
-        return _LAST[3] if np.array_equal(_LAST[1], np.asarray(x)) else None
+        return _LAST[3] if _LAST[1] == np.asarray(x).tobytes() else None
 
     def _residuals(self, x, args):
         return self.objective.residuals(self.model(x), args).reshape(-1)
@@ -120,6 +122,14 @@ class _Residuals(AbstractAtStructure):
 
     def _normal_equations(self, x, args):
         return self.objective.normal_equations(self.model(x), args)
+
+
+def _keepable(x: Any, args: Any) -> bool:
+    """Whether a Jacobian at `x` on `args` may be kept and read again: a concrete point, and
+    data of JAX arrays only (immutable: a NumPy array changed in place would be other data
+    in the same object)."""
+    return not isinstance(x, jax.core.Tracer) and all(
+        isinstance(a, jax.Array) and not isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves(args))
 
 
 def residuals_of(objective: AbstractLeastSquares, y: Any) -> _Residuals:
@@ -375,15 +385,21 @@ def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
     n_residuals = jax.eval_shape(fn._residuals_jit, x, args).shape[0]
     passes = objective.forward_passes(y)
     entries = n_residuals * n_unknowns
-    blockwise = isinstance(objective, AbstractStructuredJacobian) and entries > DENSE_JACOBIAN
-    if blockwise:
-        entries = objective.block_entries(y, args)
+    blockwise = False
+    if isinstance(objective, AbstractStructuredJacobian) and entries > DENSE_JACOBIAN:
+        blocks = objective.block_entries(y, args)
+        blockwise = blocks < entries
+        entries = min(entries, blocks)
     if entries > MAX_JACOBIAN or passes > MAX_PASSES:
+        held = f"{entries} numbers of its blocks and normal equations" if blockwise else "the whole Jacobian"
         raise ValueError(
             f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {n_unknowns} unknowns, "
-            f"{passes} forward passes (at most {MAX_PASSES}, and {8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps "
-            "of a few hundred weights (a G-LPNet); for an MLP use learn.QuasiNewton or learn.Adam"
+            f"{passes} forward passes (at most {MAX_PASSES}), holding {held} (at most {MAX_JACOBIAN}, "
+            f"{8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps of a few hundred weights (a G-LPNet); for an MLP use "
+            "learn.QuasiNewton or learn.Adam"
         )
+    if blockwise:
+        _LAST.clear()  # a whole Jacobian kept from an earlier fit would outlive the point of blocks
     return blockwise
 
 
@@ -406,7 +422,7 @@ def _out_of_reach(values, target, iterations) -> bool:
         earlier = math.log(max(values[-1 - 2 * WINDOW] / before, 1.0))
         if decrease < earlier:  # slowing: a geometric series of ratio decrease / earlier
             fall = min(fall, decrease * decrease / (earlier - decrease))
-    return math.log(values[-1]) - fall > math.log(target)
+    return values[-1] * math.exp(-fall) > target
 
 
 def _converged(values, rtol) -> bool:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -69,7 +70,7 @@ class AbstractLeastSquares(AbstractObjective):
 class AbstractStructuredJacobian(AbstractLeastSquares):
     r"""A least-squares objective whose Jacobian has a block structure that saves forward
     passes (e.g. segments that each depend on their own fitted start): it overrides
-    `jacobian` and `forward_passes`, and gives the normal equations $J^TJ$, $J^Tr$ from the
+    `jacobian` and `forward_passes`, and may give the normal equations $J^TJ$, $J^Tr$ from the
     blocks without holding $J$ (`normal_equations`, `block_entries`)."""
 
     @abc.abstractmethod
@@ -80,14 +81,18 @@ class AbstractStructuredJacobian(AbstractLeastSquares):
     def forward_passes(self, y: Any) -> int:
         """The forward passes the blocks need."""
 
-    @abc.abstractmethod
     def normal_equations(self, y: Any, args: Any) -> tuple[jax.Array, jax.Array, jax.Array]:
-        r"""`(r (n,), A (p, p), g (p,))`: $A = J^TJ$ and $g = J^Tr$ summed block by block (the
-        same sums as from `jacobian`, in another order)."""
+        r"""`(r (n,), A (p, p), g (p,))`: $A = J^TJ$ and $g = J^Tr$, summed block by block where
+        the objective knows how (the same sums as from `jacobian`, in another order); by
+        default from `jacobian`."""
+        r, J = self.jacobian(y, args)
+        return r, J.T @ J, J.T @ r
 
-    @abc.abstractmethod
     def block_entries(self, y: Any, args: Any) -> int:
-        """How many numbers `normal_equations` holds at once (its blocks and $A$)."""
+        """How many numbers `normal_equations` holds at once (its blocks and $A$); by default
+        the whole Jacobian's (nothing saved: `learn.LevenbergMarquardt` then uses `jacobian`)."""
+        n = math.prod(jax.eval_shape(lambda: self.residuals(y, args)).shape)
+        return n * int(sum(a.size for a in jax.tree_util.tree_leaves(eqx.filter(y, eqx.is_inexact_array))))
 
 
 @dataclasses.dataclass(frozen=True)

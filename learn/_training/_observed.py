@@ -241,7 +241,7 @@ class SegmentsObjective(AbstractStructuredJacobian):
     def normal_equations(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""`(r (n,), A, g)` of the unknowns of `jacobian` (weights $w$, then starts): with the
         weight block $J_w$ and each segment's start block $J_s$, $A_{ww} = J_w^TJ_w$,
-        $A_{ws} = J_w^TJ_s$ per start, $A_{ss}$ block-diagonal ($d	imes d$ per start),
+        $A_{ws} = J_w^TJ_s$ per start, $A_{ss}$ block-diagonal ($d\times d$ per start),
         $g = (J_w^Tr, J_s^Tr_s)$: $n(p + d)$ numbers where $J$ has $n(p + Sd)$ (200 trajectories
         of 101 poses and velocities: 242k residuals by 2448 unknowns, 4.7 GB as one matrix)."""
         if fitted.starts is None:
@@ -263,7 +263,10 @@ class SegmentsObjective(AbstractStructuredJacobian):
         return r.reshape(-1), A, g
 
     def block_entries(self, fitted: Fitted, args: Segments) -> int:
-        """The blocks' numbers ($n(p + d)$, one column per forward pass) and $A$'s."""
+        """The blocks' numbers ($n(p + d)$, one column per forward pass) and $A$'s; without
+        fitted starts, the whole Jacobian's (no blocks to save)."""
+        if fitted.starts is None:
+            return AbstractStructuredJacobian.block_entries(self, fitted, args)
         n = math.prod(jax.eval_shape(lambda: self.residuals(fitted, args)).shape)
         unknowns = sum(a.size for a in jax.tree_util.tree_leaves(eqx.filter(fitted, eqx.is_inexact_array)))
         return n * self.forward_passes(fitted) + unknowns**2

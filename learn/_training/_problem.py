@@ -25,7 +25,8 @@ class Description:
     """What a fit's record and checkpoints say about its objective and data: the loss's name,
     the step `h`, the training and held-out sample counts (pairs, or observations), the split
     (`seed`, `validation_fraction`), `normalise`, and for observations `max_step` and the
-    `substeps` per interval."""
+    `substeps` per interval (the most of any interval: body observations take each
+    interval's own count)."""
 
     loss: str
     h: float
