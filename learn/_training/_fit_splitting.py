@@ -208,7 +208,9 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
-        criterion.update(step_accuracy(problem, family, families[k + 1 :], criterion["ssr"], explained))
+        criterion.update(step_accuracy(problem, family, families[k + 1 :]))
+        if explained_within_its_step(criterion):
+            explained.append(family)
         ssr[family.name] = criterion["ssr"]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
@@ -248,17 +250,18 @@ def extends_a_misfit(family: Family, ssr: dict[str, float]) -> bool:
 
 
 
-def step_accuracy(problem: Any, family: Family, later: Sequence[Family], ssr: float,
-                  explained: list[Family]) -> dict[str, Any]:
-    """`{"discretisation_ssr": ...}` of a fitted family that a `later` family contains (none
-    otherwise: nothing would be skipped on it), and `family` appended to `explained` when its
-    sum of squared residuals `ssr` is within that discretisation error (`discretisation_ssr`)."""
+def step_accuracy(problem: Any, family: Family, later: Sequence[Family]) -> dict[str, Any]:
+    """`{"discretisation_ssr": ...}` of a fitted family that a `later` family extends along its
+    directions (`discretisation_ssr`; none otherwise: nothing would be skipped on it)."""
     if not any(extends_along_its_directions(f, family) for f in later):
         return {}
-    floor = discretisation_ssr(problem, problem.y0)
-    if ssr <= floor:
-        explained.append(family)
-    return {"discretisation_ssr": floor}
+    return {"discretisation_ssr": discretisation_ssr(problem, problem.y0)}
+
+
+def explained_within_its_step(criterion: dict[str, Any]) -> bool:
+    """Whether a family's sum of squared residuals is within its discretisation error (both
+    in `criterion`, from `information_criterion` and `step_accuracy`)."""
+    return "discretisation_ssr" in criterion and criterion["ssr"] <= criterion["discretisation_ssr"]
 
 
 def contains_an_explanation(family: Family, explained: Sequence[Family]) -> bool:
@@ -340,7 +343,9 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
             start, (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
-        criterion.update(step_accuracy(problem, family, families[k + 1 :], criterion["ssr"], explained))
+        criterion.update(step_accuracy(problem, family, families[k + 1 :]))
+        if explained_within_its_step(criterion):
+            explained.append(family)
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family.name, {**criterion, "target_loss": target}))
     best = fits[lowest([(f[0], f[5]["effective_parameters"]) for f in fits])]
