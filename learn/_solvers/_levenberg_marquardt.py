@@ -57,8 +57,8 @@ MAX_JACOBIAN = 200_000_000
 
 #: Past this many Jacobian entries (residuals x unknowns) a structured objective's normal
 #: equations are summed block by block (`AbstractStructuredJacobian.normal_equations`), never
-#: holding $J$: 20M (160 MB), above every W study's (W4's vehicle: 19680 x 528 = 10.4M),
-#: whose steps stay those of $J^TJ$ from one matrix.
+#: holding $J$: 20M (160 MB), above every W study's Jacobian, whose steps stay those of
+#: $J^TJ$ from one matrix.
 DENSE_JACOBIAN = 20_000_000
 
 #: The most forward passes (Jacobian columns computed at once) a step may take: `jax.jacfwd`
@@ -86,8 +86,8 @@ class _Residuals(AbstractAtStructure):
 
     The last Jacobian computed (of any structure: one kept, `_LAST`) is kept with its `x` and
     `args`: the criterion and the discretisation error read the fitted map's residuals and
-    Jacobian where Levenberg-Marquardt's last step computed them (a Jacobian of the vehicle's
-    body observations costs ~5 s); the same structure, the same `args` object (of JAX arrays
+    Jacobian where Levenberg-Marquardt's last step computed them (one evaluation fewer per
+    fit; BENCHMARKS.md, "Every W4 fit under 2 minutes"); the same structure, the same `args` object (of JAX arrays
     only: immutable) and the same `x` to the bit return them without evaluating. Jacobians
     of more than `DENSE_JACOBIAN` entries are not kept."""
 
@@ -203,8 +203,8 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     rate is lower than over the 3 steps before, falling by decreases that keep shrinking in
     that ratio (Aitken's extrapolation of a linearly converging fit's limit) (judged after 6
     steps). A fit whose decreases shrink more slowly than that, or grow again, is stopped
-    early by the second rule: measured on the vehicle at noise 1e-2, 33 creeping steps of an
-    extension (75 s) for 0.1% of its loss where it needed 0.5%. The result is kept only if it lowers the selection loss
+    early by the second rule (BENCHMARKS.md, "Every W4 fit under 2 minutes"). The result is
+    kept only if it lowers the selection loss
     (validation, or training without a validation set: `learn.KeepIfBetter`). Deterministic;
     resumable with a `learn.Checkpoint`.
     """

@@ -95,9 +95,7 @@ def body_segments(data: BodyObservations, max_step: float | None) -> BodySegment
 def sub_steps(intervals: np.ndarray, max_step: float | None) -> tuple[np.ndarray, np.ndarray]:
     """`(steps, reached)`: each interval in `ceil(interval / max_step)` equal sub-steps (one
     with `None`), one after the other; `reached[k]` the index of the sub-step that ends
-    interval `k`. Each interval its own count: uneven intervals from [0.05, 0.3] at
-    `max_step` 0.05 take 4 sub-steps on average, where the longest's count for every interval
-    took 6."""
+    interval `k`. Each interval its own count, not the longest's for every interval."""
     counts = np.ones(intervals.size, dtype=int) if max_step is None else np.maximum(
         1, np.ceil(intervals / max_step - 1e-12).astype(int))
     return np.repeat(intervals / counts, counts), np.cumsum(counts) - 1

@@ -293,9 +293,8 @@ PRUNE_RATIO = 100.0
 #: On body observations, a family whose quadratic start misfits the weak-form equations
 #: (`weak_form_quadratic`) more than this many times the least of any family's is skipped.
 #: The misfit is the least squared singular value of the same equations with fewer columns:
-#: where the family holds the body, noise alone, within 2x of the fuller family's; W4's
-#: rotated bodies on the axes: 94-98x at noise 1e-2 and regular steps, 180-1.2e3x at the other
-#: noisy protocols, 1e8-6e14x at noise 0 (BENCHMARKS.md, "Families screened by their start").
+#: where the family holds the body, noise alone, within 2x of the fuller family's (tested);
+#: the ratios on W4's rotated bodies: BENCHMARKS.md, "Every W4 fit under 2 minutes".
 SCREEN_RATIO = 10.0
 
 

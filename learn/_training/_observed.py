@@ -242,8 +242,7 @@ class SegmentsObjective(AbstractStructuredJacobian):
         r"""`(r (n,), A, g)` of the unknowns of `jacobian` (weights $w$, then starts): with the
         weight block $J_w$ and each segment's start block $J_s$, $A_{ww} = J_w^TJ_w$,
         $A_{ws} = J_w^TJ_s$ per start, $A_{ss}$ block-diagonal ($d\times d$ per start),
-        $g = (J_w^Tr, J_s^Tr_s)$: $n(p + d)$ numbers where $J$ has $n(p + Sd)$ (200 trajectories
-        of 101 poses and velocities: 242k residuals by 2448 unknowns, 4.7 GB as one matrix)."""
+        $g = (J_w^Tr, J_s^Tr_s)$: $n(p + d)$ numbers where $J$ has $n(p + Sd)$."""
         if fitted.starts is None:
             r, J = AbstractLeastSquares.jacobian(self, fitted, args)
             return r, J.T @ J, J.T @ r
