@@ -200,9 +200,8 @@ class BodyLoss(AbstractLoss):
 
 
 def substeps_for_body(data: BodyObservations, max_step: float | None) -> int:
-    if max_step is None:
-        return 1
-    return max(1, int(np.ceil(float(np.max(data.intervals())) / max_step - 1e-12)))
+    """The most sub-steps of any interval (`sub_steps`)."""
+    return int(sub_steps(np.array([float(np.max(data.intervals()))]), max_step)[1][-1]) + 1
 
 
 def first_velocities(data: BodyObservations) -> np.ndarray:
