@@ -31,15 +31,16 @@ def system_and_data(name: str):
 
 ALL = pytest.mark.parametrize("name", list(SYSTEMS))
 # Training on filiform, so(4) and sl(3) runs under -m slow (6-8 s of compilation per model, 15-25 s
-# per test); the default run trains on the diamond algebra. The splitting orders of diamond,
-# so(4) and sl(3) too (~5 s each): the default run measures filiform's, and the automatic
-# splitting's Strang order on the diamond algebra is measured by default in
-# test_automatic_splitting.py (with a richer Hamiltonian).
+# per test), on the diamond algebra too (by default a G-LPNet on it is rolled out and saved in
+# test_user_systems.py, and the gradients of its flows are checked in test_coadjoint.py). The
+# splitting orders of diamond, so(4) and sl(3) too (~5 s each): the default run measures
+# filiform's, and the automatic splitting's Strang order on the diamond algebra is measured by
+# default in test_automatic_splitting.py (with a richer Hamiltonian).
 TRAINED = pytest.mark.parametrize(
     "name", [n if n == "diamond" else pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
 )
-# every algebra with -m slow: the automatic splitting's Strang and TripleJump orders are measured by
-# default in test_automatic_splitting.py (the diamond algebra with ridge terms)
+# every algebra with -m slow: the automatic splitting's Strang order is measured by default in
+# test_automatic_splitting.py (the diamond algebra with ridge terms)
 ORDERS = pytest.mark.parametrize(
     "name", [pytest.param(n, marks=pytest.mark.slow) for n in SYSTEMS]
 )
@@ -70,7 +71,7 @@ def test_automatic_splitting_has_strang_order(name):
     assert abs(study.order - 2.0) < 0.1
 
 
-@pytest.mark.slow  # ~5 s; by default the G-LPNet is trained on the diamond below, LPNets on the catalogue elsewhere
+@pytest.mark.slow  # ~5 s; LPNets are trained on the catalogue by default elsewhere
 @TRAINED
 def test_lpnet_trains_and_rolls_out_on_the_orbit(name):
     system, data = system_and_data(name)
@@ -86,6 +87,7 @@ def test_lpnet_trains_and_rolls_out_on_the_orbit(name):
     assert casimir_drift(y, system) < 200 * 64 * EPS
 
 
+@pytest.mark.slow
 @TRAINED
 def test_glpnet_trains_and_is_an_exact_poisson_map(name):
     system, data = system_and_data(name)

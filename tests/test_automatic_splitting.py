@@ -81,7 +81,7 @@ def test_pieces_sum_to_the_hamiltonian_and_conserve_their_forms(make, n_pieces):
                                    rtol=1e3 * EPS, atol=1e3 * EPS * np.max(np.abs(y)) ** 2)
 
 
-_SLOW = pytest.mark.slow  # ~10 s each (heyoka + a compiled rollout); one of each kind runs by default
+_SLOW = pytest.mark.slow  # ~10 s each (heyoka + a compiled rollout); by default the diamond's Strang
 
 
 @pytest.mark.parametrize(
@@ -89,7 +89,7 @@ _SLOW = pytest.mark.slow  # ~10 s each (heyoka + a compiled rollout); one of eac
     [
         pytest.param(generic_so4, it.splitting.Strang, 2, marks=_SLOW),  # so(4) Strang also in test_any_algebra.py
         (diamond_with_ridges, it.splitting.Strang, 2),
-        (diamond_with_ridges, it.splitting.TripleJump, 4),
+        pytest.param(diamond_with_ridges, it.splitting.TripleJump, 4, marks=_SLOW),
         pytest.param(generic_so4, it.splitting.TripleJump, 4, marks=_SLOW),
         pytest.param(user_rigid_body, it.splitting.Strang, 2, marks=_SLOW),  # also: equals the catalogue's Strang
         pytest.param(user_rigid_body, it.splitting.TripleJump, 4, marks=_SLOW),
@@ -107,6 +107,7 @@ def test_observed_order_of_the_automatic_splitting(make, method, order):
     assert abs(observed - order) < 0.1, (errs, observed)
 
 
+@pytest.mark.slow
 def test_a_function_of_the_casimirs_is_a_piece_with_the_identity_flow():
     C = levi_civita_constants()
     system = LiePoissonSystem(lp.LieAlgebra(C), lambda m, xp: 0.5 * m[0] ** 2 + xp.sqrt(1.0 + m[0] ** 2 + m[1] ** 2 + m[2] ** 2))

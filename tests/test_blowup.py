@@ -69,6 +69,7 @@ def test_nonfinite_policies_are_classes_and_their_names():
     np.testing.assert_array_equal(seen[0][1], returned[:, ::3])
 
 
+@pytest.mark.slow
 def test_splitting_on_a_non_compact_algebra_overflows_into_an_error():
     """sl(2) has non-compact orbits: exp(t M(alpha)) grows like exp(|t alpha|); a hyperbolic
     Hamiltonian at a large step overflows inside the compiled rollout: an error, not NaN."""

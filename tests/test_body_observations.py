@@ -38,6 +38,7 @@ def test_noise_free_observations_are_heyokas_configurations_and_velocities():
     np.testing.assert_allclose(obs.velocities[0][0], unit_rows(2, 3, 0)[0] / INERTIA, atol=4 * EPS)
 
 
+@pytest.mark.slow
 def test_attitude_noise_is_a_rotation_of_the_stated_size():
     clean, noisy = observations(n=20, m=41), observations(n=20, m=41, noise=1e-3)
     angles = np.concatenate([np.asarray(lp.rotation_angle(a, b)) for a, b in zip(clean.configurations,
@@ -149,6 +150,7 @@ def test_bad_body_observations_are_refused_with_what_was_wrong():
         it.observe_body(BODY, unit_rows(2, 3, 0), Rotation.random(3, random_state=0).as_quat(), t)
 
 
+@pytest.mark.slow
 def test_the_inertia_estimate_from_velocities_recovers_the_rotated_body():
     obs = observations(n=10, m=201, steps=(0.005, 0.015))
     A, _ = learn.body_quadratic_estimate(obs, linear=False)

@@ -30,8 +30,13 @@ def _generic(g: lp.LieAlgebra) -> lp.LieAlgebra:
     )
 
 
+# By default a flow of each kind: se(3)'s closed form, so(3)'s inside the direct sum and the flow of
+# an algebra given by its constants alone (generic_so3; sl(2)'s is the same); the rest with -m slow.
+FLOW_PATHS = pytest.mark.parametrize("name", slow_except(ALGEBRAS, {"se3", "so3+heisenberg", "generic_so3"}))
+
+
 # -- Poisson maps -----------------------------------------------------------------------------
-@algebra_names
+@FLOW_PATHS
 @given(data=st.data())
 def test_coadjoint_flow_is_poisson(name, data):
     g = algebra(name)
@@ -44,7 +49,7 @@ def test_coadjoint_flow_is_poisson(name, data):
     assert defect <= 1e-10 * max(1.0, size)
 
 
-@algebra_names
+@FLOW_PATHS
 @given(data=st.data())
 def test_coadjoint_flow_matches_reference_expm(name, data):
     """Every algebra's flow (fast path or not) == scipy expm of t M(alpha) built by loops."""
@@ -111,8 +116,10 @@ def test_composed_flows_conserve_casimirs(name):
 ANGLES = [0.0, 1e-12, 1e-9, 1e-6, 1e-4, 9.99e-4, 1e-3, 1.001e-3, 0.1, 1.0, np.pi, 3.0, 10.0, 31.0]
 
 
+# by default zero, tiny, both sides of the switch at 1e-3, a half-turn and a large angle; the
+# others with -m slow
 @pytest.mark.parametrize("fast", ["so3", "so3_spatial", "se3", "so3+heisenberg"])
-@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("angle", slow_except(ANGLES, {0.0, 1e-12, 9.99e-4, 1e-3, 1.001e-3, np.pi, 31.0}))
 def test_closed_form_equals_expm(fast, angle):
     """Rodrigues / se(3) formulas against expm on the same constants, to 1e-13 relative,
     across the switch to the Taylor series at angle 1e-3, tiny, zero and large angles."""
@@ -255,7 +262,7 @@ def test_rotation_coefficients_against_closed_forms():
 
 
 # -- batching and transformations ------------------------------------------------------------
-@algebra_names
+@FLOW_PATHS
 def test_batching_jit_vmap(name):
     g = algebra(name)
     rng = np.random.default_rng(4)
@@ -304,6 +311,7 @@ def test_expm_action_matches_scipy_on_every_path(norm):
         np.testing.assert_allclose(got, reference, rtol=0, atol=256 * EPS * max(1.0, norm) * scale)
 
 
+@pytest.mark.slow
 def test_expm_action_gradients_agree_across_paths():
     # Under vmap_samples the paths differ by the batch's largest norm; derivatives of the
     # small-norm sample must not depend on which path its batch took.

@@ -82,6 +82,7 @@ def _expanded(y0, k):
     return y0
 
 
+@pytest.mark.slow
 def test_compare_reports_a_map_that_diverges_with_infinite_errors_and_its_step():
     body = system("RigidBody")
     maps = {"Strang": it.splitting.Strang(body, h=0.1), "expanding": Expanding(body, h=0.1)}

@@ -87,9 +87,10 @@ def test_heyoka_reconstruction_keeps_the_spatial_momentum_and_the_unit_quaternio
     np.testing.assert_allclose(truth.states, it.ground_truth(system, y0, 0.5, 40).states, atol=1e3 * EPS * scale)
 
 
-# Kirchhoff's poses (SE(3)) under -m slow (~10 s each); by default the rigid body's rotations
+# Kirchhoff's poses (SE(3)) under -m slow (~10 s each); by default the rigid body's rotations, by
+# Strang (TripleJump composes the same lifted steps: -m slow)
 @pytest.mark.parametrize("system", [BODY, pytest.param(VEHICLE, marks=pytest.mark.slow)], ids=["rigid body", "Kirchhoff"])
-@pytest.mark.parametrize(("method", "order"), [(Strang(), 2), (TripleJump(), 4)])
+@pytest.mark.parametrize(("method", "order"), [(Strang(), 2), pytest.param(TripleJump(), 4, marks=pytest.mark.slow)])
 def test_lifted_splitting_has_the_methods_order_on_configuration_and_momentum(system, method, order):
     rng = np.random.default_rng(5)
     y0 = rng.normal(size=(3, system.dim))
@@ -105,6 +106,7 @@ def test_lifted_splitting_has_the_methods_order_on_configuration_and_momentum(sy
     assert np.all(np.abs(observed - order) < 0.1), observed
 
 
+@pytest.mark.slow
 def test_a_million_steps_keep_the_unit_quaternion_and_the_spatial_momentum():
     g0 = Rotation.from_rotvec([0.4, -0.7, 0.5]).as_quat()
     y0 = np.array([0.6, -0.5, 0.62])

@@ -62,6 +62,7 @@ print("bitwise equal")
 """
 
 
+@pytest.mark.slow
 def test_threads_of_one_worker_do_not_share_an_integrator():
     # heyoka's integrator holds its state: two threads integrating chunks at once must each have
     # their own (a shared one raised "the first element of the time grid must match ...").
@@ -230,8 +231,9 @@ def sequential_fits():
             for p in learn.grid_points(SWEEP_GRID)]
 
 
-# On the cluster under -m slow (about 50 s); in process, the same comparison, by default.
-@pytest.mark.parametrize("on_cluster", [False, pytest.param(True, marks=pytest.mark.slow)])
+# On the cluster and in process, both under -m slow; a rerun sweep and an interrupted sweep point run
+# by default below.
+@pytest.mark.parametrize("on_cluster", [pytest.param(False, marks=pytest.mark.slow), pytest.param(True, marks=pytest.mark.slow)])
 def test_a_sweep_returns_the_numbers_of_sequential_fits_and_saves_every_point(
     sequential_fits, on_cluster, request, tmp_path
 ):

@@ -81,6 +81,7 @@ def test_flow_matches_heyoka_over_t_100(inertia):
     assert rel.max() < 1e-12, rel
 
 
+@pytest.mark.slow
 def test_exact_flow_step_map_composes_to_the_solution():
     body = RigidBody((1.0, 2.0, 3.0))
     y0, ref = heyoka_reference((1.0, 2.0, 3.0))

@@ -46,6 +46,7 @@ def test_zero_casimir_safe_denominator():
     assert np.all(np.isfinite(r.casimir_drift_relative)) and r.max_casimir_drift_relative < 1e-14
 
 
+@pytest.mark.slow
 def test_plot(tmp_path):
     pytest.importorskip("matplotlib")
     gt = it.ground_truth(KIRCHHOFF, [1, 1, 1, -1, 1, 2], 0.1, 20)
@@ -138,6 +139,7 @@ def test_integrals_of_many_trajectories_against_numpy():
     assert report["max_integral_error[J]"] == pytest.approx(np.abs(expected_J).max(), rel=16 * EPS)
 
 
+@pytest.mark.slow
 def test_charged_particle_integral_is_conserved_by_the_ground_truth():
     # E4's second integral: heyoka at its tightest tolerance keeps it to round-off, Strang does not.
     system = lp.systems.ChargedParticle()

@@ -54,7 +54,8 @@ def test_observed_order(cls, system, y0):
     assert abs(slope - cls.order) < 0.1, (errors, slope)
 
 
-@pytest.mark.parametrize("cls", [m for m in splitting.METHODS if m is not splitting.BlanesMoan4])
+@pytest.mark.parametrize("cls", [pytest.param(m, marks=pytest.mark.slow) if m is splitting.LieTrotter else m
+                                 for m in splitting.METHODS if m is not splitting.BlanesMoan4])
 def test_casimir_round_off_over_1e4_steps(cls):
     method = cls(BODY, h=0.1)
     n_steps = 10_000
@@ -77,7 +78,7 @@ def test_blanes_moan_casimir_round_off():
 
 @pytest.mark.parametrize(
     "system",
-    [lp.systems.HeavyTop(), lp.systems.Kirchhoff(), lp.systems.ChargedParticle()],
+    [pytest.param(lp.systems.HeavyTop(), marks=pytest.mark.slow), lp.systems.Kirchhoff(), lp.systems.ChargedParticle()],
     ids=lambda s: s.name,
 )
 def test_other_systems_strang_close_to_ground_truth(system):
@@ -87,6 +88,7 @@ def test_other_systems_strang_close_to_ground_truth(system):
     np.testing.assert_allclose(ys, ref, atol=1e-4)  # Strang: O(h^2) over t = 1
 
 
+@pytest.mark.slow
 def test_shapes_and_batching():
     method = splitting.Strang(BODY, h=0.1)
     y0s = PI0 + np.random.default_rng(0).uniform(-0.1, 0.1, (5, 3))

@@ -224,6 +224,7 @@ def test_closed_form_gradient_at_zero_rotation():
         np.testing.assert_allclose(d0, -expected, rtol=0, atol=8 * EPS * np.max(np.abs(expected)))
 
 
+@pytest.mark.slow
 def test_direct_sum_blockwise_equals_gauss_newton_on_the_sum():
     g, generic = algebra("so3+heisenberg"), _generic_direct_sum()
     rng = np.random.default_rng(6)

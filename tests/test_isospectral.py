@@ -44,6 +44,7 @@ def test_isospectral_methods_converge_at_their_order_against_heyoka(method, orde
     assert abs(conv.order - order) < 0.1
 
 
+@pytest.mark.slow
 def test_strang_splitting_of_the_generalized_rigid_body_against_heyoka():
     body = lp.systems.GeneralizedRigidBody(J4)
     y0 = np.random.default_rng(3).normal(size=(2, body.dim))

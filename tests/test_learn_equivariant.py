@@ -120,6 +120,7 @@ def test_step_commutes_with_every_symmetry_whatever_the_weights(key, scale, reve
         np.testing.assert_allclose(np.asarray(steps(net, jnp.asarray(s) * y)), s * y1, rtol=0, atol=16 * EPS * size)
 
 
+@pytest.mark.slow
 def test_alpha_is_the_group_average_of_the_network():
     net = equivariant(SO4, key=2)
     group = net.network.group

@@ -52,6 +52,7 @@ def test_lpnet_conserves_casimirs_kirchhoff():
     assert np.max(np.abs(C - C[0])) < 1e4 * EPS * np.max(np.abs(C[0]))
 
 
+@pytest.mark.slow
 def test_glpnet_is_poisson_and_lpnet_is_not(rb, lpnet, glpnet):
     y = np.random.default_rng(0).uniform(-2, 2, size=(20, 3))
     d_glp = np.asarray(glpnet.poisson_defect(y))
@@ -61,6 +62,7 @@ def test_glpnet_is_poisson_and_lpnet_is_not(rb, lpnet, glpnet):
     assert np.min(d_lp) > 1e-8  # alpha depends on the point: not a Poisson map
 
 
+@pytest.mark.slow
 def test_glpnet_full_vectors_is_poisson(rb):
     g = learn.GLPNet(rb, n_modules=4, full_vectors=True, key=3, h=H)
     y = np.random.default_rng(1).uniform(-2, 2, size=(10, 3))
@@ -77,6 +79,7 @@ def test_glpnet_default_order_cycles(rb):
     assert np.all(V[np.arange(6), [0, 1, 2, 0, 1, 2]] == np.asarray(g.terms.c))
 
 
+@pytest.mark.slow
 def test_rollout_shapes(lpnet, glpnet, rb):
     base = learn.MLPBaseline(rb, hidden=(4,), h=H)
     for net in (lpnet, glpnet, base):

@@ -247,6 +247,7 @@ def _diamond() -> lp.systems.LiePoissonSystem:
     return lp.systems.LiePoissonSystem(g, lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 + m[3] ** 2), name="diamond")
 
 
+@pytest.mark.slow
 def test_trajectory_loss_on_a_generic_algebra_is_the_rollout_whichever_path_the_batch_takes():
     # The segments are mapped as samples: every coadjoint flow of a step takes the Taylor path
     # (or the matrix exponential) that the batch's largest |t M(alpha)| picks. Segments of
@@ -287,6 +288,7 @@ def test_map_fitted_to_noisy_observations_keeps_the_casimir(noisy_fit):
 
 
 # -- 5. ParametricHamiltonian -----------------------------------------------------------------------
+@pytest.mark.slow
 def test_parametric_hamiltonian_recovers_the_inverse_inertia_differences():
     data = _observations(noise=0.0, size=1.0, n=6)
     model = learn.ParametricHamiltonian(BODY, _quadratic_family, np.ones(3))
@@ -337,6 +339,7 @@ def _symmetric(rng, n=3):
     return a + a.T
 
 
+@pytest.mark.slow
 @given(seed=st.integers(0, 2**32 - 1), k=st.floats(-10.0, 10.0))
 def test_quadratic_part_sees_through_the_casimir(seed, k):
     rng = np.random.default_rng(seed)
@@ -406,6 +409,7 @@ def test_criteria_the_criterion_cannot_tell_apart_choose_the_fewest_parameters_t
     assert lowest([(-100.0, 3), (-100.0 - 2 * BIC_RESOLUTION, 8)]) == 1
 
 
+@pytest.mark.slow
 def test_redundant_weights_count_once_in_the_information_criterion():
     data = _observations(noise=1e-2, size=1.0, n=4)
     criteria, n_parameters = {}, {}
@@ -597,6 +601,7 @@ def test_the_discretisation_error_is_the_methods_own_and_falls_with_its_order():
         assert 0.8 < error / (floor * (16 / 15) ** 2) < 1.2
 
 
+@pytest.mark.slow
 def test_exact_data_a_family_explains_within_its_step_skip_its_extensions_along_the_same_directions():
     # the aligned rigid body's exact trajectories: "quadratic, even" holds its H, its residuals
     # are within its own discretisation error, and the families adding terms along the same axes

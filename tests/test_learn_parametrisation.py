@@ -112,6 +112,7 @@ def test_lie_algebra_parametrisation_round_trip(system):
     assert found.shape == alpha.shape
 
 
+@pytest.mark.slow
 def test_lie_algebra_parametrisation_agrees_with_closed_form():
     rb, generic = lp.systems.RigidBody(), _generic_so3_body()
     rng = np.random.default_rng(3)

@@ -129,6 +129,7 @@ def test_wrapper_delegates_to_its_lpnet():
     assert np.abs(y1 - np.asarray(steps(lpnet, jnp.asarray(Y)))).max() > 1e-6
 
 
+@pytest.mark.slow
 def test_casimirs_over_a_long_rollout_and_not_a_poisson_map():
     net = reversible(3)
     y = np.asarray(net.rollout(Y, 2000))

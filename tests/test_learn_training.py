@@ -119,8 +119,9 @@ def test_save_load_round_trip_is_bit_identical(tmp_path, rb, fitted):
         learn.TrainingRecord.load(path)
 
 
-# seeded mini-batches (E4's sweep) by default: their shuffles resume too; full batch with -m slow
-@pytest.mark.parametrize("batch_size", [pytest.param(None, marks=pytest.mark.slow), 32])
+# seeded mini-batches (E4's sweep: their shuffles resume too) and full batch, both with -m slow; an Adam
+# fit resumed from its checkpoint runs by default in test_distributed.py (an interrupted sweep point)
+@pytest.mark.parametrize("batch_size", [pytest.param(None, marks=pytest.mark.slow), pytest.param(32, marks=pytest.mark.slow)])
 def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch, batch_size):
     import learn._files as ckpt
     import learn._solvers._adam as training
@@ -433,10 +434,11 @@ class _WeightedStateLoss(learn.AbstractPairsLoss):
         return "weighted state"
 
 
-# by default through Levenberg-Marquardt (residuals) and BFGS (the loss's gradient); Adam
-# (the same gradient, minibatched) with -m slow
+# by default through Levenberg-Marquardt (residuals); BFGS (the loss's gradient) and Adam (the same
+# gradient, minibatched) with -m slow
 @pytest.mark.parametrize("optimiser", [pytest.param(learn.Adam(200, learning_rate=1e-2), marks=pytest.mark.slow),
-                                       learn.QuasiNewton(60, "bfgs"), learn.LevenbergMarquardt(20)],
+                                       pytest.param(learn.QuasiNewton(60, "bfgs"), marks=pytest.mark.slow),
+                                       learn.LevenbergMarquardt(20)],
                          ids=["Adam", "BFGS", "Levenberg-Marquardt"])
 def test_a_new_loss_is_one_class_and_trains_through_every_solver(rb, pairs, optimiser):
     weights = jnp.array([1.0, 10.0, 100.0])

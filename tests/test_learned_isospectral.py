@@ -17,6 +17,7 @@ def _spectrum(system, ys):
     return np.linalg.eigvalsh(1j * W)
 
 
+@pytest.mark.slow
 def test_theta_one_zero_is_the_classical_midpoint():
     z = lp.systems.Zeitlin(6)
     y = z.random_state(1)

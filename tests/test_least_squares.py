@@ -204,6 +204,7 @@ def test_the_last_jacobian_is_read_again_only_at_the_same_point_of_the_same_data
     assert other._kept(jnp.zeros(3), args) is None
 
 
+@pytest.mark.slow
 def test_block_jacobian_of_the_observation_loss_is_the_full_jacobian():
     problem = _trajectory_problem()
     fitted, segments, objective = problem.y0, problem.train, problem.objective
@@ -272,6 +273,7 @@ def test_normal_equations_from_the_blocks_are_those_of_the_whole_jacobian(loss):
     assert objective.block_entries(fitted, args) == r.size * objective.forward_passes(fitted) + n_unknowns**2
 
 
+@pytest.mark.slow
 def test_levenberg_marquardt_on_the_blocks_takes_the_dense_steps_and_fits_what_the_dense_could_not(monkeypatch):
     from learn._solvers import _levenberg_marquardt as lm
     from learn._training import _observed
@@ -356,6 +358,7 @@ def glpnet_pairs():
 
 # every 5 steps: writes at steps 5, 10 and (the end) 12 of the warm start, then 5, 10, 12 after
 # it; (which write is interrupted, steps left to take after the resume)
+@pytest.mark.slow
 @pytest.mark.parametrize(("interrupt_at", "left"),
                          [(2, 14), pytest.param(3, 12, marks=pytest.mark.slow), (5, 2)],  # 5 s each
                          ids=["in the warm start", "at its end", "after it"])

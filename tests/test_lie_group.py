@@ -42,8 +42,9 @@ def test_lie_group_methods_reach_their_order(damped, reference, method, hs):
 
 @pytest.mark.parametrize(
     ("composition", "dissipation", "order"),
-    [(sp.LieTrotter, it.LieEuler, 1), (sp.Strang, it.LieEuler, 1), (sp.Strang, it.CommutatorFree2, 2),
-     (sp.TripleJump, it.CommutatorFree4, 4), (sp.Suzuki, it.CommutatorFree4, 4)],
+    [pytest.param(sp.LieTrotter, it.LieEuler, 1, marks=pytest.mark.slow),
+     pytest.param(sp.Strang, it.LieEuler, 1, marks=pytest.mark.slow), (sp.Strang, it.CommutatorFree2, 2),
+     (sp.TripleJump, it.CommutatorFree4, 4), pytest.param(sp.Suzuki, it.CommutatorFree4, 4, marks=pytest.mark.slow)],
 )
 def test_damped_splitting_reaches_the_smaller_order(damped, reference, composition, dissipation, order):
     make = lambda h: it.DampedSplitting(damped, h, composition, dissipation)
@@ -106,6 +107,7 @@ def test_casimirs_kept_over_ten_thousand_steps(name, methods):
         assert np.max(np.abs(np.asarray(damped.casimirs(y)) - C0)) > 1e-9 * scale
 
 
+@pytest.mark.slow
 def test_equilibrium_is_a_fixed_point_without_nan(damped):
     # on the major axis the velocity and the dissipative generator vanish: zero rotation
     y0 = np.array([1.0, 0.0, 0.0])

@@ -122,7 +122,8 @@ def test_coadjoint_flow_is_a_poisson_map(g):
     assert np.abs(lhs - rhs).max() < 256 * g.dim * EPS * np.abs(rhs).max()
 
 
-@pytest.mark.parametrize("g", [lp.so(5), lp.u(4), pytest.param(lp.su(3), marks=pytest.mark.slow), lp.sp(2)],
+@pytest.mark.parametrize("g", [pytest.param(lp.so(5), marks=pytest.mark.slow), lp.u(4),
+                               pytest.param(lp.su(3), marks=pytest.mark.slow), lp.sp(2)],
                          ids=lambda g: g.name)
 def test_casimirs_and_spectrum_kept_over_a_long_composition(g):
     rng = np.random.default_rng(7)

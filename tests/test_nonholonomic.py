@@ -48,6 +48,7 @@ def test_suslov_vector_field_is_lagrange_dalembert(w):
     assert abs(grad @ np.asarray(suslov.vector_field(pi))) <= 64 * EPS * max(1.0, np.abs(pi).max()) ** 3
 
 
+@pytest.mark.slow
 def test_suslov_ground_truth_keeps_the_constraint_and_the_energy_to_t_200():
     suslov = lp.systems.suslov(INERTIA, A)
     y0 = np.asarray(suslov.project(np.array([[0.6, -0.2, 0.9], [1.0, 0.5, -0.3], [-0.4, 0.8, 0.1]])))
@@ -314,6 +315,7 @@ def _step_at(method, p, h):
     return np.asarray(_STEP_AT(method, jnp.asarray(p), jnp.asarray(h)))
 
 
+@pytest.mark.slow
 @settings(max_examples=5, deadline=None)
 @given(st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3), st.floats(0.02, 0.4))
 def test_discrete_lagrange_dalembert_is_symmetric_and_reversible(y, h):
@@ -350,6 +352,7 @@ def test_composed_lagrange_dalembert_keeps_the_constraint_and_every_steady_motio
         np.testing.assert_allclose(after, steady, rtol=0, atol=256 * EPS * np.linalg.norm(steady))
 
 
+@pytest.mark.slow
 def test_composed_lagrange_dalembert_refuses_what_is_not_a_composition():
     from integrators.splitting import Strang
 

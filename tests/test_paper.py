@@ -74,6 +74,7 @@ def test_w1_smoke(tmp_path):
     assert (tmp_path / "work_precision_rigid_body.png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_hamiltonian_mismatch_is_blind_to_casimir_functions_only():
     import liepoisson as lp
     from paper._study import hamiltonian_mismatch
@@ -393,6 +394,7 @@ def test_markdown_rows_escape_pipes_inside_cells():
             assert len(set(widths)) <= 1, (table.name, rows[widths.index(max(widths))])
 
 
+@pytest.mark.slow
 def test_a_rollout_that_diverges_has_infinite_errors_not_those_of_its_finite_steps():
     """A map whose rollout turns NaN at step 3 must not look good: its figures over the finite
     steps alone would pass the paper's thresholds (the reversible LPNet whose fixed-point

@@ -35,6 +35,7 @@ def test_order_against_heyoka(method, order):
     assert abs(observed_order(lambda h: method(body, h=h)) - order) < 0.1
 
 
+@pytest.mark.slow
 def test_implicit_midpoint_conserves_quadratic_invariants_but_is_not_poisson():
     body = system("RigidBody")
     m = it.ImplicitMidpoint(body, h=0.1)

@@ -75,7 +75,7 @@ def test_bad_kept_masks_are_refused(kwargs, match):
         learn.RidgeTerms(3, 3, **kwargs)
 
 
-@pytest.mark.parametrize("any_axes", [False, True])
+@pytest.mark.parametrize("any_axes", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_a_general_family_starts_at_the_fit_of_the_quadratic_it_extends(any_axes):
     """`Family.from_nested`: the sigmoid pieces at zero and the fitted quadratic as their linear
     term give the same learned Hamiltonian, so the same steps, bit for bit."""

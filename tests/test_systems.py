@@ -15,6 +15,7 @@ from helpers import (
     SYSTEMS,
     poisson_defect,
     reference_tensor,
+    slow_except,
     solve_ivp_flow,
     states,
     system,
@@ -169,7 +170,9 @@ def _term_defects(name):
     return _TERM_DEFECTS[name]
 
 
-@system_names
+# Kirchhoff's term flows with -m slow: test_splitting_sums_to_h_and_each_flow_is_exact checks them
+# against DOP853 by default
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody", "ChargedParticle"}))
 @given(data=st.data())
 def test_splitting_terms_are_poisson_and_commute(name, data):
     """Each term's flow (the test flow with alpha frozen at L^T dphi(L y)) is a Poisson map,
@@ -341,7 +344,8 @@ def test_heyoka_rhs_equals_vector_field(name):
 
 
 # -- batching, jit, vmap, grad; registry -------------------------------------------------------
-@system_names
+# the rigid body (so(3)) and the charged particle (not Lie-Poisson) by default; the rest with -m slow
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody", "ChargedParticle"}))
 def test_system_batching_and_transformations(name):
     sys = system(name)
     rng = np.random.default_rng(36)

@@ -44,6 +44,7 @@ def test_in_units_refuses_a_scale_that_is_not_positive():
         terms.in_units(1.0, "1")
 
 
+@pytest.mark.slow
 def test_one_data_set_in_seconds_milliseconds_hours_and_scaled_states_gives_one_motion():
     rng = np.random.default_rng(3)
     y0 = rng.normal(size=(3, 3))

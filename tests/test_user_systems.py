@@ -110,7 +110,9 @@ def test_data_set_round_trip_rebuilds_the_user_system(name, tmp_path):
     assert np.max(np.abs(again.states - data.states)) <= 1e3 * EPS * np.max(np.abs(data.states))
 
 
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
+# so(4)'s with -m slow: the diamond's runs the same code by default
+@pytest.mark.parametrize("name", [n if n == "diamond" else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in sorted(SYSTEMS)])
 def test_model_round_trip_without_the_system(name, tmp_path):
     system = SYSTEMS[name]()
     y0 = np.random.default_rng(1).normal(size=(4, system.dim))

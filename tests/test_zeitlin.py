@@ -113,7 +113,7 @@ def test_a_field_of_degree_one_is_steady():
 
 
 @pytest.mark.parametrize(("method", "order"), [pytest.param(it.IsospectralMidpoint, 2, marks=pytest.mark.slow),
-                                               (it.IsospectralTripleJump, 4)])
+                                               pytest.param(it.IsospectralTripleJump, 4, marks=pytest.mark.slow)])
 def test_isospectral_methods_on_zeitlin_against_heyoka(method, order):
     z = lp.systems.Zeitlin(5)
     y0 = z.random_state(2)
