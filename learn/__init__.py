@@ -17,6 +17,7 @@ from ._models._base import (
     AbstractWarmStartableMap as AbstractWarmStartableMap,
 )
 from ._models._baseline import MLPBaseline as MLPBaseline, NeuralODE as NeuralODE
+from ._models._deeponet import DeepONet as DeepONet
 from ._models._equivariant import GroupAveraged as GroupAveraged
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._models._isospectral import IsospectralPolynomial as IsospectralPolynomial
@@ -71,6 +72,7 @@ from ._training._body import (
     latent_momenta as latent_momenta,
     weak_form_quadratic as weak_form_quadratic,
 )
+from ._training._deeponet import BodyDeepONet as BodyDeepONet, fit_deeponet as fit_deeponet
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import (
     FAMILIES as FAMILIES,

@@ -29,6 +29,16 @@ the distance travelled, RMS), and for the G-LPNet and the limit the inertia (its
 values over their trace, and its principal axes) and, on their rollouts, the drift of the
 latent momentum's Casimirs and of the spatial momentum.
 
+The full profile then runs the **LLPNN protocol** (`LLPNN`: 200 trajectories x 101
+observations at h = 0.1, noise 0.005, 50 test trajectories to t = 200, regular sampling) with,
+beside the models above, its other baselines:
+
+- **DeepONet**: `learn.fit_deeponet`, the state at t from the first observation (branch) and
+  the time (trunk); no dynamics, so nothing carries it past the training horizon t = 10;
+- **LPNet on reconstructed momenta**: the momenta from the observed velocities through the
+  weak-form inertia estimate, the paper's LPNet fitted to their pairs, its phase
+  (`learn.fit_phase`) to the observed attitudes.
+
 Rows are saved as they are measured (`<out>/W4/rows/`): an interrupted run resumes.
 """
 
@@ -80,6 +90,11 @@ N_TEST = 12
 #: BFGS iterations of the neural ODE's fit per Levenberg-Marquardt step of the others' (a
 #: Jacobian of its ~1300 weights costs as many passes as ~500 gradients).
 NEURAL_ODE_ITERATIONS = 5
+#: Adam epochs of the DeepONet (LLPNN protocol only): from 3e-3 to 1e-5, its test attitude
+#: error within the training horizon 0.015-0.12 rad on the satellite (20,000: 0.04-0.18).
+DEEPONET_EPOCHS = 60_000
+#: L-BFGS-B iterations of the LPNet on reconstructed momenta (E5's quick profile).
+LPNET_ITERATIONS = 2000
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
 
 
@@ -246,6 +261,74 @@ class LimitBodyModel(LearnedBodyModel):
 
 
 @dataclasses.dataclass(frozen=True)
+class ReconstructedLPNet:
+    r"""An LPNet fitted to reconstructed momenta, and the inertia that reconstructed them:
+    $\mu = \mathbb M(\xi - b)$, $\xi = A\mu + b$ with $A = \mathbb M^{-1}$."""
+
+    net: learn.LPNet
+    A: np.ndarray
+    b: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class LPNetBodyModel(AbstractBodyModel):
+    r"""The paper's LPNet where the momenta are not observed: momenta reconstructed from the
+    observed velocities, $\mu = \mathbb M(\xi - b)$, with the inertia of the weak-form estimate
+    (`learn.body_quadratic_estimate`: from the velocities, no model fitted); an LPNet (three
+    hidden layers of 16, sigmoid, the test-flow parametrisation, so that its step carries the
+    configuration) fitted on the paper's state loss (one step from each reconstructed momentum
+    to the next; L-BFGS-B, `LPNET_ITERATIONS`), its phase (`learn.fit_phase(noisy=True)`) to the observed
+    configurations; velocities back through the same inertia. Regular sampling only (the
+    phase is fitted to pairs at one step)."""
+
+    label: str = "LPNet on reconstructed momenta"
+
+    def fit(self, protocol, data, steps):
+        if not data.is_regular():
+            raise ValueError("the LPNet on reconstructed momenta is fitted to pairs at one step: regular sampling only")
+        A, b = learn.body_quadratic_estimate(data)
+        M = np.linalg.inv(A)
+        momenta = np.stack([(v - b) @ M.T for v in data.velocities])
+        h = float(data.times[0][1] - data.times[0][0])
+        # noisy momenta: no Poisson map joins a pair of them (their Casimirs differ), so the net is
+        # fitted on the paper's state loss, one step from each observed momentum to the next
+        observed = it.Observations(protocol.system, list(data.times), list(momenta))
+        net = learn.LPNet(protocol.system, hidden=(16, 16, 16), activation="sigmoid", key=TRAIN_SEED, h=h,
+                          parametrisation=learn.TestFlowParametrisation(protocol.system))
+        net, _ = learn.fit(net, observed, loss="state", optimiser=learn.QuasiNewton(LPNET_ITERATIONS, "lbfgsb"),
+                           validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
+        pairs = it.Trajectories(momenta, h, protocol.system, times=data.times[0] - data.times[0][0],
+                                configurations=np.stack(data.configurations))
+        net, _ = learn.fit_phase(net, pairs, noisy=True, progress=False)
+        return ReconstructedLPNet(net, A, b)
+
+    def predict(self, fitted, protocol, test):
+        mu0 = (test.xi0 - fitted.b) @ np.linalg.inv(fitted.A).T
+        every = round(H_SAVE / fitted.net.h)
+        g, mu = fitted.net.lifted_rollout(test.g0, mu0, every * (test.states.shape[1] - 1), save_every=every)
+        mu = np.asarray(mu)
+        return Prediction(np.asarray(g), mu @ fitted.A.T + fitted.b, mu)
+
+
+@dataclasses.dataclass(frozen=True)
+class DeepONetBodyModel(AbstractBodyModel):
+    """A DeepONet (`learn.fit_deeponet`: branch on the first observation, trunk on the time,
+    two hidden layers of 64, tanh, 32 basis functions; `DEEPONET_EPOCHS` of Adam): the state
+    at t from the initial one, no dynamics, nothing to carry it past the training horizon."""
+
+    label: str = "DeepONet"
+
+    def fit(self, protocol, data, steps):
+        net, _ = learn.fit_deeponet(data, epochs=DEEPONET_EPOCHS, learning_rate=3e-3, key=TRAIN_SEED, progress=False)
+        return net
+
+    def predict(self, fitted, protocol, test):
+        t = H_SAVE * np.arange(test.states.shape[1])
+        gs, xis = zip(*(fitted.predict(g0, xi0, t) for g0, xi0 in zip(test.g0, test.xi0)))
+        return Prediction(np.stack(gs), np.stack(xis))
+
+
+@dataclasses.dataclass(frozen=True)
 class AbstractVelocityFieldModel(AbstractBodyModel):
     r"""A field $\dot\xi = f(\xi)$ for the body velocities without structure, identified from
     their samples (observed, or from the configurations), integrated with the kinematics."""
@@ -368,10 +451,11 @@ class W4Row:
     casimir_drift: float | None = optional()
     spatial_momentum_drift: float | None = optional()
     family: str | None = optional()
+    part: str | None = optional()
 
     @property
-    def condition(self) -> tuple[str, str, float]:
-        return self.system, self.sampling, self.noise
+    def condition(self) -> tuple[str | None, str, str, float]:
+        return self.part, self.system, self.sampling, self.noise
 
 
 def _ratios(A: np.ndarray) -> np.ndarray:
@@ -402,21 +486,25 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
     return out
 
 
-def models() -> list[AbstractBodyModel]:
+def models(operator_baselines: bool = False) -> list[AbstractBodyModel]:
+    """W4's models; with `operator_baselines`, the LLPNN protocol's others too (a DeepONet and
+    an LPNet on reconstructed momenta)."""
     out: list[AbstractBodyModel] = [GLPNetBodyModel(), LimitBodyModel(), NeuralODEBodyModel()]
     if sindy_available():
         out += [SINDyBodyModel(), WeakSINDyBodyModel()]
+    if operator_baselines:
+        out += [DeepONetBodyModel(), LPNetBodyModel()]
     return out
 
 
 def evaluate(protocol: BodyProtocol, model: AbstractBodyModel, data: it.BodyObservations, test: TestSet, *,
-             system: str, noise: float, sampling: str, steps: int) -> W4Row:
+             system: str, noise: float, sampling: str, steps: int, part: str | None = None) -> W4Row:
     start = time.perf_counter()
     fitted = model.fit(protocol, data, steps)
     fit_seconds = time.perf_counter() - start
     figures = measure(protocol, test, model.predict(fitted, protocol, test))
     return W4Row(system=system, noise=noise, sampling=sampling, model=model.label, fit_seconds=fit_seconds,
-                 **figures, **model.identified(fitted, protocol))
+                 part=part, **figures, **model.identified(fitted, protocol))
 
 
 def _family(net) -> str:
@@ -461,12 +549,25 @@ class Profile:
     n_trajectories: int | None = None
     n_observations: int | None = None
     t_end: float | None = None  # the protocol's when None
+    n_test: int = N_TEST
+    #: A part of the study with its own protocol (rows marked with it), run after this one.
+    part: str | None = None
+    then: Profile | None = None
+    #: The LLPNN protocol's baselines besides W4's models.
+    operator_baselines: bool = False
 
+
+#: The protocol of Latent Lie-Poisson Neural Networks (Putkaradze 2026, as described in issue
+#: 42: 200 trajectories x 101 observations at h = 0.1, noise 0.005 on configurations and
+#: velocities, 50 test trajectories to t = 200), with its baselines: a neural ODE, a DeepONet
+#: and an LPNet on reconstructed momenta.
+LLPNN = Profile(("satellite", "vehicle"), (0.005,), ("regular",), n_trajectories=200, n_observations=101,
+                t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True)
 
 PROFILES = {
     "smoke": Profile(("satellite",), (1e-3,), ("uneven",), steps=10, n_trajectories=4, n_observations=8, t_end=5.0),
     "quick": Profile(("satellite",), (0.0, 1e-3, 1e-2), ("uneven",)),
-    "full": Profile(("satellite", "vehicle"), (0.0, 1e-3, 1e-2), ("regular", "uneven")),
+    "full": Profile(("satellite", "vehicle"), (0.0, 1e-3, 1e-2), ("regular", "uneven"), then=LLPNN),
 }
 
 
@@ -490,10 +591,14 @@ def _peer(rows: list[W4Row], row: W4Row, model: str) -> W4Row | None:
     return next((r for r in rows if r.condition == row.condition and r.model == model), None)
 
 
+def _where(row: W4Row) -> str:
+    return f"{'' if row.part is None else row.part + ', '}{row.system}, {row.sampling}, noise {row.noise:g}"
+
+
 def line(row: W4Row) -> str:
     position = "" if row.position_error is None else f", position {fmt(row.position_error)}"
     ratios = "" if row.inertia_ratio_error is None else f", inertia ratios within {fmt(row.inertia_ratio_error)}"
-    return (f"{row.system}, {row.sampling}, noise {row.noise:g}, {row.model}: attitude error {fmt(row.attitude_error)} "
+    return (f"{_where(row)}, {row.model}: attitude error {fmt(row.attitude_error)} "
             f"rad, velocity {fmt(row.velocity_error)}{position}{ratios}, fit {row.fit_seconds:.1f} s")
 
 
@@ -504,11 +609,12 @@ def verdict(rows: list[W4Row]) -> list[str]:
             continue
         key = "position_error" if r.position_error is not None else "attitude_error"
         what = "position" if key == "position_error" else "attitude"
-        parts = [f"{r.system}, {r.sampling}, noise {r.noise:g}: G-LPNet {what} error {fmt(getattr(r, key))}"]
+        parts = [f"{_where(r)}: G-LPNet {what} error {fmt(getattr(r, key))}"]
         limit = _peer(rows, r, "limit")
         if limit:
             parts.append(f"{getattr(r, key) / getattr(limit, key):.2f}x the limit's ({fmt(getattr(limit, key))})")
-        for peer in (_peer(rows, r, m) for m in ("neural ODE", "SINDy", "weak SINDy")):
+        peers = ("neural ODE", "SINDy", "weak SINDy", DeepONetBodyModel.label, LPNetBodyModel.label)
+        for peer in (_peer(rows, r, m) for m in peers):
             if peer:
                 below = getattr(r, key) < getattr(peer, key)
                 parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(getattr(peer, key))}")
@@ -521,21 +627,21 @@ def verdict(rows: list[W4Row]) -> list[str]:
 def _plots(rows: list[W4Row], out_dir: Path) -> list[str]:
     """Per system, sampling and noise: the mean attitude error against time, one line per model."""
     names = []
-    for system in dict.fromkeys(r.system for r in rows):
-        conditions = list(dict.fromkeys((r.sampling, r.noise) for r in rows if r.system == system))
+    for part, system in dict.fromkeys((r.part, r.system) for r in rows):
+        conditions = list(dict.fromkeys((r.sampling, r.noise) for r in rows if (r.part, r.system) == (part, system)))
         fig = figure(figsize=(4.5 * len(conditions), 4.0))
         for k, (sampling, noise) in enumerate(conditions):
             ax = fig.add_subplot(1, len(conditions), k + 1)
-            chosen = [r for r in rows if r.system == system and (r.sampling, r.noise) == (sampling, noise)]
+            chosen = [r for r in rows if r.condition == (part, system, sampling, noise)]
             for r, style in zip(chosen, series_styles(len(chosen))):
                 curve = np.asarray(r.attitude_error_curve, dtype=np.float64)
                 t = H_SAVE * np.arange(curve.size)
                 ax.semilogy(t[1:], np.maximum(curve[1:], 1e-16), label=r.model, **style)
-            ax.set_title(f"{system}, {sampling}, noise {noise:g}")
+            ax.set_title(f"{'' if part is None else part + ': '}{system}, {sampling}, noise {noise:g}")
             ax.set_xlabel("t")
             ax.set_ylabel("attitude error [rad]")
             ax.legend(fontsize=8)
-        name = f"attitude_error_{system}.png"
+        name = f"attitude_error_{'' if part is None else part.split()[0].lower() + '_'}{system}.png"
         fig.tight_layout()
         fig.savefig(out_dir / name, dpi=110)
         names.append(name)
@@ -548,31 +654,33 @@ class W4(AbstractExperiment):
     paper_values = ()
 
     def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
         rows: list[W4Row] = []
         all_protocols = protocols()
-        for system in P.systems:
-            protocol = all_protocols[system]
-            test = test_set(protocol, P.t_end)
-            for sampling, noise in itertools.product(P.samplings, P.noises):
-                data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
-                                    n_observations=P.n_observations)
-                for model in models():
-                    path = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(
-                        " ", "_")
-                    row = saved_row(W4Row, path, functools.partial(
-                        evaluate, protocol, model, data, test, system=system, noise=noise, sampling=sampling,
-                        steps=P.steps))
-                    rows.append(row)
-                    if progress:
-                        print(line(row), flush=True)
+        P: Profile | None = PROFILES[profile]
+        while P is not None:
+            prefix = profile if P.part is None else f"{profile}-{P.part.split()[0].lower()}"
+            for system in P.systems:
+                protocol = all_protocols[system]
+                test = test_set(protocol, P.t_end, P.n_test)
+                for sampling, noise in itertools.product(P.samplings, P.noises):
+                    data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
+                                        n_observations=P.n_observations)
+                    for model in models(P.operator_baselines):
+                        name = f"{prefix}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(" ", "_")
+                        row = saved_row(W4Row, out_dir / "rows" / name, functools.partial(
+                            evaluate, protocol, model, data, test, system=system, noise=noise, sampling=sampling,
+                            steps=P.steps, part=P.part))
+                        rows.append(row)
+                        if progress:
+                            print(line(row), flush=True)
+            P = P.then
         return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows), "figures": _plots(rows, out_dir),
                 "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
                 "model": "G-LPNet (TripleJump, momenta latent, family by BIC)"}
 
     def rows(self, metrics):
         rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
-        return [(f"{r.system} {r.sampling} noise {r.noise:g} G-LPNet attitude error", "—", fmt(r.attitude_error),
+        return [(f"{_where(r).replace(',', '')} G-LPNet attitude error", "—", fmt(r.attitude_error),
                  fmt(getattr(_peer(rows, r, "limit"), "attitude_error", None))) for r in rows if r.model == "G-LPNet"]
 
     def markdown_table(self, metrics):
@@ -582,7 +690,12 @@ class W4(AbstractExperiment):
             f"20 for the vehicle), means over {N_TEST} held-out initial conditions against heyoka; velocity error "
             "relative to the velocities' RMS, position error to the distance travelled; drifts of the learned maps' "
             "rollouts relative to the largest value.")
-        return self.study_markdown(metrics, description, [("Every fit", table_lines(COLUMNS, rows))])
+        sections = [("Every fit", table_lines(COLUMNS, [r for r in rows if r.part is None]))]
+        for part in dict.fromkeys(r.part for r in rows if r.part is not None):
+            title = (f"{part}: {LLPNN.n_trajectories} x {LLPNN.n_observations} observations at h = {H_REGULAR:g}, "
+                     f"{LLPNN.n_test} test trajectories to t = {LLPNN.t_end:g}")
+            sections.append((title, table_lines(COLUMNS, [r for r in rows if r.part == part])))
+        return self.study_markdown(metrics, description, sections)
 
 
 EXPERIMENT = W4()

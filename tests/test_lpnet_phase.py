@@ -134,3 +134,25 @@ def test_fit_phase_refuses_what_it_cannot_use():
     shuffled = it.Trajectories(data.states, 0.1, BODY, configurations=other.configurations)
     with pytest.raises(ValueError, match="moves off the directions its momenta allow"):
         learn.fit_phase(net, shuffled)
+
+
+def test_noisy_pairs_are_not_refused_and_their_rates_are_the_least_squares_ones():
+    # noisy configurations leave the Casimir directions by their noise: refused as a motion of
+    # these momenta, taken with noisy=True, their rates the same least squares on the turns
+    data = _truth(BODY, 2, 4, seed=0)
+    rng = np.random.default_rng(5)
+    noise = Rotation.from_rotvec(1e-3 * rng.normal(size=(data.configurations[..., 0].size, 3)))
+    g = (Rotation.from_quat(data.configurations.reshape(-1, 4)) * noise).as_quat().reshape(
+        data.configurations.shape)
+    noisy = it.Trajectories(data.states, 0.1, BODY, configurations=g)
+    net = learn.LPNet(BODY, hidden=(4,), key=0, h=0.1)
+    with pytest.raises(ValueError, match="noisy=True"):
+        phase_rates(net, noisy)
+    _, rates = phase_rates(net, noisy, noisy=True)
+    y0 = data.states[:, :-1].reshape(-1, 3)
+    alpha = np.asarray(jax.vmap(net.alpha)(jnp.asarray(y0)))
+    expected = _turns(BODY.group, g[:, :-1].reshape(-1, 4), g[:, 1:].reshape(-1, 4), alpha, 0.1,
+                      np.asarray(BODY.casimir_gradients(y0)))[0]
+    np.testing.assert_array_equal(rates, expected)
+    # the noise moves the rates by about its size over the step (1e-3 rad / 0.1), not more
+    assert 1e-4 < np.max(np.abs(rates - phase_rates(net, data)[1])) < 0.1

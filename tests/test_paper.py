@@ -683,3 +683,27 @@ def test_w6_smoke_keeps_the_constraint_where_the_neural_ode_does_not(tmp_path):
     assert sum("[constraint <= 1e-13" in v for v in metrics["verdict"]) == sum(r["kind"] == "learned" for r in rows)
     assert (tmp_path / "W6" / "nonholonomic.png").exists()
     assert len(list((tmp_path / "W6" / "rows").glob("*.json"))) == len(rows)
+
+
+@pytest.mark.slow  # two fits on a small regular protocol, ~40 s
+def test_w4s_llpnn_baselines_predict_and_the_lpnets_rollout_keeps_its_invariants():
+    from paper import w4_bodies as w4
+
+    protocol = w4.protocols()["satellite"]
+    data = w4.observations(protocol, 0.005, "regular", n_trajectories=12, n_observations=21)
+    test = w4.test_set(protocol, 5.0, 3)
+    lpnet = w4.LPNetBodyModel()
+    fitted = lpnet.fit(protocol, data, 10)
+    figures = w4.measure(protocol, test, lpnet.predict(fitted, protocol, test))
+    # a lifted LPNet step is a coadjoint step and a turn along the stabiliser: the latent
+    # momentum's Casimir and the spatial momentum stay at round-off over the 50 steps
+    assert figures["casimir_drift"] < 1e-13 and figures["spatial_momentum_drift"] < 1e-13
+    assert np.isfinite(figures["attitude_error"]) and figures["attitude_error"] < np.pi
+    deeponet = w4.DeepONetBodyModel()
+    prediction = deeponet.predict(learn.fit_deeponet(data, epochs=200, progress=False)[0], protocol, test)
+    np.testing.assert_allclose(np.linalg.norm(prediction.configurations, axis=-1), 1.0, atol=1e-15)
+    assert np.all(np.isfinite(w4.measure(protocol, test, prediction)["attitude_error_curve"]))
+    # the LLPNN protocol is the full profile's second part, with its two baselines
+    llpnn = w4.PROFILES["full"].then
+    assert (llpnn.n_trajectories, llpnn.n_observations, llpnn.t_end, llpnn.n_test) == (200, 101, 200.0, 50)
+    assert {"DeepONet", "LPNet on reconstructed momenta"} <= {m.label for m in w4.models(llpnn.operator_baselines)}

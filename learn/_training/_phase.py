@@ -54,14 +54,15 @@ def _turns(group, g0, g1, alpha, h, grads):
     return rates, off, turn
 
 
-def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]:
+def phase_rates(net: LPNet, data: Trajectories, noisy: bool = False) -> tuple[np.ndarray, np.ndarray]:
     r"""`(states (N, dim), rates (N, k))`: for every consecutive pair of `data` (states and
     configurations), the $\beta$ with $g_1 \approx g_0\exp(h\beta\cdot\nabla C(\mu_0))
     \exp(h\alpha(\mu_0))$, $\alpha$ the net's own (what its lifted step applies), by least
     squares on the Casimir gradients (exact when $\exp(h\alpha)$ carries $\mu_0$ to $\mu_1$).
     `ValueError` naming a pair whose configuration step, against the pair's exact parameters
     $\hat\alpha$ (`net.params_from_pair`), leaves those directions: no motion with these
-    momenta."""
+    momenta. With `noisy` (observed momenta and configurations), no pair is checked: what
+    leaves the directions is the noise, which the least squares drop."""
     system = net.system
     group = system.require_group()
     h = float(data.h)
@@ -70,6 +71,17 @@ def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]
     g0 = data.configurations[:, :-1].reshape(-1, group.size)
     g1 = data.configurations[:, 1:].reshape(-1, group.size)
     grads = np.asarray(system.casimir_gradients(y0))  # (N, k, dim)
+    if not noisy:
+        _check_on_orbit(net, data, y0, y1, g0, g1, grads)
+    alpha = np.asarray(jax.vmap(net.alpha)(jnp.asarray(y0)))
+    rates, _, _ = _turns(group, g0, g1, alpha, h, grads)
+    return y0, rates
+
+
+def _check_on_orbit(net: LPNet, data: Trajectories, y0, y1, g0, g1, grads) -> None:
+    """`ValueError` naming the pair whose configuration step, against the pair's exact
+    parameters, leaves the Casimir directions by more than `OFF_ORBIT` of its size."""
+    group, h = net.system.require_group(), float(data.h)
     exact = np.asarray(net.params_from_pair(y0, y1, h))
     _, off, turn = _turns(group, g0, g1, exact, h, grads)
     size = h * np.linalg.norm(exact, axis=1) + np.linalg.norm(turn, axis=1)
@@ -79,14 +91,12 @@ def phase_rates(net: LPNet, data: Trajectories) -> tuple[np.ndarray, np.ndarray]
         raise ValueError(
             f"data: the configuration of trajectory {worst // n_steps}, step {worst % n_steps}, moves off the "
             f"directions its momenta allow ({off[worst]:.3g} of a step of size {size[worst]:.3g}): these "
-            f"configurations are not a motion with these momenta on {group.name} (noisy, or of another system)")
-    alpha = np.asarray(jax.vmap(net.alpha)(jnp.asarray(y0)))
-    rates, _, _ = _turns(group, g0, g1, alpha, h, grads)
-    return y0, rates
+            f"configurations are not a motion with these momenta on {group.name} (of another system, or noisy: "
+            "then fit with noisy=True)")
 
 
 def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 16), activation: str = "sigmoid",
-              key: int | jax.Array = 0, iterations: int = 200,
+              key: int | jax.Array = 0, iterations: int = 200, noisy: bool = False,
               progress: bool | None = None) -> tuple[LPNet, TrainingRecord]:
     r"""`(net with a phase network, record)`: the rates $\beta(\mu)$ of `LPNet.lifted_step`
     along the Casimir gradients, fitted to the configurations of `data`.
@@ -95,7 +105,9 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
     `data`, `integrators.Trajectories` with configurations (`ground_truth(..., g0=...)`) at
     the net's step; `hidden`, `activation`, `key`: the phase network, a `learn.AffineMLP` from
     states to one rate per Casimir (scaled to the data's rates); `iterations`:
-    Levenberg-Marquardt steps at most on the rates' squared error.
+    Levenberg-Marquardt steps at most on the rates' squared error; `noisy`: the momenta and
+    configurations are observed with noise, so pairs that leave the Casimir directions are not
+    refused (their part off them is dropped by the least squares; `phase_rates`).
 
     Each pair's rates come in closed form (`phase_rates`); only the network is fitted, so the
     momentum step is unchanged (and so are its Casimirs)."""
@@ -125,7 +137,7 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
         raise ValueError(f"the net's step h={net.h} differs from the data's h={h}; fit the phase at the net's step")
     iterations = positive_int(iterations, "iterations")
     net = eqx.tree_at(lambda m: m.h, net, h, is_leaf=lambda v: v is None)
-    states, rates = phase_rates(net, data)
+    states, rates = phase_rates(net, data, noisy)
     network = AffineMLP(net.system.dim, net.system.n_casimirs, hidden, activation, key).rescaled(states, rates)
     scale = jnp.asarray(network.output_scale)
     loss = MeanSquares(lambda m, y, b: (jax.vmap(m.network)(y) - b) / scale, "phase rates")
