@@ -79,6 +79,7 @@ def test_splitting_on_a_non_compact_algebra_overflows_into_an_error():
         m.rollout(np.array([[3.0, 1.0, 0.5]]), 200)
 
 
+@pytest.mark.slow  # the overflow's error by default in test_reliability.py and test_matrix_algebra.py
 def test_coadjoint_flow_overflow_is_detected():
     g = lp.sl2()
     ok = np.asarray(g.coadjoint_flow([1.0, 0.0, 0.0], 1.0, [1.0, 1.0, 1.0]))

@@ -256,6 +256,9 @@ def test_the_learned_step_keeps_the_spatial_momentum_of_its_latent_momentum():
     assert np.abs(C - C[:, :1]).max() <= 500 * 10 * EPS * np.abs(C).max()
 
 
+# with -m slow: heyoka's poses keep the spatial momentum by default (test_configurations.py), and a
+# vehicle's observed velocities feed test_the_inertia_estimate_integrates_the_noise_of_a_vehicles_velocities
+@pytest.mark.slow
 def test_a_vehicle_is_observed_by_its_pose_and_its_velocities():
     vehicle = lp.systems.Kirchhoff()
     y0 = np.random.default_rng(4).uniform(-1.0, 1.0, size=(3, 6))

@@ -222,7 +222,7 @@ def test_compare_arguments():
 
 @pytest.mark.parametrize("make, order", [
     (lambda body, h: it.splitting.Strang(body, h=h), 2),
-    (lambda body, h: it.RK4(body, h=h), 4),
+    pytest.param(lambda body, h: it.RK4(body, h=h), 4, marks=pytest.mark.slow),  # RK4's order: test_runge_kutta.py
 ])
 def test_convergence_observes_the_order(make, order, tmp_path):
     body = system("RigidBody")

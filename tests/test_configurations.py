@@ -49,6 +49,7 @@ def test_group_exponentials_agree_with_the_matrix_exponential(phi, v, scale):
     assert np.all(np.isfinite(g1))
 
 
+@pytest.mark.slow  # a matrix group reconstructs like the quaternions by default below
 def test_matrix_group_of_se3_agrees_with_poses():
     P = lp.Poses()
     M = lp.MatrixGroup(P.matrix_basis())

@@ -34,6 +34,7 @@ def _quadratic_system(name: str) -> LiePoissonSystem:
     return LiePoissonSystem(g, hamiltonian, name=f"quadratic_{name}")
 
 
+@pytest.mark.slow  # the vector field by default in test_metric_enters_between_the_brackets; the rigid body's relaxation below
 def test_rigid_body_vector_field_is_euler_plus_double_bracket():
     # closed form: Pi x Omega + gamma Pi x (Pi x Omega), Omega = I^-1 Pi (numpy only)
     inertia, gamma = np.array([2.0, 1.0, 2.0 / 3.0]), 0.3
@@ -64,6 +65,7 @@ def test_metric_enters_between_the_brackets():
                                rtol=1e-13)
 
 
+@pytest.mark.slow  # the vector field's formula (undamped plus gamma B K B grad H) by default above
 def test_gamma_zero_is_the_undamped_system():
     body = system("Kirchhoff")
     y = np.random.default_rng(2).normal(size=(7, 6))
@@ -72,9 +74,8 @@ def test_gamma_zero_is_the_undamped_system():
 
 # Each example checks a batch of 4 states in one call of each method (eager dispatch costs per
 # call, not per state): 6 examples check 24 states and 6 dissipation strengths per algebra. By
-# default so(3), sl(2) and the generic path; every algebra's Casimirs and energy loss along
-# heyoka's trajectories by default below.
-@pytest.mark.parametrize("name", slow_except(ALGEBRAS, {"so3", "sl2", "generic_so3"}))
+# default so(3); every algebra's Casimirs and energy loss along heyoka's trajectories by default below.
+@pytest.mark.parametrize("name", slow_except(ALGEBRAS, {"so3"}))
 @settings(max_examples=6, deadline=None)
 @given(ys=st.lists(vectors(8, 2.0), min_size=4, max_size=4), gamma=st.floats(0.0, 3.0))
 def test_casimirs_kept_and_energy_decays_on_every_algebra(name, ys, gamma):

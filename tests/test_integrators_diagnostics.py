@@ -153,7 +153,7 @@ def test_charged_particle_integral_is_conserved_by_the_ground_truth():
     assert r.max_integral_error("I") > 1e-8
 
 
-@pytest.mark.parametrize("k", [1, 7, 19])
+@pytest.mark.parametrize("k", [pytest.param(1, marks=pytest.mark.slow), 7, pytest.param(19, marks=pytest.mark.slow)])
 def test_diverged_rollout_is_reported_up_to_the_first_non_finite_step(k):
     ys = np.array(it.splitting.Strang(BODY, h=0.1).rollout(np.array([[1.0, 0.5, 0.2], [0.3, 1.0, -0.4]]), 20))
     ref = it.ground_truth(BODY, ys[:, 0], 0.1, 20)

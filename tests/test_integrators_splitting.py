@@ -54,8 +54,13 @@ def test_observed_order(cls, system, y0):
     assert abs(slope - cls.order) < 0.1, (errors, slope)
 
 
-@pytest.mark.parametrize("cls", [pytest.param(m, marks=pytest.mark.slow) if m is splitting.LieTrotter else m
-                                 for m in splitting.METHODS if m is not splitting.BlanesMoan4])
+# Strang and one composition of Strang steps (TripleJump) by default; the other compositions of the
+# same Strang steps and Lie-Trotter with -m slow
+_COMPOSED = (splitting.Suzuki, splitting.McLachlan4, splitting.Yoshida6)
+
+
+@pytest.mark.parametrize("cls", [pytest.param(m, marks=pytest.mark.slow) if m is splitting.LieTrotter or m in _COMPOSED
+                                 else m for m in splitting.METHODS if m is not splitting.BlanesMoan4])
 def test_casimir_round_off_over_1e4_steps(cls):
     method = cls(BODY, h=0.1)
     n_steps = 10_000
@@ -69,6 +74,7 @@ def test_casimir_round_off_over_1e4_steps(cls):
     assert drift < 10 * np.sqrt(n_flows) * EPS, drift
 
 
+@pytest.mark.slow  # by default BlanesMoan4's order above and the pendulum's Casimir over composed test flows (test_casimirs.py)
 def test_blanes_moan_casimir_round_off():
     ys = np.asarray(splitting.BlanesMoan4(PENDULUM, h=0.1).rollout([0.0, 1.5, 2.35], 10_000))
     C = np.asarray(PENDULUM.casimirs(ys))[:, 0]
@@ -150,7 +156,9 @@ def test_system_type_checked():
         splitting.Strang("RigidBody", h=0.1)
 
 
-@pytest.mark.parametrize("cls", splitting.METHODS, ids=lambda m: m.__name__)
+# the compositions of Strang steps beyond TripleJump with -m slow (they compose Strang's rule)
+@pytest.mark.parametrize("cls", [pytest.param(m, marks=pytest.mark.slow) if m in _COMPOSED else m for m in splitting.METHODS],
+                         ids=lambda m: m.__name__)
 def test_a_method_composes_listed_and_indexed_flows_alike_in_its_ordering(cls):
     # One rule for both kinds of flows: a Python loop over separate functions (FlowList) and a
     # scan over one function of a traced index (IndexedFlows) apply the same flows at the

@@ -7,7 +7,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import EPS, algebra, algebra_names, system, system_names, vectors
+from helpers import (
+    ALGEBRAS,
+    EPS,
+    algebra,
+    algebra_names,
+    slow_except,
+    system,
+    system_names,
+    vectors,
+)
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
@@ -265,7 +274,8 @@ def test_gauss_newton_parameters_with_any_flow():
 
 
 # -- rejected pairs and input checks --------------------------------------------------------
-@algebra_names
+# so(3)'s by default (the check is the same for every algebra); the others with -m slow
+@pytest.mark.parametrize("name", slow_except(ALGEBRAS, {"so3"}))
 def test_different_casimir_levels_are_rejected(name):
     g = algebra(name)
     rng = np.random.default_rng(8)

@@ -115,6 +115,7 @@ def test_generalized_rigid_body_round_trips_through_its_name():
     assert back == body and back.dim == 6
 
 
+@pytest.mark.slow  # ~3.5 s; the methods' orders and long runs by default above
 def test_a_rollout_with_a_fixed_iteration_count_is_reverse_differentiable():
     import jax
 

@@ -86,6 +86,7 @@ def test_learn_load_names_a_file_that_holds_no_learned_map(tmp_path):
         learn.load(tmp_path / "d.h5")
 
 
+@pytest.mark.slow  # every G-LPNet fit of the default run jits and differentiates the network
 def test_a_glpnet_is_a_pytree_jax_transforms():
     # the activation is a static field: jit and grad see only arrays
     g = learn.GLPNet(RB, h=0.1, method=it.splitting.Strang)

@@ -36,6 +36,7 @@ def equivariant(system, key=0, h=0.1, **kw):
     return learn.LPNet(system, h=h, network=averaged(system, key), **kw)
 
 
+@pytest.mark.slow  # the rigid body's three half-turns are counted by default in test_step_commutes_with_every_symmetry_whatever_the_weights
 def test_rigid_body_symmetries_are_the_half_turns():
     found = [s.tolist() for s in sign_symmetries(RB)]
     assert found == [[-1, -1, 1], [-1, 1, -1], [1, -1, -1]]
@@ -46,6 +47,7 @@ def test_rigid_body_symmetries_are_the_half_turns():
                 assert any(np.array_equal(a * b, s) for s in sign_symmetries(SO4))
 
 
+@pytest.mark.slow  # a group element that is not a symmetry is refused by default in test_a_parametrisation_that_breaks_the_law_is_refused
 def test_a_linear_term_on_every_axis_leaves_none():
     tilted = lp.systems.LiePoissonSystem(
         lp.so3(), lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 / 2 + m[2] ** 2 / 3) + 0.3 * (m[0] + m[1] + m[2]),
@@ -143,8 +145,10 @@ def test_without_equivariance_the_step_does_not_commute():
     assert gap > 1e-4
 
 
-# so(4)'s instance under -m slow (the default test run's budget; the property is algebra-independent)
-@pytest.mark.parametrize("system", [RB, pytest.param(SO4, marks=pytest.mark.slow)], ids=["RigidBody", "so4"])
+# with -m slow (so(4)'s and the rigid body's; the property is algebra-independent): a reversible
+# equivariant step commutes with the symmetries by default in test_step_commutes_with_every_symmetry_whatever_the_weights
+@pytest.mark.parametrize("system", [pytest.param(RB, marks=pytest.mark.slow), pytest.param(SO4, marks=pytest.mark.slow)],
+                         ids=["RigidBody", "so4"])
 def test_reversible_equivariant_step_is_reversible_under_every_reversing_symmetry(system):
     net = learn.Reversible(equivariant(system, key=3))
     assert net.symmetry == tuple(float(r) for r in reversing_symmetries(system)[0])

@@ -77,6 +77,8 @@ def noisy_fit():
 
 
 # -- 1. a map trained on uneven steps runs at steps it never saw -------------------------------------
+# a fit and a convergence study with -m slow; the same fit on noisy observations runs by default (section 4)
+@pytest.mark.slow
 def test_glpnet_fitted_on_uneven_steps_has_its_order_at_unseen_steps(exact_fit):
     data, model, _ = exact_fit
     assert isinstance(model, learn.GLPNet) and model.method == TripleJump()  # order 4
@@ -433,7 +435,10 @@ def test_redundant_weights_count_once_in_the_information_criterion():
 
 
 # -- 8. RidgeTerms(bias=False) ------------------------------------------------------------------------
-@pytest.mark.parametrize(("activation", "linear_term"), [("identity", False), ("sigmoid", True), ("tanh", False)])
+# the identity activation by default (the observations' fits use it), the others with -m slow
+@pytest.mark.parametrize(("activation", "linear_term"), [
+    ("identity", False), pytest.param("sigmoid", True, marks=pytest.mark.slow),
+    pytest.param("tanh", False, marks=pytest.mark.slow)])
 def test_no_bias_is_a_zero_bias(activation, linear_term):
     no_bias = learn.RidgeTerms(3, 4, key=5, activation=activation, linear_term=linear_term, bias=False)
     assert no_bias.b is None and not no_bias.bias
@@ -579,6 +584,7 @@ def test_families_contain_the_simpler_ones_as_their_definitions_say():
                 assert not (f.contains(g) and g.contains(k)) or f.contains(k)
 
 
+@pytest.mark.slow  # the sub-steps by default in test_max_step_runs_each_interval_in_equal_sub_steps; the skip using this figure runs with -m slow
 def test_the_discretisation_error_is_the_methods_own_and_falls_with_its_order():
     # a G-LPNet (TripleJump, order 4) of the true H on exact data: the difference of its
     # predictions at s and 2s sub-steps falls 2^4 per doubling in size, so 2^8 in the SSR

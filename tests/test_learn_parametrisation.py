@@ -54,6 +54,7 @@ def test_so3_rotation_spatial_sign():
     np.testing.assert_allclose(found, alpha, rtol=0, atol=1e-13)
 
 
+@pytest.mark.slow  # the same inverse (so(3)'s closed form) by default in test_inverse_flows.py (zero and tiny rotations)
 def test_so3_rotation_zero_rotation_is_zero_without_nan():
     rb = lp.systems.RigidBody()
     p = learn.TestFlowParametrisation(rb)
@@ -99,9 +100,12 @@ def test_parametrisations_check_their_system():
         learn.SE3RotationShear(lp.systems.RigidBody())
 
 
+# se(3)'s (Kirchhoff, the heavy top) with -m slow: the parametrisation is the system's
+# test_flow_parameters, round-tripped on se(3) and Kirchhoff by default in test_inverse_flows.py
 @pytest.mark.parametrize(
     "system",
-    [lp.systems.RigidBody(), lp.systems.Kirchhoff(), lp.systems.HeavyTop(), lp.systems.ExtendedPendulum()],
+    [lp.systems.RigidBody(), pytest.param(lp.systems.Kirchhoff(), marks=pytest.mark.slow),
+     pytest.param(lp.systems.HeavyTop(), marks=pytest.mark.slow), lp.systems.ExtendedPendulum()],
     ids=lambda s: s.name,
 )
 def test_lie_algebra_parametrisation_round_trip(system):

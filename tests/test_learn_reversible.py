@@ -62,6 +62,7 @@ def test_check_reversing_symmetry_says_what_fails(system, signs, why):
         check_reversing_symmetry(system, signs)
 
 
+@pytest.mark.slow  # learn.Reversible's refusals by default in test_bad_arguments
 def test_no_symmetry_is_an_error_naming_the_way_out():
     diamond = NEW_ALGEBRAS["diamond"]()
     assert reversing_symmetries(diamond) == []
@@ -70,8 +71,10 @@ def test_no_symmetry_is_an_error_naming_the_way_out():
         learn.Reversible(learn.LPNet(diamond))
 
 
+# the heavy top (its own heyoka integrator to compile) with -m slow; Kirchhoff's se(3) by default
 @pytest.mark.parametrize(
-    "system", [RB, lp.systems.HeavyTop(), SYSTEM_FACTORIES["Kirchhoff"](), NEW_ALGEBRAS["so4"]()],
+    "system", [RB, pytest.param(lp.systems.HeavyTop(), marks=pytest.mark.slow), SYSTEM_FACTORIES["Kirchhoff"](),
+               NEW_ALGEBRAS["so4"]()],
     ids=["RigidBody", "HeavyTop", "Kirchhoff", "so4"],
 )
 def test_every_symmetry_found_reverses_the_exact_flow(system):
@@ -158,7 +161,9 @@ def test_unconverged_iteration_is_a_divergence_not_a_wrong_state():
         net.with_iterations(0)
 
 
-@pytest.mark.parametrize("h", [1.0, pytest.param(2.0, marks=pytest.mark.slow)])
+# with -m slow: the same policy runs by default for learn.Reversible above, and ImplicitMidpoint's
+# order and arguments in test_runge_kutta.py
+@pytest.mark.parametrize("h", [pytest.param(1.0, marks=pytest.mark.slow), pytest.param(2.0, marks=pytest.mark.slow)])
 def test_unconverged_implicit_midpoint_is_a_divergence_not_its_last_newton_iterate(h):
     # The same policy for the classical implicit map. Two Newton steps from the explicit Euler
     # guess at h |f'| ~ 1-2 still move the stage by far more than round-off (measured: 3 are
@@ -232,6 +237,7 @@ def write_version_1_reversible_equivariant_lpnet(path, net):
             weights.create_dataset(f"{i:04d}", data=np.asarray(array))
 
 
+@pytest.mark.slow  # a Reversible's file round trip by default above; version-1 files in test_learn_symmetric_glpnet.py
 def test_version_1_file_of_a_reversible_equivariant_lpnet_loads(tmp_path):
     lpnet = learn.LPNet(RB, h=0.1, network=learn.GroupAveraged(
         learn.AffineMLP(3, 3, hidden=(8, 8), key=4, input_scaling=([0.1, 0.0, -0.1], [1.0, 2.0, 0.5])),

@@ -25,6 +25,7 @@ def _exact_pairs(system, rng, n=16):
     return traj.states[:, 0], traj.states[:, 1]
 
 
+@pytest.mark.slow  # the round trip from parameters by default below and in test_inverse_flows.py
 def test_round_trip_on_exact_flow_pairs(system):
     param = learn.SE3RotationShear(system)
     y0, y1 = _exact_pairs(system, np.random.default_rng(0))

@@ -30,13 +30,16 @@ def with_linear_term(g, key=7):
     return eqx.tree_at(lambda m: m.terms.e, g, 0.5 * jax.random.normal(jax.random.PRNGKey(key), (g.n_modules,)))
 
 
-# Kirchhoff (12 modules, ~19 s of compilation for the three methods) under -m slow. By default the
-# rigid body's TripleJump; its Strang and Lie-Trotter with -m slow (both are checked against the
-# classical method by default in test_every_activation_is_strang_of_its_learned_hamiltonian).
+# Kirchhoff (12 modules, ~19 s of compilation for the three methods) under -m slow, and the rigid
+# body's with -m slow too: its Strang and Lie-Trotter networks are checked against the classical
+# method by default in test_every_activation_is_strang_of_its_learned_hamiltonian, a Strang network
+# with linear terms in test_a_network_composes_its_modules_in_its_method_ordering, and the TripleJump
+# composition's order against heyoka in test_composed_network_has_the_composition_order_at_other_steps.
 @pytest.mark.parametrize("system_name", ["RigidBody", pytest.param("Kirchhoff", marks=pytest.mark.slow)])
 @pytest.mark.parametrize(
     "method", [pytest.param(it.splitting.LieTrotter, marks=pytest.mark.slow),
-               pytest.param(it.splitting.Strang, marks=pytest.mark.slow), it.splitting.TripleJump],
+               pytest.param(it.splitting.Strang, marks=pytest.mark.slow),
+               pytest.param(it.splitting.TripleJump, marks=pytest.mark.slow)],
     ids=lambda m: m.__name__,
 )
 def test_network_with_a_method_is_that_method_on_its_learned_system(method, system_name):
@@ -62,10 +65,13 @@ def test_network_with_a_method_is_that_method_on_its_learned_system(method, syst
     assert g.exact_flows_per_step == method().flows_per_step(2 * system.dim)
 
 
-# every activation and both choices of the linear term by default; the other three pairs with -m slow
+# the sigmoid (the default activation) by default; the other activations and the linear term with
+# -m slow (a Strang network with linear terms runs by default in
+# test_a_network_composes_its_modules_in_its_method_ordering)
 @pytest.mark.parametrize(("activation", "linear_term"), [
-    ("sigmoid", False), ("tanh", True), ("identity", False),
-    *(pytest.param(a, b, marks=pytest.mark.slow) for a, b in [("sigmoid", True), ("tanh", False), ("identity", True)]),
+    ("sigmoid", False),
+    *(pytest.param(a, b, marks=pytest.mark.slow)
+      for a, b in [("tanh", True), ("identity", False), ("sigmoid", True), ("tanh", False), ("identity", True)]),
 ])
 def test_every_activation_is_strang_of_its_learned_hamiltonian(activation, linear_term):
     g = net(activation=activation, linear_term=linear_term)
@@ -139,6 +145,7 @@ def test_order_against_heyoka_on_the_learned_hamiltonian(method, order):
     assert abs(observed - order) < 0.1, (errors, observed)
 
 
+@pytest.mark.slow  # a composed network's order against heyoka by default in test_composed_network_has_the_composition_order_at_other_steps
 def test_compositions_of_the_learned_splitting_raise_the_order():
     g = net()
     system = g.learned_system()
@@ -152,10 +159,13 @@ def test_compositions_of_the_learned_splitting_raise_the_order():
     assert abs(observed - 4) < 0.15, (errors, observed)
 
 
+# with -m slow: a composed network's order against heyoka runs by default
+# (test_composed_network_has_the_composition_order_at_other_steps)
 @pytest.mark.parametrize(
     "method, n_modules",
     [pytest.param(it.splitting.TripleJump, 1, marks=pytest.mark.slow),
-     pytest.param(it.splitting.TripleJump, 3, marks=pytest.mark.slow), (it.splitting.Suzuki, 2),
+     pytest.param(it.splitting.TripleJump, 3, marks=pytest.mark.slow),
+     pytest.param(it.splitting.Suzuki, 2, marks=pytest.mark.slow),
      pytest.param(it.splitting.Yoshida6, 2, marks=pytest.mark.slow)],
 )
 def test_composed_network_is_the_composition_of_its_strang_steps(method, n_modules):
@@ -277,8 +287,11 @@ def test_method_ordering_survives_save_and_load_and_older_files_name_the_method(
     assert np.array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(old.step)(Y)))
 
 
-@pytest.mark.parametrize("linear_term", [False, True])
-@pytest.mark.parametrize("method", [it.splitting.Strang, it.splitting.TripleJump], ids=lambda m: m.__name__)
+# fit_splitting's network (TripleJump, linear terms) by default; the other three with -m slow
+@pytest.mark.parametrize(("method", "linear_term"), [
+    pytest.param(m, b, id=f"{m.__name__}-{b}",
+                 marks=() if (m, b) == (it.splitting.TripleJump, True) else pytest.mark.slow)
+    for m in (it.splitting.Strang, it.splitting.TripleJump) for b in (False, True)])
 def test_method_survives_save_and_load(tmp_path, linear_term, method):
     g = net(method=method, linear_term=linear_term)
     g = with_linear_term(g) if linear_term else g

@@ -257,7 +257,8 @@ def test_baseline_fit_and_casimir_drift(tmp_path, rb, pairs):
     np.testing.assert_array_equal(np.asarray(jax.vmap(loaded.step)(y[:3])), np.asarray(jax.vmap(f.step)(y[:3])))
 
 
-@pytest.mark.parametrize("cls", [learn.LPNet, learn.MLPBaseline])
+# the LPNet by default; the baseline's refinement (the same stage on another network) with -m slow
+@pytest.mark.parametrize("cls", [learn.LPNet, pytest.param(learn.MLPBaseline, marks=pytest.mark.slow)])
 def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     net = cls(rb, hidden=(8, 8), key=0)
     stages = (ADAM_200, learn.QuasiNewton(150))
@@ -280,6 +281,7 @@ def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     assert hist["train_loss"][-1] == pytest.approx(record.train_loss, rel=1e-6)
 
 
+@pytest.mark.slow  # the numbering after Adam's epochs by default in test_quasi_newton_refinement_lowers_the_loss
 def test_refinement_iterations_numbered_after_adam_epochs(rb, pairs):
     stages = (ADAM_20, learn.QuasiNewton(5))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)

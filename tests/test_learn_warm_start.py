@@ -10,8 +10,9 @@ import liepoisson as lp
 from learn._models._glpnet import linear_to_activation
 
 
-@pytest.mark.parametrize("activation", ["sigmoid", "tanh"])
-@pytest.mark.parametrize("full_vectors", [False, True])
+# the default network (sigmoid, axis vectors) by default; tanh and full vectors with -m slow
+@pytest.mark.parametrize("activation", ["sigmoid", pytest.param("tanh", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("full_vectors", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_linear_to_activation_reproduces_linear_net(activation, full_vectors):
     system = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
     X = jnp.asarray(np.random.default_rng(0).uniform(-2, 2, size=(64, 3)))

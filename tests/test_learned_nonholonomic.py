@@ -124,6 +124,7 @@ def test_the_quadratic_family_steps_by_the_exact_flow_of_its_field(seed, h):
     assert abs(np.linalg.norm(got) - np.linalg.norm(u)) <= 8 * EPS * np.linalg.norm(u)
 
 
+@pytest.mark.slow  # ~2.5 s; the family's step against DOP853 by default above
 def test_the_quadratic_family_is_smooth_where_it_does_not_move():
     model = eqx.tree_at(lambda m: m.rate, learn.QuadraticDAlembertMap(SUSLOV, h=0.1), jax.numpy.asarray([0.3, -0.2]))
     u = jax.numpy.asarray([0.4, 0.6])  # c . u = 0: an equilibrium of du/dt = (c . u) J u

@@ -9,13 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.optimize
-from helpers import ToyProblem
+from helpers import ToyProblem, slow_except
 
 import integrators as it
 import learn
 import liepoisson as lp
 from integrators.internals import composition_flops
-from integrators.splitting import METHODS, IndexedFlows, Strang, TripleJump
+from integrators.splitting import METHODS, IndexedFlows, LieTrotter, Strang, TripleJump
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(2.0, 1.0, 2 / 3))
@@ -153,6 +153,10 @@ def test_levenberg_marquardt_needs_a_least_squares_loss():
         learn.LevenbergMarquardt(5).run(problem, learn.Context())
 
 
+# ~4 s with -m slow: Levenberg-Marquardt on observations' block Jacobians runs by default in every
+# fit_splitting (test_learn_observations.py, the README), the blocks are checked below, and the
+# ParametricHamiltonian's rollout in test_trajectory_loss_of_the_true_hamiltonian_is_round_off
+@pytest.mark.slow
 def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observations():
     """`learn.fit(..., optimiser=learn.LevenbergMarquardt())` with fitted starts: the block
     Jacobian path, end to end."""
@@ -314,7 +318,9 @@ def test_levenberg_marquardt_on_the_blocks_takes_the_dense_steps_and_fits_what_t
 
 
 # -- IndexedFlows: a G-LPNet's modules composed in a scan ---------------------------------------
-@pytest.mark.parametrize("method", [m for m in METHODS if m.__name__ != "BlanesMoan4"], ids=lambda m: m.__name__)
+# Lie-Trotter and Strang by default; the compositions of Strang steps with -m slow
+@pytest.mark.parametrize("method", slow_except([m for m in METHODS if m.__name__ != "BlanesMoan4"], {LieTrotter, Strang}),
+                         ids=lambda m: m.__name__)
 def test_scanned_glpnet_step_is_the_unrolled_composition(method):
     net = learn.GLPNet(BODY, 4, key=3, method=method, linear_term=True, h=0.1)
     flows = net.flows()

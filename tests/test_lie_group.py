@@ -44,7 +44,8 @@ def test_lie_group_methods_reach_their_order(damped, reference, method, hs):
     ("composition", "dissipation", "order"),
     [pytest.param(sp.LieTrotter, it.LieEuler, 1, marks=pytest.mark.slow),
      pytest.param(sp.Strang, it.LieEuler, 1, marks=pytest.mark.slow), (sp.Strang, it.CommutatorFree2, 2),
-     (sp.TripleJump, it.CommutatorFree4, 4), pytest.param(sp.Suzuki, it.CommutatorFree4, 4, marks=pytest.mark.slow)],
+     pytest.param(sp.TripleJump, it.CommutatorFree4, 4, marks=pytest.mark.slow),  # CommutatorFree4's order above
+     pytest.param(sp.Suzuki, it.CommutatorFree4, 4, marks=pytest.mark.slow)],
 )
 def test_damped_splitting_reaches_the_smaller_order(damped, reference, composition, dissipation, order):
     make = lambda h: it.DampedSplitting(damped, h, composition, dissipation)
@@ -71,17 +72,17 @@ def _generic_damped(name: str, gamma: float) -> DoubleBracket:
 # generic algebra). The Lie-group methods' code does not depend on the algebra, which enters
 # through its coadjoint flow only (that flow is checked over 10^4 composed steps on every
 # algebra in test_coadjoint.py). By default: every stepper on so3 (compact, one Casimir), with
-# RK4 as the control that would see a drift; CommutatorFree4 and DampedSplitting on se3 (two
-# Casimirs, its own splitting); LieEuler, one exponential of the algebra per step, on sl2
-# (non-compact) and so3+heisenberg (a direct sum). The other pairs run with -m slow.
+# RK4 as the control that would see a drift. The other pairs run with -m slow: CommutatorFree4 and
+# DampedSplitting on se3 (two Casimirs, its own splitting); LieEuler, one exponential of the
+# algebra per step, on sl2 (non-compact) and so3+heisenberg (a direct sum).
 _ALL = ("LieEuler", "CommutatorFree4", "DampedSplitting", "RK4")
 
 
 @pytest.mark.parametrize(("name", "methods"), [
-    # se3's (~4 s) under -m slow: so3 runs every method by default, sl2 and so3+heisenberg other algebras
+    # so3 runs every method by default; se3's (~4 s), sl2's and so3+heisenberg's under -m slow
     ("so3", _ALL), pytest.param("se3", ("CommutatorFree4", "DampedSplitting"), marks=pytest.mark.slow),
-    ("sl2", ("LieEuler",)),
-    ("so3+heisenberg", ("LieEuler",)),
+    pytest.param("sl2", ("LieEuler",), marks=pytest.mark.slow),
+    pytest.param("so3+heisenberg", ("LieEuler",), marks=pytest.mark.slow),
     pytest.param("se3", ("LieEuler", "RK4"), marks=pytest.mark.slow),
     pytest.param("sl2", ("CommutatorFree4", "RK4"), marks=pytest.mark.slow),
     pytest.param("so3+heisenberg", ("CommutatorFree4", "RK4"), marks=pytest.mark.slow),

@@ -20,6 +20,11 @@ ALGEBRAS = [pytest.param(g, id=g.name) for g in _DEFAULT] + [
     pytest.param(g, id=g.name, marks=pytest.mark.slow) for g in _MORE]
 
 
+def algebras(default):
+    """ALGEBRAS with only the families named in `default` (e.g. {"u3"}) in the default run."""
+    return [pytest.param(g, id=g.name, marks=() if g.name in default else pytest.mark.slow) for g in SMALL]
+
+
 def _vectors(g, seed, k=1):
     return np.random.default_rng(seed).normal(size=(k, g.dim))
 
@@ -75,7 +80,8 @@ def test_jacobi_identity(g, seed):
     assert np.abs(np.asarray(J)).max() <= 64 * g.size**2 * EPS * size
 
 
-@pytest.mark.parametrize("g", ALGEBRAS)
+# so(4)'s Casimirs are checked by value by default (test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two)
+@pytest.mark.parametrize("g", algebras({"u3", "sl3"}))
 def test_casimirs_are_casimirs(g):
     mu = _vectors(g, 4, 5)
     B = np.asarray(g.poisson_tensor(mu))
@@ -100,7 +106,8 @@ def test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two():
     np.testing.assert_allclose(c, [np.sum(np.arange(1.0, 7.0) ** 2), np.trace(M @ M @ M @ M) / 2], rtol=8 * EPS)
 
 
-@pytest.mark.parametrize("g", ALGEBRAS)
+# complex and non-compact by default; so(4)'s flow (compact, real) with -m slow
+@pytest.mark.parametrize("g", algebras({"u3", "sl3"}))
 def test_coadjoint_flow_is_generated_by_the_poisson_tensor(g):
     alpha, mu = _vectors(g, 5, 2)
     h = 1e-5  # central difference: truncation h^2 |d^3 mu| ~ 1e-10, round-off eps/h ~ 1e-11
@@ -111,7 +118,8 @@ def test_coadjoint_flow_is_generated_by_the_poisson_tensor(g):
                                atol=4 * EPS * np.abs(mu).max())
 
 
-@pytest.mark.parametrize("g", ALGEBRAS)
+# complex and non-compact by default; so(4)'s flow (compact, real) with -m slow
+@pytest.mark.parametrize("g", algebras({"u3", "sl3"}))
 def test_coadjoint_flow_is_a_poisson_map(g):
     alpha, mu = _vectors(g, 6, 2)
     alpha *= 0.5
@@ -122,8 +130,9 @@ def test_coadjoint_flow_is_a_poisson_map(g):
     assert np.abs(lhs - rhs).max() < 256 * g.dim * EPS * np.abs(rhs).max()
 
 
+# u(4) by default; the others (sp(2) non-compact: its flow by default through sl(3)'s above) with -m slow
 @pytest.mark.parametrize("g", [pytest.param(lp.so(5), marks=pytest.mark.slow), lp.u(4),
-                               pytest.param(lp.su(3), marks=pytest.mark.slow), lp.sp(2)],
+                               pytest.param(lp.su(3), marks=pytest.mark.slow), pytest.param(lp.sp(2), marks=pytest.mark.slow)],
                          ids=lambda g: g.name)
 def test_casimirs_and_spectrum_kept_over_a_long_composition(g):
     rng = np.random.default_rng(7)
@@ -146,6 +155,7 @@ def test_casimirs_and_spectrum_kept_over_a_long_composition(g):
         assert np.abs(s1 - s0).max() < 2e3 * EPS * g.size * np.abs(s0).max()
 
 
+@pytest.mark.slow  # the matrices' convention by default in test_manakov_body_as_a_lie_poisson_system_on_so4
 def test_so3_of_matrices_is_so3_of_structure_constants():
     # so(3)'s components (M12, M13, M23) are (-Pi3, Pi2, -Pi1) for M = hat(Pi).
     P = np.array([[0, 0, -1], [0, 1, 0], [-1, 0, 0]], dtype=float)

@@ -57,6 +57,7 @@ def test_every_ordering_has_order_two(ordering):
     assert abs(observed_order(lambda h: it.splitting.Strang(body, h=h, ordering=ordering)) - 2) < 0.1
 
 
+@pytest.mark.slow  # two 2000-step rollouts; an ordering's order by default above
 def test_orderings_of_the_rigid_body_splitting():
     body = system("RigidBody")
     energy = []

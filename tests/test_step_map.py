@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import numpy as np
 import pytest
-from helpers import system
+from helpers import slow_except, system
 
 import integrators
 import learn
@@ -35,6 +35,12 @@ HEAVY = {"TripleJump", "Suzuki", "McLachlan4", "Yoshida6", "BlanesMoan4"}
 
 def compiled(names):
     return [pytest.param(n, marks=pytest.mark.slow) if n in HEAVY else n for n in names]
+
+
+# The rollout is one shared function: by default Strang and the two learned maps with a network
+# (LPNet, G-LPNet); Lie-Trotter, the pendulum's Strang and the baseline with -m slow (the pendulum's
+# compiled step by default in test_poisson_defect_at_round_off).
+ROLLED_OUT = slow_except(MAPS, {"Strang", "LPNet", "GLPNet"})
 
 # Exact sub-flows per step, from the methods' definitions: N pieces, Strang 2N - 1 flows,
 # a composition of s Strang steps s (2N - 1), Blanes-Moan's PRK_6 7 + 6; one test flow per
@@ -111,7 +117,7 @@ def rollouts(name: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(m.rollout(y0, N_STEPS)), np.asarray(m.rollout(many, N_STEPS))
 
 
-@pytest.mark.parametrize("name", compiled(MAPS))
+@pytest.mark.parametrize("name", ROLLED_OUT)
 def test_rollout_agrees_with_the_step_iterated_by_hand(name):
     y0, many = initial_states(step_map(name))
     one, batch = rollouts(name)
@@ -128,7 +134,7 @@ def test_rollout_agrees_with_the_step_iterated_by_hand(name):
     np.testing.assert_allclose(batch, ref_batch, rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("name", compiled(MAPS))
+@pytest.mark.parametrize("name", ROLLED_OUT)
 def test_save_every_keeps_every_kth_state_exactly(name):
     m = step_map(name)
     y0, many = initial_states(m)
@@ -167,7 +173,7 @@ def test_a_learned_map_without_h_cannot_step_forward(name):
             call()
 
 
-@pytest.mark.parametrize("name", MAPS)
+@pytest.mark.parametrize("name", compiled(MAPS))  # the compositions' steps: -m slow
 def test_step_takes_one_state(name):
     m = step_map(name)
     y0, many = initial_states(m)
@@ -188,9 +194,9 @@ def test_poisson_defect_shapes():
 
 
 # Compiling the Jacobian of BlanesMoan4's 13 pendulum flows takes 10-20 s: slow run only
-# (the pendulum's defect is checked by default through Strang)
+# (the pendulum's defect is checked by default through Strang); Lie-Trotter's with -m slow too
 @pytest.mark.parametrize(
-    "name", compiled(POISSON)
+    "name", slow_except(POISSON, {"Strang", "Strang/ExtendedPendulum", "GLPNet"})
 )
 def test_poisson_defect_at_round_off(name):
     m = step_map(name)
@@ -202,7 +208,7 @@ def test_poisson_defect_at_round_off(name):
     assert np.max(defect) < 8 * EXACT_FLOWS[name] * EPS * scale, defect
 
 
-@pytest.mark.parametrize("name", ["LPNet", "MLPBaseline"])
+@pytest.mark.parametrize("name", ["LPNet", pytest.param("MLPBaseline", marks=pytest.mark.slow)])  # the baseline's drift: test_learn_training.py
 def test_poisson_defect_of_an_unstructured_step(name):
     y = np.random.default_rng(1).uniform(-2, 2, (16, 3))
     defect = np.asarray(step_map(name).poisson_defect(y))
@@ -213,7 +219,8 @@ def test_poisson_defect_of_an_unstructured_step(name):
         assert np.min(defect) > 1e-3
 
 
-@pytest.mark.parametrize("name", compiled(MAPS))
+# by default Strang and every learned map; Lie-Trotter and the pendulum's Strang with -m slow
+@pytest.mark.parametrize("name", slow_except(MAPS, {"Strang", "LPNet", "GLPNet", "MLPBaseline"}))
 def test_cost_counts_the_exact_sub_flows(name, monkeypatch):
     m = step_map(name)
     cost = m.cost()

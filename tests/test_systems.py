@@ -130,7 +130,8 @@ def test_poisson_tensor_antisymmetric_and_jacobi(name):
 
 
 # -- exact test flows are Poisson maps ---------------------------------------------------------
-@system_names
+# Kirchhoff's test flow (se(3)'s coadjoint flow, a Poisson map by default in test_coadjoint.py) with -m slow
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody", "ChargedParticle"}))
 @given(data=st.data())
 def test_test_flow_is_poisson(name, data):
     sys = system(name)
@@ -170,9 +171,9 @@ def _term_defects(name):
     return _TERM_DEFECTS[name]
 
 
-# Kirchhoff's term flows with -m slow: test_splitting_sums_to_h_and_each_flow_is_exact checks them
-# against DOP853 by default
-@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody", "ChargedParticle"}))
+# Kirchhoff's and the charged particle's term flows with -m slow: test_splitting_sums_to_h_and_each_flow_is_exact
+# checks them against DOP853 by default
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody"}))
 @given(data=st.data())
 def test_splitting_terms_are_poisson_and_commute(name, data):
     """Each term's flow (the test flow with alpha frozen at L^T dphi(L y)) is a Poisson map,
@@ -329,7 +330,9 @@ def test_pendulum_special_cases_are_the_papers_T():
 
 
 # -- heyoka right-hand side --------------------------------------------------------------------
-@system_names
+# the rigid body by default; the others with -m slow (their heyoka ground truth against Strang by
+# default in test_integrators_splitting.py)
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody"}))
 def test_heyoka_rhs_equals_vector_field(name):
     sys = system(name)
     pairs = sys.heyoka_system()
@@ -344,8 +347,9 @@ def test_heyoka_rhs_equals_vector_field(name):
 
 
 # -- batching, jit, vmap, grad; registry -------------------------------------------------------
-# the rigid body (so(3)) and the charged particle (not Lie-Poisson) by default; the rest with -m slow
-@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody", "ChargedParticle"}))
+# the rigid body (so(3)) by default; the rest with -m slow (the charged particle's test flow and its
+# Jacobian by default in test_charged_particle_degenerate_test_flows)
+@pytest.mark.parametrize("name", slow_except(SYSTEMS, {"RigidBody"}))
 def test_system_batching_and_transformations(name):
     sys = system(name)
     rng = np.random.default_rng(36)

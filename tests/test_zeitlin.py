@@ -42,7 +42,7 @@ def test_laplacian_is_the_double_commutator_with_spectrum_minus_l_l_plus_1():
     np.testing.assert_allclose(eigenvalues, expected, atol=1e3 * EPS * N * N)
 
 
-@pytest.mark.parametrize("N", [2, 3, 17])
+@pytest.mark.parametrize("N", [2, pytest.param(3, marks=pytest.mark.slow), 17])  # the smallest and a large N by default
 def test_poisson_solve_inverts_the_laplacian_on_traceless_matrices(N):
     W = _skew(N, N)
     P = np.asarray(qs.solve_poisson(W))
