@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from integrators import BodyObservations
 from liepoisson import Poses, Rotations
 from liepoisson.internals import positive_float, positive_int, show_progress
+from liepoisson.systems import AbstractLiePoissonSystem
 
 from .._models._deeponet import DeepONet
 from .._solvers._adam import Adam
@@ -172,7 +173,7 @@ class BodyDeepONet(eqx.Module):
     state."""
 
     net: DeepONet
-    system: object = eqx.field(static=True)
+    system: AbstractLiePoissonSystem = eqx.field(static=True)
 
     def predict(self, g0: ArrayLike, xi0: ArrayLike, t: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """`(g (T, size), xi (T, dim))` at the times `t` `(T,)` since the initial state."""
