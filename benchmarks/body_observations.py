@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n-test", type=int, default=w4.N_TEST, help="held-out initial conditions")
     parser.add_argument("--out", default=default_out("body_observations"))
     args = parser.parse_args(argv)
-    models = [m for m in w4.models() if m.label in args.models]
+    models = [m for m in w4.models(operator_baselines=True) if m.label in args.models]
     if args.time_unit != 1.0:  # the learned maps; SINDy's fits are not covariant in time (its thresholds)
         models = [dataclasses.replace(m, unit=args.time_unit) for m in models if isinstance(m, w4.LearnedBodyModel)]
     rows = []

@@ -154,6 +154,16 @@ class AbstractLieGroup(abc.ABC):
         $[E_a, E_b] = C_{abd}E_d$ for the structure constants this group goes with."""
 
     @abc.abstractmethod
+    def between(self, g1: jax.Array, g2: jax.Array) -> jax.Array:
+        r"""$g_1^{-1}g_2$ `(..., size)`, exactly, in this representation (traceable, batched): a
+        configuration relative to another, the same for both moved by any $h$ on the left."""
+
+    @abc.abstractmethod
+    def compose(self, g1: jax.Array, g2: jax.Array) -> jax.Array:
+        r"""$g_1g_2$ `(..., size)` (traceable, batched): `between`'s inverse,
+        $g_1\,(g_1^{-1}g_2) = g_2$."""
+
+    @abc.abstractmethod
     def difference(self, g1: jax.Array, g2: jax.Array) -> jax.Array:
         r"""A smooth measure of $g_1^{-1}g_2$ in $\mathbb R^{\dim}$, equal to
         $\log(g_1^{-1}g_2)$ to first order (traceable, batched): the residual of a fit."""
@@ -238,10 +248,17 @@ class Rotations(AbstractLieGroup):
     def matrix_basis(self) -> np.ndarray:
         return np.array([np.array(hat(e), dtype=np.float64) for e in np.eye(3)])
 
+    def between(self, g1, g2):
+        r"""$q_1^{-1}\otimes q_2$ (the conjugate of $q_1$, the signs of both kept)."""
+        return jnp.stack(quaternion_product(_split(g1 * jnp.asarray([-1.0, -1.0, -1.0, 1.0])), _split(g2)), axis=-1)
+
+    def compose(self, g1, g2):
+        return jnp.stack(quaternion_product(_split(g1), _split(g2)), axis=-1)
+
     def difference(self, g1, g2):
         r"""$2\,\mathrm{sign}(w)\,u$ of $q_1^{-1}\otimes q_2 = (u, w)$: the rotation vector to
         first order, $2\sin(\theta/2)$ along the axis (the same for $\pm q$)."""
-        rel = jnp.stack(quaternion_product(_split(g1 * jnp.asarray([-1.0, -1.0, -1.0, 1.0])), _split(g2)), axis=-1)
+        rel = self.between(g1, g2)
         return 2.0 * jnp.where(rel[..., 3:] < 0.0, -1.0, 1.0) * rel[..., :3]
 
     def log_between(self, g1, g2):
@@ -346,11 +363,20 @@ class Poses(AbstractLieGroup):
             E[3 + a, a, 3] = 1.0
         return E
 
+    def between(self, g1, g2):
+        r"""$(q_1^{-1}\otimes q_2,\ R_1^\top(x_2 - x_1))$."""
+        d = jnp.einsum("...ji,...j->...i", rotation_matrix(g1[..., :4]), g2[..., 4:] - g1[..., 4:])
+        return jnp.concatenate([Rotations().between(g1[..., :4], g2[..., :4]), d], axis=-1)
+
+    def compose(self, g1, g2):
+        r"""$(q_1\otimes q_2,\ x_1 + R_1x_2)$."""
+        x = g1[..., 4:] + jnp.einsum("...ij,...j->...i", rotation_matrix(g1[..., :4]), g2[..., 4:])
+        return jnp.concatenate([Rotations().compose(g1[..., :4], g2[..., :4]), x], axis=-1)
+
     def difference(self, g1, g2):
         """The attitudes' `Rotations.difference`, then $R_1^\top(x_2 - x_1)$ (body frame)."""
-        R1 = rotation_matrix(g1[..., :4])
-        d = jnp.einsum("...ji,...j->...i", R1, g2[..., 4:] - g1[..., 4:])
-        return jnp.concatenate([Rotations().difference(g1[..., :4], g2[..., :4]), d], axis=-1)
+        rel = self.between(g1, g2)
+        return jnp.concatenate([Rotations().difference(g1[..., :4], g2[..., :4]), rel[..., 4:]], axis=-1)
 
     def log_between(self, g1, g2):
         g1, g2 = np.asarray(self.check(g1, "g1")), np.asarray(self.check(g2, "g2"))
@@ -455,12 +481,19 @@ class MatrixGroup(AbstractLieGroup):
     def matrix_basis(self) -> np.ndarray:
         return self.basis
 
-    def difference(self, g1, g2):
-        """The basis coordinates of $g_1^{-1}g_2 - 1$ (the logarithm to first order)."""
+    def between(self, g1, g2):
         G1 = g1.reshape(g1.shape[:-1] + (self.n, self.n))
         G2 = g2.reshape(g2.shape[:-1] + (self.n, self.n))
-        rel = jnp.linalg.solve(G1, G2) - jnp.eye(self.n)
-        return rel.reshape(rel.shape[:-2] + (self.size,)) @ jnp.asarray(self._coordinates)
+        rel = jnp.linalg.solve(G1, G2)
+        return rel.reshape(rel.shape[:-2] + (self.size,))
+
+    def compose(self, g1, g2):
+        out = g1.reshape(g1.shape[:-1] + (self.n, self.n)) @ g2.reshape(g2.shape[:-1] + (self.n, self.n))
+        return out.reshape(out.shape[:-2] + (self.size,))
+
+    def difference(self, g1, g2):
+        """The basis coordinates of $g_1^{-1}g_2 - 1$ (the logarithm to first order)."""
+        return (self.between(g1, g2) - jnp.asarray(self.identity())) @ jnp.asarray(self._coordinates)
 
     def log_between(self, g1, g2):
         from scipy.linalg import logm

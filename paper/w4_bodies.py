@@ -284,8 +284,9 @@ class LPNetBodyModel(AbstractBodyModel):
     label: str = "LPNet on reconstructed momenta"
 
     def fit(self, protocol, data, steps):
-        if not data.is_regular():
-            raise ValueError("the LPNet on reconstructed momenta is fitted to pairs at one step: regular sampling only")
+        if not data.is_regular() or len({tuple(t - t[0]) for t in data.times}) > 1:
+            raise ValueError("the LPNet on reconstructed momenta is fitted to pairs at one step on one time grid: "
+                             "regular sampling, every trajectory at the same times, only")
         A, b = learn.body_quadratic_estimate(data)
         M = np.linalg.inv(A)
         momenta = np.stack([(v - b) @ M.T for v in data.velocities])
@@ -319,7 +320,7 @@ class DeepONetBodyModel(AbstractBodyModel):
     label: str = "DeepONet"
 
     def fit(self, protocol, data, steps):
-        net, _ = learn.fit_deeponet(data, epochs=DEEPONET_EPOCHS, learning_rate=3e-3, key=TRAIN_SEED, progress=False)
+        net, _ = learn.fit_deeponet(data, epochs=DEEPONET_EPOCHS, key=TRAIN_SEED, progress=False)
         return net
 
     def predict(self, fitted, protocol, test):
@@ -556,6 +557,17 @@ class Profile:
     #: The LLPNN protocol's baselines besides W4's models.
     operator_baselines: bool = False
 
+    @property
+    def slug(self) -> str:
+        """The part's short name in file names ('' for the main part)."""
+        return "" if self.part is None else self.part.split()[0].lower()
+
+    @property
+    def title(self) -> str:
+        """The part's heading: its protocol."""
+        return (f"{self.part}: {self.n_trajectories} x {self.n_observations} observations at h = {H_REGULAR:g}, "
+                f"{self.n_test} test trajectories to t = {self.t_end:g}")
+
 
 #: The protocol of Latent Lie-Poisson Neural Networks (Putkaradze 2026, as described in issue
 #: 42: 200 trajectories x 101 observations at h = 0.1, noise 0.005 on configurations and
@@ -563,6 +575,17 @@ class Profile:
 #: and an LPNet on reconstructed momenta.
 LLPNN = Profile(("satellite", "vehicle"), (0.005,), ("regular",), n_trajectories=200, n_observations=101,
                 t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True)
+
+def _parts() -> list[Profile]:
+    """Every part any profile runs after its own."""
+    out, todo = [], list(PROFILES.values())
+    while todo:
+        P = todo.pop()
+        if P.then is not None and P.then not in out:
+            out.append(P.then)
+            todo.append(P.then)
+    return out
+
 
 PROFILES = {
     "smoke": Profile(("satellite",), (1e-3,), ("uneven",), steps=10, n_trajectories=4, n_observations=8, t_end=5.0),
@@ -641,7 +664,8 @@ def _plots(rows: list[W4Row], out_dir: Path) -> list[str]:
             ax.set_xlabel("t")
             ax.set_ylabel("attitude error [rad]")
             ax.legend(fontsize=8)
-        name = f"attitude_error_{'' if part is None else part.split()[0].lower() + '_'}{system}.png"
+        slug = next((P.slug + "_" for P in _parts() if P.part == part and part is not None), "")
+        name = f"attitude_error_{slug}{system}.png"
         fig.tight_layout()
         fig.savefig(out_dir / name, dpi=110)
         names.append(name)
@@ -658,7 +682,7 @@ class W4(AbstractExperiment):
         all_protocols = protocols()
         P: Profile | None = PROFILES[profile]
         while P is not None:
-            prefix = profile if P.part is None else f"{profile}-{P.part.split()[0].lower()}"
+            prefix = profile if P.part is None else f"{profile}-{P.slug}"
             for system in P.systems:
                 protocol = all_protocols[system]
                 test = test_set(protocol, P.t_end, P.n_test)
@@ -692,8 +716,7 @@ class W4(AbstractExperiment):
             "rollouts relative to the largest value.")
         sections = [("Every fit", table_lines(COLUMNS, [r for r in rows if r.part is None]))]
         for part in dict.fromkeys(r.part for r in rows if r.part is not None):
-            title = (f"{part}: {LLPNN.n_trajectories} x {LLPNN.n_observations} observations at h = {H_REGULAR:g}, "
-                     f"{LLPNN.n_test} test trajectories to t = {LLPNN.t_end:g}")
+            title = next((P.title for P in _parts() if P.part == part), part)
             sections.append((title, table_lines(COLUMNS, [r for r in rows if r.part == part])))
         return self.study_markdown(metrics, description, sections)
 

@@ -156,3 +156,9 @@ def test_noisy_pairs_are_not_refused_and_their_rates_are_the_least_squares_ones(
     np.testing.assert_array_equal(rates, expected)
     # the noise moves the rates by about its size over the step (1e-3 rad / 0.1), not more
     assert 1e-4 < np.max(np.abs(rates - phase_rates(net, data)[1])) < 0.1
+    # on exact pairs, noisy=True only skips the check: the same rates
+    np.testing.assert_array_equal(phase_rates(net, data, noisy=True)[1], phase_rates(net, data)[1])
+    fitted, _ = learn.fit_phase(net, noisy, noisy=True, iterations=2, progress=False)
+    assert fitted.phase is not None
+    with pytest.raises(TypeError, match="noisy must be True or False"):
+        learn.fit_phase(net, noisy, noisy="yes")

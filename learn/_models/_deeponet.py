@@ -32,6 +32,7 @@ class DeepONet(eqx.Module):
     branch: AffineMLP
     trunk: AffineMLP
     bias: jax.Array
+    in_size: int = eqx.field(static=True)
     out_size: int = eqx.field(static=True)
     width: int = eqx.field(static=True)
     output_shift: tuple[float, ...]
@@ -39,10 +40,11 @@ class DeepONet(eqx.Module):
 
     def __init__(self, in_size: int, out_size: int, *, width: int = 32, hidden: Sequence[int] = (64, 64),
                  activation: str = "tanh", key: int | jax.Array = 0):
+        self.in_size = positive_int(in_size, "in_size")
         self.out_size = positive_int(out_size, "out_size")
         self.width = positive_int(width, "width")
         k1, k2 = jax.random.split(as_key(key))
-        self.branch = AffineMLP(in_size, self.out_size * self.width, hidden, activation, k1)
+        self.branch = AffineMLP(self.in_size, self.out_size * self.width, hidden, activation, k1)
         self.trunk = AffineMLP(1, self.width, hidden, activation, k2)
         self.bias = jnp.zeros(self.out_size)
         self.output_shift, self.output_scale = (0.0,) * self.out_size, (1.0,) * self.out_size
@@ -73,7 +75,10 @@ class DeepONet(eqx.Module):
         of the times `t` `(N,)`, the output's mean and spread those of the states `u`
         `(N, out_size)` (both MLPs' outputs left at unit scale)."""
         u0, t, u = (np.asarray(a, dtype=np.float64) for a in (u0, t, u))
-        in_shift, in_scale = affine(u0, u0.shape[-1])
+        if u0.ndim != 2 or u0.shape[1] != self.in_size or u.ndim != 2 or u.shape[1] != self.out_size:
+            raise ValueError(f"u0 must have shape (S, {self.in_size}) and u (N, {self.out_size}); got shapes "
+                             f"{u0.shape} and {u.shape}")
+        in_shift, in_scale = affine(u0, self.in_size)
         t_shift, t_scale = affine(t.reshape(-1, 1), 1)
         out_shift, out_scale = affine(u, self.out_size)
         net = eqx.tree_at(lambda n: (n.branch.input_shift, n.branch.input_scale), self, (in_shift, in_scale))

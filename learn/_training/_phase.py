@@ -62,7 +62,7 @@ def phase_rates(net: LPNet, data: Trajectories, noisy: bool = False) -> tuple[np
     `ValueError` naming a pair whose configuration step, against the pair's exact parameters
     $\hat\alpha$ (`net.params_from_pair`), leaves those directions: no motion with these
     momenta. With `noisy` (observed momenta and configurations), no pair is checked: what
-    leaves the directions is the noise, which the least squares drop."""
+    leaves the directions is the noise (and the net's misfit), which the least squares drop."""
     system = net.system
     group = system.require_group()
     h = float(data.h)
@@ -107,7 +107,8 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
     states to one rate per Casimir (scaled to the data's rates); `iterations`:
     Levenberg-Marquardt steps at most on the rates' squared error; `noisy`: the momenta and
     configurations are observed with noise, so pairs that leave the Casimir directions are not
-    refused (their part off them is dropped by the least squares; `phase_rates`).
+    refused (their part off them, the noise and the net's misfit, is dropped by the least
+    squares; `phase_rates`).
 
     Each pair's rates come in closed form (`phase_rates`); only the network is fitted, so the
     momentum step is unchanged (and so are its Casimirs)."""
@@ -136,6 +137,8 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
     if net.h is not None and abs(net.h - h) > 1e-12 * h:
         raise ValueError(f"the net's step h={net.h} differs from the data's h={h}; fit the phase at the net's step")
     iterations = positive_int(iterations, "iterations")
+    if not isinstance(noisy, bool):
+        raise TypeError(f"noisy must be True or False; got {noisy!r}")
     net = eqx.tree_at(lambda m: m.h, net, h, is_leaf=lambda v: v is None)
     states, rates = phase_rates(net, data, noisy)
     network = AffineMLP(net.system.dim, net.system.n_casimirs, hidden, activation, key).rescaled(states, rates)
