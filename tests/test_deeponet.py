@@ -127,3 +127,15 @@ def test_a_body_deeponet_refuses_a_network_of_other_sizes_and_inputs_that_are_no
             model.predict(q, np.ones(3), t)
     with pytest.raises(TypeError, match="t must be real numbers"):
         model.predict(q, np.ones(3), "abc")
+
+
+def test_a_poses_prediction_is_on_the_group_and_starts_from_its_first_pose():
+    # a vehicle's network, any weights: predictions are poses (unit quaternion, position), g0
+    # times a relative pose that between() recovers
+    model = learn.BodyDeepONet(learn.DeepONet(6, 13, width=4, hidden=(8,), key=1), VEHICLE)
+    g0 = np.array([0.0, 0.6, 0.0, 0.8, 1.0, -2.0, 0.5])
+    g, xi = model.predict(g0, np.ones(6), np.arange(3.0))
+    assert g.shape == (3, 7) and xi.shape == (3, 6)
+    np.testing.assert_allclose(np.linalg.norm(g[:, :4], axis=1), 1.0, atol=4 * EPS)
+    rel = np.asarray(VEHICLE.group.between(jnp.asarray(g0), jnp.asarray(g)))
+    np.testing.assert_allclose(np.asarray(VEHICLE.group.compose(jnp.asarray(g0), jnp.asarray(rel))), g, atol=16 * EPS)
