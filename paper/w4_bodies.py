@@ -90,8 +90,8 @@ N_TEST = 12
 #: BFGS iterations of the neural ODE's fit per Levenberg-Marquardt step of the others' (a
 #: Jacobian of its ~1300 weights costs as many passes as ~500 gradients).
 NEURAL_ODE_ITERATIONS = 5
-#: Adam epochs of the DeepONet (LLPNN protocol only): from 3e-3 to 1e-5, its test attitude
-#: error within the training horizon 0.015-0.12 rad on the satellite (20,000: 0.04-0.18).
+#: Adam epochs of the DeepONet (LLPNN protocol only), from 3e-3 to 1e-5 (BENCHMARKS.md, "The
+#: LLPNN protocol as W4's second part").
 DEEPONET_EPOCHS = 60_000
 #: L-BFGS-B iterations of the LPNet on reconstructed momenta (E5's quick profile).
 LPNET_ITERATIONS = 2000
