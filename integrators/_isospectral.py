@@ -12,12 +12,18 @@ W_{n+1} = (1 + \tfrac h2\tilde B)\,\tilde W\,(1 - \tfrac h2\tilde B), \qquad \ti
 
 Eliminating $\tilde W$: $W_{n+1} = Q W_n Q^\dagger$ with the Cayley transform
 $Q = (1 - \tfrac h2\tilde B)^{-1}(1 + \tfrac h2\tilde B)$, unitary for any skew-Hermitian
-$\tilde B$. The stage equation $\tilde W = W_n + \tfrac h2[\tilde B, \tilde W] +
-\tfrac{h^2}4\tilde B\tilde W\tilde B$ is solved by fixed-point iteration; with
-$X = \tilde B\tilde W$ (skew-Hermitian factors: $\tilde W\tilde B = X^\dagger$) an iteration
-costs two matrix products and one evaluation of $B$. The new state is formed as the
-conjugation, not from the stage equation, so the Casimirs do not depend on the iteration's
-tolerance (quflow forms it from the stage equation; its Casimirs drift at its tolerance).
+$\tilde B$. The stage equation, $\tilde W = X W_n X^\dagger$ with
+$X = (1 - \tfrac h2\tilde B)^{-1}$, is solved by a quasi-Newton iteration (quflow's
+`isomp_quasinewton`): $\tilde B$ from the iterate, then the next iterate $X W_n X^\dagger$ with
+$\tilde B$ frozen. Each iteration forms the Cayley conjugation $Q W_n Q^\dagger$ of its
+iterate (one LU, two matrix products, one evaluation of $B$) and the next iterate from the
+same products ($X = (Q + 1)/2$); the step is the conjugation of the iterate the last
+iteration started from, accepted when that iteration moved it by at most `tol` in quflow's
+norm (the largest row sum, relative to $W_n$'s). The new state is the conjugation, not the
+stage equation, so the Casimirs do not depend on the iteration's tolerance (quflow forms it
+from the stage equation; its Casimirs drift at its tolerance). A rollout starts each step's
+iteration from a polynomial extrapolation of the past stages, close enough that one iteration
+is the rule (BENCHMARKS.md, "Zeitlin's model").
 
 For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a matrix
 (conventions, matrix algebras), $B = -\Xi$.
@@ -25,6 +31,8 @@ For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a m
 
 from __future__ import annotations
 
+import functools
+from fractions import Fraction
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -41,8 +49,8 @@ from ._lapack import serial_lapack
 from ._lie_group import check_lie_poisson
 from ._step_map import AbstractStepMap, check_state
 
-#: The fixed-point iteration stops when an iteration moves the stage by at most `tol` times
-#: max|W| (entrywise). 1e-10: the stage's error enters the step's accuracy (energy, state), not
+#: The stage iteration stops when an iteration moves the stage by at most `tol` times
+#: ||W||_inf (the largest row sum of |W_ij|, quflow's norm). 1e-10: the stage's error enters the step's accuracy (energy, state), not
 #: its Casimirs; at the step sizes of a Zeitlin run it is below the method's local error.
 DEFAULT_TOL = 1e-10
 #: Iterations after which a step that has not met the tolerance is NaN (a step too large for
@@ -79,8 +87,8 @@ class IsospectralMidpoint(AbstractStepMap):
     **Arguments:**
 
     - `system`, a Lie-Poisson system on so(N), u(N) or su(N); `h` > 0.
-    - `tol` (default `DEFAULT_TOL`): the fixed-point iteration stops when an iteration moves
-      the stage by at most `tol` times max|W|.
+    - `tol` (default `DEFAULT_TOL`): the stage iteration stops when an iteration moves the
+      stage by at most `tol` times $\|W\|_\infty$ (largest row sum; both in that norm).
     - `iterations` (default `None`): `None` iterates until `tol` is met (at most `max_iter`
       iterations), the robust choice; an integer $k$ makes every step of a rollout do exactly
       $k$ iterations from its extrapolated start (straight-line code, which reverse-mode
@@ -89,10 +97,11 @@ class IsospectralMidpoint(AbstractStepMap):
       needs, but a later step may need more.
     - `max_iter` (default `DEFAULT_MAX_ITER`): the cap of the iterations to `tol`.
 
-    A rollout carries $W$ and the last three stage increments of each substep; its first step
-    starts from a history found by three steps backwards (the method is symmetric: a step back
-    shares its stage with the step forward it undoes), so every step starts from the quadratic
-    extrapolation of the last three. `step(y)` alone starts cold and iterates to `tol`.
+    A rollout carries $W$ and the last `PREDICTOR_POINTS` stage increments of each substep; its
+    first step starts from a history found by as many steps backwards (the method is
+    symmetric: a step back shares its stage with the step forward it undoes), so every step
+    starts from the least-squares extrapolation of degree `PREDICTOR_DEGREE` through them.
+    `step(y)` alone starts cold and iterates to `tol`.
     """
 
     system: AbstractLiePoissonSystem = eqx.field(static=True)
@@ -117,10 +126,10 @@ class IsospectralMidpoint(AbstractStepMap):
     @property
     def divergence_hint(self) -> str:
         if self.iterations is None:
-            return (f"The fixed-point iteration did not meet tol={self.tol:g} within max_iter={self.max_iter} "
+            return (f"The stage iteration did not meet tol={self.tol:g} within max_iter={self.max_iter} "
                     "iterations (a step too large for it to contract), or the state left the finite range: "
                     "try a smaller h")
-        return (f"A step's fixed-point iteration did not meet tol={self.tol:g} in iterations={self.iterations} "
+        return (f"A step's stage iteration did not meet tol={self.tol:g} in iterations={self.iterations} "
                 f"(a step that has not converged is NaN): use more, e.g. IsospectralMidpoint(..., "
                 f"iterations={self.iterations + 1}), or iterations=None to iterate until tol is met")
 
@@ -129,41 +138,52 @@ class IsospectralMidpoint(AbstractStepMap):
         (`system.velocity_matrix`); a learned map on this step overrides it."""
         return self.system.velocity_matrix(W)
 
-    def _iterate(self, W, h, Wt):
-        r"""One fixed-point iteration of the stage equation: `(new stage, B at Wt, moved)`."""
-        B = self.velocity_matrix(Wt)
-        X = B @ Wt  # [B, Wt] = X - X^dagger, B Wt B = X B (skew-Hermitian factors)
-        Wn = W + 0.5 * h * (X - dagger(X)) + 0.25 * h * h * (X @ B)
-        return Wn, B, jnp.max(jnp.abs(Wn - Wt))
+    def _iterate(self, W: jax.Array, h: jax.Array | float, Wt: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        r"""One quasi-Newton iteration of the stage equation from the iterate `Wt`: with
+        $B = \tfrac h2 B(\widetilde W)$ the step's candidate is the conjugation
+        $Q W Q^\dagger$ by the Cayley transform $Q = (1 - B)^{-1}(1 + B)$ (one LU), and the
+        stage the iteration moves to is the stage equation solved with $B$ frozen,
+        $X W X^\dagger$ with $X = (1 - B)^{-1} = (Q + 1)/2$, formed from the same products:
+        $X W X^\dagger = (QWQ^\dagger + QW - (QW)^\dagger + W)/4$. Returns `(candidate, next
+        iterate, moved)`, `moved` the largest entry of the iterate's change."""
+        B = 0.5 * h * self.velocity_matrix(Wt)
+        eye = jnp.eye(W.shape[-1], dtype=W.dtype)
+        Q = jnp.linalg.solve(eye - B, eye + B)  # the Cayley transform: unitary (orthogonal)
+        QW = Q @ W
+        W1 = QW @ dagger(Q)
+        # X W X^dagger from the same products; its round-off is far below tol (it is only where
+        # the next iteration starts), while W1 keeps the conjugation's few eps a step
+        G = 0.25 * (W1 + QW - dagger(QW) + W)
+        W1 = 0.5 * (W1 - dagger(W1))  # back onto the algebra (exact halving): no drift off it
+        return W1, G, _norm(G - Wt)
 
     def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None
                   ) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""One isospectral midpoint step of size `h` from `W`, the stage $\tilde W$ sought
-        from $W + D$ by `iterations` iterations (None: until `tol`): returns the new state (NaN
-        if the stage has not converged), the stage's increment $\tilde W - W$ and the
-        iteration count."""
-        scale = self.tol * jnp.maximum(jnp.max(jnp.abs(W)), jnp.finfo(jnp.float64).tiny)
+        from $W + D$ by `iterations` quasi-Newton iterations (None: until `tol`): returns the
+        new state (NaN if the stage has not converged), the stage's increment $\tilde W - W$
+        (the last iteration's, one iteration past the stage whose $B$ made the step) and the
+        iteration count.
+
+        The step is the Cayley conjugation of the iterate that the last iteration started
+        from, accepted when that iteration moved it by at most `tol` times max|W| (quflow's
+        rule, one evaluation of $B$ a step fewer than iterating once more)."""
+        scale = self.tol * jnp.maximum(_norm(W), jnp.finfo(jnp.float64).tiny)
         if iterations is None:
 
             def body(state):
                 Wt, _, _, k = state
-                return (*self._iterate(W, h, Wt), k + 1)
+                W1, G, moved = self._iterate(W, h, Wt)
+                return G, W1, moved, k + 1
 
-            Wt, B, moved, k = jax.lax.while_loop(
+            Wt, W1, moved, k = jax.lax.while_loop(
                 lambda state: (state[2] > scale) & (state[3] < self.max_iter), body,
                 (W + D, jnp.zeros_like(W), jnp.asarray(jnp.inf), jnp.asarray(0)))
         else:  # straight-line code: no control flow in the step
             Wt = W + D
             for _ in range(iterations):
-                Wt, B, moved = self._iterate(W, h, Wt)
+                W1, Wt, moved = self._iterate(W, h, Wt)
             k = jnp.asarray(iterations)
-        # B is from the last iteration, at the iterate before the last (as quflow does):
-        # converged to the tolerance, and one evaluation of B a step cheaper.
-        B = 0.5 * h * B
-        eye = jnp.eye(W.shape[-1], dtype=W.dtype)
-        Q = jnp.linalg.solve(eye - B, eye + B)  # the Cayley transform: unitary (orthogonal)
-        W1 = Q @ W @ dagger(Q)
-        W1 = 0.5 * (W1 - dagger(W1))  # back onto the algebra (exact halving): no drift off it
         return jnp.where(moved <= scale, W1, jnp.nan), Wt - W, k
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
@@ -177,51 +197,119 @@ class IsospectralMidpoint(AbstractStepMap):
         algebra = self.system.algebra
         return algebra.coordinates(self.step_matrix(algebra.matrix(check_state(y, self.system.dim))))
 
-    # A rollout carries W itself, and each substep's last three stage increments: the next
-    # step's iteration starts from their quadratic extrapolation, O(h^4) from the solution
-    # (quflow starts from the last increment, O(h^2)), which saves iterations (BENCHMARKS.md,
-    # "Zeitlin's model"). Converting W to coordinates and back every step
-    # would cost a rounding per step (u(N)'s basis has entries 1/sqrt(2)) and bias the Casimirs.
-    def carry(self, y: jax.Array) -> tuple[jax.Array, tuple[Any, ...]]:
+    # A rollout carries W itself, each substep's last `PREDICTOR_POINTS` stage increments (a
+    # ring buffer) and how many of them are filled: the next step's iteration starts from
+    # their least-squares polynomial extrapolation (`predictor_weights`), which saves
+    # iterations (BENCHMARKS.md, "Zeitlin's model"). Converting W to coordinates and back every
+    # step would cost a rounding per step (u(N)'s basis has entries 1/sqrt(2)) and bias the
+    # Casimirs.
+    def carry(self, y: jax.Array) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array]:
         W = self.system.algebra.matrix(check_state(y, self.system.dim))
-        # Three steps back, each substep undoing one forward substep (in reverse order): the
-        # stage it finds is that forward substep's, whose increment starts from the state it
-        # lands on. One traced substep, scanned over the 3 x len(substeps) of them.
-        S = len(self.substeps)
-        coefficients = jnp.asarray([-self.substeps[index] for _ in range(3) for index in reversed(range(S))])
-
-        def back(Wb, coefficient):
-            Wn, D, _ = self._midpoint(Wb, coefficient * self.h, jnp.zeros_like(Wb), None)
-            return Wn, Wb + D - Wn
-
-        # The history is only where the iteration starts: no derivative flows through it (so a
+        M, S = PREDICTOR_POINTS, len(self.substeps)
+        # The history is found by M steps backwards, each substep undoing one forward substep
+        # (in reverse order; the method is symmetric: a step back shares its stage with the step
+        # forward it undoes), warm-started by the same extrapolation of the increments found so
+        # far. No derivative flows through it: it is only where the iteration starts (so a
         # rollout with a fixed `iterations` is reverse-differentiable: no while loop carries one).
-        _, increments = jax.lax.scan(back, jax.lax.stop_gradient(W), coefficients)
-        found = [[increments[step * S + (S - 1 - index)] for step in range(3)] for index in range(S)]
-        return W, tuple(tuple(history) for history in found)
+        backwards = tuple(-c for c in reversed(self.substeps))
+        empty = jnp.zeros((M, *W.shape), W.dtype)
 
-    def step_carry(self, c: tuple[jax.Array, tuple[Any, ...]]) -> tuple[jax.Array, tuple[Any, ...]]:
+        def back(state, _):
+            Wb, histories, count = state
+            found, updated = [], []
+            for coefficient, history in zip(backwards, histories):
+                Wn, D, _ = self._midpoint(Wb, coefficient * self.h, _predict(history, count), None)
+                updated.append(_push(history, D, count))
+                found.append(Wb + D - Wn)  # the forward substep's increment, from where it starts
+                Wb = Wn
+            return (Wb, tuple(updated), _counted(count)), jnp.stack(found)
+
+        _, found = jax.lax.scan(back, (jax.lax.stop_gradient(W), (empty,) * S, jnp.asarray(0)), None, length=M)
+        # found[j, s]: backward step j (the forward step j + 1 before W), backward substep s
+        # (forward substep S - 1 - s); the forward ring full, the oldest in slot 0 (count M)
+        histories = tuple(found[::-1, S - 1 - index] for index in range(S))
+        return W, histories, jnp.asarray(M)
+
+    def step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]
+                   ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array]:
         return self._step_warm(c, self.iterations)[0]
 
     def _step_warm(self, c, iterations):
-        W, histories = c
+        W, histories, count = c
         updated, total = [], jnp.asarray(0)
-        for coefficient, (D1, D2, D3) in zip(self.substeps, histories):
-            W, D, k = self._midpoint(W, coefficient * self.h, 3.0 * (D1 - D2) + D3, iterations)
-            updated.append((D, D1, D2))
+        for coefficient, history in zip(self.substeps, histories):
+            W, D, k = self._midpoint(W, coefficient * self.h, _predict(history, count), iterations)
+            updated.append(_push(history, D, count))
             total = total + k
-        return (W, tuple(updated)), total
+        return (W, tuple(updated), _counted(count)), total
 
-    def uncarry(self, c: tuple[jax.Array, tuple[Any, ...]]) -> jax.Array:
+    def uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]) -> jax.Array:
         return self.system.algebra.coordinates(c[0])
 
     def iterations_needed(self, y: ArrayLike, n_steps: int = 20) -> tuple[float, int]:
-        """`(mean, max)` of the fixed-point iterations (summed over substeps) that the steps
+        """`(mean, max)` of the quasi-Newton iterations (summed over substeps) that the steps
         of a rollout from `y` need to meet `tol`, over `n_steps` steps: choose `iterations=`
         from the max (and more for a flow that stiffens)."""
         n_steps = positive_int(n_steps, "n_steps")
         counts = np.asarray(_count_iterations(self, self.carry(jnp.asarray(y, jnp.float64)), n_steps))
         return float(counts.mean()), int(counts.max())
+
+
+#: How many past stage increments a rollout keeps, and the degree of the least-squares
+#: polynomial through them whose value one step ahead starts the next stage iteration.
+PREDICTOR_POINTS = 8
+PREDICTOR_DEGREE = 5
+
+
+def _norm(A: jax.Array) -> jax.Array:
+    r"""$\|A\|_\infty$, the largest row sum of $|A_{ij}|$ (quflow's norm of the iteration's
+    residual)."""
+    return jnp.max(jnp.sum(jnp.abs(A), axis=-1), axis=-1)
+
+
+@functools.cache
+def predictor_weights(points: int = PREDICTOR_POINTS, degree: int = PREDICTOR_DEGREE) -> np.ndarray:
+    r"""`(points + 1, points)`: row $k$ the weights $w_j$ of the $j$-th latest of $k$ known
+    increments ($j = 1..k$, zero beyond) in the prediction $\sum_j w_j D_{n-j}$ of $D_n$: the
+    least-squares polynomial of degree $\min(k - 1, \text{degree})$ through them, at the next
+    step (row 0: no history, a cold start). Exact rationals, rounded once: the weights sum to
+    1 to the last bit (a constant history is predicted exactly)."""
+    table = np.zeros((points + 1, points))
+    for k in range(1, points + 1):
+        # w = V (V^T V)^{-1} e_0, V_jp = t_j^p at t_j = -j: the normal equations in fractions
+        d = min(k - 1, degree) + 1
+        V = [[Fraction(-j) ** p for p in range(d)] for j in range(1, k + 1)]
+        A = [[sum(V[j][p] * V[j][q] for j in range(k)) for q in range(d)] + [Fraction(int(p == 0))]
+             for p in range(d)]
+        for p in range(d):  # Gauss-Jordan: A is symmetric positive definite (no pivoting)
+            A[p] = [a / A[p][p] for a in A[p]]
+            for r in range(d):
+                if r != p:
+                    A[r] = [a - A[r][p] * b for a, b in zip(A[r], A[p])]
+        c = [A[p][d] for p in range(d)]  # (V^T V)^{-1} e_0
+        table[k, :k] = [float(sum(V[j][p] * c[p] for p in range(d))) for j in range(k)]
+    return table
+
+
+def _predict(history: jax.Array, count: jax.Array) -> jax.Array:
+    r"""The next increment extrapolated from the ring `history` `(M, m, m)` after `count`
+    pushes (`_push`: the $j$-th latest in slot $(\text{count} - j) \bmod M$; fewer than $M$
+    pushes, the extrapolation of those there are)."""
+    M = history.shape[0]
+    row = jnp.asarray(predictor_weights(M))[jnp.minimum(count, M)]  # j-th latest at index j - 1
+    return jnp.tensordot(row[(count - 1 - jnp.arange(M)) % M], history, axes=1)
+
+
+def _push(history: jax.Array, D: jax.Array, count: jax.Array) -> jax.Array:
+    """`history` with `D` written over the oldest, slot `count mod M` (in place in a compiled
+    loop)."""
+    return history.at[count % history.shape[0]].set(D)
+
+
+def _counted(count: jax.Array) -> jax.Array:
+    """The count after one more push, kept below 2M (its residue mod M and min(count, M) kept)."""
+    count = count + 1
+    return jnp.where(count >= 2 * PREDICTOR_POINTS, count - PREDICTOR_POINTS, count)
 
 
 @eqx.filter_jit

@@ -133,3 +133,43 @@ def test_a_rollout_with_a_fixed_iteration_count_is_reverse_differentiable():
     e = np.eye(body.dim)[0] * 1e-6
     fd = (float(final_energy(y0 + e)) - float(final_energy(y0 - e))) / 2e-6
     assert np.all(np.isfinite(g)) and abs(g[0] - fd) < 1e-6 * max(1.0, abs(fd))
+
+
+def test_predictor_extrapolates_polynomials_exactly_through_the_ring():
+    import jax.numpy as jnp
+
+    from integrators._isospectral import PREDICTOR_DEGREE, PREDICTOR_POINTS, _counted, _predict, _push
+
+    M = PREDICTOR_POINTS
+    # increments D_n = p(n) 1 for a polynomial p of degree PREDICTOR_DEGREE: once k points are
+    # in the ring, the prediction of D_k is exact for degree min(k - 1, PREDICTOR_DEGREE); the
+    # ring wraps around (3 M pushes) and the count stays bounded
+    coefficients = np.random.default_rng(7).normal(size=PREDICTOR_DEGREE + 1)
+    history, count = jnp.zeros((M, 2, 2)), jnp.asarray(0)
+    for n in range(3 * M):
+        exact = np.polyval(coefficients, n)
+        predicted = float(_predict(history, count)[0, 0])
+        if n > PREDICTOR_DEGREE:
+            # round-off of a least-squares fit through values up to ~|p(3M)|
+            assert abs(predicted - exact) < 1e3 * EPS * abs(np.polyval(np.abs(coefficients), 3 * M))
+        history, count = _push(history, exact * jnp.eye(2), count), _counted(count)
+        assert int(count) < 2 * M
+
+
+def test_iteration_forms_the_cayley_conjugation_and_the_frozen_stage():
+    import jax.numpy as jnp
+
+    body = lp.systems.GeneralizedRigidBody(J4)
+    method = it.IsospectralMidpoint(body, 0.1)
+    rng = np.random.default_rng(8)
+    W = np.asarray(body.algebra.matrix(rng.normal(size=body.dim)))
+    Wt = W + 0.05 * np.asarray(body.algebra.matrix(rng.normal(size=body.dim)))
+    W1, G, moved = method._iterate(jnp.asarray(W), 0.1, jnp.asarray(Wt))
+    B = 0.05 * np.asarray(body.velocity_matrix(Wt))
+    X = np.linalg.inv(np.eye(4) - B)
+    Q = X @ (np.eye(4) + B)
+    scale = np.abs(W).max()
+    # against the definitions, by numpy's own solve: a few eps of |W| (Q, X well conditioned)
+    np.testing.assert_allclose(np.asarray(W1), Q @ W @ Q.T, atol=32 * EPS * scale)
+    np.testing.assert_allclose(np.asarray(G), X @ W @ X.T, atol=32 * EPS * scale)
+    assert float(moved) == np.abs(np.asarray(G) - Wt).sum(axis=1).max()
