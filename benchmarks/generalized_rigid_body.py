@@ -7,7 +7,8 @@ and the Casimirs over a long Strang run (BENCHMARKS.md, "The generalized rigid b
 
 Mass matrix J = linspace(1, 2.2, N); two random initial conditions (seed 0), the error at
 t = 1 for h = 0.1, 0.05, 0.025 against heyoka at its default tolerance (machine epsilon); the
-Casimirs $\\tfrac12(-1)^k\\mathrm{tr}\\,M^{2k}$ over `--steps` Strang steps of h = 0.05, the
+Casimirs of so(N) (`so(N).casimirs`: $\\tfrac12(-1)^k\\mathrm{tr}\\,M^{2k}$, the Pfaffian for the last of an
+even N) over `--steps` Strang steps of h = 0.05, the
 largest change relative to each Casimir's value.
 """
 

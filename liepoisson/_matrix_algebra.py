@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike
 
 from ._abstract_algebra import AbstractLieAlgebra
 from ._inverse import gauss_newton_parameters
+from ._pfaffian import pfaffian
 from ._validation import as_state
 
 #: Largest dimension for which `structure_constants` is formed (n^3 float64: 16.8 MB at 128).
@@ -142,7 +143,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)` build
     them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
-    Casimirs are traces of powers (`casimirs`), the spectrum is `spectrum`.
+    Casimirs are traces of powers and so(2k)'s Pfaffian (`casimirs`), the spectrum is
+    `spectrum`.
     """
 
     def __init__(self, family: str, N: int, *, sign: int = -1):
@@ -249,7 +251,9 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     def casimirs(self, mu: ArrayLike) -> jax.Array:
         r"""Traces of powers, real, `(..., k)`: so(N) $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$,
-        $k = 1..\lfloor N/2\rfloor$ (so(3): $|\Pi|^2$); u(N) $\mathrm{tr}\,(iM)^k$, $k = 1..N$
+        $k = 1..\lfloor N/2\rfloor$ (so(3): $|\Pi|^2$), for even $N$ the last replaced by the
+        Pfaffian $\mathrm{Pf}(M)$ (its square is $\det M$; its sign tells orbits apart that
+        the traces confuse, and its gradient does not vanish where it does); u(N) $\mathrm{tr}\,(iM)^k$, $k = 1..N$
         (su(N): $2..N$); sp(2N) $\mathrm{tr}\,M^{2k}$, $k = 1..N$; gl(N) $\mathrm{tr}\,M^k$,
         $k = 1..N$ (sl(N): $2..N$). One matrix product per power."""
         return _casimirs(self, as_state(mu, "mu", self.dim))
@@ -258,18 +262,23 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         M = self.matrix(mu)
         if self.complex:
             M = 1j * M
+        pfaffian_last = self.family == "so" and self.N % 2 == 0  # Pf(M) for tr M^N (module _pfaffian)
         if self.family == "so":
-            step, powers, scale = M @ M, range(1, self.N // 2 + 1), [0.5 * (-1) ** k for k in range(1, self.N // 2 + 1)]
+            traces = self.N // 2 - pfaffian_last
+            step, powers, scale = M @ M, range(1, traces + 1), [0.5 * (-1) ** k for k in range(1, traces + 1)]
         elif self.family == "sp":
             step, powers, scale = M @ M, range(1, self.N + 1), [1.0] * self.N
         else:
             first = 1 if self.family in ("u", "gl") else 2
             step, powers, scale = M, range(first, self.N + 1), [1.0] * (self.N + 1 - first)
         out, P = [], None
-        for k in range(1, max(powers) + 1):
+        for k in range(1, max(powers, default=0) + 1):
             P = step if P is None else P @ step
             if k in powers:
                 out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+        if pfaffian_last:
+            out.append(pfaffian(M))
+            scale.append(1.0)
         return jnp.stack(out, axis=-1) * jnp.asarray(scale)
 
     def casimir_gradients(self, mu: ArrayLike) -> jax.Array:

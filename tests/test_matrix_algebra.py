@@ -100,10 +100,71 @@ def test_casimirs_are_casimirs(g):
 def test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two():
     Pi = np.array([0.3, -1.1, 0.8])
     assert abs(float(lp.so(3).casimirs(Pi)[0]) - Pi @ Pi) < 4 * EPS
-    M = np.asarray(lp.so(4).matrix(np.arange(1.0, 7.0)))
     c = np.asarray(lp.so(4).casimirs(np.arange(1.0, 7.0)))
-    # -tr M^2 / 2 is the sum of the squared entries above the diagonal; tr M^4 / 2 directly
-    np.testing.assert_allclose(c, [np.sum(np.arange(1.0, 7.0) ** 2), np.trace(M @ M @ M @ M) / 2], rtol=8 * EPS)
+    # -tr M^2 / 2 is the sum of the squared entries above the diagonal; the Pfaffian
+    # M01 M23 - M02 M13 + M03 M12 (components in the order 01, 02, 03, 12, 13, 23)
+    np.testing.assert_allclose(c, [np.sum(np.arange(1.0, 7.0) ** 2), 1 * 6 - 2 * 5 + 3 * 4], rtol=8 * EPS)
+
+
+def _pfaffian_by_expansion(A):
+    """Pf(A) by expansion along the first row (n!! terms: small n only)."""
+    n = A.shape[0]
+    if n == 0:
+        return 1.0
+    return sum((-1) ** (j + 1) * A[0, j] * _pfaffian_by_expansion(A[np.ix_(*[[k for k in range(n) if k not in (0, j)]] * 2)])
+               for j in range(1, n))
+
+
+@pytest.mark.parametrize("n", [2, 4, 6, 8])
+def test_pfaffian_against_its_expansion_and_its_gradient_against_the_minors(n):
+    import jax
+
+    from liepoisson._pfaffian import pfaffian
+
+    rng = np.random.default_rng(n)
+    X = rng.normal(size=(n, n))
+    A = X - X.T
+    value = _pfaffian_by_expansion(A)
+    # Householder reduction: backward stable, a few eps of the size prod |A| ~ |A|^(n/2)
+    assert abs(float(pfaffian(A)) - value) < 64 * n * EPS * np.abs(A).max() ** (n // 2) * 3 ** n
+    assert abs(float(pfaffian(A)) ** 2 - np.linalg.det(A)) < 1e-10 * abs(np.linalg.det(A)) + 1e-12
+    # d Pf / d A_ij (A_ji = -A_ij moving with it) is the signed Pfaffian of the minor without i, j
+    G = np.asarray(jax.jit(jax.grad(pfaffian))(A))
+    for i, j in [(0, 1), (0, n - 1), (n - 2, n - 1)] + ([(1, 4), (2, 3)] if n >= 6 else []):
+        rest = [k for k in range(n) if k not in (i, j)]
+        minor = (-1) ** (i + j + 1) * _pfaffian_by_expansion(A[np.ix_(rest, rest)])
+        assert abs((G[i, j] - G[j, i]) - minor) < 1e-12 * max(1.0, abs(minor)) * 3 ** n
+
+
+def test_pfaffian_gradient_where_the_pfaffian_vanishes():
+    import jax
+
+    from liepoisson._pfaffian import pfaffian
+
+    # rank 2 (Pf = 0, det's gradient 0): d Pf = A01 dA23, exactly, no NaN from the reduced columns
+    A = np.zeros((4, 4))
+    A[0, 1], A[1, 0] = 2.5, -2.5
+    G = np.asarray(jax.grad(pfaffian)(A))
+    expected = np.zeros((4, 4))
+    expected[2, 3], expected[3, 2] = 1.25, -1.25  # half of d/dA23 on each of A23, A32
+    assert float(pfaffian(A)) == 0.0
+    np.testing.assert_allclose(G, expected, atol=4 * EPS)
+    assert np.all(np.asarray(jax.grad(pfaffian)(np.zeros((6, 6)))) == 0.0)
+    with pytest.raises(ValueError, match="even"):
+        pfaffian(np.zeros((3, 3)))
+
+
+def test_so4_casimirs_tell_apart_the_orbits_that_traces_confuse():
+    # so(4) = so(3) x so(3): M and its image under the reflection diag(-1, 1, 1, 1) have the same
+    # traces of powers but Pfaffians of opposite sign: different orbits of SO(4)
+    g = lp.so(4)
+    mu = np.array([0.3, -1.2, 0.7, 2.0, 0.4, -0.9])
+    R = np.diag([-1.0, 1.0, 1.0, 1.0])
+    nu = np.asarray(g.coordinates(R @ np.asarray(g.matrix(mu)) @ R))
+    M, N = np.asarray(g.matrix(mu)), np.asarray(g.matrix(nu))
+    assert abs(np.trace(np.linalg.matrix_power(M, 4)) - np.trace(np.linalg.matrix_power(N, 4))) < 64 * EPS
+    c, d = np.asarray(g.casimirs(mu)), np.asarray(g.casimirs(nu))
+    assert abs(c[0] - d[0]) < 8 * EPS * c[0] and abs(c[1] + d[1]) < 8 * EPS * abs(c[1]) and abs(c[1]) > 0.1
 
 
 # complex and non-compact by default; so(4)'s flow (compact, real) with -m slow
@@ -291,3 +352,36 @@ def test_rank_with_round_off_in_the_constants_and_conversions_check_shapes():
     with pytest.raises(ValueError, match=r"X must have shape \(\.\.\., 3, 3\)"):
         lp.so(3).coordinates(np.ones((4, 4)))
     assert lp.systems.LiePoissonSystem(lp.u(12), lambda m, xp: m[0] ** 2).group is None  # no constants formed
+
+
+@pytest.mark.parametrize("n", [4, 6])
+def test_pfaffian_second_derivatives_against_the_expansion_also_where_it_degenerates(n):
+    import jax
+    import jax.numpy as jnp
+
+    from liepoisson._pfaffian import pfaffian
+
+    upper = np.triu_indices(n, 1)
+
+    def on_entries(f):
+        def g(x):
+            A = jnp.zeros((n, n)).at[upper].set(x)
+            return f(A - A.T)
+        return g
+
+    X = np.random.default_rng(10 + n).normal(size=(n, n))
+    points = {
+        "generic": X - X.T,
+        "rank 2 (Pf = 0)": np.outer(X[0], X[1]) - np.outer(X[1], X[0]),
+        "reduced columns": np.where(np.abs(X - X.T) > 1.2, X - X.T, 0.0),
+        "zero": np.zeros((n, n)),
+    }
+    hessian = jax.jit(jax.hessian(on_entries(pfaffian)))
+    expected_hessian = jax.jit(jax.hessian(on_entries(_pfaffian_by_expansion)))
+    for name, A in points.items():
+        x = jnp.asarray(A[upper])
+        # the expansion is a polynomial written in jnp: JAX's derivatives of it are exact
+        H = np.asarray(hessian(x))
+        expected = np.asarray(expected_hessian(x))
+        assert not np.isnan(H).any(), name
+        np.testing.assert_allclose(H, expected, atol=64 * EPS * max(1.0, np.abs(A).max()) ** (n // 2 - 2), err_msg=name)

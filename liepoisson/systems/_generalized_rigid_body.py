@@ -21,7 +21,8 @@ class GeneralizedRigidBody(AbstractLiePoissonSystem, AbstractDefinedByParams):
     = \sum_{i<j} \frac{M_{ij}^2}{2(J_i + J_j)}.$$
 
     The state is $\mu_a = M_{ij}$, $i < j$ (`liepoisson.so(N)`); the Casimirs are
-    $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$. For $N = 3$ it is Euler's rigid body with principal
+    $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$, $k < N/2$, and for even $N$ the Pfaffian
+    $\mathrm{Pf}(M)$ (`liepoisson.so`). For $N = 3$ it is Euler's rigid body with principal
     moments $I_1 = J_2 + J_3$, $I_2 = J_1 + J_3$, $I_3 = J_1 + J_2$ (`RigidBody`, whose
     coordinates are $(\Pi_1, \Pi_2, \Pi_3) = (-M_{23}, M_{13}, -M_{12})$).
 
