@@ -12,6 +12,7 @@ from ._direct_sum import DirectSum as DirectSum
 from ._matrix_algebra import (
     MatrixLieAlgebra as MatrixLieAlgebra,
     gl as gl,
+    se as se,
     sl as sl,
     so as so,
     sp as sp,

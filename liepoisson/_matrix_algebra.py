@@ -1,18 +1,27 @@
-r"""Matrix Lie algebras of any size: so(N), u(N), su(N), sp(2N, R), gl(N), sl(N).
+r"""Matrix Lie algebras of any size: so(N), u(N), su(N), sp(2N, R), gl(N), sl(N), and the
+semidirect product se(N) = so(N) x R^N.
 
 An element is an $m\times m$ matrix $X = \sum_a x_a E_a$ in a basis $E_a$ orthonormal for the
 pairing $\langle A, B\rangle = \kappa\,\mathrm{Re}\,\mathrm{tr}(A^\dagger B)$ (`kappa`,
 $\tfrac12$ for so(N) so that so(3)'s components are the angular momentum, 1 otherwise). The
 same matrix represents a momentum $\mu \in \mathfrak g^*$ through $\mu_a = \langle M, E_a\rangle$.
-Every algebra here is closed under $X \mapsto X^\dagger$, so ([the conventions page][conventions])
+With $\Pi$ the orthogonal projection onto the algebra (`coordinates`), ([the conventions
+page][conventions])
 
-$$\mathrm{ad}^*_\xi\mu \leftrightarrow [\Xi^\dagger, M], \qquad
-\dot M = [\Xi^\dagger, M] \;\; (\text{body}, \Xi = \partial H/\partial\mu), \qquad
-M(t) = e^{t A^\dagger} M e^{-t A^\dagger}$$
+$$\mathrm{ad}^*_\xi\mu \leftrightarrow \Pi[\Xi^\dagger, M], \qquad
+\dot M = \Pi[\Xi^\dagger, M] \;\; (\text{body}, \Xi = \partial H/\partial\mu), \qquad
+M(t) = \Pi\big(e^{t A^\dagger} M e^{-t A^\dagger}\big)$$
 
-for the test flow of $\langle\alpha, \mu\rangle$: a conjugation, so the whole spectrum of $M$ is
-kept (the Casimirs are the traces of its powers). For so(N) and u(N), $\Xi^\dagger = -\Xi$ and
-the body equation is $\dot M = [M, \Xi]$ (Manakov's $\dot M = [M, \Omega]$).
+for the test flow of $\langle\alpha, \mu\rangle$ ($\langle\mathrm{Ad}^*_g\mu, \xi\rangle =
+\langle M, gXg^{-1}\rangle$, and the projection of a conjugate of the orthogonal complement is
+zero). Every algebra here but se(N) is closed under $X \mapsto X^\dagger$, and then $\Pi$ acts
+as the identity: the flow is a conjugation, the whole spectrum of $M$ is kept and the Casimirs
+are the traces of its powers. For so(N) and u(N), $\Xi^\dagger = -\Xi$ and the body equation is
+$\dot M = [M, \Xi]$ (Manakov's $\dot M = [M, \Omega]$). se(N) as $(N+1)\times(N+1)$ matrices
+$\begin{pmatrix}A & \sqrt2\,b\\ 0 & 0\end{pmatrix}$ (so that $(A, b)$ with
+$\langle\cdot,\cdot\rangle = \tfrac12\mathrm{tr}A^\top A' + b\cdot b'$ is orthonormal): its
+bracket is $([A, A'], Ab' - A'b)$, its orbits are not isospectral, and its Casimirs are given
+below (`casimirs`).
 
 Coordinates and matrices are converted by one scatter and one gather over the nonzero entries
 of the basis, $O(m^2)$; brackets, $\mathrm{ad}^*$ and flows are matrix products, $O(m^3)$. No
@@ -43,7 +52,7 @@ STRUCTURE_CONSTANTS_MAX_DIM = 128
 #: Jacobian per pair) is attempted.
 FLOW_PARAMETERS_MAX_DIM = 400
 
-FAMILIES = ("so", "u", "su", "sp", "gl", "sl")
+FAMILIES = ("so", "u", "su", "sp", "gl", "sl", "se")
 
 
 def dagger(X: jax.Array) -> jax.Array:
@@ -111,6 +120,14 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
                 for j in range(N):
                     if i != j:
                         add([(i, j, 1.0)], f"E{i + 1}{j + 1}")
+    elif family == "se":
+        # se(N) = so(N) x R^N: [[A, sqrt2 b], [0, 0]], the translations last
+        m, kappa = N + 1, 0.5
+        for i in range(N):
+            for j in range(i + 1, N):
+                add([(i, j, 1.0), (j, i, -1.0)], f"M{i + 1}{j + 1}")
+        for i in range(N):
+            add([(i, N, math.sqrt(2.0))], f"p{i + 1}")
     elif family == "sp":
         # sp(2N, R) = {[[a, b], [c, -a^T]] : b, c symmetric}.
         m, kappa = 2 * N, 1.0
@@ -137,11 +154,12 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
       traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
-      for sl).
+      for sl), `"se"` (se(N) = so(N) x R^N, $(N+1)\times(N+1)$, coordinates
+      $(M_{ij}, p_i)$).
     - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
     - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
 
-    The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)` build
+    The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)`, `se(N)` build
     them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
     Casimirs are traces of powers and so(2k)'s Pfaffian (`casimirs`), the spectrum is
     `spectrum`.
@@ -245,9 +263,10 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     # -- Casimirs --------------------------------------------------------------------------------
     @property
     def n_casimirs(self) -> int:
-        """The rank: floor(N/2) for so(N), N for u(N), gl(N) and sp(2N), N - 1 for su(N), sl(N)."""
+        """The rank (of the coadjoint action, the index): floor(N/2) for so(N), N for u(N), gl(N)
+        and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N)."""
         return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
-                "gl": self.N, "sl": self.N - 1}[self.family]
+                "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2}[self.family]
 
     def casimirs(self, mu: ArrayLike) -> jax.Array:
         r"""Traces of powers, real, `(..., k)`: so(N) $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$,
@@ -255,10 +274,18 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         Pfaffian $\mathrm{Pf}(M)$ (its square is $\det M$; its sign tells orbits apart that
         the traces confuse, and its gradient does not vanish where it does); u(N) $\mathrm{tr}\,(iM)^k$, $k = 1..N$
         (su(N): $2..N$); sp(2N) $\mathrm{tr}\,M^{2k}$, $k = 1..N$; gl(N) $\mathrm{tr}\,M^k$,
-        $k = 1..N$ (sl(N): $2..N$). One matrix product per power."""
+        $k = 1..N$ (sl(N): $2..N$). One matrix product per power. se(N), $\mu = (\Pi, p)$:
+        $|p|^2$ and the Casimirs of the rotations about $p$, of $K = (|p|^2 - pp^\top)\Pi$
+        (translations move $\Pi$ by $bp^\top - pb^\top$, which $K$ does not see):
+        $\tfrac12(-1)^k\mathrm{tr}\,K^{2k}$, $k \le (N-1)/2$, and for odd $N$ the last replaced
+        by the Pfaffian of $\begin{pmatrix}\Pi & p\\ -p^\top & 0\end{pmatrix}$ (invariant under
+        translations as a congruence by a unimodular matrix; se(3): $-\Pi\cdot p$ in the vector
+        components)."""
         return _casimirs(self, as_state(mu, "mu", self.dim))
 
     def _casimir_values(self, mu: jax.Array) -> jax.Array:
+        if self.family == "se":
+            return _se_casimirs(self.matrix(mu), self.N)
         M = self.matrix(mu)
         if self.complex:
             M = 1j * M
@@ -291,6 +318,11 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         r"""The eigenvalues of $M$, kept by every coadjoint motion: real, ascending, of the
         Hermitian $iM$ for u(N), su(N) and of $-iM$ for so(N) (`(..., m)`); complex, of $M$ for
         the others, sorted by real then imaginary part."""
+        if self.family == "se":
+            raise ValueError(
+                "se(N)'s coadjoint orbits are not isospectral (a translation changes the spectrum of the matrix of "
+                "mu): it has no spectrum to keep; its invariants are casimirs(mu)"
+            )
         M = self.matrix(as_state(mu, "mu", self.dim))
         if self.complex:
             return jnp.linalg.eigvalsh(1j * M)
@@ -368,9 +400,50 @@ def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, m
     U = jsl.expm(A)
     if algebra.family in ("so", "u", "su"):
         V = algebra._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
+    elif algebra.family == "se":
+        # exp(A) = [[R, 0], [c^T, 1]] (A = [[-a, 0], [sqrt2 b^T, 0]]): its inverse [[R^T, 0], [-c^T R^T, 1]]
+        # from R's orthogonality, as for so(N), not a second exponential (whose mismatch with
+        # the first drifts the Casimirs)
+        N = algebra.N
+        R, c = U[..., :N, :N], U[..., N:, :N]
+        Rt = jnp.swapaxes(R, -1, -2)
+        V = jnp.concatenate([
+            jnp.concatenate([Rt, jnp.zeros(R.shape[:-1] + (1,), R.dtype)], axis=-1),
+            jnp.concatenate([-(c @ Rt), jnp.ones(c.shape[:-1] + (1,), R.dtype)], axis=-1),
+        ], axis=-2)
     else:
         V = jsl.expm(-A)
-    return algebra.coordinates(U @ M @ V)
+    out = algebra.coordinates(U @ M @ V)
+    if algebra.family == "se":
+        # p' = R p from the coordinates themselves: through the matrix it would be scaled by
+        # sqrt2 and back, fl(sqrt2) fl(sqrt2 / 2) != 1, a bias that shrinks |p| every flow
+        p = mu[..., -algebra.N:]
+        out = out.at[..., -algebra.N:].set(jnp.einsum("...ij,...j->...i", R, p))
+    return out
+
+
+def _se_casimirs(M: jax.Array, N: int) -> jax.Array:
+    """se(N)'s Casimirs from the matrix of mu (`MatrixLieAlgebra.casimirs`), `(..., 1 + (N-1)//2)`."""
+    Pi = M[..., :N, :N]
+    p = M[..., :N, N] / math.sqrt(2.0)
+    squared = jnp.sum(p * p, axis=-1)
+    out = [squared]
+    rotations = (N - 1) // 2
+    pfaffian_last = N % 2 == 1 and rotations > 0
+    traces = rotations - pfaffian_last
+    if traces:
+        K = squared[..., None, None] * Pi - p[..., :, None] * (p[..., None, :] @ Pi)  # (|p|^2 - p p^T) Pi
+        K2, P = K @ K, None
+        for k in range(1, traces + 1):
+            P = K2 if P is None else P @ K2
+            out.append(0.5 * (-1) ** k * jnp.trace(P, axis1=-2, axis2=-1))
+    if pfaffian_last:
+        bordered = jnp.concatenate([
+            jnp.concatenate([Pi, p[..., :, None]], axis=-1),
+            jnp.concatenate([-p[..., None, :], jnp.zeros(p.shape[:-1] + (1, 1), M.dtype)], axis=-1),
+        ], axis=-2)
+        out.append(pfaffian(bordered))
+    return jnp.stack(out, axis=-1)
 
 
 def so(N: int, sign: int = -1) -> MatrixLieAlgebra:
@@ -404,3 +477,10 @@ def gl(N: int, sign: int = -1) -> MatrixLieAlgebra:
 def sl(N: int, sign: int = -1) -> MatrixLieAlgebra:
     r"""sl(N, R), traceless real $N\times N$ matrices (dimension $N^2 - 1$)."""
     return MatrixLieAlgebra("sl", N, sign=sign)
+
+
+def se(N: int, sign: int = -1) -> MatrixLieAlgebra:
+    r"""se(N) = so(N) x R^N, the Euclidean algebra as $(N+1)\times(N+1)$ matrices, coordinates
+    $\mu = (M_{ij}\ (i<j), p_1..p_N)$ (dimension $N(N+1)/2$): the rigid body in a fluid and
+    the heavy top of N dimensions. No structure-constant tensor; Casimirs `casimirs`."""
+    return MatrixLieAlgebra("se", N, sign=sign)

@@ -1,4 +1,4 @@
-"""Matrix Lie algebras (so(N), u(N), su(N), sp(2N), gl(N), sl(N)): bracket, Lie-Poisson
+"""Matrix Lie algebras (so(N), u(N), su(N), sp(2N), gl(N), sl(N), se(N)): bracket, Lie-Poisson
 structure, Casimirs and coadjoint flows against independent references (structure constants
 formed from the matrices, finite differences, the so(3) of structure constants)."""
 
@@ -14,7 +14,7 @@ EPS = np.finfo(np.float64).eps
 # Every family at a small size by default (real and complex, compact and not, traceless); the
 # other sizes under -m slow.
 _DEFAULT = [lp.so(4), lp.u(3), lp.sl(3)]
-_MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3)]
+_MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3), lp.se(3), lp.se(4), lp.se(5)]
 SMALL = _DEFAULT + _MORE
 ALGEBRAS = [pytest.param(g, id=g.name) for g in _DEFAULT] + [
     pytest.param(g, id=g.name, marks=pytest.mark.slow) for g in _MORE]
@@ -32,7 +32,7 @@ def _vectors(g, seed, k=1):
 @pytest.mark.parametrize("g", ALGEBRAS)
 def test_dimensions_and_rank(g):
     expected = {"so": g.N * (g.N - 1) // 2, "u": g.N**2, "su": g.N**2 - 1, "sp": 2 * g.N**2 + g.N,
-                "gl": g.N**2, "sl": g.N**2 - 1}[g.family]
+                "gl": g.N**2, "sl": g.N**2 - 1, "se": g.N * (g.N + 1) // 2}[g.family]
     assert g.dim == expected
     mu = _vectors(g, 0)[0]
     # generic corank = number of Casimirs (the rank of the algebra)
@@ -385,3 +385,58 @@ def test_pfaffian_second_derivatives_against_the_expansion_also_where_it_degener
         expected = np.asarray(expected_hessian(x))
         assert not np.isnan(H).any(), name
         np.testing.assert_allclose(H, expected, atol=64 * EPS * max(1.0, np.abs(A).max()) ** (n // 2 - 2), err_msg=name)
+
+
+def test_se3_of_matrices_is_se3_of_structure_constants():
+    # components (M12, M13, M23) = (-Pi3, Pi2, -Pi1) as for so(3), p as it is
+    P = np.zeros((6, 6))
+    P[:3, :3] = [[0, 0, -1], [0, 1, 0], [-1, 0, 0]]
+    P[3:, 3:] = np.eye(3)
+    g, h = lp.se(3), lp.se3()
+    rng = np.random.default_rng(11)
+    mu, alpha = rng.normal(size=(2, 6))
+    # both are sums of a few O(1) products: a few eps
+    np.testing.assert_allclose(P @ np.asarray(h.poisson_tensor(mu)) @ P.T, np.asarray(g.poisson_tensor(P @ mu)),
+                               atol=8 * EPS)
+    np.testing.assert_allclose(P @ np.asarray(h.coadjoint_flow(alpha, 0.8, mu)),
+                               np.asarray(g.coadjoint_flow(P @ alpha, 0.8, P @ mu)), atol=64 * EPS)
+    Pi, p = mu[:3], mu[3:]
+    np.testing.assert_allclose(np.asarray(g.casimirs(P @ mu)), [p @ p, -(Pi @ p)], rtol=16 * EPS)
+
+
+@pytest.mark.parametrize("N", [4, 5, 6])
+def test_se_casimirs_are_casimirs_kept_by_every_flow(N):
+    g = lp.se(N)
+    assert g.n_casimirs == 1 + (N - 1) // 2 and g.dim == N * (N + 1) // 2
+    rng = np.random.default_rng(12 + N)
+    mu = rng.normal(size=(3, g.dim))
+    B, G = np.asarray(g.poisson_tensor(mu)), np.asarray(g.casimir_gradients(mu))
+    # B grad C = 0: sums of dim products of O(|B||G|) terms
+    assert np.abs(np.einsum("kab,kjb->kja", B, G)).max() < 64 * g.dim * EPS * np.abs(B).max() * np.abs(G).max()
+    assert all(np.linalg.matrix_rank(Gk) == g.n_casimirs for Gk in G)
+    assert g.orbit_dimension(mu[0]) == g.dim - g.n_casimirs
+    # a finite flow (rotations and translations at once) keeps them to round-off of their size
+    c0 = np.asarray(g.casimirs(mu[0]))
+    c1 = np.asarray(g.casimirs(g.coadjoint_flow(rng.normal(size=g.dim), 0.7, mu[0])))
+    scale = np.linalg.norm(G[0], axis=-1) * np.linalg.norm(mu[0])
+    assert (np.abs(c1 - c0) / scale).max() < 1e3 * EPS
+    with pytest.raises(ValueError, match="not isospectral"):
+        g.spectrum(mu[0])
+
+
+def test_se_flows_keep_the_casimirs_without_a_drift_over_many_compositions():
+    # 2000 exact flows: each rotates p by an orthogonal R (a few eps), a random walk of
+    # round-off ~ sqrt(2000) eps; the matrix's sqrt2 scaling of p, were it undone by rounding
+    # every flow, would shrink |p|^2 by ~2 eps a flow (~1e-12 here)
+    g = lp.se(4)
+    rng = np.random.default_rng(13)
+    mu0 = rng.normal(size=g.dim)
+    alphas = rng.normal(size=(2000, g.dim))
+
+    def body(mu, a):
+        return g._coadjoint_flow(a, np.asarray(0.3), mu), None
+
+    mu1, _ = jax.lax.scan(body, mu0, alphas)
+    c0, c1 = np.asarray(g.casimirs(mu0)), np.asarray(g.casimirs(mu1))
+    scale = np.linalg.norm(np.asarray(g.casimir_gradients(mu0)), axis=-1) * np.linalg.norm(mu0)
+    assert (np.abs(c1 - c0) / scale).max() < 200 * EPS
