@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import math
+from fractions import Fraction
 from typing import Any
 
 import jax
@@ -69,6 +70,47 @@ def _helmert(N: int) -> np.ndarray:
         H[k, k - 1] = -float(k)
         H[:, k - 1] /= math.sqrt(k * (k + 1))
     return H
+
+
+def _dual_coefficients(a: np.ndarray, c: np.ndarray, kappa: float) -> np.ndarray:
+    r"""The coefficients $d_p$ of `coordinates`, $x_a = \mathrm{Re}\sum_p d_p X_p$: ideally
+    $\kappa\,\bar c_p$, chosen among the floats next to it so that $\sum_p \mathrm{Re}(d_p c_p)$,
+    the gain of `coordinates(matrix(x))`, is 1 as nearly as floats allow (exact rationals; one
+    pass of +-1 ulp per entry). With $\kappa\,\bar c_p$ itself the gain of an entry
+    $1/\sqrt2$ is $1 - 1.8\times10^{-16}$, a bias of one sign that a long composition of
+    flows adds up (BENCHMARKS.md, "Casimirs of a long composition"). Elements with the same
+    entries share the search (u(N)'s off-diagonal ones: two patterns)."""
+    c = np.asarray(c, dtype=np.complex128)
+    d = kappa * np.conj(c)
+    out = d.copy()
+    order = np.argsort(a, kind="stable")
+    bounds = np.flatnonzero(np.diff(a[order])) + 1
+    found: dict[tuple[complex, ...], np.ndarray] = {}
+    for entries in np.split(order, bounds):
+        pattern = tuple(c[entries])
+        if pattern not in found:
+            found[pattern] = _best_dual(c[entries], d[entries])
+        out[entries] = found[pattern]
+    return out
+
+
+def _best_dual(c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """`d` moved by an ulp entry by entry where that brings sum Re(d c) nearer to 1 (exactly)."""
+    F = Fraction
+    def term(v, w):  # Re(v w), exactly
+        return F(float(v.real)) * F(float(w.real)) - F(float(v.imag)) * F(float(w.imag))
+
+    values = [complex(v) for v in d]
+    gain = sum(term(v, w) for v, w in zip(values, c))
+    for i, (v, w) in enumerate(zip(values, c)):
+        for candidate in (complex(np.nextafter(v.real, -np.inf), v.imag), complex(np.nextafter(v.real, np.inf), v.imag),
+                          complex(v.real, np.nextafter(v.imag, -np.inf)), complex(v.real, np.nextafter(v.imag, np.inf))):
+            if (candidate.real and not v.real) or (candidate.imag and not v.imag):
+                continue  # an entry that is real (imaginary) stays so
+            trial = gain - term(values[i], w) + term(candidate, w)
+            if abs(trial - 1) < abs(gain - 1):
+                values[i], gain = candidate, trial
+    return np.asarray(values)
 
 
 def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
@@ -189,6 +231,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         self._a = a
         self._p = p
         self._c = c if self.complex else c.real
+        d = _dual_coefficients(a, c, kappa)
+        self._d = d if self.complex else d.real
 
     # -- the two representations -----------------------------------------------------------
     @property
@@ -378,7 +422,7 @@ def _matrix(algebra: MatrixLieAlgebra, x: jax.Array) -> jax.Array:
 def _coordinates(algebra: MatrixLieAlgebra, X: jax.Array) -> jax.Array:
     batch = X.shape[:-2]
     flat = X.reshape(batch + (algebra.size * algebra.size,))
-    values = algebra.kappa * jnp.real(jnp.conj(jnp.asarray(algebra._c, algebra._dtype)) * flat[..., algebra._p])
+    values = jnp.real(jnp.asarray(algebra._d, algebra._dtype) * flat[..., algebra._p])
     return jnp.zeros(batch + (algebra.dim,), jnp.float64).at[..., algebra._a].add(values)
 
 
@@ -413,7 +457,11 @@ def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, m
         ], axis=-2)
     else:
         V = jsl.expm(-A)
-    out = algebra.coordinates(U @ M @ V)
+    # mu plus the coordinates of the change: coordinates(matrix(mu)) is mu only up to a
+    # rounding bias of the basis's irrational entries (1/sqrt2, Helmert's), about an eps a round
+    # trip and of one sign, which a composition of flows would add up (BENCHMARKS.md, "Casimirs
+    # of a long composition"); on the change it is as small as the change
+    out = mu + algebra.coordinates(U @ M @ V - M)
     if algebra.family == "se":
         # p' = R p from the coordinates themselves: through the matrix it would be scaled by
         # sqrt2 and back, fl(sqrt2) fl(sqrt2 / 2) != 1, a bias that shrinks |p| every flow
