@@ -457,11 +457,14 @@ def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, m
         ], axis=-2)
     else:
         V = jsl.expm(-A)
-    # mu plus the coordinates of the change: coordinates(matrix(mu)) is mu only up to a
-    # rounding bias of the basis's irrational entries (1/sqrt2, Helmert's), about an eps a round
-    # trip and of one sign, which a composition of flows would add up (BENCHMARKS.md, "Casimirs
-    # of a long composition"); on the change it is as small as the change
-    out = mu + algebra.coordinates(U @ M @ V - M)
+    if algebra.family in ("so", "gl"):  # entries +-1: coordinates(matrix(mu)) is mu exactly
+        out = algebra.coordinates(U @ M @ V)
+    else:
+        # mu plus the coordinates of the change: with the basis's irrational entries (1/sqrt2,
+        # Helmert's) coordinates(matrix(mu)) is mu only up to a rounding bias of one sign, which
+        # a composition of flows would add up (BENCHMARKS.md, "Casimirs of a long composition");
+        # on the change it is as small as the change
+        out = mu + algebra.coordinates(U @ M @ V - M)
     if algebra.family == "se":
         # p' = R p from the coordinates themselves: through the matrix it would be scaled by
         # sqrt2 and back, fl(sqrt2) fl(sqrt2 / 2) != 1, a bias that shrinks |p| every flow
