@@ -72,30 +72,32 @@ def _helmert(N: int) -> np.ndarray:
     return H
 
 
-def _dual_coefficients(a: np.ndarray, c: np.ndarray, kappa: float) -> np.ndarray:
+def _dual_coefficients(a: np.ndarray, c: np.ndarray, kappa: float) -> tuple[np.ndarray, bool]:
     r"""The coefficients $d_p$ of `coordinates`, $x_a = \mathrm{Re}\sum_p d_p X_p$: ideally
     $\kappa\,\bar c_p$, chosen among the floats next to it so that $\sum_p \mathrm{Re}(d_p c_p)$,
     the gain of `coordinates(matrix(x))`, is 1 as nearly as floats allow (exact rationals; one
     pass of +-1 ulp per entry). With $\kappa\,\bar c_p$ itself the gain of an entry
     $1/\sqrt2$ is $1 - 1.8\times10^{-16}$, a bias of one sign that a long composition of
     flows adds up (BENCHMARKS.md, "Casimirs of a long composition"). Elements with the same
-    entries share the search (u(N)'s off-diagonal ones: two patterns)."""
+    entries share the search (u(N)'s off-diagonal ones: two patterns). Also returns whether
+    every gain is exactly 1 (entries +-1, +-i: the round trip is exact)."""
     c = np.asarray(c, dtype=np.complex128)
     d = kappa * np.conj(c)
     out = d.copy()
     order = np.argsort(a, kind="stable")
     bounds = np.flatnonzero(np.diff(a[order])) + 1
-    found: dict[tuple[complex, ...], np.ndarray] = {}
+    found: dict[tuple[complex, ...], tuple[np.ndarray, bool]] = {}
     for entries in np.split(order, bounds):
         pattern = tuple(c[entries])
         if pattern not in found:
             found[pattern] = _best_dual(c[entries], d[entries])
-        out[entries] = found[pattern]
-    return out
+        out[entries] = found[pattern][0]
+    return out, all(exact for _, exact in found.values())
 
 
-def _best_dual(c: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """`d` moved by an ulp entry by entry where that brings sum Re(d c) nearer to 1 (exactly)."""
+def _best_dual(c: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, bool]:
+    """`d` moved by an ulp entry by entry where that brings sum Re(d c) nearer to 1 (exactly),
+    and whether the gain is then exactly 1."""
     F = Fraction
     def term(v, w):  # Re(v w), exactly
         return F(float(v.real)) * F(float(w.real)) - F(float(v.imag)) * F(float(w.imag))
@@ -110,7 +112,7 @@ def _best_dual(c: np.ndarray, d: np.ndarray) -> np.ndarray:
             trial = gain - term(values[i], w) + term(candidate, w)
             if abs(trial - 1) < abs(gain - 1):
                 values[i], gain = candidate, trial
-    return np.asarray(values)
+    return np.asarray(values), gain == 1
 
 
 def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
@@ -231,7 +233,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         self._a = a
         self._p = p
         self._c = c if self.complex else c.real
-        d = _dual_coefficients(a, c, kappa)
+        d, self._exact_round_trip = _dual_coefficients(a, c, kappa)
         self._d = d if self.complex else d.real
 
     # -- the two representations -----------------------------------------------------------
@@ -444,32 +446,16 @@ def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, m
     U = jsl.expm(A)
     if algebra.family in ("so", "u", "su"):
         V = algebra._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
-    elif algebra.family == "se":
-        # exp(A) = [[R, 0], [c^T, 1]] (A = [[-a, 0], [sqrt2 b^T, 0]]): its inverse [[R^T, 0], [-c^T R^T, 1]]
-        # from R's orthogonality, as for so(N), not a second exponential (whose mismatch with
-        # the first drifts the Casimirs)
-        N = algebra.N
-        R, c = U[..., :N, :N], U[..., N:, :N]
-        Rt = jnp.swapaxes(R, -1, -2)
-        V = jnp.concatenate([
-            jnp.concatenate([Rt, jnp.zeros(R.shape[:-1] + (1,), R.dtype)], axis=-1),
-            jnp.concatenate([-(c @ Rt), jnp.ones(c.shape[:-1] + (1,), R.dtype)], axis=-1),
-        ], axis=-2)
     else:
         V = jsl.expm(-A)
-    if algebra.family in ("so", "gl"):  # entries +-1: coordinates(matrix(mu)) is mu exactly
+    if algebra._exact_round_trip:  # entries +-1: coordinates(matrix(mu)) is mu exactly
         out = algebra.coordinates(U @ M @ V)
     else:
         # mu plus the coordinates of the change: with the basis's irrational entries (1/sqrt2,
-        # Helmert's) coordinates(matrix(mu)) is mu only up to a rounding bias of one sign, which
-        # a composition of flows would add up (BENCHMARKS.md, "Casimirs of a long composition");
-        # on the change it is as small as the change
+        # Helmert's, se's sqrt2) coordinates(matrix(mu)) is mu only up to a rounding bias of one
+        # sign, which a composition of flows would add up (BENCHMARKS.md, "Casimirs of a long
+        # composition"); on the change it is as small as the change
         out = mu + algebra.coordinates(U @ M @ V - M)
-    if algebra.family == "se":
-        # p' = R p from the coordinates themselves: through the matrix it would be scaled by
-        # sqrt2 and back, fl(sqrt2) fl(sqrt2 / 2) != 1, a bias that shrinks |p| every flow
-        p = mu[..., -algebra.N:]
-        out = out.at[..., -algebra.N:].set(jnp.einsum("...ij,...j->...i", R, p))
     return out
 
 
