@@ -44,6 +44,7 @@ from ._groups import (
     rotation_angle as rotation_angle,
 )
 from ._expm import expm_action as expm_action
+from ._expm import matrix_exponential as matrix_exponential
 from ._samples import common_path_first as common_path_first, vmap_samples as vmap_samples
 from ._casimirs import polynomial_casimirs as polynomial_casimirs
 from ._elliptic import ellipj as ellipj

@@ -96,6 +96,16 @@ class AbstractLieAlgebra(abc.ABC):
         xi = as_state(xi, "xi", self.dim)
         return jnp.einsum("...ab,...b->...a", self.poisson_tensor(mu), xi)
 
+    def poisson_lstsq(self, mu: ArrayLike, v: ArrayLike, rcond: float = 1e-15) -> np.ndarray:
+        r"""The minimum-norm least-squares $\xi$ of $\mathbb B(\mu)\,\xi = v$, `(..., n)`
+        (NumPy): $\mathbb B(\mu)^+ v$, singular values below `rcond` times the largest
+        dropped. Here from the dense tensor; matrix algebras whose elements are normal
+        matrices solve it in the eigenbasis of $\mu$ instead, without forming it."""
+        mu = np.asarray(as_state(mu, "mu", self.dim))
+        v = np.asarray(as_state(v, "v", self.dim))
+        B = np.asarray(self.poisson_tensor(mu))
+        return np.einsum("...ab,...b->...a", np.linalg.pinv(B, rcond=rcond), v)
+
     def poisson_tensor_components(self, mu: Any) -> list[list[Any]]:
         r"""$\mathbb{B}$ as nested lists of expressions in the components (any backend: numbers,
         JAX arrays, heyoka expressions), from the structure constants."""

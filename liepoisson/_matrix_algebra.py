@@ -38,13 +38,14 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ._abstract_algebra import AbstractLieAlgebra
+from ._expm import matrix_exponential
 from ._inverse import gauss_newton_parameters
 from ._pfaffian import pfaffian
+from ._samples import COMMON_PATH_ONLY
 from ._validation import as_state
 
 #: Largest dimension for which `structure_constants` is formed (n^3 float64: 16.8 MB at 128).
@@ -282,6 +283,28 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         cols = jax.vmap(lambda e: self.poisson_action(mu, jnp.broadcast_to(e, mu.shape)), out_axes=-1)(eye)
         return cols
 
+    def poisson_lstsq(self, mu: ArrayLike, v: ArrayLike, rcond: float = 1e-15) -> np.ndarray:
+        r"""$\mathbb B(\mu)^+ v$ (NumPy). For so(N), u(N) and su(N), whose elements are normal
+        matrices, in the eigenbasis of $M = Q\,\mathrm{diag}(m)\,Q^\dagger$, where
+        $\mathbb B(\mu)\,\xi = v$ reads $\hat X_{jk}(m_k - m_j) = \hat T_{jk}$ with
+        $\hat X = Q^\dagger\Xi^\dagger Q$, $T = -\mathrm{sign}\cdot V$: O(m^3) a state instead
+        of the $n\times n$ pseudo-inverse ($n = m^2$). Pairs with $|m_k - m_j|$ below `rcond`
+        times the largest are dropped (the pseudo-inverse's cut: its singular values are the
+        $|m_k - m_j|$). Other families: the dense pseudo-inverse."""
+        if self.family not in ("so", "u", "su"):
+            return super().poisson_lstsq(mu, v, rcond)
+        mu = np.asarray(as_state(mu, "mu", self.dim))
+        v = np.asarray(as_state(v, "v", self.dim))
+        lam, Q = np.linalg.eigh(1j * np.asarray(self.matrix(mu)))  # M = Q diag(-i lam) Q^dagger
+        Qh = np.conj(np.swapaxes(Q, -1, -2))
+        T = Qh @ np.asarray(self.matrix(-self.sign * v)) @ Q
+        gaps = lam[..., None, :] - lam[..., :, None]  # lam_k - lam_j; m_k - m_j = -i gaps
+        cut = rcond * np.max(np.abs(gaps), axis=(-2, -1), keepdims=True)
+        keep = np.abs(gaps) > cut
+        X_hat = np.where(keep, 1j * T / np.where(keep, gaps, 1.0), 0.0)
+        X = Q @ X_hat @ Qh
+        return np.asarray(self.coordinates(np.asarray(self._dagger(jnp.asarray(X)))))
+
     @property
     def structure_constants(self) -> np.ndarray:
         r"""$C_{abd} = \langle [E_a, E_b], E_d\rangle$ (read-only), formed on first use, for
@@ -378,7 +401,9 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
 
     # -- exact flows ------------------------------------------------------------------------------
     def _coadjoint_flow(self, alpha, t, mu):
-        return _coadjoint_flow(self, alpha, t, mu)
+        # The execution policy is read at trace time: a static argument, so that the program
+        # traced for `common_path_first`'s first attempt is not reused for its second.
+        return _coadjoint_flow(self, COMMON_PATH_ONLY.get(), alpha, t, mu)
 
     def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
         if self.dim > FLOW_PARAMETERS_MAX_DIM:
@@ -438,16 +463,19 @@ def _casimir_gradients(algebra: MatrixLieAlgebra, flat: jax.Array) -> jax.Array:
     return jax.vmap(jax.jacrev(algebra._casimir_values))(flat)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _coadjoint_flow(algebra: MatrixLieAlgebra, alpha: jax.Array, t: jax.Array, mu: jax.Array) -> jax.Array:
-    r"""$e^{tA^\dagger} M e^{-tA^\dagger}$ in coordinates (body convention)."""
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _coadjoint_flow(algebra: MatrixLieAlgebra, common_path_only: bool, alpha: jax.Array, t: jax.Array,
+                    mu: jax.Array) -> jax.Array:
+    r"""$e^{tA^\dagger} M e^{-tA^\dagger}$ in coordinates (body convention); `common_path_only`
+    is `COMMON_PATH_ONLY`'s value when traced (`matrix_exponential` reads it)."""
+    del common_path_only
     A = algebra._dagger(algebra.matrix(t[..., None] * alpha))
     M = algebra.matrix(mu)
-    U = jsl.expm(A)
+    U = matrix_exponential(A)
     if algebra.family in ("so", "u", "su"):
         V = algebra._dagger(U)  # exp(A)^{-1} = exp(A)^dagger for a unitary group
     else:
-        V = jsl.expm(-A)
+        V = matrix_exponential(-A)
     if algebra._exact_round_trip:  # entries +-1: coordinates(matrix(mu)) is mu exactly
         out = algebra.coordinates(U @ M @ V)
     else:

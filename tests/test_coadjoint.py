@@ -409,3 +409,51 @@ def test_expm_action_degenerate_inputs():
     # a non-finite generator gives a non-finite result (rollouts then raise), never a finite guess
     bad = zero.at[1, 0, 0].set(jnp.nan)
     assert not np.all(np.isfinite(np.asarray(_ACTION(bad, v))))
+
+
+# -- matrix_exponential (matrix algebras' flows): both paths against scipy's expm -------------
+@pytest.mark.parametrize("norm", (0.1, 0.49, 0.51, 3.0))
+def test_matrix_exponential_matches_scipy_on_both_paths(norm):
+    import scipy.linalg
+
+    rng = np.random.default_rng(int(norm * 100))
+    A = rng.normal(size=(6, 5, 5)) + 1j * rng.normal(size=(6, 5, 5))
+    A[:3] -= np.conj(A[:3].transpose(0, 2, 1))  # anti-Hermitian (u(N)) and general matrices
+    A *= norm / np.abs(A).sum(axis=-2).max()  # the batch's largest 1-norm is `norm`
+    reference = np.stack([scipy.linalg.expm(a) for a in A])
+    for fn in (jax.jit(lp.vmap_samples(lp.matrix_exponential)), jax.jit(lp.matrix_exponential)):
+        got = np.asarray(fn(jnp.asarray(A)))
+        # Taylor terms bounded by e^{1/2} (14 of them), or Pade and squarings: a few roundings
+        # of entries of size e^|A|
+        np.testing.assert_allclose(got, reference, rtol=0, atol=64 * EPS * np.exp(norm))
+    # under common_path_first's first attempt, beyond the bound: NaN (so that it is repeated)
+    from liepoisson._samples import COMMON_PATH_ONLY
+
+    token = COMMON_PATH_ONLY.set(True)
+    try:
+        first = np.asarray(jax.jit(lp.vmap_samples(lp.matrix_exponential))(jnp.asarray(A)))
+    finally:
+        COMMON_PATH_ONLY.reset(token)
+    assert np.all(np.isnan(first)) == (norm > 0.5)
+    if norm <= 0.5:
+        np.testing.assert_allclose(first, reference, rtol=0, atol=64 * EPS * np.exp(norm))
+
+
+def test_matrix_flow_under_training_keeps_the_spectrum_and_matches_the_eager_flow():
+    # An LPNet's step on u(N) inside a compiled, differentiated loss takes the Taylor path; it
+    # must be the eager flow (jax.scipy expm) to round-off, and keep the spectrum of iW.
+    g = lp.u(6)
+    rng = np.random.default_rng(2)
+    mu = jnp.asarray(rng.normal(size=(8, g.dim)))
+    alpha = jnp.asarray(rng.normal(size=(8, g.dim)))
+    alpha = alpha * 0.3 / np.abs(np.asarray(g.matrix(alpha))).sum(axis=-2).max()
+    eager = np.asarray(g.coadjoint_flow(alpha, 1.0, mu))
+    flow = lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m))
+    value, grad = jax.jit(jax.value_and_grad(lambda a: jnp.sum(flow(a, mu) ** 2)))(alpha)
+    traced = np.asarray(jax.jit(flow)(alpha, mu))
+    np.testing.assert_allclose(traced, eager, rtol=0, atol=64 * EPS * np.abs(eager).max())
+    np.testing.assert_allclose(np.asarray(g.spectrum(traced)), np.asarray(g.spectrum(mu)), rtol=0,
+                               atol=64 * EPS * np.abs(np.asarray(mu)).max())
+    # |flow(mu)|^2 = |mu|^2 for a unitary conjugation: its gradient in alpha vanishes
+    np.testing.assert_allclose(float(value), float(np.sum(np.asarray(mu) ** 2)), rtol=64 * EPS)
+    np.testing.assert_allclose(np.asarray(grad), 0.0, atol=1e3 * EPS * float(value))

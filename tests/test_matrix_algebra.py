@@ -443,3 +443,32 @@ def test_a_long_composition_of_flows_has_no_rounding_bias(g):
     c0, c1 = np.asarray(g.casimirs(mu0)), np.asarray(g.casimirs(mu1))
     scale = np.linalg.norm(np.asarray(g.casimir_gradients(mu0)), axis=-1) * np.linalg.norm(mu0)
     assert (np.abs(c1 - c0) / scale).max() < 400 * EPS
+
+
+@pytest.mark.parametrize("g", algebras({"so4", "u3"}))
+def test_poisson_lstsq_is_the_pseudo_inverse(g):
+    # so, u, su solve B(mu) xi = v in the eigenbasis of mu, the others through the dense
+    # pseudo-inverse: both must be that pseudo-inverse (the minimum-norm least-squares solution),
+    # also at mu = 0 (B = 0: xi = 0, no division) and where eigenvalues repeat.
+    from liepoisson._abstract_algebra import AbstractLieAlgebra
+
+    rng = np.random.default_rng(7)
+    mu = rng.normal(size=(4, g.dim))
+    v = rng.normal(size=(4, g.dim))  # not in the image of B: the least-squares part matters
+    mu[0] = 0.0
+    M = np.asarray(g.matrix(mu[1]))
+    mu[2] = np.asarray(g.coordinates(M @ M @ M - M))  # for so, u: stays in the algebra
+    if g.family in ("u", "su") and g.size >= 3:  # two equal eigenvalues: a stabiliser larger than generic
+        Q = np.linalg.qr(rng.normal(size=(g.size, g.size)))[0]
+        D = np.diag(np.r_[1.0, 1.0, np.arange(2.0, g.size)])
+        mu[3] = np.asarray(g.coordinates(1j * Q @ D @ Q.T))
+    got = np.asarray(g.poisson_lstsq(mu, v))
+    dense = np.asarray(AbstractLieAlgebra.poisson_lstsq(g, mu, v))
+    assert np.all(np.isfinite(got))
+    np.testing.assert_array_equal(got[0], 0.0)
+    # both backward stable: errors of a few eps times the largest |1/(m_k - m_j)| (O(1) here)
+    np.testing.assert_allclose(got, dense, rtol=0, atol=256 * EPS * np.abs(dense).max())
+    # and it is a least-squares solution: the residual is orthogonal to the image of B
+    B = np.asarray(g.poisson_tensor(mu))
+    r = v - np.einsum("...ab,...b->...a", B, got)
+    np.testing.assert_allclose(np.einsum("...ab,...a->...b", B, r), 0.0, atol=256 * EPS * np.abs(v).max())

@@ -55,11 +55,11 @@ class AbstractStepParametrisation(abc.ABC):
 
     def params_estimate(self, y0: ArrayLike, y1: ArrayLike, h: float) -> np.ndarray:
         r"""First-order estimate $\alpha \approx \mathbb B(y_0)^+ (y_1 - y_0)/h$ (minimum norm,
-        hence orthogonal to the Casimir gradients); not validated. Used to scale networks."""
+        hence orthogonal to the Casimir gradients; `system.poisson_lstsq`); not validated. Used
+        to scale networks."""
         y0, y1 = pairs(y0, y1, self.system.dim)
         h = positive_float(h, "h")
-        B = np.asarray(self.system.poisson_tensor(y0))
-        return np.einsum("...ab,...b->...a", np.linalg.pinv(B), (y1 - y0) / h)
+        return self.system.poisson_lstsq(y0, (y1 - y0) / h)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.system!r}, rtol={self.rtol:g})"

@@ -145,6 +145,15 @@ class AbstractPoissonSystem(abc.ABC):
             -2,
         )
 
+
+    def poisson_lstsq(self, y: ArrayLike, v: ArrayLike, rcond: float = 1e-15) -> np.ndarray:
+        r"""The minimum-norm least-squares $\xi$ of $\mathbb B(y)\,\xi = v$, `(..., dim)`
+        (NumPy; singular values below `rcond` times the largest dropped): the first-order
+        estimate of a step's parameters (`learn`'s `params_estimate`)."""
+        y = np.asarray(as_state(y, "y", self.dim))
+        v = np.asarray(as_state(v, "v", self.dim))
+        B = np.asarray(self.poisson_tensor(y))
+        return np.einsum("...ab,...b->...a", np.linalg.pinv(B, rcond=rcond), v)
     def vector_field(self, y: ArrayLike) -> jax.Array:
         """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
         y = self.check_regular(y)
@@ -309,6 +318,10 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
         if isinstance(self.algebra, LieAlgebra):
             return AbstractPoissonSystem.poisson_tensor(self, y)
         return self.algebra.poisson_tensor(as_state(y, "y", self.dim))
+
+    def poisson_lstsq(self, y: ArrayLike, v: ArrayLike, rcond: float = 1e-15) -> np.ndarray:
+        """The algebra's `poisson_lstsq` (matrix algebras: without forming $\\mathbb B$)."""
+        return self.algebra.poisson_lstsq(as_state(y, "y", self.dim), as_state(v, "v", self.dim), rcond)
 
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
