@@ -622,7 +622,10 @@ def test_w5_smoke_learned_isospectral_map_keeps_casimirs(tmp_path):
         assert learned["state_error_final"] < midpoint["state_error_final"]
     # halving the classical step helps (the reference is accurate to far below these errors)
     assert rows["isospectral midpoint, h = H/2"]["state_error_final"] < midpoint["state_error_final"]
-    assert sum("N = 6, learned" in v and "Casimirs kept to" in v for v in metrics["verdict"]) == 2
+    # the LPNet (alpha affine in W, a few L-BFGS-B iterations) is fitted, rolled out and reported
+    lpnet = rows["learned LPNet, alpha affine in W"]
+    assert lpnet["train_loss"] > 0 and lpnet["energy_error_early"] is not None
+    assert sum("N = 6, learned" in v and "Casimirs kept to" in v for v in metrics["verdict"]) == 3
     # resumable: the rows of N = 6 are read back, not refitted
     assert (tmp_path / "W5" / "rows" / "N6.json").exists()
 
