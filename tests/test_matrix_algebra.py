@@ -472,3 +472,17 @@ def test_poisson_lstsq_is_the_pseudo_inverse(g):
     B = np.asarray(g.poisson_tensor(mu))
     r = v - np.einsum("...ab,...b->...a", B, got)
     np.testing.assert_allclose(np.einsum("...ab,...a->...b", B, r), 0.0, atol=256 * EPS * np.abs(v).max())
+
+
+@pytest.mark.parametrize("g", algebras({"so4", "u3", "sl3"}))
+def test_casimir_gradients_in_closed_form_equal_reverse_mode(g):
+    # the closed form s p <(c X^(p-1))^dagger, E_a>/kappa against jax.jacrev of the values (and
+    # se's, which is jacrev itself); round-off of the powers, O(1) entries
+    import jax
+
+    mu = np.random.default_rng(4).normal(size=(3, g.dim))
+    mu[1] = 0.0  # every power vanishes: the gradients of tr X^p (p > 1) are zero, not NaN
+    got = np.asarray(g.casimir_gradients(mu))
+    reference = np.asarray(jax.vmap(jax.jacrev(g._casimir_values))(mu))
+    assert got.shape == (3, g.n_casimirs, g.dim)
+    np.testing.assert_allclose(got, reference, rtol=0, atol=64 * EPS * np.abs(reference).max())
