@@ -374,10 +374,11 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         q, traces, pfaffian_last = self._trace_casimirs()
         step = X @ X if q == 2 else X
         out, P = [], None
-        for k, s in traces:  # P = step^k
-            while P is None or k > done:
-                P, done = (step, 1) if P is None else (P @ step, done + 1)
-            out.append(s * jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+        scales = dict(traces)
+        for k in range(1, max(scales, default=0) + 1):
+            P = step if P is None else P @ step  # step^k
+            if k in scales:
+                out.append(scales[k] * jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
         if pfaffian_last:
             out.append(pfaffian(M))
         return jnp.stack(out, axis=-1)
@@ -393,13 +394,14 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         X = c * M
         q, traces, pfaffian_last = self._trace_casimirs()
         step = X @ X if q == 2 else X
-        out, P = [], None
-        for k, s in traces:  # P = step^(k-1)
-            while P is None or k - 1 > done:
-                P, done = (jnp.broadcast_to(jnp.eye(self.size, dtype=X.dtype), X.shape), 0) if P is None \
-                    else (P @ step, done + 1)
-            power = P @ X if q == 2 else P  # X^(p-1)
-            out.append(s * q * k / self.kappa * self.coordinates(dagger(c * power)))
+        out, P = [], jnp.broadcast_to(jnp.eye(self.size, dtype=X.dtype), X.shape)
+        scales = dict(traces)
+        for k in range(1, max(scales, default=0) + 1):
+            if k > 1:
+                P = P @ step  # step^(k-1)
+            if k in scales:
+                power = P @ X if q == 2 else P  # X^(p-1)
+                out.append(scales[k] * q * k / self.kappa * self.coordinates(dagger(c * power)))
         if pfaffian_last:
             flat = mu.reshape(-1, self.dim)
             out.append(jax.vmap(jax.grad(lambda m: pfaffian(self.matrix(m))))(flat).reshape(mu.shape))
