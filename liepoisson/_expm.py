@@ -148,7 +148,9 @@ def _taylor(A: jax.Array) -> jax.Array:
 
 
 def matrix_exponential(A: jax.Array) -> jax.Array:
-    r"""$\exp(A)$ for `A` `(..., n, n)`, exact to round-off (jit, vmap, grad, jvp).
+    r"""$\exp(A)$ for `A` `(..., n, n)` (jit, vmap, grad, jvp): to round-off on the Taylor path;
+    beyond it as accurate as `jax.scipy.linalg.expm` (errors of 1e-13 at $|A|_1 = 10$, see
+    `_EXPM_NORM`).
 
     Under `vmap_samples` (the library's training loss, rollout and Poisson defect), the
     largest $|A|_1$ over the batch picks the path for all samples: the Taylor polynomial of

@@ -295,7 +295,10 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
             return super().poisson_lstsq(mu, v, rcond)
         mu = np.asarray(as_state(mu, "mu", self.dim))
         v = np.asarray(as_state(v, "v", self.dim))
-        lam, Q = np.linalg.eigh(1j * np.asarray(self.matrix(mu)))  # M = Q diag(-i lam) Q^dagger
+        iM = 1j * np.asarray(self.matrix(mu))
+        # less its trace part (ad_M does not see it): eigenvalue gaps to the gaps' precision
+        iM -= (np.trace(iM, axis1=-2, axis2=-1) / self.size)[..., None, None] * np.eye(self.size)
+        lam, Q = np.linalg.eigh(iM)  # M = Q diag(-i lam) Q^dagger + its trace part
         Qh = np.conj(np.swapaxes(Q, -1, -2))
         T = Qh @ np.asarray(self.matrix(-self.sign * v)) @ Q
         gaps = lam[..., None, :] - lam[..., :, None]  # lam_k - lam_j; m_k - m_j = -i gaps

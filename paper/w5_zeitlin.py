@@ -238,7 +238,7 @@ class W5(AbstractExperiment):
         for N in P.sizes:
             print(f"W5: Zeitlin N = {N}", flush=True)
             path = rows_dir / f"N{N}.json"
-            saved = saved_row(_Rows, path, lambda N=N: _Rows([row_to_json(r) for r in run_size(N, P, progress)]))
+            saved = saved_row(_Rows, path, lambda N=N: _Rows([row_to_json(r) for r in run_size(N, P, progress)], True))
             rows += [row_from_json(W5Row, r) for r in saved.rows]
         return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows),
                 "profile_settings": dataclasses.asdict(P), "fine": FINE, "tol": TOL, "degrees": list(DEGREES), "early": EARLY}
@@ -257,9 +257,12 @@ class W5(AbstractExperiment):
 
 @dataclasses.dataclass(frozen=True)
 class _Rows:
-    """The rows of one N, saved together (a study interrupted after N = 16 resumes at 32)."""
+    """The rows of one N, saved together (a study interrupted after N = 16 resumes at 32).
+    `with_lpnet`: written by a run that fits the LPNet (files of earlier runs lack it and are
+    refitted, not resumed without its row)."""
 
     rows: list
+    with_lpnet: bool
 
 
 def _rows(metrics) -> list[W5Row]:

@@ -440,20 +440,50 @@ def test_matrix_exponential_matches_scipy_on_both_paths(norm):
 
 
 def test_matrix_flow_under_training_keeps_the_spectrum_and_matches_the_eager_flow():
-    # An LPNet's step on u(N) inside a compiled, differentiated loss takes the Taylor path; it
-    # must be the eager flow (jax.scipy expm) to round-off, and keep the spectrum of iW.
+    # An LPNet's step on u(N) inside a compiled, differentiated loss takes the Taylor path; its
+    # values and gradients must be the eager flow's (jax.scipy expm, a plain vmap) to round-off,
+    # and it keeps the spectrum of iW.
     g = lp.u(6)
     rng = np.random.default_rng(2)
     mu = jnp.asarray(rng.normal(size=(8, g.dim)))
+    w = jnp.asarray(rng.normal(size=(8, g.dim)))
     alpha = jnp.asarray(rng.normal(size=(8, g.dim)))
     alpha = alpha * 0.3 / np.abs(np.asarray(g.matrix(alpha))).sum(axis=-2).max()
+
+    def loss(a, vmap):
+        return jnp.sum(w * vmap(lambda a, m: g.coadjoint_flow(a, 1.0, m))(a, mu))
+
+    traced = np.asarray(jax.jit(lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m)))(alpha, mu))
     eager = np.asarray(g.coadjoint_flow(alpha, 1.0, mu))
-    flow = lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m))
-    value, grad = jax.jit(jax.value_and_grad(lambda a: jnp.sum(flow(a, mu) ** 2)))(alpha)
-    traced = np.asarray(jax.jit(flow)(alpha, mu))
     np.testing.assert_allclose(traced, eager, rtol=0, atol=64 * EPS * np.abs(eager).max())
     np.testing.assert_allclose(np.asarray(g.spectrum(traced)), np.asarray(g.spectrum(mu)), rtol=0,
                                atol=64 * EPS * np.abs(np.asarray(mu)).max())
-    # |flow(mu)|^2 = |mu|^2 for a unitary conjugation: its gradient in alpha vanishes
-    np.testing.assert_allclose(float(value), float(np.sum(np.asarray(mu) ** 2)), rtol=64 * EPS)
-    np.testing.assert_allclose(np.asarray(grad), 0.0, atol=1e3 * EPS * float(value))
+    taylor = np.asarray(jax.jit(jax.grad(lambda a: loss(a, lp.vmap_samples)))(alpha))
+    reference = np.asarray(jax.jit(jax.grad(lambda a: loss(a, jax.vmap)))(alpha))
+    assert np.abs(reference).max() > 1.0  # a loss that the flow's parameters move
+    np.testing.assert_allclose(taylor, reference, rtol=0, atol=256 * EPS * np.abs(reference).max())
+
+
+def test_common_path_first_on_a_matrix_flow_beyond_the_taylor_bound():
+    # The matrix flow is compiled once per policy: the first attempt (Taylor only, NaN beyond
+    # |A|_1 = 1/2) must not be reused by the repeat, which then returns the finite value.
+    g = lp.u(3)
+    rng = np.random.default_rng(6)
+    mu = jnp.asarray(rng.normal(size=(4, g.dim)))
+    alpha = jnp.asarray(rng.normal(size=(4, g.dim)))
+    alpha = alpha * 3.0 / np.abs(np.asarray(g.matrix(alpha))).sum(axis=-2).max()  # beyond 1/2
+
+    def loss(a):
+        return jnp.sum(jnp.sin(lp.vmap_samples(lambda a, m: g.coadjoint_flow(a, 1.0, m))(a, mu)))
+
+    calls = []
+
+    def ok(out):
+        calls.append(bool(np.isfinite(out[0])))
+        return calls[-1]
+
+    value, grad = lp.common_path_first(jax.value_and_grad(loss), ok)(alpha)
+    assert calls == [False]  # the first attempt was beyond the bound, and rejected
+    assert np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(grad)))
+    eager = float(jnp.sum(jnp.sin(g.coadjoint_flow(alpha, 1.0, mu))))
+    np.testing.assert_allclose(float(value), eager, rtol=0, atol=64 * EPS * np.abs(np.asarray(mu)).size)

@@ -138,7 +138,13 @@ def test_a_rollout_with_a_fixed_iteration_count_is_reverse_differentiable():
 def test_predictor_extrapolates_polynomials_exactly_through_the_ring():
     import jax.numpy as jnp
 
-    from integrators._isospectral import PREDICTOR_DEGREE, PREDICTOR_POINTS, _counted, _predict, _push
+    from integrators._isospectral import (
+        PREDICTOR_DEGREE,
+        PREDICTOR_POINTS,
+        _counted,
+        _predict,
+        _push,
+    )
 
     M = PREDICTOR_POINTS
     # increments D_n = p(n) 1 for a polynomial p of degree PREDICTOR_DEGREE: once k points are

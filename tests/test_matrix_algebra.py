@@ -445,7 +445,7 @@ def test_a_long_composition_of_flows_has_no_rounding_bias(g):
     assert (np.abs(c1 - c0) / scale).max() < 400 * EPS
 
 
-@pytest.mark.parametrize("g", algebras({"so4", "u3"}))
+@pytest.mark.parametrize("g", algebras({"so4", "u3", "su3"}))
 def test_poisson_lstsq_is_the_pseudo_inverse(g):
     # so, u, su solve B(mu) xi = v in the eigenbasis of mu, the others through the dense
     # pseudo-inverse: both must be that pseudo-inverse (the minimum-norm least-squares solution),

@@ -145,7 +145,6 @@ class AbstractPoissonSystem(abc.ABC):
             -2,
         )
 
-
     def poisson_lstsq(self, y: ArrayLike, v: ArrayLike, rcond: float = 1e-15) -> np.ndarray:
         r"""The minimum-norm least-squares $\xi$ of $\mathbb B(y)\,\xi = v$, `(..., dim)`
         (NumPy; singular values below `rcond` times the largest dropped): the first-order
@@ -154,6 +153,7 @@ class AbstractPoissonSystem(abc.ABC):
         v = np.asarray(as_state(v, "v", self.dim))
         B = np.asarray(self.poisson_tensor(y))
         return np.einsum("...ab,...b->...a", np.linalg.pinv(B, rcond=rcond), v)
+
     def vector_field(self, y: ArrayLike) -> jax.Array:
         """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
         y = self.check_regular(y)
