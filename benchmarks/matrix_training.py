@@ -25,9 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import integrators as it
-import learn
 import liepoisson as lp
 from liepoisson._abstract_algebra import AbstractLieAlgebra
+from paper.w5_zeitlin import lpnet_start
 
 from ._report import add_output_arguments, saved_results, write_json
 
@@ -50,9 +50,7 @@ def measure(N: int, pairs: int) -> dict:
     H = float(0.1 * np.pi * system.hbar / np.linalg.norm(np.asarray(system.stream_matrix(W)), 2))  # quflow's step
     y0 = np.stack([system.random_state(100 + i) for i in range(pairs)])
     y1 = np.asarray(it.IsospectralMidpoint(system, H).rollout(y0, 1))[:, -1]
-    model = learn.LPNet(system, hidden=(), h=H)
-    zero = jnp.zeros_like(model.network.mlp.layers[-1].weight)  # as W5 starts it
-    model = eqx.tree_at(lambda m: m.network.mlp.layers[-1].weight, model, zero).normalised(y0, y1, H)
+    model = lpnet_start(system, H).normalised(y0, y1, H)
     A = np.asarray(system.algebra.matrix(H * np.asarray(jax.vmap(model.alpha)(jnp.asarray(y0)))))
     params, static = eqx.partition(model, eqx.is_inexact_array)
     out = {"N": N, "dim": system.dim, "pairs": pairs, "h": H,

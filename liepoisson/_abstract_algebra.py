@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._inverse import checked_flow_parameters
-from ._validation import as_scalar_time, as_state, broadcast_batch
+from ._validation import as_scalar_time, as_state, broadcast_batch, pinv_apply
 
 
 class AbstractLieAlgebra(abc.ABC):
@@ -103,8 +103,7 @@ class AbstractLieAlgebra(abc.ABC):
         matrices solve it in the eigenbasis of $\mu$ instead, without forming it."""
         mu = np.asarray(as_state(mu, "mu", self.dim))
         v = np.asarray(as_state(v, "v", self.dim))
-        B = np.asarray(self.poisson_tensor(mu))
-        return np.einsum("...ab,...b->...a", np.linalg.pinv(B, rcond=rcond), v)
+        return pinv_apply(self.poisson_tensor(mu), v, rcond)
 
     def poisson_tensor_components(self, mu: Any) -> list[list[Any]]:
         r"""$\mathbb{B}$ as nested lists of expressions in the components (any backend: numbers,

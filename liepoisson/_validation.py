@@ -8,6 +8,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 def is_traced(x: Any) -> bool:
@@ -178,3 +179,9 @@ def broadcast_batch(dim: int, **batches: tuple[int, ...]) -> tuple[int, ...]:
             f"the batch shapes of {given} do not broadcast (states and parameters have shape "
             f"(..., {dim}), times shape (...), and their leading axes broadcast together)"
         ) from None
+
+
+def pinv_apply(B: ArrayLike, v: ArrayLike, rcond: float) -> np.ndarray:
+    r"""$B^+ v$ for stacks `B` `(..., n, n)`, `v` `(..., n)` (NumPy; singular values below `rcond`
+    times the largest dropped): the dense minimum-norm least squares of `poisson_lstsq`."""
+    return np.einsum("...ab,...b->...a", np.linalg.pinv(np.asarray(B), rcond=rcond), np.asarray(v))

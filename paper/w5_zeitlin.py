@@ -139,6 +139,13 @@ def measure(system, name: str, step_map, h: float, reference: np.ndarray, every:
                  ms_per_step=1e3 * best / (n_steps * reference.shape[0]), **extra)
 
 
+def lpnet_start(system: lp.systems.Zeitlin, h: float) -> learn.LPNet:
+    r"""W5's LPNet before its fit: $\alpha(W)$ affine in $W$ (`hidden=()`), zero weights."""
+    lpnet = learn.LPNet(system, hidden=(), h=h)
+    zero = jnp.zeros_like(lpnet.network.mlp.layers[-1].weight)
+    return eqx.tree_at(lambda m: m.network.mlp.layers[-1].weight, lpnet, zero)
+
+
 def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
     system = lp.systems.Zeitlin(N)
     H = quflow_step(system)
@@ -171,10 +178,8 @@ def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
     # N = 16 it fitted the training pairs and not the test fields: 65,792 weights, 98,304
     # residuals).
     begin = time.perf_counter()
-    lpnet = learn.LPNet(system, hidden=(), h=H)
-    layer = lpnet.network.mlp.layers[-1]
     fitted, record = learn.fit(
-        eqx.tree_at(lambda m: m.network.mlp.layers[-1].weight, lpnet, jnp.zeros_like(layer.weight)),
+        lpnet_start(system, H),
         (trajectories[:P.lpnet_fields, :-1].reshape(-1, system.dim), trajectories[:P.lpnet_fields, 1:].reshape(-1, system.dim)),
         h=H, optimiser=learn.QuasiNewton(P.lpnet_iterations), validation_fraction=0.2, normalise=True,
         progress=progress)

@@ -20,7 +20,7 @@ from .._groups import AbstractLieGroup, default_group
 from .._inverse import checked_flow_parameters, gauss_newton_parameters
 from .._namespace import HEYOKA, JAX
 from .._polynomial import Polynomial
-from .._validation import as_scalar_time, as_state, broadcast_batch
+from .._validation import as_scalar_time, as_state, broadcast_batch, pinv_apply
 
 if TYPE_CHECKING:
     from ._terms import CollectiveTerm
@@ -151,8 +151,7 @@ class AbstractPoissonSystem(abc.ABC):
         estimate of a step's parameters (`learn`'s `params_estimate`)."""
         y = np.asarray(as_state(y, "y", self.dim))
         v = np.asarray(as_state(v, "v", self.dim))
-        B = np.asarray(self.poisson_tensor(y))
-        return np.einsum("...ab,...b->...a", np.linalg.pinv(B, rcond=rcond), v)
+        return pinv_apply(self.poisson_tensor(y), v, rcond)
 
     def vector_field(self, y: ArrayLike) -> jax.Array:
         """$\\dot y = \\mathbb{B}(y)\\,\\nabla H(y)$."""
