@@ -133,8 +133,8 @@ def expm_action(A: jax.Array, v: jax.Array) -> jax.Array:
 
 # The common path of `matrix_exponential` under `vmap_samples`: the Taylor polynomial of
 # degree 14 for |A|_1 <= 1/2, whose remainder is at most (1/2)^15/15! e^{1/2} = 4e-17 relative
-# (below round-off; every term is bounded by e^{1/2}). An LPNet on Zeitlin's model at quflow's
-# step has |h A|_1 of about 0.2 (N = 16) to 0.25 (N = 32).
+# (below round-off; every term is bounded by e^{1/2}). What a training batch's norms are, and
+# what the path saves: BENCHMARKS.md, "LPNets on Zeitlin's model".
 _MATRIX_BOUND, _MATRIX_DEGREE = 0.5, 14
 
 
@@ -149,8 +149,8 @@ def _taylor(A: jax.Array) -> jax.Array:
 
 def matrix_exponential(A: jax.Array) -> jax.Array:
     r"""$\exp(A)$ for `A` `(..., n, n)` (jit, vmap, grad, jvp): to round-off on the Taylor path;
-    beyond it as accurate as `jax.scipy.linalg.expm` (errors of 1e-13 at $|A|_1 = 10$, see
-    `_EXPM_NORM`).
+    beyond it as accurate as `jax.scipy.linalg.expm` (less so than `expm_action` at large
+    norms: the comment on `_EXPM_NORM`).
 
     Under `vmap_samples` (the library's training loss, rollout and Poisson defect), the
     largest $|A|_1$ over the batch picks the path for all samples: the Taylor polynomial of

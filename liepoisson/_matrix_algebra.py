@@ -390,8 +390,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         r"""Gradients `(..., k, n)` in closed form: with $X = cM$ and $p = qk$,
         $\partial_a\,s\,\mathrm{Re}\,\mathrm{tr}\,X^p = s\,p\,\mathrm{Re}\,\mathrm{tr}(cX^{p-1}E_a)
         = s\,p\,\langle (cX^{p-1})^\dagger, E_a\rangle/\kappa$; the Pfaffian's by its own
-        derivative. (Reverse mode through the powers stores every power for every Casimir: 34 GB
-        for 1920 states of u(32).)"""
+        derivative. (Reverse mode through the powers stores every power for every Casimir:
+        BENCHMARKS.md, "LPNets on Zeitlin's model".)"""
         M = self.matrix(mu)
         c = 1j if self.complex else 1.0
         X = c * M
