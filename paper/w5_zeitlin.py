@@ -32,8 +32,6 @@ import dataclasses
 import time
 from pathlib import Path
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 import integrators as it
@@ -140,10 +138,9 @@ def measure(system, name: str, step_map, h: float, reference: np.ndarray, every:
 
 
 def lpnet_start(system: lp.systems.Zeitlin, h: float) -> learn.LPNet:
-    r"""W5's LPNet before its fit: $\alpha(W)$ affine in $W$ (`hidden=()`), zero weights."""
-    lpnet = learn.LPNet(system, hidden=(), h=h)
-    zero = jnp.zeros_like(lpnet.network.mlp.layers[-1].weight)
-    return eqx.tree_at(lambda m: m.network.mlp.layers[-1].weight, lpnet, zero)
+    r"""W5's LPNet before its fit: $\alpha(W)$ affine in $W$ (`hidden=()`), from zero weights
+    and bias (`init="zero"`: the constant mean step once normalised)."""
+    return learn.LPNet(system, hidden=(), h=h, init="zero")
 
 
 def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:

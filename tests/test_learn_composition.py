@@ -130,3 +130,51 @@ def test_group_averaged_scalings_come_from_the_group_orbit():
     # and the averaged network is still equivariant with those scalings
     for s in np.asarray(group):
         assert np.allclose(scaled(jnp.asarray(s * x[0])), s * np.asarray(scaled(jnp.asarray(x[0]))), atol=1e-14)
+
+
+def test_a_zero_start_is_the_constant_test_flow_at_the_output_shift():
+    # init="zero": the last layer starts at zero weights and bias, so alpha(y) is the output
+    # shift at every y and the step is the exact test flow of that constant alpha.
+    shift, scale = (0.3, -0.2, 0.5), (2.0, 3.0, 4.0)
+    net = learn.LPNet(RB, hidden=(4,), key=2, output_scaling=(shift, scale), init="zero", h=0.1)
+    np.testing.assert_array_equal(np.asarray(jax.vmap(net.network)(Y)), np.broadcast_to(shift, Y.shape))
+    want = np.stack([np.asarray(RB.test_flow(jnp.asarray(shift), 0.1, y)) for y in Y])
+    np.testing.assert_array_equal(np.asarray(jax.vmap(net.step)(Y)), want)
+    # the hidden layer keeps its random start (from the same key as the default network's)
+    default = learn.LPNet(RB, hidden=(4,), key=2, h=0.1)
+    np.testing.assert_array_equal(net.network.mlp.layers[0].weight, default.network.mlp.layers[0].weight)
+    assert not np.any(default.network.mlp.layers[-1].weight == 0.0)
+
+
+def test_a_zero_start_is_part_of_the_architecture(tmp_path):
+    net = learn.LPNet(RB, hidden=(4,), init="zero", h=0.1)
+    assert net.network.spec()["init"] == "zero"
+    # files written before `init` existed have none: a default network's spec stays the same
+    assert "init" not in learn.LPNet(RB, hidden=(4,)).network.spec()
+    moved = jax.tree_util.tree_map(lambda w: w + 0.25, net)  # as a fit would leave it
+    moved.save(tmp_path / "z.h5")
+    back = learn.load(tmp_path / "z.h5")
+    assert back.network.init == "zero"
+    np.testing.assert_array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(moved.step)(Y)))
+    for fresh in (back.reinitialised(7), learn.LPNet.from_hyperparameters(RB, back.hyperparameters(), key=7, h=0.1)):
+        last = fresh.network.mlp.layers[-1]
+        assert not np.any(last.weight) and not np.any(last.bias)
+
+
+@pytest.mark.parametrize("init", ["zeros", None, 0])
+def test_an_unknown_start_is_refused_naming_it(init):
+    with pytest.raises(ValueError, match=r"init must be one of \('random', 'zero'\)"):
+        learn.AffineMLP(3, 3, init=init)
+
+
+def test_a_fit_from_a_zero_start_lowers_the_loss():
+    # the gradient reaches the zero last layer (and through it the hidden ones): pairs of a map
+    # whose alpha varies with the state, y1 = exp flow of grad H(y0) (a Lie-Euler step)
+    y0 = np.random.default_rng(3).normal(size=(24, 3))
+    y1 = np.stack([np.asarray(RB.test_flow(RB.hamiltonian_gradient(y), 0.1, y)) for y in y0])
+    net = learn.LPNet(RB, hidden=(8,), init="zero", h=0.1).normalised(y0, y1, 0.1)
+    before = float(learn.state_mse(net, jnp.asarray(y0), jnp.asarray(y1)))
+    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.QuasiNewton(50), validation_fraction=0.0,
+                                 progress=False, normalise=False)
+    assert record.train_loss < 0.1 * before
+    assert np.any(fitted.network.mlp.layers[-1].weight != 0.0)

@@ -55,7 +55,9 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
     default `default_parametrisation(system)`); `h`, the time step (`None`: set by `learn.fit`
     from the data); `phase`: a network from states to one rate per Casimir, the part of the
     configuration's motion that momenta cannot fix (`lifted_step`; `learn.fit_phase` fits it
-    to configurations; `None`: no lifted step).
+    to configurations; `None`: no lifted step); `init` (keyword): the default network's start,
+    `"random"` (default) or `"zero"` ($\alpha$ starts at the constant $m_\text{out}$; see
+    `AffineMLP`).
     """
 
     network: AbstractNetwork
@@ -77,6 +79,7 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
         *,
         network: AbstractNetwork | None = None,
         phase: AbstractNetwork | None = None,
+        init: str | None = None,
     ):
         self.system = check_system(system)
         refuse_nonholonomic(system, "an LPNet")
@@ -94,7 +97,7 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
         self.parametrisation = parametrisation
         network = network_or_default(
             network, functools.partial(AffineMLP, system.dim, parametrisation.n_params), hidden=hidden,
-            activation=activation, key=key, input_scaling=input_scaling, output_scaling=output_scaling)
+            activation=activation, key=key, input_scaling=input_scaling, output_scaling=output_scaling, init=init)
         in_size = system.dim + 1 if isinstance(network, AbstractNetwork) and network.in_size == system.dim + 1 \
             else system.dim
         network = check_network(network, in_size, parametrisation.n_params,

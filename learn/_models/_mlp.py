@@ -67,6 +67,15 @@ def activation_antiderivative(activation: str):
     )
 
 
+INITS = ("random", "zero")
+
+
+def check_init(init: Any) -> str:
+    if init not in INITS:
+        raise ValueError(f"init must be one of {INITS}; got {init!r}")
+    return init
+
+
 def check_activation(activation: Any) -> str:
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}; got {activation!r}")
@@ -74,17 +83,22 @@ def check_activation(activation: Any) -> str:
 
 
 class MLP(eqx.Module):
-    """$x \\mapsto W_L\\,\\sigma(\\ldots\\sigma(W_1 x + b_1)\\ldots) + b_L$ for one sample."""
+    """$x \\mapsto W_L\\,\\sigma(\\ldots\\sigma(W_1 x + b_1)\\ldots) + b_L$ for one sample;
+    `init="zero"` starts with $W_L = 0$, $b_L = 0$ (the other layers random)."""
 
     layers: tuple[eqx.nn.Linear, ...]
     activation: str = eqx.field(static=True)
 
-    def __init__(self, in_size: int, out_size: int, hidden: Sequence[int], activation: str, key):
+    def __init__(self, in_size: int, out_size: int, hidden: Sequence[int], activation: str, key,
+                 init: str = "random"):
         sizes = (in_size, *hidden, out_size)
         keys = jax.random.split(key, len(sizes) - 1)
-        self.layers = tuple(
-            eqx.nn.Linear(a, b, key=k, dtype=jnp.float64) for a, b, k in zip(sizes[:-1], sizes[1:], keys)
-        )
+        layers = [eqx.nn.Linear(a, b, key=k, dtype=jnp.float64) for a, b, k in zip(sizes[:-1], sizes[1:], keys)]
+        if init == "zero":
+            last = layers[-1]
+            layers[-1] = eqx.tree_at(lambda l: (l.weight, l.bias), last,
+                                     (jnp.zeros_like(last.weight), jnp.zeros_like(last.bias)))
+        self.layers = tuple(layers)
         self.activation = activation
 
     def __call__(self, x: jax.Array) -> jax.Array:
@@ -132,7 +146,12 @@ class AffineMLP(AbstractNetwork):
 
     **Arguments:** `in_size`, `out_size`; `hidden` layer widths; `activation` (a name of
     `ACTIVATIONS`); `key` (int seed or PRNG key); `input_scaling`/`output_scaling`:
-    `(shift, scale)` pairs (`None`: identity; `learn.fit(normalise=True)` sets them).
+    `(shift, scale)` pairs (`None`: identity; `learn.fit(normalise=True)` sets them); `init`:
+    `"random"` (default: every layer at equinox's uniform start) or `"zero"` (the last layer
+    at zero weights and bias, so the network starts as the constant $m_\text{out}$, the
+    data's mean output once normalised, and a fit moves only directions the data reach:
+    the start for a network with more weights than data, such as an affine $\alpha(W)$ on
+    Zeitlin's model). `init` is part of the architecture (`spec`, `reinitialised`).
     """
 
     mlp: MLP
@@ -140,6 +159,7 @@ class AffineMLP(AbstractNetwork):
     input_scale: tuple[float, ...]
     output_shift: tuple[float, ...]
     output_scale: tuple[float, ...]
+    init: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -150,9 +170,11 @@ class AffineMLP(AbstractNetwork):
         key: int | jax.Array = 0,
         input_scaling: Scaling | None = None,
         output_scaling: Scaling | None = None,
+        init: str = "random",
     ):
         in_size, out_size = positive_int(in_size, "in_size"), positive_int(out_size, "out_size")
-        self.mlp = MLP(in_size, out_size, check_hidden(hidden), check_activation(activation), as_key(key))
+        self.init = check_init(init)
+        self.mlp = MLP(in_size, out_size, check_hidden(hidden), check_activation(activation), as_key(key), init)
         self.input_shift, self.input_scale = _scaling(input_scaling, in_size, "input_scaling")
         self.output_shift, self.output_scale = _scaling(output_scaling, out_size, "output_scaling")
 
@@ -165,7 +187,7 @@ class AffineMLP(AbstractNetwork):
 
     def reinitialised(self, key: int | jax.Array) -> AffineMLP:
         return AffineMLP(self.in_size, self.out_size, self.hidden, self.activation, key,
-                         (self.input_shift, self.input_scale), (self.output_shift, self.output_scale))
+                         (self.input_shift, self.input_scale), (self.output_shift, self.output_scale), self.init)
 
     @property
     def in_size(self) -> int:
@@ -184,7 +206,7 @@ class AffineMLP(AbstractNetwork):
         return self.mlp.activation
 
     def spec(self) -> dict[str, Any]:
-        return {
+        out = {
             "kind": "AffineMLP",
             "in_size": self.in_size,
             "out_size": self.out_size,
@@ -193,6 +215,8 @@ class AffineMLP(AbstractNetwork):
             "input_scaling": [list(self.input_shift), list(self.input_scale)],
             "output_scaling": [list(self.output_shift), list(self.output_scale)],
         }
+        # files written before `init` existed have none: a default network's stays the same
+        return out if self.init == "random" else {**out, "init": self.init}
 
     def rescaled(self, inputs: np.ndarray, outputs: np.ndarray) -> AffineMLP:
         in_shift, in_scale = affine(inputs, len(self.input_shift))
