@@ -13,6 +13,7 @@ from ._matrix_algebra import (
     MatrixLieAlgebra as MatrixLieAlgebra,
     gl as gl,
     se as se,
+    semidirect as semidirect,
     sl as sl,
     so as so,
     sp as sp,

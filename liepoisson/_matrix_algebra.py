@@ -1,5 +1,6 @@
 r"""Matrix Lie algebras of any size: so(N), u(N), su(N), sp(2N, R), gl(N), sl(N), and the
-semidirect product se(N) = so(N) x R^N.
+semidirect products by the defining representation, se(N) = so(N) x R^N, gl(N) x R^N,
+sl(N) x R^N and u(N) x C^N (`semidirect`).
 
 An element is an $m\times m$ matrix $X = \sum_a x_a E_a$ in a basis $E_a$ orthonormal for the
 pairing $\langle A, B\rangle = \kappa\,\mathrm{Re}\,\mathrm{tr}(A^\dagger B)$ (`kappa`,
@@ -14,14 +15,14 @@ M(t) = \Pi\big(e^{t A^\dagger} M e^{-t A^\dagger}\big)$$
 
 for the test flow of $\langle\alpha, \mu\rangle$ ($\langle\mathrm{Ad}^*_g\mu, \xi\rangle =
 \langle M, gXg^{-1}\rangle$, and the projection of a conjugate of the orthogonal complement is
-zero). Every algebra here but se(N) is closed under $X \mapsto X^\dagger$, and then $\Pi$ acts
+zero). Every algebra here but the semidirect products is closed under $X \mapsto X^\dagger$, and then $\Pi$ acts
 as the identity: the flow is a conjugation, the whole spectrum of $M$ is kept and the Casimirs
 are the traces of its powers. For so(N) and u(N), $\Xi^\dagger = -\Xi$ and the body equation is
 $\dot M = [M, \Xi]$ (Manakov's $\dot M = [M, \Omega]$). se(N) as $(N+1)\times(N+1)$ matrices
 $\begin{pmatrix}A & \sqrt2\,b\\ 0 & 0\end{pmatrix}$ (so that $(A, b)$ with
 $\langle\cdot,\cdot\rangle = \tfrac12\mathrm{tr}A^\top A' + b\cdot b'$ is orthonormal): its
 bracket is $([A, A'], Ab' - A'b)$, its orbits are not isospectral, and its Casimirs are given
-below (`casimirs`).
+below (`casimirs`); the other semidirect products likewise, with $b$ at unit scale.
 
 Coordinates and matrices are converted by one scatter and one gather over the nonzero entries
 of the basis, $O(m^2)$; brackets, $\mathrm{ad}^*$ and flows are matrix products, $O(m^3)$. No
@@ -54,7 +55,10 @@ STRUCTURE_CONSTANTS_MAX_DIM = 128
 #: Jacobian per pair) is attempted.
 FLOW_PARAMETERS_MAX_DIM = 400
 
-FAMILIES = ("so", "u", "su", "sp", "gl", "sl", "se")
+#: The semidirect products g x R^N (C^N for u) by the defining representation, by family, and
+#: the algebra g of each.
+SEMIDIRECT = {"se": "so", "aff": "gl", "saff": "sl", "uaff": "u"}
+FAMILIES = ("so", "u", "su", "sp", "gl", "sl", *SEMIDIRECT)
 
 
 def dagger(X: jax.Array) -> jax.Array:
@@ -117,8 +121,10 @@ def _best_dual(c: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, bool]:
 
 
 def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
-    """`(m, a, p, c, kappa, names)`: the basis as triples, $E_a$ has entry `c` at flat index `p`
-    (row-major in an m x m matrix)."""
+    r"""`(m, a, p, c, kappa, names)`: the basis as triples, $E_a$ has entry `c` at flat index `p`
+    (row-major in an m x m matrix). A semidirect product g x R^N (`SEMIDIRECT`) is
+    $[[A, s\,b], [0, 0]]$ in size $N + 1$, g's basis first, the translations last ($s$ makes
+    them unit vectors of the pairing: $\sqrt2$ for so's $\kappa = 1/2$)."""
     a_list: list[int] = []
     p_list: list[int] = []
     c_list: list[complex] = []
@@ -133,14 +139,16 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
         names.append(name)
 
     r2 = 1.0 / math.sqrt(2.0)
-    if family == "so":
-        m, kappa = N, 0.5
+    base = SEMIDIRECT.get(family, family)
+    m = N + 1 if family in SEMIDIRECT else (2 * N if family == "sp" else N)
+    if base == "so":
+        kappa = 0.5
         for i in range(N):
             for j in range(i + 1, N):
                 add([(i, j, 1.0), (j, i, -1.0)], f"M{i + 1}{j + 1}")
-    elif family in ("u", "su"):
-        m, kappa = N, 1.0
-        if family == "u":
+    elif base in ("u", "su"):
+        kappa = 1.0
+        if base == "u":
             for i in range(N):
                 add([(i, i, 1j)], f"d{i + 1}")
         else:
@@ -151,9 +159,9 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
             for j in range(i + 1, N):
                 add([(i, j, r2), (j, i, -r2)], f"r{i + 1}{j + 1}")
                 add([(i, j, 1j * r2), (j, i, 1j * r2)], f"s{i + 1}{j + 1}")
-    elif family in ("gl", "sl"):
-        m, kappa = N, 1.0
-        if family == "gl":
+    elif base in ("gl", "sl"):
+        kappa = 1.0
+        if base == "gl":
             for i in range(N):
                 for j in range(N):
                     add([(i, j, 1.0)], f"E{i + 1}{j + 1}")
@@ -165,17 +173,9 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
                 for j in range(N):
                     if i != j:
                         add([(i, j, 1.0)], f"E{i + 1}{j + 1}")
-    elif family == "se":
-        # se(N) = so(N) x R^N: [[A, sqrt2 b], [0, 0]], the translations last
-        m, kappa = N + 1, 0.5
-        for i in range(N):
-            for j in range(i + 1, N):
-                add([(i, j, 1.0), (j, i, -1.0)], f"M{i + 1}{j + 1}")
-        for i in range(N):
-            add([(i, N, math.sqrt(2.0))], f"p{i + 1}")
-    elif family == "sp":
+    elif base == "sp":
         # sp(2N, R) = {[[a, b], [c, -a^T]] : b, c symmetric}.
-        m, kappa = 2 * N, 1.0
+        kappa = 1.0
         for i in range(N):
             for j in range(N):
                 add([(i, j, r2), (N + j, N + i, -r2)], f"a{i + 1}{j + 1}")
@@ -189,6 +189,12 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
                 add([(N + i, j, r2), (N + j, i, r2)], f"c{i + 1}{j + 1}")
     else:
         raise ValueError(f"family must be one of {FAMILIES}; got {family!r}")
+    if family in SEMIDIRECT:
+        scale = math.sqrt(1.0 / kappa)
+        for i in range(N):
+            add([(i, N, scale)], f"p{i + 1}")
+            if base == "u":
+                add([(i, N, 1j * scale)], f"q{i + 1}")
     return m, np.asarray(a_list), np.asarray(p_list), np.asarray(c_list), kappa, names
 
 
@@ -200,12 +206,13 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
       traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
       for sl), `"se"` (se(N) = so(N) x R^N, $(N+1)\times(N+1)$, coordinates
-      $(M_{ij}, p_i)$).
+      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"` (gl(N), sl(N), u(N) x R^N or C^N:
+      `liepoisson.semidirect`).
     - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
     - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
 
-    The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)`, `se(N)` build
-    them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
+    The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)`, `se(N)` and
+    `semidirect(g)` build them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
     Casimirs are traces of powers and so(2k)'s Pfaffian (`casimirs`), the spectrum is
     `spectrum`.
     """
@@ -228,7 +235,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         self.size = m
         self.kappa = kappa
         self.basis_names = tuple(names)
-        self.complex = family in ("u", "su")
+        self.complex = SEMIDIRECT.get(family, family) in ("u", "su")
         self._dim = len(names)
         self._dtype = jnp.complex128 if self.complex else jnp.float64
         self._a = a
@@ -338,7 +345,14 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         """The rank (of the coadjoint action, the index): floor(N/2) for so(N), N for u(N), gl(N)
         and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N)."""
         return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
-                "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2}[self.family]
+                "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2,
+                "aff": 0, "saff": 1, "uaff": self.N}[self.family]
+
+    @property
+    def semidirect(self) -> bool:
+        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff): orbits not
+        isospectral, Casimirs not traces of powers."""
+        return self.family in SEMIDIRECT
 
     def casimirs(self, mu: ArrayLike) -> jax.Array:
         r"""Traces of powers, real, `(..., k)`: so(N) $\tfrac12(-1)^k\mathrm{tr}\,M^{2k}$,
@@ -370,8 +384,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         return 1, [(k, 1.0) for k in range(first, self.N + 1)], False
 
     def _casimir_values(self, mu: jax.Array) -> jax.Array:
-        if self.family == "se":
-            return _se_casimirs(self.matrix(mu), self.N)
+        if self.semidirect:
+            return _semidirect_casimirs(self, self.matrix(mu))
         M = self.matrix(mu)
         X = 1j * M if self.complex else M
         q, traces, pfaffian_last = self._trace_casimirs()
@@ -421,10 +435,10 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         r"""The eigenvalues of $M$, kept by every coadjoint motion: real, ascending, of the
         Hermitian $iM$ for u(N), su(N) and of $-iM$ for so(N) (`(..., m)`); complex, of $M$ for
         the others, sorted by real then imaginary part."""
-        if self.family == "se":
+        if self.semidirect:
             raise ValueError(
-                "se(N)'s coadjoint orbits are not isospectral (a translation changes the spectrum of the matrix of "
-                "mu): it has no spectrum to keep; its invariants are casimirs(mu)"
+                f"{self.name}'s coadjoint orbits are not isospectral (a translation changes the spectrum of the matrix "
+                "of mu): it has no spectrum to keep; its invariants are casimirs(mu)"
             )
         M = self.matrix(as_state(mu, "mu", self.dim))
         if self.complex:
@@ -494,7 +508,7 @@ def _casimirs(algebra: MatrixLieAlgebra, mu: jax.Array) -> jax.Array:
 
 @functools.partial(jax.jit, static_argnums=0)
 def _casimir_gradients(algebra: MatrixLieAlgebra, flat: jax.Array) -> jax.Array:
-    if algebra.family == "se":
+    if algebra.semidirect:
         return jax.vmap(jax.jacrev(algebra._casimir_values))(flat)
     return algebra._casimir_gradient_values(flat)
 
@@ -521,6 +535,32 @@ def _coadjoint_flow(algebra: MatrixLieAlgebra, common_path_only: bool, alpha: ja
         # composition"); on the change it is as small as the change
         out = mu + algebra.coordinates(U @ M @ V - M)
     return out
+
+
+def _semidirect_casimirs(algebra: MatrixLieAlgebra, M: jax.Array) -> jax.Array:
+    """The Casimirs of a semidirect product from the matrix of mu (`MatrixLieAlgebra.casimirs`),
+    `(..., n_casimirs)`."""
+    N = algebra.N
+    if algebra.family == "se":
+        return _se_casimirs(M, N)
+    A = M[..., :N, :N]
+    p = M[..., :N, N]  # the translations' components (unit scale: kappa = 1)
+    if algebra.family == "aff":
+        return jnp.zeros(M.shape[:-2] + (0,), jnp.float64)
+    if algebra.family == "saff":
+        # det [p, A p, ..., A^(N-1) p] (SL(N) x R^N)
+        columns = [p]
+        for _ in range(N - 1):
+            columns.append((A @ columns[-1][..., None])[..., 0])
+        return jnp.linalg.det(jnp.stack(columns, axis=-1))[..., None]
+    # uaff: |p|^2 and Re tr (iK)^k, k = 1..N-1, K = (|p|^2 - p p^dagger) A
+    squared = jnp.sum(jnp.real(jnp.conj(p) * p), axis=-1)
+    K = 1j * (squared[..., None, None] * A - p[..., :, None] * (jnp.conj(p)[..., None, :] @ A))
+    out, P = [squared], None
+    for _ in range(1, N):
+        P = K if P is None else P @ K
+        out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+    return jnp.stack(out, axis=-1)
 
 
 def _se_casimirs(M: jax.Array, N: int) -> jax.Array:
@@ -585,3 +625,28 @@ def se(N: int, sign: int = -1) -> MatrixLieAlgebra:
     $\mu = (M_{ij}\ (i<j), p_1..p_N)$ (dimension $N(N+1)/2$): the rigid body in a fluid and
     the heavy top of N dimensions. No structure-constant tensor; Casimirs `casimirs`."""
     return MatrixLieAlgebra("se", N, sign=sign)
+
+
+def semidirect(algebra: MatrixLieAlgebra) -> MatrixLieAlgebra:
+    r"""$\mathfrak g \ltimes \mathbb R^N$ for $\mathfrak g$ = so(N) (se(N)), gl(N) (aff(N),
+    the affine algebra), sl(N) (the special affine algebra) or u(N) ($\mathbb C^N$, the unitary
+    affine algebra), acting on column vectors: $(N+1)\times(N+1)$ matrices
+    $\begin{pmatrix}A & s\,b\\ 0 & 0\end{pmatrix}$, coordinates $\mu = (\text{g's}, p)$
+    (u: $p_i$, $q_i$ the real and imaginary parts), the same sign. Casimirs (`casimirs`): se(N)'s;
+    none for aff(N) (a Frobenius algebra: an open orbit); $\det[p, Ap, \ldots, A^{N-1}p]$ for
+    sl(N) (SL(N) keeps volumes, and a translation moves $A$ by $pb^\top$ less its trace,
+    which adds to $A^kp$ only combinations of lower powers); $|p|^2$ and
+    $\mathrm{Re}\,\mathrm{tr}(iK)^k$, $K = (|p|^2 - pp^\dagger)A$, $k = 1..N-1$, for u(N)
+    (the unitary group of the complement of $p$, as for se). sp and su: `ValueError` (their
+    Casimirs are not derived here)."""
+    if not isinstance(algebra, MatrixLieAlgebra):
+        raise TypeError(f"algebra must be a liepoisson.MatrixLieAlgebra (so(N), gl(N), sl(N) or u(N)); got "
+                        f"{type(algebra).__name__}")
+    family = {base: name for name, base in SEMIDIRECT.items()}.get(algebra.family)
+    if family is None:
+        raise ValueError(
+            f"semidirect products with R^N are built for so(N), gl(N), sl(N) and u(N); got {algebra.name} (for sp "
+            "and su their Casimirs are not derived: give the structure constants to liepoisson.LieAlgebra at small "
+            "size, whose Casimir search finds them)"
+        )
+    return MatrixLieAlgebra(family, algebra.N, sign=algebra.sign)
