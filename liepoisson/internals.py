@@ -17,6 +17,7 @@ argument, and progress bars. Not a user API: these names may change with the lib
 from ._casimir_values import casimir_scale as casimir_scale
 from ._inverse import check_casimirs_agree as check_casimirs_agree
 from ._jsonable import jsonable as jsonable
+from ._matrix_algebra import SEMIDIRECT as SEMIDIRECT
 from ._matrix_algebra import dagger as dagger
 from ._progress import progress_bar as progress_bar
 from ._progress import show_progress as show_progress

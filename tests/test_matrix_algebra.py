@@ -279,6 +279,35 @@ def test_definitions_round_trip_and_bad_input():
         lp.u(2).casimirs([np.nan, 0, 0, 0])
 
 
+def test_semidirect_products_by_hand_and_bad_input():
+    assert lp.semidirect(lp.so(3)) == lp.se(3)
+    assert lp.semidirect(lp.u(2, sign=1)).sign == 1
+    # sl(2) x R^2 as [[a, b, p1], [c, -a, p2], [0, 0, 0]]: its Casimir det[p, Ap] by hand,
+    # A p = (a p1 + b p2, c p1 - a p2)
+    g = lp.semidirect(lp.sl(2))
+    mu = np.random.default_rng(11).normal(size=g.dim)
+    M = np.asarray(g.matrix(mu))
+    (a, b), (c, _), p = M[0, :2], M[1, :2], M[:2, 2]
+    Ap = np.array([a * p[0] + b * p[1], c * p[0] - a * p[1]])
+    np.testing.assert_allclose(np.asarray(g.casimirs(mu)), [p[0] * Ap[1] - p[1] * Ap[0]], rtol=8 * EPS)
+    # u(2) x C^2: |p|^2 and Re tr iK, K = (|p|^2 - p p^dagger) A
+    h = lp.semidirect(lp.u(2))
+    mu = np.random.default_rng(12).normal(size=h.dim)
+    M = np.asarray(h.matrix(mu))
+    A, p = M[:2, :2], M[:2, 2]
+    K = (np.vdot(p, p) * np.eye(2) - np.outer(p, p.conj())) @ A
+    np.testing.assert_allclose(np.asarray(h.casimirs(mu)), [np.vdot(p, p).real, np.trace(1j * K).real], rtol=16 * EPS)
+    with pytest.raises(ValueError, match=r"orbits are not isospectral"):
+        h.spectrum(mu)
+    with pytest.raises(ValueError, match=r"so\(N\), gl\(N\), sl\(N\) and u\(N\); got sp2"):
+        lp.semidirect(lp.sp(2))
+    with pytest.raises(ValueError, match="got su3"):
+        lp.semidirect(lp.su(3))
+    with pytest.raises(TypeError, match="MatrixLieAlgebra"):
+        lp.semidirect(lp.so3())
+    assert np.asarray(lp.semidirect(lp.gl(2)).casimirs(np.ones((3, 6)))).shape == (3, 0)
+
+
 def test_non_compact_overflow_is_reported():
     g = lp.gl(2)
     with pytest.raises(FloatingPointError, match="overflowed"):
