@@ -143,18 +143,29 @@ def lpnet_start(system: lp.systems.Zeitlin, h: float) -> learn.LPNet:
     return learn.LPNet(system, hidden=(), h=h, init="zero")
 
 
+def training_trajectories(system: lp.systems.Zeitlin, H: float, fields: int, steps: int) -> np.ndarray:
+    """The isospectral midpoint at $H$/`FINE` from `fields` random fields (seeds from
+    `TRAIN_SEED`), sampled every $H$ for `steps` steps: `(fields, steps + 1, dim)`."""
+    starts = np.stack([system.random_state(TRAIN_SEED + i) for i in range(fields)])
+    data_map = it.IsospectralMidpoint(system, H / FINE, tol=TOL)
+    return np.asarray(data_map.rollout(starts, steps * FINE, save_every=FINE))
+
+
+def test_reference(system: lp.systems.Zeitlin, H: float, fields: int, steps: int) -> np.ndarray:
+    """The isospectral triple jump at $H$/`FINE` from `fields` random fields (seeds from
+    `TEST_SEED`), sampled every $H$ for `steps` steps: `(fields, steps + 1, dim)`."""
+    tests = np.stack([system.random_state(TEST_SEED + i) for i in range(fields)])
+    return np.asarray(it.IsospectralTripleJump(system, H / FINE, tol=TOL).rollout(tests, steps * FINE,
+                                                                                   save_every=FINE))
+
+
 def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
     system = lp.systems.Zeitlin(N)
     H = quflow_step(system)
-    data_map = it.IsospectralMidpoint(system, H / FINE, tol=TOL)
-    fields = max(P.n_train, P.lpnet_fields)
-    starts = np.stack([system.random_state(TRAIN_SEED + i) for i in range(fields)])
-    trajectories = np.asarray(data_map.rollout(starts, P.train_steps * FINE, save_every=FINE))
+    trajectories = training_trajectories(system, H, max(P.n_train, P.lpnet_fields), P.train_steps)
     y0 = trajectories[:P.n_train, :-1].reshape(-1, system.dim)
     y1 = trajectories[:P.n_train, 1:].reshape(-1, system.dim)
-    tests = np.stack([system.random_state(TEST_SEED + i) for i in range(P.n_test)])
-    reference = np.asarray(it.IsospectralTripleJump(system, H / FINE, tol=TOL).rollout(
-        tests, P.test_steps * FINE, save_every=FINE))
+    reference = test_reference(system, H, P.n_test, P.test_steps)
 
     rows = []
     for degree in DEGREES:
