@@ -1,19 +1,21 @@
-"""A G-LPNet on Zeitlin's model at N = 16 (dimension 256): W5's data and test fields, a
+r"""A G-LPNet on Zeitlin's model at N = 16 (dimension 256): W5's data and test fields, a
 G-LPNet of M ridge modules against the isospectral midpoint at the same step
 (BENCHMARKS.md, "LPNets on Zeitlin's model").
 
-    python -m benchmarks.zeitlin_glpnet [--N 16] [--modules 16] [--iterations 50]
+    python -m benchmarks.zeitlin_glpnet [--N 16] [--modules 16] [--iterations 50] [--init zero]
     python -m benchmarks.zeitlin_glpnet --report
 
 The G-LPNet is `learn.GLPNet` with `Strang()` over M modules
-$\\Phi_s(\\langle\\alpha_s, W\\rangle)$, identity activation (each piece a quadratic, as Zeitlin's
+$\Phi_s(\langle\alpha_s, W\rangle)$, identity activation (each piece a quadratic, as Zeitlin's
 energy is: a sum of $N^2 - 1$ squares in the Laplacian's eigenbasis) and learned full vectors
-$\\alpha_s$, fitted by BFGS (`learn.QuasiNewton`) from the identity warm start to the pairs of
+$\alpha_s$, started at $\widetilde H = 0$ (`init="zero"`: the identity step, vectors of unit
+expected length; `--init random` is the paper's start, vectors of length about $\sqrt{256}$),
+fitted by BFGS (`learn.QuasiNewton`) to the pairs of
 W5's full profile (12 fields x 40 steps of quflow's step H, the isospectral midpoint at H/16);
 tested as W5 tests (`paper.w5_zeitlin.measure`, 8 fields x 400 steps against the isospectral
 triple jump at H/16). Every step is 2M - 1 conjugations, each an exact Poisson map: the
 G-LPNet is exactly Poisson and keeps the spectrum of W; its energy is the learned
-$\\widetilde H$'s, a rank-M quadratic where Zeitlin's has rank $N^2 - 1$. The fitted network is
+$\widetilde H$'s, a rank-M quadratic where Zeitlin's has rank $N^2 - 1$. The fitted network is
 saved beside the results (`--model`).
 """
 
@@ -41,14 +43,15 @@ from ._report import RESULTS, add_output_arguments, saved_results, write_json
 NAME = "zeitlin_glpnet"
 
 
-def run(N: int, modules: int, iterations: int, model_path: Path) -> list[dict]:
+def run(N: int, modules: int, iterations: int, init: str, model_path: Path) -> list[dict]:
     P = PROFILES["full"]
     system = lp.systems.Zeitlin(N)
     H = quflow_step(system)
     trajectories = training_trajectories(system, H, P.n_train, P.train_steps)
     pairs = (trajectories[:, :-1].reshape(-1, system.dim), trajectories[:, 1:].reshape(-1, system.dim))
     reference = test_reference(system, H, P.n_test, P.test_steps)
-    net = learn.GLPNet(system, n_modules=modules, method=Strang(), activation="identity", full_vectors=True, h=H)
+    net = learn.GLPNet(system, n_modules=modules, method=Strang(), activation="identity", full_vectors=True, h=H,
+                       init=init)
     begin = time.perf_counter()
     fitted, record = learn.fit(net, pairs, h=H, optimiser=learn.QuasiNewton(iterations), validation_fraction=0.2,
                                progress=True)
@@ -57,7 +60,7 @@ def run(N: int, modules: int, iterations: int, model_path: Path) -> list[dict]:
     rows = []
     for name, step_map, extra in (
         (f"G-LPNet, {modules} modules", fitted, {"fit_seconds": fit_seconds, "train_loss": float(record.train_loss),
-                                                 "iterations": iterations}),
+                                                 "iterations": iterations, "init": init}),
         ("isospectral midpoint", it.IsospectralMidpoint(system, H, tol=TOL), {}),
     ):
         row = measure(system, name, step_map, H, reference, 1, theta=None, fit_seconds=None, train_loss=None)
@@ -83,13 +86,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--N", type=int, default=16)
     parser.add_argument("--modules", type=int, default=16)
     parser.add_argument("--iterations", type=int, default=50)
+    parser.add_argument("--init", choices=["zero", "random"], default="zero")
     parser.add_argument("--model", type=Path, default=RESULTS / f"{NAME}.h5")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
     if args.report:
         report(saved_results(args.out))
         return
-    results = run(args.N, args.modules, args.iterations, args.model)
+    results = run(args.N, args.modules, args.iterations, args.init, args.model)
     report(results)
     write_json(args.out, args, results)
 

@@ -55,7 +55,8 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
 
     **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$: each
     basis direction twice, the paper's 6 for so(3)), `order`, `key`, `activation` (paper:
-    sigmoid), `full_vectors`, `linear_term`: the pieces, `learn.RidgeTerms`, or `terms`, such
+    sigmoid), `full_vectors`, `linear_term`, `init` (`"zero"`: start at $\widetilde H = 0$, the
+    identity step; for large systems): the pieces, `learn.RidgeTerms`, or `terms`, such
     pieces given whole (then none of those); `method`, a method instance (`Strang()`,
     `Strang(ordering=...)`: the order in which the modules are applied) or class (its
     instance without ordering); `h` (`None`: set by `learn.fit`).
@@ -79,6 +80,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
         full_vectors: bool | None = None,
         linear_term: bool | None = None,
         terms: RidgeTerms | None = None,
+        init: str | None = None,
     ):
         self.system = check_system(system)
         refuse_nonholonomic(system, "a G-LPNet")
@@ -86,7 +88,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
         # algebra's G-LPNet can rotate about each axis on both sides of the others.
         terms = network_or_default(
             terms, functools.partial(default_terms, system.dim), "terms", n_modules=n_modules, order=order, key=key,
-            activation=activation, full_vectors=full_vectors, linear_term=linear_term)
+            activation=activation, full_vectors=full_vectors, linear_term=linear_term, init=init)
         if not isinstance(terms, RidgeTerms):
             raise TypeError(f"terms must be a learn.RidgeTerms; got {type(terms).__name__}")
         if terms.dim != system.dim:

@@ -22,7 +22,7 @@ import numpy as np
 from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
-from ._mlp import ACTIVATIONS, as_key, check_activation
+from ._mlp import ACTIVATIONS, as_key, check_activation, check_init
 
 
 def ridge_potential(x: Any, a: Any, b: Any, e: Any, antiderivative: Any, xp: Any) -> Any:
@@ -79,7 +79,11 @@ class RidgeTerms(eqx.Module):
     cycling); `key`; `activation` $\sigma$ (paper: sigmoid); `full_vectors`; `linear_term`;
     `bias` (default, and the paper: True); `a_kept`, `b_kept`: which $a_s$ and $b_s$ the
     pieces have (default all): the others are zero and not trained (a piece $b_sx$ alone, or
-    $a_sx^2/2$ without a linear part, e.g. a family of quadratics whose terms were selected).
+    $a_sx^2/2$ without a linear part, e.g. a family of quadratics whose terms were selected);
+    `init`: `"random"` (default, the paper's: $a_s, c_s \sim N(0, 1)$, $b_s \sim N(0, 0.01)$)
+    or `"zero"` ($a_s = b_s = 0$: $\widetilde H = 0$ and the step is the identity; full vectors
+    $c_s \sim N(0, 1/n)$, of unit expected length): the start for large systems, where the
+    paper's full vectors have length $\sqrt n$ and its first step moves every state far.
     """
 
     a: jax.Array
@@ -92,10 +96,12 @@ class RidgeTerms(eqx.Module):
     full_vectors: bool = eqx.field(static=True)
     a_kept: tuple[bool, ...] | None = eqx.field(static=True)
     b_kept: tuple[bool, ...] | None = eqx.field(static=True)
+    init: str = eqx.field(static=True)
 
     def __init__(self, dim: int, n_modules: int, order: Sequence[int] | None = None, key: int | jax.Array = 0, *,
                  activation: str = "sigmoid", full_vectors: bool = False, linear_term: bool = False,
-                 bias: bool = True, a_kept: Sequence[bool] | None = None, b_kept: Sequence[bool] | None = None):
+                 bias: bool = True, a_kept: Sequence[bool] | None = None, b_kept: Sequence[bool] | None = None,
+                 init: str = "random"):
         self.dim = positive_int(dim, "dim")
         n_modules = positive_int(n_modules, "n_modules")
         self.order = check_order(order, n_modules, dim)
@@ -110,6 +116,12 @@ class RidgeTerms(eqx.Module):
         self.c = jax.random.normal(kc, shape, jnp.float64)
         self.b = 0.1 * jax.random.normal(kb, (n_modules,), jnp.float64) if bias else None
         self.e = jnp.zeros(n_modules, jnp.float64) if linear_term else None
+        self.init = check_init(init)
+        if self.init == "zero":
+            self.a = jnp.zeros_like(self.a)
+            self.b = None if self.b is None else jnp.zeros_like(self.b)
+            if self.full_vectors:
+                self.c = self.c / np.sqrt(self.dim)
         self.a_kept = _kept(a_kept, n_modules, "a_kept")
         self.b_kept = _kept(b_kept, n_modules, "b_kept")
         if self.b_kept is not None and not bias:
@@ -157,7 +169,7 @@ class RidgeTerms(eqx.Module):
         """The same family of pieces with fresh parameters from `key`."""
         return RidgeTerms(self.dim, self.n_modules, self.order, key, activation=self.activation,
                           full_vectors=self.full_vectors, linear_term=self.linear_term, bias=self.bias,
-                          a_kept=self.a_kept, b_kept=self.b_kept)
+                          a_kept=self.a_kept, b_kept=self.b_kept, init=self.init)
 
     def in_units(self, time: float, size: float) -> RidgeTerms:
         r"""The pieces that move states of size `size` over times in units `time` as these
@@ -212,4 +224,5 @@ class RidgeTerms(eqx.Module):
                 "activation": self.activation, "linear_term": self.linear_term,
                 **({} if self.bias else {"bias": False}),  # files before `bias` have one
                 **({} if self.a_kept is None else {"a_kept": list(self.a_kept)}),
-                **({} if self.b_kept is None else {"b_kept": list(self.b_kept)})}
+                **({} if self.b_kept is None else {"b_kept": list(self.b_kept)}),
+                **({} if self.init == "random" else {"init": self.init})}  # files before `init`: random
