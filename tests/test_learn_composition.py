@@ -1,6 +1,7 @@
 """Learned maps are built by composition: what a combination that cannot work does (refused at
 construction, naming the argument), and the parts that files and restarts must keep."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -178,3 +179,36 @@ def test_a_fit_from_a_zero_start_lowers_the_loss():
                                  progress=False, normalise=False)
     assert record.train_loss < 0.1 * before
     assert np.any(fitted.network.mlp.layers[-1].weight != 0.0)
+
+
+def test_a_glpnet_zero_start_is_the_identity_step_and_is_kept_by_files(tmp_path):
+    # init="zero": a_s = b_s = 0, so H~ = 0 and every module's flow is the identity
+    net = learn.GLPNet(RB, n_modules=4, init="zero", h=0.1, method=it.splitting.Strang)
+    np.testing.assert_array_equal(np.asarray(jax.vmap(net.step)(Y)), Y)
+    assert net.hyperparameters()["init"] == "zero" and "init" not in learn.GLPNet(RB).hyperparameters()
+    moved = eqx.tree_at(lambda m: m.terms.a, net, net.terms.a + 0.5)  # as a fit would leave it
+    moved.save(tmp_path / "g.h5")
+    back = learn.load(tmp_path / "g.h5")
+    np.testing.assert_array_equal(np.asarray(jax.vmap(back.step)(Y)), np.asarray(jax.vmap(moved.step)(Y)))
+    for fresh in (back.reinitialised(3), learn.GLPNet.from_hyperparameters(RB, back.hyperparameters(), key=3)):
+        assert fresh.terms.init == "zero" and not np.any(fresh.terms.a) and not np.any(fresh.terms.b)
+
+
+def test_a_zero_start_gives_full_vectors_of_unit_expected_length():
+    # the paper's start draws each component from N(0, 1): |alpha_s|^2 ~ dim; the zero start
+    # scales them by 1/sqrt(dim): mean |alpha_s|^2 = 1 (64 modules of dimension 16: the sample
+    # mean of a chi^2_16 / 16 has standard deviation 0.044)
+    system = lp.systems.Zeitlin(4)
+    lengths = [np.mean(np.sum(np.asarray(learn.RidgeTerms(system.dim, 64, key=2, full_vectors=True, init=init)
+                                         .vectors()) ** 2, axis=1)) for init in ("random", "zero")]
+    assert abs(lengths[0] / system.dim - 1.0) < 0.25 and abs(lengths[1] - 1.0) < 0.25
+
+
+def test_a_glpnet_fit_from_a_zero_start_lowers_the_loss():
+    y0 = np.random.default_rng(4).normal(size=(24, 3))
+    y1 = np.asarray(it.splitting.Strang(RB, 0.1).rollout(y0, 1))[:, -1]
+    net = learn.GLPNet(RB, n_modules=6, init="zero", h=0.1, method=it.splitting.Strang)
+    before = float(learn.state_mse(net, jnp.asarray(y0), jnp.asarray(y1)))
+    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.QuasiNewton(40), validation_fraction=0.0,
+                               progress=False)
+    assert record.train_loss < 0.1 * before
