@@ -1,6 +1,6 @@
 r"""Matrix Lie algebras of any size: so(N), u(N), su(N), sp(2N, R), gl(N), sl(N), and the
 semidirect products by the defining representation, se(N) = so(N) x R^N, gl(N) x R^N,
-sl(N) x R^N and u(N) x C^N (`semidirect`).
+sl(N) x R^N, u(N) x C^N and su(N) x C^N (`semidirect`).
 
 An element is an $m\times m$ matrix $X = \sum_a x_a E_a$ in a basis $E_a$ orthonormal for the
 pairing $\langle A, B\rangle = \kappa\,\mathrm{Re}\,\mathrm{tr}(A^\dagger B)$ (`kappa`,
@@ -57,7 +57,7 @@ FLOW_PARAMETERS_MAX_DIM = 400
 
 #: The semidirect products g x R^N (C^N for u) by the defining representation, by family, and
 #: the algebra g of each.
-SEMIDIRECT = {"se": "so", "aff": "gl", "saff": "sl", "uaff": "u"}
+SEMIDIRECT = {"se": "so", "aff": "gl", "saff": "sl", "uaff": "u", "suaff": "su"}
 FAMILIES = ("so", "u", "su", "sp", "gl", "sl", *SEMIDIRECT)
 
 
@@ -193,7 +193,7 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
         scale = math.sqrt(1.0 / kappa)
         for i in range(N):
             add([(i, N, scale)], f"p{i + 1}")
-            if base == "u":
+            if base in ("u", "su"):
                 add([(i, N, 1j * scale)], f"q{i + 1}")
     return m, np.asarray(a_list), np.asarray(p_list), np.asarray(c_list), kappa, names
 
@@ -206,7 +206,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
       traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
       for sl), `"se"` (se(N) = so(N) x R^N, $(N+1)\times(N+1)$, coordinates
-      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"` (gl(N), sl(N), u(N) x R^N or C^N:
+      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"`, `"suaff"` (gl(N), sl(N) x R^N, u(N),
+      su(N) x C^N:
       `liepoisson.semidirect`).
     - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
     - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
@@ -346,11 +347,11 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N)."""
         return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
                 "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2,
-                "aff": 0, "saff": 1, "uaff": self.N}[self.family]
+                "aff": 0, "saff": 1, "uaff": self.N, "suaff": self.N - 1}[self.family]
 
     @property
     def semidirect(self) -> bool:
-        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff): orbits not
+        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff, suaff): orbits not
         isospectral, Casimirs not traces of powers."""
         return self.family in SEMIDIRECT
 
@@ -553,13 +554,23 @@ def _semidirect_casimirs(algebra: MatrixLieAlgebra, M: jax.Array) -> jax.Array:
         for _ in range(N - 1):
             columns.append((A @ columns[-1][..., None])[..., 0])
         return jnp.linalg.det(jnp.stack(columns, axis=-1))[..., None]
-    # uaff: |p|^2 and Re tr (iK)^k, k = 1..N-1, K = (|p|^2 - p p^dagger) A
+    # uaff: |p|^2 and Re tr (iK)^k, k = 1..N-1, K = Q A, Q = |p|^2 - p p^dagger; suaff: k = 2..N-1
+    # and K = Q (tr(Q) A - tr(QA)), which su's translations (A moved by a multiple of i less
+    # than u's) do not see; a polynomial, no division by |p|
     squared = jnp.sum(jnp.real(jnp.conj(p) * p), axis=-1)
-    K = 1j * (squared[..., None, None] * A - p[..., :, None] * (jnp.conj(p)[..., None, :] @ A))
+    QA = squared[..., None, None] * A - p[..., :, None] * (jnp.conj(p)[..., None, :] @ A)
+    first = 1
+    if algebra.family == "suaff":
+        trace_QA = jnp.trace(QA, axis1=-2, axis2=-1)
+        QA = ((N - 1) * squared)[..., None, None] * QA - trace_QA[..., None, None] * (
+            squared[..., None, None] * jnp.eye(N) - p[..., :, None] * jnp.conj(p)[..., None, :])
+        first = 2
+    K = 1j * QA
     out, P = [squared], None
-    for _ in range(1, N):
+    for k in range(1, N):
         P = K if P is None else P @ K
-        out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+        if k >= first:
+            out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
     return jnp.stack(out, axis=-1)
 
 
@@ -629,24 +640,26 @@ def se(N: int, sign: int = -1) -> MatrixLieAlgebra:
 
 def semidirect(algebra: MatrixLieAlgebra) -> MatrixLieAlgebra:
     r"""$\mathfrak g \ltimes \mathbb R^N$ for $\mathfrak g$ = so(N) (se(N)), gl(N) (aff(N),
-    the affine algebra), sl(N) (the special affine algebra) or u(N) ($\mathbb C^N$, the unitary
-    affine algebra), acting on column vectors: $(N+1)\times(N+1)$ matrices
+    the affine algebra), sl(N) (the special affine algebra), u(N) or su(N) ($\mathbb C^N$, the
+    (special) unitary affine algebra), acting on column vectors: $(N+1)\times(N+1)$ matrices
     $\begin{pmatrix}A & s\,b\\ 0 & 0\end{pmatrix}$, coordinates $\mu = (\text{g's}, p)$
-    (u: $p_i$, $q_i$ the real and imaginary parts), the same sign. Casimirs (`casimirs`): se(N)'s;
+    (u, su: $p_i$, $q_i$ the real and imaginary parts), the same sign. Casimirs (`casimirs`): se(N)'s;
     none for aff(N) (a Frobenius algebra: an open orbit); $\det[p, Ap, \ldots, A^{N-1}p]$ for
     sl(N) (SL(N) keeps volumes, and a translation moves $A$ by $pb^\top$ less its trace,
     which adds to $A^kp$ only combinations of lower powers); $|p|^2$ and
     $\mathrm{Re}\,\mathrm{tr}(iK)^k$, $K = (|p|^2 - pp^\dagger)A$, $k = 1..N-1$, for u(N)
-    (the unitary group of the complement of $p$, as for se). sp and su: `ValueError` (their
-    Casimirs are not derived here)."""
+    (the unitary group of the complement of $p$, as for se); for su(N), $|p|^2$ and
+    $\mathrm{Re}\,\mathrm{tr}(iK)^k$, $k = 2..N-1$, $K = Q(\mathrm{tr}(Q)A - \mathrm{tr}(QA))$,
+    $Q = |p|^2 - pp^\dagger$ (su's translations move $A$ by a multiple of $i$ less than u's,
+    which $K$ does not see). sp: `ValueError` (its Casimirs are not derived here)."""
     if not isinstance(algebra, MatrixLieAlgebra):
-        raise TypeError(f"algebra must be a liepoisson.MatrixLieAlgebra (so(N), gl(N), sl(N) or u(N)); got "
+        raise TypeError(f"algebra must be a liepoisson.MatrixLieAlgebra (so(N), gl(N), sl(N), u(N) or su(N)); got "
                         f"{type(algebra).__name__}")
     family = {base: name for name, base in SEMIDIRECT.items()}.get(algebra.family)
     if family is None:
         raise ValueError(
-            f"semidirect products with R^N are built for so(N), gl(N), sl(N) and u(N); got {algebra.name} (for sp "
-            "and su their Casimirs are not derived: give the structure constants to liepoisson.LieAlgebra at small "
-            "size, whose Casimir search finds them)"
+            f"semidirect products with R^N are built for so(N), gl(N), sl(N), u(N) and su(N); got {algebra.name} (for "
+            "sp their Casimirs are not derived: give the structure constants to liepoisson.LieAlgebra at small size, "
+            "whose Casimir search finds them)"
         )
     return MatrixLieAlgebra(family, algebra.N, sign=algebra.sign)

@@ -17,7 +17,7 @@ EPS = np.finfo(np.float64).eps
 _DEFAULT = [lp.so(4), lp.u(3), lp.sl(3), lp.semidirect(lp.sl(3)), lp.semidirect(lp.u(2))]
 _MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3), lp.se(3), lp.se(4), lp.se(5),
          lp.semidirect(lp.gl(3)), lp.semidirect(lp.sl(2)), lp.semidirect(lp.sl(4)), lp.semidirect(lp.u(3)),
-         lp.semidirect(lp.u(4))]
+         lp.semidirect(lp.u(4)), lp.semidirect(lp.su(3)), lp.semidirect(lp.su(4))]
 SMALL = _DEFAULT + _MORE
 ALGEBRAS = [pytest.param(g, id=g.name) for g in _DEFAULT] + [
     pytest.param(g, id=g.name, marks=pytest.mark.slow) for g in _MORE]
@@ -36,7 +36,7 @@ def _vectors(g, seed, k=1):
 def test_dimensions_and_rank(g):
     expected = {"so": g.N * (g.N - 1) // 2, "u": g.N**2, "su": g.N**2 - 1, "sp": 2 * g.N**2 + g.N,
                 "gl": g.N**2, "sl": g.N**2 - 1, "se": g.N * (g.N + 1) // 2, "aff": g.N**2 + g.N,
-                "saff": g.N**2 - 1 + g.N, "uaff": g.N**2 + 2 * g.N}[g.family]
+                "saff": g.N**2 - 1 + g.N, "uaff": g.N**2 + 2 * g.N, "suaff": g.N**2 - 1 + 2 * g.N}[g.family]
     assert g.dim == expected
     mu = _vectors(g, 0)[0]
     # generic corank = number of Casimirs (the rank of the algebra)
@@ -85,7 +85,7 @@ def test_jacobi_identity(g, seed):
 
 
 # so(4)'s Casimirs are checked by value by default (test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two)
-@pytest.mark.parametrize("g", [p for p in algebras({"u3", "sl3", "saff3", "uaff2"}) if p.values[0].n_casimirs])
+@pytest.mark.parametrize("g", [p for p in algebras({"u3", "sl3", "saff3", "uaff2", "suaff3"}) if p.values[0].n_casimirs])
 def test_casimirs_are_casimirs(g):
     mu = _vectors(g, 4, 5)
     B = np.asarray(g.poisson_tensor(mu))
@@ -299,10 +299,17 @@ def test_semidirect_products_by_hand_and_bad_input():
     np.testing.assert_allclose(np.asarray(h.casimirs(mu)), [np.vdot(p, p).real, np.trace(1j * K).real], rtol=16 * EPS)
     with pytest.raises(ValueError, match=r"orbits are not isospectral"):
         h.spectrum(mu)
-    with pytest.raises(ValueError, match=r"so\(N\), gl\(N\), sl\(N\) and u\(N\); got sp2"):
+    with pytest.raises(ValueError, match=r"so\(N\), gl\(N\), sl\(N\), u\(N\) and su\(N\); got sp2"):
         lp.semidirect(lp.sp(2))
-    with pytest.raises(ValueError, match="got su3"):
-        lp.semidirect(lp.su(3))
+    # su(2) x C^2: |p|^2 alone (one Casimir)
+    k = lp.semidirect(lp.su(2))
+    mu = np.random.default_rng(13).normal(size=k.dim)
+    p = np.asarray(k.matrix(mu))[:2, 2]
+    np.testing.assert_allclose(np.asarray(k.casimirs(mu)), [np.vdot(p, p).real], rtol=8 * EPS)
+    # at p = 0 every Casimir and gradient is zero, not NaN (su's K is a polynomial, no 1/|p|)
+    for g in (h, lp.semidirect(lp.su(4))):
+        assert np.all(np.asarray(g.casimirs(np.zeros(g.dim))) == 0.0)
+        assert np.all(np.asarray(g.casimir_gradients(np.zeros(g.dim))) == 0.0)
     with pytest.raises(TypeError, match="MatrixLieAlgebra"):
         lp.semidirect(lp.so3())
     assert np.asarray(lp.semidirect(lp.gl(2)).casimirs(np.ones((3, 6)))).shape == (3, 0)
