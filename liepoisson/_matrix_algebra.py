@@ -57,7 +57,7 @@ FLOW_PARAMETERS_MAX_DIM = 400
 
 #: The semidirect products g x R^N (C^N for u) by the defining representation, by family, and
 #: the algebra g of each.
-SEMIDIRECT = {"se": "so", "aff": "gl", "saff": "sl", "uaff": "u", "suaff": "su"}
+SEMIDIRECT = {"se": "so", "aff": "gl", "saff": "sl", "uaff": "u", "suaff": "su", "spaff": "sp"}
 FAMILIES = ("so", "u", "su", "sp", "gl", "sl", *SEMIDIRECT)
 
 
@@ -140,7 +140,8 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
 
     r2 = 1.0 / math.sqrt(2.0)
     base = SEMIDIRECT.get(family, family)
-    m = N + 1 if family in SEMIDIRECT else (2 * N if family == "sp" else N)
+    vector = 2 * N if base == "sp" else N  # the size of the defining representation
+    m = vector + 1 if family in SEMIDIRECT else vector
     if base == "so":
         kappa = 0.5
         for i in range(N):
@@ -191,10 +192,10 @@ def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray
         raise ValueError(f"family must be one of {FAMILIES}; got {family!r}")
     if family in SEMIDIRECT:
         scale = math.sqrt(1.0 / kappa)
-        for i in range(N):
-            add([(i, N, scale)], f"p{i + 1}")
+        for i in range(vector):
+            add([(i, vector, scale)], f"p{i + 1}")
             if base in ("u", "su"):
-                add([(i, N, 1j * scale)], f"q{i + 1}")
+                add([(i, vector, 1j * scale)], f"q{i + 1}")
     return m, np.asarray(a_list), np.asarray(p_list), np.asarray(c_list), kappa, names
 
 
@@ -206,8 +207,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
       traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
       for sl), `"se"` (se(N) = so(N) x R^N, $(N+1)\times(N+1)$, coordinates
-      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"`, `"suaff"` (gl(N), sl(N) x R^N, u(N),
-      su(N) x C^N:
+      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"`, `"suaff"`, `"spaff"` (gl(N), sl(N) x R^N,
+      u(N), su(N) x C^N, sp(2N) x R^{2N}:
       `liepoisson.semidirect`).
     - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
     - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
@@ -223,7 +224,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
             raise ValueError(f"family must be one of {FAMILIES}; got {family!r}")
         if isinstance(N, bool) or not isinstance(N, (int, np.integer)):
             raise TypeError(f"N must be an integer; got {type(N).__name__} {N!r}")
-        smallest = 1 if family == "sp" else 2
+        smallest = 1 if family in ("sp", "spaff") else 2
         if N < smallest:
             raise ValueError(f"N must be >= {smallest} for {family}(N); got {N}")
         if isinstance(sign, bool) or sign not in (-1, 1):
@@ -347,11 +348,11 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N)."""
         return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
                 "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2,
-                "aff": 0, "saff": 1, "uaff": self.N, "suaff": self.N - 1}[self.family]
+                "aff": 0, "saff": 1, "uaff": self.N, "suaff": self.N - 1, "spaff": self.N}[self.family]
 
     @property
     def semidirect(self) -> bool:
-        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff, suaff): orbits not
+        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff, suaff, spaff): orbits not
         isospectral, Casimirs not traces of powers."""
         return self.family in SEMIDIRECT
 
@@ -544,6 +545,8 @@ def _semidirect_casimirs(algebra: MatrixLieAlgebra, M: jax.Array) -> jax.Array:
     N = algebra.N
     if algebra.family == "se":
         return _se_casimirs(M, N)
+    if algebra.family == "spaff":
+        return _spaff_casimirs(M, N)
     A = M[..., :N, :N]
     p = M[..., :N, N]  # the translations' components (unit scale: kappa = 1)
     if algebra.family == "aff":
@@ -571,6 +574,36 @@ def _semidirect_casimirs(algebra: MatrixLieAlgebra, M: jax.Array) -> jax.Array:
         P = K if P is None else P @ K
         if k >= first:
             out.append(jnp.real(jnp.trace(P, axis1=-2, axis2=-1)))
+    return jnp.stack(out, axis=-1)
+
+
+def _spaff_casimirs(M: jax.Array, N: int) -> jax.Array:
+    r"""sp(2N) x R^{2N}'s Casimirs from the matrix of mu, `(..., N)`. With $S = -JA$ (symmetric:
+    $A = JS$), $u = Jp$: $c = p^\top Sp$, and the invariants of the quadratic form $S$ on
+    $V_0 = \{x : u^\top x = 0\} \ni p$ (a translation adds $\mathrm{sym}(uv^\top)$ to $S$,
+    zero there), reduced modulo $p$ by its Schur complement $T = cS - (Sp)(Sp)^\top$ ($Tp = 0$)
+    and carried to the whole space by $\tilde P = c + wu^\top$, $w = -JSp$ ($\tilde Px = cx$
+    on $V_0$, $\tilde Pw = 0$): $\mathrm{tr}\,L^{2k}$, $k = 1..N-1$, $L = -J\tilde P^\top
+    T\tilde P$, whose spectrum is $c^2$ times that of $J^{-1}T$ on the symplectic space
+    $V_0/p$ (the sp(2N-2) that fixes $p$), and zeros. A polynomial: no division."""
+    m = 2 * N
+    J = jnp.asarray(np.block([[np.zeros((N, N)), np.eye(N)], [-np.eye(N), np.zeros((N, N))]]))
+    A = M[..., :m, :m]
+    p = M[..., :m, m]
+    S = -J @ A
+    Sp = (S @ p[..., None])[..., 0]
+    c = jnp.sum(p * Sp, axis=-1)
+    out = [c]
+    if N > 1:
+        T = c[..., None, None] * S - Sp[..., :, None] * Sp[..., None, :]
+        u = p @ J.T  # J p
+        w = -(Sp @ J.T)  # -J S p
+        Pt = c[..., None, None] * jnp.eye(m) + w[..., :, None] * u[..., None, :]
+        L = -J @ jnp.swapaxes(Pt, -1, -2) @ T @ Pt
+        L2, P = L @ L, None
+        for _ in range(1, N):
+            P = L2 if P is None else P @ L2
+            out.append(jnp.trace(P, axis1=-2, axis2=-1))
     return jnp.stack(out, axis=-1)
 
 
@@ -651,15 +684,16 @@ def semidirect(algebra: MatrixLieAlgebra) -> MatrixLieAlgebra:
     (the unitary group of the complement of $p$, as for se); for su(N), $|p|^2$ and
     $\mathrm{Re}\,\mathrm{tr}(iK)^k$, $k = 2..N-1$, $K = Q(\mathrm{tr}(Q)A - \mathrm{tr}(QA))$,
     $Q = |p|^2 - pp^\dagger$ (su's translations move $A$ by a multiple of $i$ less than u's,
-    which $K$ does not see). sp: `ValueError` (its Casimirs are not derived here)."""
+    which $K$ does not see); for sp(2N) x R^{2N} ($(2N+1)\times(2N+1)$), $p^\top S p$
+    ($S = -JA$) and the traces of powers of the form $S$ reduced to the symplectic space
+    $\{x : (Jp)^\top x = 0\}/p$ (module function `_spaff_casimirs`)."""
     if not isinstance(algebra, MatrixLieAlgebra):
-        raise TypeError(f"algebra must be a liepoisson.MatrixLieAlgebra (so(N), gl(N), sl(N), u(N) or su(N)); got "
+        raise TypeError(f"algebra must be a liepoisson.MatrixLieAlgebra (so, gl, sl, u, su or sp); got "
                         f"{type(algebra).__name__}")
     family = {base: name for name, base in SEMIDIRECT.items()}.get(algebra.family)
     if family is None:
         raise ValueError(
-            f"semidirect products with R^N are built for so(N), gl(N), sl(N), u(N) and su(N); got {algebra.name} (for "
-            "sp their Casimirs are not derived: give the structure constants to liepoisson.LieAlgebra at small size, "
-            "whose Casimir search finds them)"
+            f"semidirect products with the defining representation are built for so, gl, sl, u, su and sp; got "
+            f"{algebra.name}, itself a semidirect product"
         )
     return MatrixLieAlgebra(family, algebra.N, sign=algebra.sign)

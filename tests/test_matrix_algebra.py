@@ -17,7 +17,8 @@ EPS = np.finfo(np.float64).eps
 _DEFAULT = [lp.so(4), lp.u(3), lp.sl(3), lp.semidirect(lp.sl(3)), lp.semidirect(lp.u(2))]
 _MORE = [lp.so(3), lp.so(5), lp.u(2), lp.su(3), lp.sp(1), lp.sp(2), lp.gl(3), lp.se(3), lp.se(4), lp.se(5),
          lp.semidirect(lp.gl(3)), lp.semidirect(lp.sl(2)), lp.semidirect(lp.sl(4)), lp.semidirect(lp.u(3)),
-         lp.semidirect(lp.u(4)), lp.semidirect(lp.su(3)), lp.semidirect(lp.su(4))]
+         lp.semidirect(lp.u(4)), lp.semidirect(lp.su(3)), lp.semidirect(lp.su(4)), lp.semidirect(lp.sp(1)),
+         lp.semidirect(lp.sp(2)), lp.semidirect(lp.sp(3))]
 SMALL = _DEFAULT + _MORE
 ALGEBRAS = [pytest.param(g, id=g.name) for g in _DEFAULT] + [
     pytest.param(g, id=g.name, marks=pytest.mark.slow) for g in _MORE]
@@ -36,7 +37,8 @@ def _vectors(g, seed, k=1):
 def test_dimensions_and_rank(g):
     expected = {"so": g.N * (g.N - 1) // 2, "u": g.N**2, "su": g.N**2 - 1, "sp": 2 * g.N**2 + g.N,
                 "gl": g.N**2, "sl": g.N**2 - 1, "se": g.N * (g.N + 1) // 2, "aff": g.N**2 + g.N,
-                "saff": g.N**2 - 1 + g.N, "uaff": g.N**2 + 2 * g.N, "suaff": g.N**2 - 1 + 2 * g.N}[g.family]
+                "saff": g.N**2 - 1 + g.N, "uaff": g.N**2 + 2 * g.N, "suaff": g.N**2 - 1 + 2 * g.N,
+                "spaff": 2 * g.N**2 + 3 * g.N}[g.family]
     assert g.dim == expected
     mu = _vectors(g, 0)[0]
     # generic corank = number of Casimirs (the rank of the algebra)
@@ -85,7 +87,8 @@ def test_jacobi_identity(g, seed):
 
 
 # so(4)'s Casimirs are checked by value by default (test_so3_casimir_is_the_squared_angular_momentum_and_so4_has_two)
-@pytest.mark.parametrize("g", [p for p in algebras({"u3", "sl3", "saff3", "uaff2", "suaff3"}) if p.values[0].n_casimirs])
+@pytest.mark.parametrize("g", [p for p in algebras({"u3", "sl3", "saff3", "uaff2", "suaff3", "spaff2"})
+                               if p.values[0].n_casimirs])
 def test_casimirs_are_casimirs(g):
     mu = _vectors(g, 4, 5)
     B = np.asarray(g.poisson_tensor(mu))
@@ -93,8 +96,9 @@ def test_casimirs_are_casimirs(g):
     assert G.shape == (5, g.n_casimirs, g.dim)
     scale = np.abs(B).max() * np.abs(G).max()
     assert np.abs(np.einsum("kab,kjb->kja", B, G)).max() < 64 * g.dim * EPS * scale
-    # gradients are independent at a generic point
-    assert all(np.linalg.matrix_rank(Gk) == g.n_casimirs for Gk in G)
+    # gradients are independent at a generic point (each row scaled to unit length: the
+    # semidirect products' Casimirs are of very different degrees)
+    assert all(np.linalg.matrix_rank(Gk / np.linalg.norm(Gk, axis=1, keepdims=True)) == g.n_casimirs for Gk in G)
     # against central finite differences of casimirs (step 1e-6: error ~ 1e-12 relative)
     e = np.eye(g.dim)[0]
     fd = (np.asarray(g.casimirs(mu[0] + 1e-6 * e)) - np.asarray(g.casimirs(mu[0] - 1e-6 * e))) / 2e-6
@@ -299,8 +303,14 @@ def test_semidirect_products_by_hand_and_bad_input():
     np.testing.assert_allclose(np.asarray(h.casimirs(mu)), [np.vdot(p, p).real, np.trace(1j * K).real], rtol=16 * EPS)
     with pytest.raises(ValueError, match=r"orbits are not isospectral"):
         h.spectrum(mu)
-    with pytest.raises(ValueError, match=r"so\(N\), gl\(N\), sl\(N\), u\(N\) and su\(N\); got sp2"):
-        lp.semidirect(lp.sp(2))
+    with pytest.raises(ValueError, match=r"so, gl, sl, u, su and sp; got se3, itself a semidirect product"):
+        lp.semidirect(lp.se(3))
+    # sp(2) = sl(2): sp(1) x R^2 is sl(2) x R^2 in another basis, and its Casimir p^T S p =
+    # -p^T J A p is -det[p, Ap]
+    a, b = lp.semidirect(lp.sp(1)), lp.semidirect(lp.sl(2))
+    mu = np.random.default_rng(14).normal(size=a.dim)
+    same = np.asarray(b.coordinates(a.matrix(mu)))
+    np.testing.assert_allclose(np.asarray(a.casimirs(mu)), -np.asarray(b.casimirs(same)), rtol=16 * EPS)
     # su(2) x C^2: |p|^2 alone (one Casimir)
     k = lp.semidirect(lp.su(2))
     mu = np.random.default_rng(13).normal(size=k.dim)
