@@ -1,8 +1,8 @@
 """se(N) = so(N) x R^N as a matrix algebra, N = 3..6: Strang splitting's observed order against
 heyoka and its Casimirs over a long run, for a rigid body in a fluid of N dimensions
 (BENCHMARKS.md, "se(N): the semidirect product as matrices"); the same for the other
-semidirect products (`--families saff uaff aff`: sl(N) x R^N, u(N) x C^N, gl(N) x R^N,
-`liepoisson.semidirect`).
+semidirect products (`--families saff uaff aff suaff spaff`: sl(N) x R^N, u(N) x C^N,
+gl(N) x R^N, su(N) x C^N, sp(2N) x R^{2N}, `liepoisson.semidirect`).
 
     python -m benchmarks.semidirect [--families se] [--sizes 3 4 5 6] [--steps 10000]
     python -m benchmarks.semidirect --report

@@ -10,13 +10,14 @@ $\Phi_s(\langle\alpha_s, W\rangle)$, identity activation (each piece a quadratic
 energy is: a sum of $N^2 - 1$ squares in the Laplacian's eigenbasis) and learned full vectors
 $\alpha_s$, started at $\widetilde H = 0$ (`init="zero"`: the identity step, vectors of unit
 expected length; `--init random` is the paper's start, vectors of length about $\sqrt{256}$),
-fitted by BFGS (`learn.QuasiNewton`) to the pairs of
+fitted by L-BFGS-B (`learn.QuasiNewton`'s default) to the pairs of
 W5's full profile (12 fields x 40 steps of quflow's step H, the isospectral midpoint at H/16);
 tested as W5 tests (`paper.w5_zeitlin.measure`, 8 fields x 400 steps against the isospectral
 triple jump at H/16). Every step is 2M - 1 conjugations, each an exact Poisson map: the
 G-LPNet is exactly Poisson and keeps the spectrum of W; its energy is the learned
 $\widetilde H$'s, a rank-M quadratic where Zeitlin's has rank $N^2 - 1$. The fitted network is
-saved beside the results (`--model`).
+saved beside the results (`--model`). The default files are `zeitlin_glpnet.json` / `.h5` at
+N = 16 from the zero start, with `_N32` and `_random_init` appended for the others.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from paper.w5_zeitlin import (
     training_trajectories,
 )
 
-from ._report import RESULTS, add_output_arguments, saved_results, write_json
+from ._report import RESULTS, add_output_arguments, default_out, saved_results, write_json
 
 NAME = "zeitlin_glpnet"
 
@@ -87,9 +88,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--modules", type=int, default=16)
     parser.add_argument("--iterations", type=int, default=50)
     parser.add_argument("--init", choices=["zero", "random"], default="zero")
-    parser.add_argument("--model", type=Path, default=RESULTS / f"{NAME}.h5")
+    parser.add_argument("--model", type=Path, default=None, help="default: beside --out's default, by N and init")
     add_output_arguments(parser, NAME)
+    parser.set_defaults(out=None)
     args = parser.parse_args(argv)
+    name = NAME + ("" if args.N == 16 else f"_N{args.N}") + ("" if args.init == "zero" else f"_{args.init}_init")
+    args.out = default_out(name) if args.out is None else args.out
+    args.model = RESULTS / f"{name}.h5" if args.model is None else args.model
     if args.report:
         report(saved_results(args.out))
         return

@@ -122,9 +122,10 @@ def _best_dual(c: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, bool]:
 
 def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
     r"""`(m, a, p, c, kappa, names)`: the basis as triples, $E_a$ has entry `c` at flat index `p`
-    (row-major in an m x m matrix). A semidirect product g x R^N (`SEMIDIRECT`) is
-    $[[A, s\,b], [0, 0]]$ in size $N + 1$, g's basis first, the translations last ($s$ makes
-    them unit vectors of the pairing: $\sqrt2$ for so's $\kappa = 1/2$)."""
+    (row-major in an m x m matrix). A semidirect product g x V (`SEMIDIRECT`, V = R^N, C^N,
+    R^{2N} for sp) is $[[A, s\,b], [0, 0]]$ in size $\dim V + 1$, g's basis first, the
+    translations last ($s$ makes them unit vectors of the pairing: $\sqrt2$ for so's
+    $\kappa = 1/2$)."""
     a_list: list[int] = []
     p_list: list[int] = []
     c_list: list[complex] = []
@@ -207,16 +208,17 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     - `family`: `"so"` (so(N), $N\times N$ antisymmetric), `"u"` / `"su"` (skew-Hermitian,
       traceless for su), `"sp"` (sp(2N, R), $2N\times 2N$), `"gl"` / `"sl"` (real, traceless
       for sl), `"se"` (se(N) = so(N) x R^N, $(N+1)\times(N+1)$, coordinates
-      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"`, `"suaff"`, `"spaff"` (gl(N), sl(N) x R^N,
-      u(N), su(N) x C^N, sp(2N) x R^{2N}:
-      `liepoisson.semidirect`).
-    - `N`: the size ($N \ge 2$; `"sp"`: $N \ge 1$, matrices $2N\times 2N$).
+      $(M_{ij}, p_i)$), `"aff"`, `"saff"`, `"uaff"`, `"suaff"`, `"spaff"` (gl(N) x R^N,
+      sl(N) x R^N, u(N) x C^N, su(N) x C^N, sp(2N) x R^{2N}: `liepoisson.semidirect`).
+    - `N`: the size ($N \ge 2$; `"sp"`, `"spaff"`: $N \ge 1$, matrices $2N\times 2N$,
+      $(2N+1)\times(2N+1)$).
     - `sign`: $-1$ for body (left-invariant) systems, $+1$ for spatial ones.
 
     The constructors `liepoisson.so(N)`, `u(N)`, `su(N)`, `sp(N)`, `gl(N)`, `sl(N)`, `se(N)` and
-    `semidirect(g)` build them. `matrix(x)` and `coordinates(X)` convert between the two representations; the
-    Casimirs are traces of powers and so(2k)'s Pfaffian (`casimirs`), the spectrum is
-    `spectrum`.
+    `semidirect(g)` build them. `matrix(x)` and `coordinates(X)` convert between the two
+    representations; the Casimirs are traces of powers and so(2k)'s Pfaffian, polynomials of
+    the translations and the rest for the semidirect products (`casimirs`); the spectrum (not
+    of a semidirect product) is `spectrum`.
     """
 
     def __init__(self, family: str, N: int, *, sign: int = -1):
@@ -344,16 +346,17 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
     # -- Casimirs --------------------------------------------------------------------------------
     @property
     def n_casimirs(self) -> int:
-        """The rank (of the coadjoint action, the index): floor(N/2) for so(N), N for u(N), gl(N)
-        and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N)."""
+        """The index (the corank of the generic coadjoint orbit): floor(N/2) for so(N), N for u(N),
+        gl(N) and sp(2N), N - 1 for su(N), sl(N), 1 + floor((N-1)/2) for se(N); 0, 1, N, N - 1, N
+        for gl(N) x R^N, sl(N) x R^N, u(N) x C^N, su(N) x C^N, sp(2N) x R^{2N}."""
         return {"so": self.N // 2, "u": self.N, "su": self.N - 1, "sp": self.N,
                 "gl": self.N, "sl": self.N - 1, "se": 1 + (self.N - 1) // 2,
                 "aff": 0, "saff": 1, "uaff": self.N, "suaff": self.N - 1, "spaff": self.N}[self.family]
 
     @property
-    def semidirect(self) -> bool:
-        """Whether this is a semidirect product g x R^N (se, aff, saff, uaff, suaff, spaff): orbits not
-        isospectral, Casimirs not traces of powers."""
+    def is_semidirect(self) -> bool:
+        """Whether this is a semidirect product g x V (se, aff, saff, uaff, suaff, spaff): orbits
+        not isospectral, Casimirs not traces of powers."""
         return self.family in SEMIDIRECT
 
     def casimirs(self, mu: ArrayLike) -> jax.Array:
@@ -368,14 +371,14 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         $\tfrac12(-1)^k\mathrm{tr}\,K^{2k}$, $k \le (N-1)/2$, and for odd $N$ the last replaced
         by the Pfaffian of $\begin{pmatrix}\Pi & p\\ -p^\top & 0\end{pmatrix}$ (invariant under
         translations as a congruence by a unimodular matrix; se(3): $-\Pi\cdot p$ in the vector
-        components)."""
+        components). The other semidirect products: `liepoisson.semidirect`."""
         return _casimirs(self, as_state(mu, "mu", self.dim))
 
     def _trace_casimirs(self) -> tuple[int, list[tuple[int, float]], bool]:
         r"""The Casimirs as `(q, [(k, s), ...], pfaffian_last)`:
         $C = s\,\mathrm{Re}\,\mathrm{tr}\,X^{qk}$ with $X = M$ ($iM$ for u, su) and $q = 2$ for so
         and sp (odd powers vanish), and whether a Pfaffian comes last (so(2k), module
-        _pfaffian). Not for se."""
+        _pfaffian). Not for the semidirect products."""
         if self.family == "so":
             pfaffian_last = self.N % 2 == 0  # Pf(M) for tr M^N
             traces = self.N // 2 - pfaffian_last
@@ -386,7 +389,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         return 1, [(k, 1.0) for k in range(first, self.N + 1)], False
 
     def _casimir_values(self, mu: jax.Array) -> jax.Array:
-        if self.semidirect:
+        if self.is_semidirect:
             return _semidirect_casimirs(self, self.matrix(mu))
         M = self.matrix(mu)
         X = 1j * M if self.complex else M
@@ -427,8 +430,8 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         return jnp.stack(out, axis=-2)
 
     def casimir_gradients(self, mu: ArrayLike) -> jax.Array:
-        """Gradients of `casimirs`, `(..., k, n)`: in closed form (se: reverse-mode
-        differentiation)."""
+        """Gradients of `casimirs`, `(..., k, n)`: in closed form (the semidirect products:
+        reverse-mode differentiation)."""
         mu = as_state(mu, "mu", self.dim)
         grads = _casimir_gradients(self, mu.reshape(-1, self.dim))
         return grads.reshape(mu.shape[:-1] + (self.n_casimirs, self.dim))
@@ -437,7 +440,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         r"""The eigenvalues of $M$, kept by every coadjoint motion: real, ascending, of the
         Hermitian $iM$ for u(N), su(N) and of $-iM$ for so(N) (`(..., m)`); complex, of $M$ for
         the others, sorted by real then imaginary part."""
-        if self.semidirect:
+        if self.is_semidirect:
             raise ValueError(
                 f"{self.name}'s coadjoint orbits are not isospectral (a translation changes the spectrum of the matrix "
                 "of mu): it has no spectrum to keep; its invariants are casimirs(mu)"
@@ -510,7 +513,7 @@ def _casimirs(algebra: MatrixLieAlgebra, mu: jax.Array) -> jax.Array:
 
 @functools.partial(jax.jit, static_argnums=0)
 def _casimir_gradients(algebra: MatrixLieAlgebra, flat: jax.Array) -> jax.Array:
-    if algebra.semidirect:
+    if algebra.is_semidirect:
         return jax.vmap(jax.jacrev(algebra._casimir_values))(flat)
     return algebra._casimir_gradient_values(flat)
 
@@ -547,10 +550,10 @@ def _semidirect_casimirs(algebra: MatrixLieAlgebra, M: jax.Array) -> jax.Array:
         return _se_casimirs(M, N)
     if algebra.family == "spaff":
         return _spaff_casimirs(M, N)
-    A = M[..., :N, :N]
-    p = M[..., :N, N]  # the translations' components (unit scale: kappa = 1)
     if algebra.family == "aff":
         return jnp.zeros(M.shape[:-2] + (0,), jnp.float64)
+    A = M[..., :N, :N]
+    p = M[..., :N, N]  # the translations' components (unit scale: kappa = 1)
     if algebra.family == "saff":
         # det [p, A p, ..., A^(N-1) p] (SL(N) x R^N)
         columns = [p]
@@ -672,11 +675,12 @@ def se(N: int, sign: int = -1) -> MatrixLieAlgebra:
 
 
 def semidirect(algebra: MatrixLieAlgebra) -> MatrixLieAlgebra:
-    r"""$\mathfrak g \ltimes \mathbb R^N$ for $\mathfrak g$ = so(N) (se(N)), gl(N) (aff(N),
-    the affine algebra), sl(N) (the special affine algebra), u(N) or su(N) ($\mathbb C^N$, the
-    (special) unitary affine algebra), acting on column vectors: $(N+1)\times(N+1)$ matrices
-    $\begin{pmatrix}A & s\,b\\ 0 & 0\end{pmatrix}$, coordinates $\mu = (\text{g's}, p)$
-    (u, su: $p_i$, $q_i$ the real and imaginary parts), the same sign. Casimirs (`casimirs`): se(N)'s;
+    r"""$\mathfrak g \ltimes V$, $V$ the defining representation, column vectors: $\mathbb R^N$
+    for so(N) (se(N)), gl(N) (the affine algebra), sl(N) (the special affine algebra),
+    $\mathbb C^N$ for u(N), su(N), $\mathbb R^{2N}$ for sp(2N); matrices
+    $\begin{pmatrix}A & s\,b\\ 0 & 0\end{pmatrix}$ of size $\dim V + 1$, coordinates
+    $\mu = (\text{g's}, p)$ (u, su: $p_i$, $q_i$ the real and imaginary parts), the same sign.
+    Casimirs (`casimirs`): se(N)'s;
     none for aff(N) (a Frobenius algebra: an open orbit); $\det[p, Ap, \ldots, A^{N-1}p]$ for
     sl(N) (SL(N) keeps volumes, and a translation moves $A$ by $pb^\top$ less its trace,
     which adds to $A^kp$ only combinations of lower powers); $|p|^2$ and

@@ -151,7 +151,9 @@ class AffineMLP(AbstractNetwork):
     at zero weights and bias, so the network starts as the constant $m_\text{out}$, the
     data's mean output once normalised, and a fit moves only directions the data reach:
     the start for a network with more weights than data, such as an affine $\alpha(W)$ on
-    Zeitlin's model). `init` is part of the architecture (`spec`, `reinitialised`).
+    Zeitlin's model). `init` is part of the architecture (`spec`, `reinitialised`); without
+    hidden layers a zero start has no random part, so restarts (`learn.Restarts`) repeat one
+    fit.
     """
 
     mlp: MLP
