@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike
 from ._abstract_algebra import AbstractLieAlgebra
 from ._expm import matrix_exponential
 from ._inverse import gauss_newton_parameters
+from ._memory import check_fits_in_memory, integer, memory_limit
 from ._pfaffian import pfaffian
 from ._samples import COMMON_PATH_ONLY
 from ._validation import as_state
@@ -118,6 +119,63 @@ def _best_dual(c: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, bool]:
             if abs(trial - 1) < abs(gain - 1):
                 values[i], gain = candidate, trial
     return np.asarray(values), gain == 1
+
+
+#: An upper estimate of the bytes the construction takes per nonzero entry of the basis (the
+#: Python lists `_basis` builds, then its arrays) and per basis element (its name and index).
+_BYTES_PER_ENTRY = 100
+_BYTES_PER_ELEMENT = 250
+
+
+def _basis_size(family: str, N: int) -> tuple[int, int, int]:
+    """`(m, dim, entries)` of `_basis(family, N)` in closed form (exact Python ints for any
+    N): the matrix size, the dimension and the count of nonzero entries of the basis."""
+    base = SEMIDIRECT.get(family, family)
+    vector = 2 * N if base == "sp" else N
+    diagonal = (N - 1) * (N + 2) // 2  # the traceless diagonals (_helmert): k + 2 entries each
+    dim, entries = {
+        "so": (N * (N - 1) // 2, N * (N - 1)),
+        "u": (N * N, N + 2 * N * (N - 1)),
+        "su": (N * N - 1, diagonal + 2 * N * (N - 1)),
+        "gl": (N * N, N * N),
+        "sl": (N * N - 1, diagonal + N * (N - 1)),
+        "sp": (2 * N * N + N, 4 * N * N),
+    }[base]
+    if family in SEMIDIRECT:
+        translations = 2 * vector if base in ("u", "su") else vector
+        return vector + 1, dim + translations, entries + translations
+    return vector, dim, entries
+
+
+def _construction_bytes(family: str, N: int) -> int:
+    """An upper estimate of the memory `MatrixLieAlgebra(family, N)` takes to build: its basis,
+    `_helmert`'s dense matrix (su, sl) and one complex matrix of its size."""
+    m, dim, entries = _basis_size(family, N)
+    helmert = 8 * N * (N - 1) if SEMIDIRECT.get(family, family) in ("su", "sl") else 0
+    return _BYTES_PER_ENTRY * entries + _BYTES_PER_ELEMENT * dim + helmert + 16 * m * m
+
+
+def check_size(family: str, N: int, name: str = "N") -> None:
+    """`ValueError` naming `name` (before anything is allocated) if `family`(N) would not fit
+    in memory (`liepoisson._memory.memory_limit`), with the largest N that does."""
+    need = _construction_bytes(family, N)
+    if need <= memory_limit():
+        return
+
+    def fits(n: int) -> bool:
+        return _construction_bytes(family, n) <= memory_limit()
+
+    low = 1  # the largest N that fits: doubling, then bisection on the closed form
+    while fits(2 * low):
+        low *= 2
+    high = 2 * low
+    while high - low > 1:
+        mid = (low + high) // 2
+        low, high = (mid, high) if fits(mid) else (low, mid)
+    m, dim, _ = _basis_size(family, N)
+    check_fits_in_memory(
+        need, f"{name}: {family}(N) at N = {integer(N)} (dimension {integer(dim)}, matrices {integer(m)} x "
+        f"{integer(m)}) is too large to build: its basis", f"give N <= {low:,} for {family}(N) on this machine")
 
 
 def _basis(family: str, N: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, list[str]]:
@@ -231,6 +289,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
             raise ValueError(f"N must be >= {smallest} for {family}(N); got {N}")
         if isinstance(sign, bool) or sign not in (-1, 1):
             raise ValueError(f"sign must be -1 (body) or +1 (spatial); got {sign!r}")
+        check_size(family, int(N))
         self.family = family
         self.N = int(N)
         self.sign = int(sign)
@@ -700,4 +759,5 @@ def semidirect(algebra: MatrixLieAlgebra) -> MatrixLieAlgebra:
             f"semidirect products with the defining representation are built for so, gl, sl, u, su and sp; got "
             f"{algebra.name}, itself a semidirect product"
         )
+    check_size(family, algebra.N, "algebra")
     return MatrixLieAlgebra(family, algebra.N, sign=algebra.sign)
