@@ -93,6 +93,15 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
     if unknown:
         print(f"unknown experiment(s) {unknown}; available: {', '.join(EXPERIMENTS)}", file=sys.stderr)
         return 2
+    for folder in (out, *(out / i for i in ids)):  # before any experiment runs, one line if it fails
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as err:  # what check_out_dir cannot foresee: a dangling link, too long a name, a race
+            why = (f"it is a link to {os.readlink(folder)!r}, which does not exist" if os.path.islink(folder) else
+                   err.strerror or str(err))
+            print(f"python -m paper: error: --out {str(folder)!r} cannot be created ({why}); give a folder you can "
+                  "write to (python -m paper --out DIR)", file=sys.stderr)
+            return 2
     results = {}
     t0 = time.perf_counter()
     for exp_id in ids:

@@ -72,3 +72,42 @@ def test_execute_names_out_dir(tmp_path):
     with pytest.raises(ValueError, match=r"out_dir '.*results\.txt/W2' cannot be created: '.*results\.txt' exists and "
                                          r"is not a folder"):
         EXPERIMENTS["W2"].execute(profile="smoke", progress=False, out_dir=file / "W2")
+
+
+# -- a folder the check lets through but mkdir cannot create: one line, status 2, for every run --
+@pytest.mark.parametrize("exp_id", list(EXPERIMENTS))
+def test_out_that_cannot_be_created(tmp_path, capsys, exp_id, monkeypatch):
+    # a dangling link: nothing exists at its target, so the check passes; mkdir meets the link
+    link = tmp_path / "results"
+    link.symlink_to(tmp_path / "missing" / "target")
+    assert cli.main(["run", exp_id, "--profile", "smoke", "--out", str(link)]) == 2
+    assert _error_line(capsys) == (
+        f"python -m paper: error: --out {str(link)!r} cannot be created (it is a link to "
+        f"{str(tmp_path / 'missing' / 'target')!r}, which does not exist); give a folder you can write to "
+        "(python -m paper --out DIR)\n")
+    # a name longer than the file system allows
+    long = tmp_path / ("x" * 300)
+    assert cli.main(["run", exp_id, "--profile", "smoke", "--out", str(long)]) == 2
+    assert _error_line(capsys).startswith(f"python -m paper: error: --out {str(long)!r} cannot be created (")
+    # below a regular file that appeared after the check (a race): as if the check had passed
+    file = tmp_path / "somefile"
+    file.write_text("")
+    monkeypatch.setattr(cli, "check_out_dir", lambda *args: None)
+    assert cli.main(["run", exp_id, "--profile", "smoke", "--out", str(file / "sub")]) == 2
+    assert _error_line(capsys) == (f"python -m paper: error: --out {str(file / 'sub')!r} cannot be created (Not a "
+                                   "directory); give a folder you can write to (python -m paper --out DIR)\n")
+    assert file.read_text() == ""
+
+
+def test_out_that_cannot_be_created_from_the_shell(tmp_path):
+    import subprocess
+    import sys
+
+    link = tmp_path / "results"
+    link.symlink_to(tmp_path / "missing")
+    done = subprocess.run([sys.executable, "-m", "paper", "run", "W2", "--profile", "smoke", "--out", str(link)],
+                          capture_output=True, text=True, timeout=600, cwd=os.path.dirname(os.path.dirname(__file__)))
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "Traceback" not in done.stderr, done.stderr
+    assert f"--out {str(link)!r} cannot be created" in done.stderr
+    assert not (tmp_path / "missing").exists()
