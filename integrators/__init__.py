@@ -14,6 +14,7 @@ from ._diagnostics import (
     error_growth_rate as error_growth_rate,
 )
 from ._damped_splitting import DampedSplitting as DampedSplitting
+from ._forced_splitting import ForcedSplitting as ForcedSplitting
 from ._splitting._base import Splitting as Splitting
 from ._exact import ExactFlow as ExactFlow
 from ._implicit import AbstractImplicitStepMap as AbstractImplicitStepMap

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from liepoisson.internals import positive_float, positive_int, progress_bar, show_progress
-from liepoisson.systems import AbstractPoissonSystem
+from liepoisson.systems import AbstractPoissonSystem, Forced
 
 from ._distributed import check_client, map_unordered
 from ._step_map import check_fits_in_memory
@@ -96,6 +96,8 @@ def _initial_conditions(system: AbstractPoissonSystem, y0: ArrayLike) -> np.ndar
         raise ValueError(
             f"y0 must have shape ({system.dim},) or (n_traj, {system.dim}); got shape {y0.shape}"
         )
+    if isinstance(system, Forced):
+        system.check_taylor_starts(y0, "y0")
     return y0
 
 

@@ -20,7 +20,7 @@ import equinox as eqx
 import jax
 
 from liepoisson.internals import check_system, positive_float, refuse_nonholonomic
-from liepoisson.systems import AbstractLiePoissonSystem
+from liepoisson.systems import AbstractForcedSystem, AbstractLiePoissonSystem
 
 from ._step_map import AbstractStepMap, check_state
 
@@ -39,6 +39,10 @@ def check_lie_poisson(system, what: str = "system") -> AbstractLiePoissonSystem:
             f"a DoubleBracket of one): Lie-group methods move by its coadjoint action; got {type(system).__name__}"
         )
     refuse_nonholonomic(system, "a Lie-group method")
+    if isinstance(system, AbstractForcedSystem):
+        raise ValueError(  # noqa: TRY004 (a system of the right type, unsuitable)
+            f"{what} is forced ({system!r}): its forces move the momenta off the coadjoint orbit, where a Lie-group "
+            "method cannot follow. Use integrators.ForcedSplitting, integrators.RK4 or integrators.ground_truth")
     return system
 
 

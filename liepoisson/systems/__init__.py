@@ -1,5 +1,6 @@
 """Physical Poisson systems: rigid body, heavy top, Kirchhoff, extended pendulum, charged particle;
-double-bracket dissipation of any Lie-Poisson system; nonholonomic constraints on its body
+double-bracket dissipation of any Lie-Poisson system; external forces in the body frame
+(linear and quadratic drag, constant torques); nonholonomic constraints on its body
 velocity (the Lie-Poisson-d'Alembert equations: the Suslov problem, the Chaplygin sleigh)."""
 
 from ._base import (
@@ -22,6 +23,17 @@ from ._double_bracket import (
     DoubleBracket as DoubleBracket,
     damped_heavy_top as damped_heavy_top,
     damped_rigid_body as damped_rigid_body,
+)
+from ._forces import (
+    FORCES as FORCES,
+    AbstractDissipativeForce as AbstractDissipativeForce,
+    AbstractForce as AbstractForce,
+    AbstractForcedSystem as AbstractForcedSystem,
+    ConstantTorque as ConstantTorque,
+    Forced as Forced,
+    LinearDrag as LinearDrag,
+    QuadraticDrag as QuadraticDrag,
+    force_from_params as force_from_params,
 )
 from ._generalized_rigid_body import GeneralizedRigidBody as GeneralizedRigidBody
 from ._heavy_top import HeavyTop as HeavyTop

@@ -14,6 +14,7 @@ from .._jsonable import jsonable
 from ._base import AbstractPoissonSystem
 from ._charged_particle import ChargedParticle
 from ._double_bracket import DoubleBracket
+from ._forces import Forced
 from ._generalized_rigid_body import GeneralizedRigidBody
 from ._heavy_top import HeavyTop
 from ._kirchhoff import Kirchhoff
@@ -43,6 +44,10 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
             raise ValueError("a DoubleBracket is rebuilt from its params (system, system_params, gamma, metric); "
                              f"got {params!r}")
         return DoubleBracket.from_params(params, from_name)
+    if name == Forced.name:
+        if not isinstance(params, dict):
+            raise ValueError(f"a Forced system is rebuilt from its params (system, system_params, forces); got {params!r}")
+        return Forced.from_params(params, from_name)
     if name == LiePoissonDAlembert.name:
         if not isinstance(params, dict):
             raise ValueError("a LiePoissonDAlembert is rebuilt from its params (system, system_params, constraints); "
@@ -50,7 +55,7 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
         return LiePoissonDAlembert.from_params(params, from_name)
     if name not in SYSTEMS:
         raise ValueError(
-            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket, LiePoissonDAlembert and user LiePoissonSystems "
+            f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket, Forced, LiePoissonDAlembert and user LiePoissonSystems "
             "(saved with their definition). For a system class of your own, pass system=... to the loader"
         )
     return SYSTEMS[name](**(params or {}))
