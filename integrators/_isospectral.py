@@ -79,6 +79,17 @@ def check_isospectral(system: AbstractLiePoissonSystem, what: str = "system") ->
     return system
 
 
+def check_stage_tolerance(tol: Any, name: str = "tol") -> float:
+    r"""`tol` as a float in (0, 1): relative to $\|W\|_\infty$, the largest move of the stage
+    iteration that is accepted; at 1 or more the first iterate is accepted, converged or not."""
+    tol = positive_float(tol, name)
+    if tol >= 1.0:
+        raise ValueError(f"{name} must be in (0, 1): the stage iteration stops when an iteration moves the stage by "
+                         f"at most {name} times ||W||_inf, so at {name} >= 1 it accepts its first iterate unchecked "
+                         f"(the default is {DEFAULT_TOL:g}); got {tol!r}")
+    return tol
+
+
 class IsospectralMidpoint(AbstractStepMap):
     r"""The isospectral midpoint method (module docstring): order 2, symmetric, a Lie-Poisson
     integrator for $\dot W = [B(W), W]$ (Modin & Viviani 2020) that keeps the spectrum of $W$
@@ -87,8 +98,8 @@ class IsospectralMidpoint(AbstractStepMap):
     **Arguments:**
 
     - `system`, a Lie-Poisson system on so(N), u(N) or su(N); `h` > 0.
-    - `tol` (default `DEFAULT_TOL`): the stage iteration stops when an iteration moves the
-      stage by at most `tol` times $\|W\|_\infty$ (largest row sum; both in that norm).
+    - `tol` in (0, 1) (default `DEFAULT_TOL`): the stage iteration stops when an iteration
+      moves the stage by at most `tol` times $\|W\|_\infty$ (largest row sum; both in that norm).
     - `iterations` (default `None`): `None` iterates until `tol` is met (at most `max_iter`
       iterations), the robust choice; an integer $k$ makes every step of a rollout do exactly
       $k$ iterations from its extrapolated start (straight-line code, which reverse-mode
@@ -115,7 +126,7 @@ class IsospectralMidpoint(AbstractStepMap):
                  iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER):
         self.system = check_isospectral(system)
         self.h = positive_float(h, "h")
-        self.tol = positive_float(tol, "tol")
+        self.tol = check_stage_tolerance(tol)
         self.iterations = None if iterations is None else positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
 

@@ -24,8 +24,9 @@ these names may change with the library.
   strings, NaN as `nan`): the paper's metrics and the benchmarks' result files.
 - `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
   library's style.
-- `check_isospectral(system)`, `ISOSPECTRAL_TOL`, `ISOSPECTRAL_MAX_ITER`: what the isospectral
-  methods accept and their defaults (a learned map on the same step uses them).
+- `check_isospectral(system)`, `check_stage_tolerance(tol)`, `ISOSPECTRAL_TOL`,
+  `ISOSPECTRAL_MAX_ITER`: what the isospectral methods accept and their defaults (a learned map
+  on the same step uses them).
 - `serial_lapack()`, `serial_lapack_block()`: JAX's CPU LAPACK (SciPy's OpenBLAS) on one
   thread, for the process or for a `with` block.
 """
@@ -46,6 +47,7 @@ from ._ground_truth import integrate_chunk as integrate_chunk
 from ._isospectral import DEFAULT_MAX_ITER as ISOSPECTRAL_MAX_ITER  # noqa: F401 (re-exported, renamed)
 from ._isospectral import DEFAULT_TOL as ISOSPECTRAL_TOL  # noqa: F401 (re-exported, renamed)
 from ._isospectral import check_isospectral as check_isospectral
+from ._isospectral import check_stage_tolerance as check_stage_tolerance
 from ._json_values import json_values as json_values
 from ._lapack import serial_lapack as serial_lapack
 from ._lapack import serial_lapack_block as serial_lapack_block

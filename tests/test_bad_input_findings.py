@@ -46,3 +46,19 @@ def test_the_largest_size_said_to_fit_is_built(family, monkeypatch):
     assert g.N == largest
     with pytest.raises(ValueError, match=f"^N: {family}\\(N\\) at N = {largest + 1:,} "):
         MatrixLieAlgebra(family, largest + 1)
+
+
+# -- the isospectral stage iteration's relative tolerance -----------------------------------------
+@pytest.mark.parametrize("tol", [1.0, 10, 1e300])
+def test_stage_tolerance_must_be_below_one(tol):
+    import integrators as it
+    import learn
+
+    body = lp.systems.GeneralizedRigidBody((1.0, 1.3, 1.9, 2.6))
+    for build in (lambda: it.IsospectralMidpoint(body, 0.1, tol=tol), lambda: it.IsospectralTripleJump(body, 0.1, tol=tol),
+                  lambda: learn.IsospectralPolynomial(body, h=0.1, tol=tol)):
+        with pytest.raises(ValueError, match=r"^tol must be in \(0, 1\): .* got "):
+            build()
+    # a small tolerance is taken as it is
+    assert it.IsospectralMidpoint(body, 0.1, tol=0.5).tol == 0.5
+    assert learn.IsospectralPolynomial(body, h=0.1, tol=1e-14).tol == 1e-14

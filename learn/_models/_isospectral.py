@@ -13,7 +13,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import IsospectralMidpoint
-from integrators.internals import ISOSPECTRAL_MAX_ITER, ISOSPECTRAL_TOL, check_h, check_isospectral
+from integrators.internals import (
+    ISOSPECTRAL_MAX_ITER,
+    ISOSPECTRAL_TOL,
+    check_h,
+    check_isospectral,
+    check_stage_tolerance,
+)
 from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
@@ -99,7 +105,7 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
         self.degree = int(theta.size)
         self.theta = jnp.asarray(theta)
         self.h = None if h is None else positive_float(h, "h")
-        self.tol = positive_float(tol, "tol")
+        self.tol = check_stage_tolerance(tol)
         self.iterations = None if iterations is None else positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
 
