@@ -62,3 +62,61 @@ def test_stage_tolerance_must_be_below_one(tol):
     # a small tolerance is taken as it is
     assert it.IsospectralMidpoint(body, 0.1, tol=0.5).tol == 0.5
     assert learn.IsospectralPolynomial(body, h=0.1, tol=1e-14).tol == 1e-14
+
+
+# -- the named nonholonomic systems: every error names the user's argument --------------------------
+@pytest.mark.parametrize(("a", "error", "message"), [
+    ((0.0, 0.0, 0.0), ValueError, r"^a must be a non-zero body vector .* which is zero"),
+    ((1e200, 1e200, 0.0), ValueError, r"^a must be a non-zero body vector .* squared length is beyond float64"),
+    ((1e-300, 0.0, 0.0), ValueError, r"^a must be a non-zero body vector"),
+    ((1.0, 2.0), ValueError, r"^a must have shape \(3,\); got shape \(2,\)"),
+    ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], ValueError, r"^a must have shape \(3,\); got shape \(2, 3\)"),
+    (np.eye(3), ValueError, r"^a must have shape \(3,\)"),
+    ((1.0, np.nan, 0.0), ValueError, r"^a must be finite"),
+    ("x", TypeError, r"^a must be 3 real numbers"),
+    ([1j, 0.0, 0.0], TypeError, r"^a must be 3 real numbers"),
+    (None, ValueError, r"^a must have shape \(3,\)"),
+])
+def test_suslov_errors_name_a(a, error, message):
+    with pytest.raises(error, match=message):
+        lp.systems.suslov(a=a)
+
+
+@pytest.mark.parametrize(("inertia", "error"), [((1.0, -2.0, 3.0), ValueError), ((1.0, 2.0), ValueError),
+                                                ("x", TypeError)])
+def test_suslov_errors_name_inertia(inertia, error):
+    with pytest.raises(error, match="^inertia must"):
+        lp.systems.suslov(inertia=inertia)
+
+
+@pytest.mark.parametrize(("kwargs", "error", "message"), [
+    ({"a": None}, TypeError, r"^a must be a real number .* got NoneType None"),
+    ({"a": 1j}, TypeError, r"^a must be a real number .* got complex 1j"),
+    ({"a": np.array(1 + 0j)}, TypeError, r"^a must be a real number"),
+    ({"a": True}, TypeError, r"^a must be a real number"),
+    ({"a": [1.0]}, TypeError, r"^a must be a real number"),
+    ({"a": np.inf}, ValueError, r"^a must be finite"),
+    ({"mass": 0.0}, ValueError, r"^mass must be finite and > 0"),
+    ({"mass": None}, TypeError, r"^mass must be a positive real number"),
+    ({"inertia": -1.0}, ValueError, r"^inertia must be finite and > 0"),
+    # overflow of the inverse mass matrix: named, not a failure deep inside the Hamiltonian
+    ({"a": 1e200}, ValueError, r"^mass = 1.0, inertia = 1.0 and a = 1e\+200 give an inverse mass matrix beyond"),
+    ({"mass": 1e300, "inertia": 1e-300, "a": 1e300}, ValueError, r"^mass = 1e\+300, inertia = 1e-300 and a = 1e\+300"),
+])
+def test_chaplygin_sleigh_errors_name_the_argument(kwargs, error, message):
+    with pytest.raises(error, match=message):
+        lp.systems.chaplygin_sleigh(**kwargs)
+
+
+def test_chaplygin_sleigh_velocity_from_its_momentum():
+    # xi = M^{-1} mu with M^{-1} in closed form: to round-off of mu's own size, also where
+    # mass a^2 dwarfs inertia
+    for m, inertia, a in ((1.0, 1.0, 0.5), (2.0, 0.7, -0.3), (1.0, 1.0, 100.0)):
+        sleigh = lp.systems.chaplygin_sleigh(m, inertia, a)
+        M = np.array([[inertia + m * a * a, 0.0, m * a], [0.0, m, 0.0], [m * a, 0.0, m]])
+        xi = np.array([0.3, -0.2, 0.0])  # admissible: no sideways velocity
+        mu = M @ xi
+        np.testing.assert_allclose(np.asarray(sleigh.hamiltonian_gradient(mu)), xi, rtol=0,
+                                   atol=16 * np.finfo(float).eps * np.abs(mu).max() * max(1.0, a * a))
+    for arg in (np.float32(0.5), np.array(0.5), np.int64(1)):  # NumPy scalars are real numbers
+        lp.systems.chaplygin_sleigh(a=arg)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import numbers
 from typing import Any
 
 import jax
@@ -33,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from .._groups import AbstractLieGroup, MatrixGroup
 from .._namespace import HEYOKA
-from .._validation import positive_float
+from .._validation import finite_vector, positive_float
 from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem, AbstractPoissonSystem
 
 #: Constraint covectors whose smallest singular value is below this fraction of the largest
@@ -349,7 +350,14 @@ def suslov(inertia: ArrayLike = (1.0, 2.0, 3.0), a: ArrayLike = (1.0, 1.0, 1.0))
     in the plane $a^\perp$ as $t \to \pm\infty$; $|\Pi|^2$ changes along the way."""
     from ._rigid_body import RigidBody
 
-    return LiePoissonDAlembert(RigidBody(inertia), a)
+    body = RigidBody(inertia)
+    a = finite_vector(a, "a", 3)
+    square = sum(float(x) * float(x) for x in a)  # Python floats: inf or 0 beyond float64, no warning
+    if not 0.0 < square < np.inf:
+        why = "which is zero" if not np.any(a) else "whose squared length is beyond float64"
+        raise ValueError(f"a must be a non-zero body vector of moderate length (the constraint is <a, Omega> = 0, "
+                         f"so only its direction matters: scale it); got {a.tolist()}, {why}")
+    return LiePoissonDAlembert(body, a)
 
 
 #: se(2)'s matrix basis $(E_\theta, E_x, E_y)$ as $3\times3$ homogeneous matrices, matching
@@ -376,13 +384,20 @@ def chaplygin_sleigh(mass: float = 1.0, inertia: float = 1.0, a: float = 0.5) ->
     from ._lie_poisson import LiePoissonSystem
 
     m, J = positive_float(mass, "mass"), positive_float(inertia, "inertia")
-    if isinstance(a, (bool, str, bytes)) or np.ndim(a) != 0:
-        raise TypeError(f"a must be a real number (the distance of the centre of mass along the blade); got {a!r}")
+    real = isinstance(a, numbers.Real) or (isinstance(a, (np.ndarray, np.generic)) and np.ndim(a) == 0
+                                           and np.asarray(a).dtype.kind in "iuf")
+    if isinstance(a, bool) or not real:
+        raise TypeError(f"a must be a real number (the distance of the centre of mass along the blade); got "
+                        f"{type(a).__name__} {a!r}")
     a = float(a)
     if not np.isfinite(a):
         raise ValueError(f"a must be finite (the distance of the centre of mass along the blade); got {a!r}")
-    M = np.array([[J + m * a * a, 0.0, m * a], [0.0, m, 0.0], [m * a, 0.0, m]])
-    Minv = np.linalg.inv(M)
+    # M^{-1} in closed form (det M = m^2 I): exact where inverting M would cancel I against m a^2
+    Minv = np.array([[1.0 / J, 0.0, -a / J], [0.0, 1.0 / m, 0.0], [-a / J, 0.0, 1.0 / m + a * a / J]])
+    if not np.all(np.isfinite(Minv)):
+        raise ValueError(f"mass = {m!r}, inertia = {J!r} and a = {a!r} give an inverse mass matrix beyond float64 "
+                         f"(a / inertia = {a / J:.3g}, a^2 / inertia = {a * a / J:.3g}, 1 / mass = {1.0 / m:.3g}); "
+                         "give them in units where they are of moderate size")
 
     def hamiltonian(mu, xp):
         return 0.5 * sum(float(Minv[i, j]) * mu[i] * mu[j] for i in range(3) for j in range(3) if Minv[i, j] != 0.0)
