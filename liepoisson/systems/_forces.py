@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import abc
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
@@ -482,18 +482,28 @@ class Forced(AbstractForcedSystem, AbstractDefinedByParams):
         self.__dict__["_quadratic"] = (A, b)
         return A, b
 
+    def drag_matrix(self, xi: jax.Array) -> jax.Array:
+        r"""$\bar D(\xi) = \sum_f w_f(\xi)D_f$ `(dim, dim)` over the dissipative forces (their
+        matrices embedded at their components), for one body velocity `xi` `(dim,)`."""
+        out = jnp.zeros((self.dim, self.dim), dtype=xi.dtype)
+        for f in self.forces:
+            if isinstance(f, AbstractDissipativeForce):
+                out = out + f.weight(xi[..., list(f.components(self.dim))]) * jnp.asarray(f.embedded(self.dim))
+        return out
+
     def force_flow(self, t: ArrayLike, y: ArrayLike) -> jax.Array:
         r"""The flow of the forces alone over a time `t` from `y` `(..., dim)`, with the
         Hamiltonian's body velocity $\xi = \nabla H$ (`forces_flow`): exact for linear drag
         and constant torques, else the midpoint discrete gradient, whose energy never increases
         for $t > 0$ under dissipative forces."""
         A, b = self.quadratic_hamiltonian()
-        drags = [(f, jnp.asarray(f.embedded(self.dim))) for f in self.forces if isinstance(f, AbstractDissipativeForce)]
+        drags = [f for f in self.forces if isinstance(f, AbstractDissipativeForce)]
         torques = [f.force(jnp.zeros(self.dim)) for f in self.forces if not isinstance(f, AbstractDissipativeForce)]
         torque = sum(torques[1:], torques[0]) if torques else None
         y = jnp.asarray(y, dtype=jnp.float64)
         t = jnp.asarray(t, dtype=jnp.float64)
-        one = functools.partial(forces_flow, jnp.asarray(A), jnp.asarray(b), drags, torque)
+        one = functools.partial(forces_flow, jnp.asarray(A), jnp.asarray(b), self.drag_matrix, torque,
+                                constant=all(isinstance(f, LinearDrag) for f in drags))
         flat = y.reshape(-1, self.dim)
         out = jax.vmap(one, in_axes=(None, 0))(t, flat) if t.ndim == 0 else jax.vmap(one)(
             jnp.broadcast_to(t, y.shape[:-1]).reshape(-1), flat)
@@ -537,31 +547,30 @@ class Forced(AbstractForcedSystem, AbstractDefinedByParams):
 MIDPOINT_ITERATIONS = 6
 
 
-def forces_flow(A: jax.Array, b: jax.Array, drags: Sequence[tuple[AbstractDissipativeForce | str, jax.Array]],
-                torque: jax.Array | None, t: jax.Array, y: jax.Array) -> jax.Array:
-    r"""The flow of the forces alone, $\dot\mu = -\sum_f w_f(\xi)D_f\xi + \tau$ with
+def forces_flow(A: jax.Array, b: jax.Array, drag: Callable[[jax.Array], jax.Array], torque: jax.Array | None,
+                t: jax.Array, y: jax.Array, *, constant: bool = False) -> jax.Array:
+    r"""The flow of the forces alone, $\dot\mu = -\bar D(\xi)\,\xi + \tau$ with
     $\xi = A\mu + b$ (a quadratic Hamiltonian), over a time `t` from one state `y` `(dim,)`.
 
-    `drags` holds `(force, D)` pairs: the force gives the weight $w_f$ (its `weight`, on its
-    components) and `D` is its matrix embedded `(dim, dim)` (a traced array for learned drags;
-    `"linear"` or `"quadratic"` may stand for the force). `torque` is $\tau$ `(dim,)` or None.
+    `drag(xi)` is $\bar D(\xi)$ `(dim, dim)`, symmetric positive semidefinite for every
+    $\xi$ (the sum of the drags' $w_f(\xi)D_f$); `constant`: it does not depend on $\xi$ (linear
+    drags). `torque` is $\tau$ `(dim,)` or None.
 
-    - Linear drags only: exact, $\mu(t) = e^{tM}\mu + \ldots$ by the exponential of the affine
-      system $\dot\mu = -\bar D(A\mu + b) + \tau$ (augmented by one dimension).
-    - Otherwise the midpoint discrete gradient: $\mu_1 - \mu_0 = t\,(-\bar D(w)\,\bar\xi + \tau)$,
-      $\bar\xi = A(\mu_0 + \mu_1)/2 + b$, $\bar D(w) = \sum_f w_f D_f$ with the weights at the
-      midpoint (fixed-point iterations, `MIDPOINT_ITERATIONS`), one linear solve each. For a
-      quadratic $H$, $H(\mu_1) - H(\mu_0) = \bar\xi\cdot(\mu_1 - \mu_0)$ exactly, so
+    - Constant $\bar D$: exact, the exponential of the affine system
+      $\dot\mu = -\bar D(A\mu + b) + \tau$ (augmented by one dimension).
+    - Otherwise the midpoint discrete gradient: $\mu_1 - \mu_0 = t\,(-\bar D\,\bar\xi + \tau)$,
+      $\bar\xi = A(\mu_0 + \mu_1)/2 + b$, $\bar D$ at the midpoint's $\xi$ (fixed-point
+      iterations, `MIDPOINT_ITERATIONS`), one linear solve each. For a quadratic $H$,
+      $H(\mu_1) - H(\mu_0) = \bar\xi\cdot(\mu_1 - \mu_0)$ exactly, so
       $H(\mu_1) - H(\mu_0) = -t\,\bar\xi^\top\bar D\bar\xi + t\,\bar\xi\cdot\tau$: without a
-      torque the energy never increases, for every $t > 0$ and any weights $w_f \ge 0$
-      (the iterations' convergence does not matter). Symmetric ($\Phi_{-t} = \Phi_t^{-1}$ at
-      convergence) and of order 2, so that a symmetric composition of order 4 keeps its order.
+      torque the energy never increases, for every $t > 0$ and whatever $\bar D$ was evaluated
+      at (the iterations' convergence does not matter). Symmetric ($\Phi_{-t} = \Phi_t^{-1}$
+      at convergence) and of order 2, so that a symmetric composition of order 4 keeps its order.
     """
     dim = y.shape[-1]
-    kinds = [_weight_of(force) for force, _ in drags]
     tau = jnp.zeros(dim, dtype=y.dtype) if torque is None else torque
-    if all(kind is None for kind in kinds):  # linear drags: the exact affine flow
-        Dbar = sum((D for _, D in drags), jnp.zeros((dim, dim), dtype=y.dtype))
+    if constant:  # the exact affine flow
+        Dbar = drag(b)
         M = jnp.zeros((dim + 1, dim + 1), dtype=y.dtype)
         M = M.at[:dim, :dim].set(-Dbar @ A).at[:dim, dim].set(tau - Dbar @ b)
         E = jax.scipy.linalg.expm(t * M)
@@ -569,9 +578,7 @@ def forces_flow(A: jax.Array, b: jax.Array, drags: Sequence[tuple[AbstractDissip
     eye = jnp.eye(dim, dtype=y.dtype)
 
     def solve(mid: jax.Array) -> jax.Array:
-        xi = A @ mid + b
-        Dbar = sum((D if kind is None else kind(xi) * D for kind, (_, D) in zip(kinds, drags)),
-                   jnp.zeros((dim, dim), dtype=y.dtype))
+        Dbar = drag(A @ mid + b)
         rhs = y - t * (0.5 * Dbar @ (A @ y) + Dbar @ b) + t * tau
         return jnp.linalg.solve(eye + 0.5 * t * Dbar @ A, rhs)
 
@@ -579,16 +586,3 @@ def forces_flow(A: jax.Array, b: jax.Array, drags: Sequence[tuple[AbstractDissip
         return solve(0.5 * (y + y1))
 
     return jax.lax.fori_loop(0, MIDPOINT_ITERATIONS, iterate, solve(y))
-
-
-def _weight_of(force: AbstractDissipativeForce | str):
-    """None for a linear drag (weight 1), else $\\xi \\mapsto w(\\xi)$ on all components."""
-    if force == "linear" or isinstance(force, LinearDrag):
-        return None
-    if force == "quadratic":
-        return _safe_norm
-    if isinstance(force, AbstractDissipativeForce):
-        comps = None if force.indices is None else list(force.indices)
-        return (lambda xi: force.weight(xi)) if comps is None else (lambda xi: force.weight(xi[..., comps]))
-    raise TypeError(f"a drag must be a liepoisson.systems.AbstractDissipativeForce, 'linear' or 'quadratic'; "
-                    f"got {force!r}")
