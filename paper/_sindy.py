@@ -90,9 +90,11 @@ class _AbstractSINDyModel(AbstractStudyModel):
 class SINDyModel(_AbstractSINDyModel):
     """SINDy: polynomial library of degree 2, STLSQ; derivatives by smoothed finite differences
     (regular sampling: the smoother's window of 11 points, or the shortest trajectory's odd
-    length) or finite differences (uneven: the smoother assumes even spacing)."""
+    length) or finite differences (uneven: the smoother assumes even spacing); `threshold`,
+    STLSQ's (pysindy's default 0.1)."""
 
     label: str = "SINDy"
+    threshold: float = 0.1
 
     def vector_field(self, data):
         import pysindy as ps
@@ -103,7 +105,7 @@ class SINDyModel(_AbstractSINDyModel):
             derivative = ps.SmoothedFiniteDifference(smoother_kws={"window_length": window})
         else:
             derivative = ps.FiniteDifference()
-        model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
+        model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(threshold=self.threshold),
                          differentiation_method=derivative)
         return model.fit(list(data.states), t=list(data.times))
 
