@@ -48,6 +48,50 @@ FORMAT_VERSION = 1
 MEASURED = ("configurations", "velocities")
 
 
+#: Quaternions that look scalar first are refused when, read scalar last, the rotations between
+#: successive attitudes miss the rotations the rates give by more than `SCALAR_FIRST_MISFIT` of
+#: their size, and read scalar first they miss by `SCALAR_FIRST_GAIN` times less (medians over
+#: the intervals: noise that swamps the motion spoils both readings alike and trips nothing).
+SCALAR_FIRST_MISFIT = 0.5
+SCALAR_FIRST_GAIN = 4.0
+
+
+def _rotation_misfit(q: np.ndarray, rates: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""`|log(q_k^{-1} q_{k+1}) - (w_k + w_{k+1}) dt_k / 2|` per interval (the body rotation
+    between successive attitudes against the mean rate's), and the size of the latter."""
+    from scipy.spatial.transform import Rotation
+
+    moved = (Rotation.from_quat(q[:-1]).inv() * Rotation.from_quat(q[1:])).as_rotvec()
+    expected = 0.5 * (rates[:-1] + rates[1:]) * dt[:, None]
+    return np.linalg.norm(moved - expected, axis=1), np.linalg.norm(expected, axis=1)
+
+
+def check_scalar_last(group: Any, times: tuple[np.ndarray, ...], configurations: tuple[np.ndarray, ...],
+                      velocities: tuple[np.ndarray, ...]) -> None:
+    r"""`ValueError` if attitudes (`Rotations`, `Poses`: the first four components) fit the
+    measured rates (the first three components of the body velocity) much better read scalar
+    first, $(w, x, y, z)$, than scalar last, $(x, y, z, w)$, as they are taken."""
+    if not isinstance(group, (Rotations, Poses)):
+        return
+    last, first, size = [], [], []
+    for t, g, v in zip(times, configurations, velocities, strict=True):
+        dt, q, rates = np.diff(t), g[:, :4], v[:, :3]
+        e_last, s = _rotation_misfit(q, rates, dt)
+        e_first, _ = _rotation_misfit(np.roll(q, -1, axis=1), rates, dt)
+        last.append(e_last), first.append(e_first), size.append(s)
+    last, first, size = (float(np.median(np.concatenate(x))) for x in (last, first, size))
+    if size > 0.0 and last > SCALAR_FIRST_MISFIT * size and SCALAR_FIRST_GAIN * first < last:
+        convert = ("g[:, [1, 2, 3, 0, 4, 5, 6]] (the quaternion's scalar moved last, the position kept)"
+                   if isinstance(group, Poses) else "np.roll(q, -1, axis=-1)")
+        raise ValueError(
+            f"configurations look like quaternions given scalar first, (w, x, y, z): read scalar last, (x, y, z, w), "
+            f"as they are taken (scipy's Rotation.as_quat()), the rotations between successive attitudes miss the "
+            f"rotations the velocities' rates give by {last / size:.0%} of their size (median over the intervals), "
+            f"read scalar first by {first / size:.0%}. Convert them with {convert}, or "
+            "Rotation.from_quat(q, scalar_first=True).as_quat()"
+        )
+
+
 def _check_system(system: Any) -> AbstractLiePoissonSystem:
     if not isinstance(system, AbstractLiePoissonSystem):
         raise TypeError(f"system must be a Lie-Poisson system (liepoisson.systems.AbstractLiePoissonSystem) with a "
@@ -93,7 +137,8 @@ class BodyObservations:
       increasing.
     - `configurations`: one `(n_j, group.size)` array per trajectory, or `None`; quaternions
       within `liepoisson._groups.QUATERNION_TOLERANCE` (1e-6) of unit norm are normalised,
-      others refused.
+      others refused. With velocities too, attitudes whose successive rotations fit the rates
+      much better read scalar first are refused as such (`check_scalar_last`).
     - `velocities`: one `(n_j, dim)` array per trajectory, or `None`. At least one of the two.
     - `metadata`: JSON values kept with the data and in its file.
     """
@@ -124,6 +169,8 @@ class BodyObservations:
             self.configurations = tuple(np.asarray(group.check(g, f"configurations[{j}]")) for j, g in enumerate(gs))
         if velocities is not None:
             self.velocities = tuple(_rows(velocities, "velocities", n, system.dim, list(self.times)))
+        if self.configurations is not None and self.velocities is not None:
+            check_scalar_last(group, self.times, self.configurations, self.velocities)
         try:
             self.metadata: dict[str, Any] = jsonable(dict(metadata or {}))
         except (TypeError, ValueError) as err:

@@ -120,3 +120,56 @@ def test_chaplygin_sleigh_velocity_from_its_momentum():
                                    atol=16 * np.finfo(float).eps * np.abs(mu).max() * max(1.0, a * a))
     for arg in (np.float32(0.5), np.array(0.5), np.int64(1)):  # NumPy scalars are real numbers
         lp.systems.chaplygin_sleigh(a=arg)
+
+
+# -- quaternions given scalar first ---------------------------------------------------------------
+def _observed(system, g0, noise):
+    import integrators as it
+
+    n = g0.shape[0]
+    y0 = np.random.default_rng(0).normal(size=(n, system.dim))
+    return it.observe_body(system, y0 / np.linalg.norm(y0, axis=1, keepdims=True), g0,
+                           it.uneven_times(n, 21, (0.05, 0.3), seed=2), noise=noise, seed=3)
+
+
+def _scalar_first(q):
+    return np.concatenate([q[:, 3:4], q[:, :3], q[:, 4:]], axis=1)  # (x, y, z, w, ...) -> (w, x, y, z, ...)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-3, 1e-2])
+@pytest.mark.parametrize("vehicle", [False, True], ids=["attitudes", "poses"])
+def test_quaternions_given_scalar_first_are_refused(noise, vehicle):
+    import integrators as it
+    from scipy.spatial.transform import Rotation
+
+    system = lp.systems.Kirchhoff() if vehicle else lp.systems.RigidBody((2.0, 1.0, 2.0 / 3.0))
+    q0 = Rotation.random(4, random_state=1).as_quat()
+    g0 = np.concatenate([q0, np.zeros((4, 3))], axis=1) if vehicle else q0
+    obs = _observed(system, g0, noise)  # built by BodyObservations: correct data pass, exact or noisy
+    again = it.BodyObservations(system, obs.times, obs.configurations, obs.velocities)
+    assert len(again) == 4
+    wrong = [_scalar_first(g) for g in obs.configurations]
+    convert = r"g\[:, \[1, 2, 3, 0, 4, 5, 6\]\]" if vehicle else r"np\.roll\(q, -1, axis=-1\)"
+    with pytest.raises(ValueError, match=r"^configurations look like quaternions given scalar first, \(w, x, y, z\): "
+                                         rf"read scalar last.* by \d+% .* read scalar first by \d+%\. Convert them "
+                                         rf"with {convert}"):
+        it.BodyObservations(system, obs.times, wrong, obs.velocities)
+    # as the message says: converted back, they pass (and are the attitudes given)
+    fixed = [np.roll(g[:, :4], -1, axis=-1) for g in wrong] if not vehicle else [g[:, [1, 2, 3, 0, 4, 5, 6]]
+                                                                                  for g in wrong]
+    back = it.BodyObservations(system, obs.times, fixed, obs.velocities)
+    np.testing.assert_array_equal(np.concatenate(back.configurations), np.concatenate(obs.configurations))
+    # either alone cannot be compared: taken as given
+    it.BodyObservations(system, obs.times, wrong)
+
+
+def test_noise_that_swamps_the_motion_trips_nothing():
+    import integrators as it
+    from scipy.spatial.transform import Rotation
+
+    system = lp.systems.RigidBody((2.0, 1.0, 2.0 / 3.0))
+    times = it.uneven_times(4, 21, (0.001, 0.002), seed=2)  # 1-2 mrad a step, 0.5 rad of attitude noise
+    y0 = np.random.default_rng(0).normal(size=(4, 3))
+    obs = it.observe_body(system, y0, Rotation.random(4, random_state=1).as_quat(), times, noise=0.5, seed=3)
+    for configurations in (obs.configurations, [_scalar_first(g) for g in obs.configurations]):
+        it.BodyObservations(system, obs.times, configurations, obs.velocities)
