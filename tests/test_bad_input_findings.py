@@ -139,8 +139,9 @@ def _scalar_first(q):
 @pytest.mark.parametrize("noise", [0.0, 1e-3, 1e-2])
 @pytest.mark.parametrize("vehicle", [False, True], ids=["attitudes", "poses"])
 def test_quaternions_given_scalar_first_are_refused(noise, vehicle):
-    import integrators as it
     from scipy.spatial.transform import Rotation
+
+    import integrators as it
 
     system = lp.systems.Kirchhoff() if vehicle else lp.systems.RigidBody((2.0, 1.0, 2.0 / 3.0))
     q0 = Rotation.random(4, random_state=1).as_quat()
@@ -164,8 +165,9 @@ def test_quaternions_given_scalar_first_are_refused(noise, vehicle):
 
 
 def test_noise_that_swamps_the_motion_trips_nothing():
-    import integrators as it
     from scipy.spatial.transform import Rotation
+
+    import integrators as it
 
     system = lp.systems.RigidBody((2.0, 1.0, 2.0 / 3.0))
     times = it.uneven_times(4, 21, (0.001, 0.002), seed=2)  # 1-2 mrad a step, 0.5 rad of attitude noise
