@@ -89,8 +89,10 @@ class AbstractStepMap(eqx.Module):
         `save_every` >= 1.
 
         **Returns:** `(n_steps // save_every + 1, dim)`, or `(n_traj, n_steps // save_every + 1,
-        dim)` for many initial conditions; entry 0 is `y0`. Compiled once per map, shape and
-        `n_steps` (`jax.lax.scan`, vectorised over trajectories with `jax.vmap`).
+        dim)` for many initial conditions; entry 0 is `y0`. Compiled once per map structure and
+        shape of `y0`: every `n_steps`, `save_every` and `h` runs the same program, a piece of
+        at most `chunk_size` saved states applied as often as needed (vectorised over
+        trajectories with `jax.vmap`).
 
         A trajectory that leaves the finite range (a learned map far outside its training
         region, too large a step) raises `RolloutDivergedError` naming the trajectory, the steps
@@ -116,10 +118,13 @@ class AbstractStepMap(eqx.Module):
                              "the rollout's states (n_traj, n_steps // save_every + 1, dim)",
                              "save fewer states with save_every= (a divisor of n_steps: every save_every-th "
                              "state is kept), or roll out fewer trajectories or steps at a time")
-        every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32 if save_every < 2**31 else jnp.int64)
-        out = _rollout_compiled(traced_h(self), jnp.asarray(y0.reshape(-1, dim)), n_steps // save_every, every)
+        Y = y0.reshape(-1, dim)
+        step_map, every, chunk = traced_h(self), _traced_count(save_every), chunk_size(n_traj, dim)
+        (host,) = _in_chunks(lambda c, count: _rollout_chunk(step_map, c, count, every, chunk),
+                             _carry_compiled(step_map, jax.device_put(Y)), (Y,), n_steps // save_every, chunk)
+        out = jax.device_put(host)  # not jnp.asarray: that compiles a copy per shape
         nonfinite.check(self, out, save_every)
-        return out[0] if y0.ndim == 1 else out
+        return jax.device_put(host[0]) if y0.ndim == 1 else out
 
     # -- the state between steps ------------------------------------------------------------
     # A rollout carries the state from step to step in the map's own representation (an
@@ -186,7 +191,8 @@ class AbstractReconstructingStepMap(AbstractStepMap):
 
         **Returns:** `(configurations, states)`, `(n_traj, n_saved, group.size)` and
         `(n_traj, n_saved, dim)` (without the leading axis for one initial condition).
-        A trajectory that leaves the finite range raises `RolloutDivergedError`."""
+        A trajectory that leaves the finite range raises `RolloutDivergedError`. Compiled once
+        per map structure and number of trajectories, as `rollout`."""
         check_h(self)
         group = self.system.require_group()
         dim = self.system.dim
@@ -206,29 +212,17 @@ class AbstractReconstructingStepMap(AbstractStepMap):
                              "the lifted rollout's configurations and states",
                              "save fewer with save_every= (a divisor of n_steps), or roll out fewer trajectories "
                              "or steps at a time")
-        G = jnp.broadcast_to(jnp.asarray(g0), (n_traj, group.size))
-        Y = jnp.broadcast_to(jnp.asarray(y0), (n_traj, dim))
-        gs, ys = _lifted_rollout_compiled(traced_h(self), G, Y, n_steps // save_every, save_every)
-        bad = ~(jnp.all(jnp.isfinite(ys), axis=(1, 2)) & jnp.all(jnp.isfinite(gs), axis=(1, 2)))
-        if bool(jnp.any(bad)):
-            RaiseIfNonfinite().check(self, jnp.where(jnp.isfinite(gs[..., :1]), ys, jnp.nan), save_every)
+        G = np.broadcast_to(g0, (n_traj, group.size))
+        Y = np.broadcast_to(y0, (n_traj, dim))
+        step_map, every, chunk = traced_h(self), _traced_count(save_every), chunk_size(n_traj, dim + group.size)
+        gs, ys = _in_chunks(lambda c, count: _lifted_rollout_chunk(step_map, c, count, every, chunk),
+                            jax.device_put((G, Y)), (G, Y), n_steps // save_every, chunk)
+        # on the host: no small program compiled per length for the check or the slicing
+        bad = ~(np.all(np.isfinite(ys), axis=(1, 2)) & np.all(np.isfinite(gs), axis=(1, 2)))
+        if bool(np.any(bad)):
+            RaiseIfNonfinite().check(self, np.where(np.isfinite(gs[..., :1]), ys, np.nan), save_every)
         single = y0.ndim == 1 and g0.ndim == 1
-        return (gs[0], ys[0]) if single else (gs, ys)
-
-
-@eqx.filter_jit
-def _lifted_rollout_compiled(step_map: AbstractReconstructingStepMap, g0: jax.Array, y0: jax.Array, n_saved: int,
-                             save_every: int) -> tuple[jax.Array, jax.Array]:
-    """`(N, size)`, `(N, dim)` -> `(N, n_saved + 1, size)`, `(N, n_saved + 1, dim)`."""
-    step = jax.vmap(step_map.lifted_step)
-
-    def body(gy, _):
-        gy = jax.lax.fori_loop(0, save_every, lambda _, z: step(*z), gy) if save_every > 1 else step(*gy)
-        return gy, gy
-
-    _, (gs, ys) = jax.lax.scan(body, (g0, y0), None, length=n_saved)
-    return (jnp.concatenate([g0[:, None], jnp.swapaxes(gs, 0, 1)], axis=1),
-            jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1))
+        return jax.device_put((gs[0], ys[0]) if single else (gs, ys))
 
 
 #: The largest share of the machine's physical memory one output array may take.
@@ -324,27 +318,98 @@ def traced_h(step_map: AbstractStepMap) -> AbstractStepMap:
     return eqx.tree_at(lambda m: m.h, step_map, jnp.asarray(step_map.h, dtype=jnp.float64))
 
 
+#: The most states one compiled piece of a rollout saves: a rollout of any length runs the same
+#: program as often as it needs (one compilation for every `n_steps`); the last piece stops at
+#: the states asked for.
+ROLLOUT_CHUNK = 128
+#: The most bytes one piece's saved states take (many trajectories of a large system: fewer
+#: states a piece).
+CHUNK_BYTES = 2**26
+
+
+def chunk_size(n_traj: int, width: int) -> int:
+    """The states one piece of a rollout saves: `ROLLOUT_CHUNK`, or the largest power of two
+    whose `(size, n_traj, width)` float64 states fit in `CHUNK_BYTES` (at least 1). Depends on
+    the shape only, never on `n_steps`."""
+    fits = CHUNK_BYTES // (8 * max(1, n_traj * width))
+    return max(1, min(ROLLOUT_CHUNK, 1 << (fits.bit_length() - 1) if fits else 1))
+
+
+def _traced_count(n: int) -> np.ndarray:
+    """`n` as a 0-d integer array: traced by `eqx.filter_jit`, not a constant of the program."""
+    return np.asarray(n, dtype=np.int32 if n < 2**31 else np.int64)
+
+
+def _in_chunks(run: Callable[[Any, np.ndarray], tuple[Any, tuple[jax.Array, ...]]], carry: Any,
+               firsts: tuple[np.ndarray, ...], n_saved: int, chunk: int) -> tuple[np.ndarray, ...]:
+    """`(N, n_saved + 1, ...)` on the host for each of `firsts` `(N, ...)` (entry 0):
+    `run(carry, count)` advances the carried state by `count` <= `chunk` saved states and
+    returns them, `(chunk, N, ...)` of which the first `count` are meant. Each piece is
+    dispatched before the previous one is copied out, so the pieces run back to back."""
+    outs: list[np.ndarray] = []
+    pending = None
+    done = 0
+    while done < n_saved or pending is not None:
+        piece = None
+        if done < n_saved:
+            count = min(chunk, n_saved - done)
+            carry, saved = run(carry, _traced_count(count))
+            piece, done = (done, count, saved), done + count
+        if pending is not None:
+            start, count, saved = pending
+            if not outs:
+                outs = [np.empty((f.shape[0], n_saved + 1, *f.shape[1:]), dtype=np.result_type(f, s.dtype))
+                        for f, s in zip(firsts, saved, strict=True)]
+            for out, s in zip(outs, saved, strict=True):
+                out[:, start + 1 : start + 1 + count] = np.swapaxes(np.asarray(s)[:count], 0, 1)
+        pending = piece
+    if not outs:  # n_saved = 0
+        return tuple(np.array(f[:, None]) for f in firsts)
+    for out, f in zip(outs, firsts, strict=True):
+        out[:, 0] = f
+    return tuple(outs)
+
+
+def _saved_states(advance: Callable[[Any], Any], save: Callable[[Any], Any], c: Any, count: jax.Array,
+                  save_every: jax.Array, chunk: int) -> tuple[Any, Any]:
+    """`count` times: `save_every` times `advance`, then `save`; returns the carried state and
+    the saved ones, `(chunk, ...)` (the first `count` written). `count` and `save_every` are
+    traced: one program for every length and spacing."""
+    shapes = jax.eval_shape(save, c)
+    buffers = jax.tree_util.tree_map(lambda s: jnp.zeros((chunk, *s.shape), s.dtype), shapes)
+
+    def body(k, state):
+        c, saved = state
+        c = jax.lax.fori_loop(0, save_every, lambda _, z: advance(z), c)
+        return c, jax.tree_util.tree_map(lambda b, x: b.at[k].set(x), saved, save(c))
+
+    return jax.lax.fori_loop(0, count, body, (c, buffers))
+
+
 @eqx.filter_jit
-def _rollout_compiled(step_map: AbstractStepMap, y0: jax.Array, n_saved: int, save_every: int | jax.Array) -> jax.Array:
-    """`y0` `(N, dim)` -> `(N, n_saved + 1, dim)`. `save_every` is the Python int 1, or a traced
-    integer (then one program serves every spacing of the outputs: a study at several h with
-    the same output times compiles once per map)."""
+def _carry_compiled(step_map: AbstractStepMap, y0: jax.Array) -> Any:
+    """`y0` `(N, dim)` as the map carries it between steps."""
+    return vmap_samples(step_map.carry)(y0)
+
+
+@eqx.filter_jit
+def _rollout_chunk(step_map: AbstractStepMap, c: Any, count: jax.Array, save_every: jax.Array,
+                   chunk: int) -> tuple[Any, tuple[jax.Array]]:
+    """The carried states `(N, ...)` advanced by `count * save_every` steps, and the states
+    `(chunk, N, dim)` after every `save_every`-th step (the first `count`)."""
     step = vmap_samples(step_map.step_carry)
     uncarry = vmap_samples(step_map.uncarry)
-    if isinstance(save_every, int) and save_every == 1:
+    return _saved_states(step, lambda c: (uncarry(c),), c, count, save_every, chunk)
 
-        def body(c, _):
-            c = step(c)
-            return c, uncarry(c)
 
-    else:
-
-        def body(c, _):
-            c = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), c)
-            return c, uncarry(c)
-
-    _, ys = jax.lax.scan(body, vmap_samples(step_map.carry)(y0), None, length=n_saved)
-    return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
+@eqx.filter_jit
+def _lifted_rollout_chunk(step_map: AbstractReconstructingStepMap, gy: tuple[jax.Array, jax.Array],
+                          count: jax.Array, save_every: jax.Array, chunk: int
+                          ) -> tuple[tuple[jax.Array, jax.Array], tuple[jax.Array, jax.Array]]:
+    """`_rollout_chunk` of `lifted_step` on configurations `(N, group.size)` and states
+    `(N, dim)`."""
+    step = jax.vmap(step_map.lifted_step)
+    return _saved_states(lambda gy: step(*gy), lambda gy: gy, gy, count, save_every, chunk)
 
 
 @eqx.filter_jit

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from integrators import BodyObservations
 from liepoisson import vmap_samples
-from liepoisson.internals import positive_float
+from liepoisson.internals import positive_float, positive_int
 
 from .._models._base import AbstractBodyMap
 from ._losses import AbstractLoss
@@ -215,20 +215,55 @@ def first_velocities(data: BodyObservations) -> np.ndarray:
 def latent_momenta(model, xi: ArrayLike, iterations: int = 20) -> jax.Array:
     r"""The momenta $\mu$ `(..., dim)` with $\nabla\widetilde H(\mu) = \xi$ for body velocities
     `xi` `(..., dim)` (what a gyroscope reads): the latent state a learned map starts from
-    (Newton's method on `model.body_velocity`, least squares per step; exact after one step
-    for a quadratic $\widetilde H$). In the gauge of the fit (conventions,
-    [Observations of bodies][conventions-body-observations])."""
-    xi = jnp.asarray(xi, dtype=jnp.float64)
+    (Newton's method on `model.body_velocity` from $\mu = 0$, least squares per step; exact
+    after one step for a quadratic $\widetilde H$). In the gauge of the fit (conventions,
+    [Observations of bodies][conventions-body-observations]).
+
+    At most `iterations` (>= 1) Newton steps per sample; a sample stops once its step is at
+    round-off, $|\Delta\mu|_\infty \le$ `NEWTON_TOLERANCE` $|\mu|_\infty$. Compiled once per
+    structure of `model` and shape of `xi` (the weights, `h` and `iterations` are traced),
+    vectorised over the samples; not reverse-differentiable (a `jax.lax.while_loop`)."""
+    iterations = positive_int(iterations, "iterations")
     dim = model.system.dim
-    if xi.ndim < 1 or xi.shape[-1] != dim or not bool(jnp.all(jnp.isfinite(xi))):
-        raise ValueError(f"xi must be finite body velocities of shape (..., {dim}); got shape {xi.shape}")
-    flat = xi.reshape(-1, dim)
-    grad = jax.vmap(model.body_velocity)
-    hess = jax.vmap(jax.jacfwd(model.body_velocity))
-    mu = jnp.zeros_like(flat)
-    for _ in range(iterations):
-        mu = mu - jnp.einsum("sij,sj->si", jnp.linalg.pinv(hess(mu)), grad(mu) - flat)
-    return mu.reshape(xi.shape)
+    values = np.asarray(xi, dtype=np.float64)
+    if values.ndim < 1 or values.shape[-1] != dim or not np.all(np.isfinite(values)):
+        raise ValueError(f"xi must be finite body velocities of shape (..., {dim}); got shape {values.shape}")
+    # h does not enter the velocity: an array (traced), so that no h, nor None, recompiles
+    h = np.nan if model.h is None else model.h
+    model = eqx.tree_at(lambda m: m.h, model, np.asarray(h, dtype=np.float64), is_leaf=lambda v: v is None)
+    return _newton_momenta(model, values, np.asarray(iterations, dtype=np.int32))
+
+
+#: `latent_momenta` stops a sample once its Newton step is at most this times its momentum
+#: (sup norms): with the error squared each step, the next step would move it by round-off.
+NEWTON_TOLERANCE = 1e-10
+
+
+@eqx.filter_jit
+def _newton_momenta(model, xi: jax.Array, iterations: jax.Array) -> jax.Array:
+    """`(..., dim)` momenta of the body velocities `xi` `(..., dim)` (`latent_momenta`)."""
+
+    def velocity_twice(mu):
+        v = model.body_velocity(mu)
+        return v, v
+
+    def one(target):
+        def newton(state):
+            k, mu, _ = state
+            hessian, velocity = jax.jacfwd(velocity_twice, has_aux=True)(mu)
+            change = jnp.linalg.pinv(hessian) @ (velocity - target)
+            mu = mu - change
+            done = jnp.max(jnp.abs(change)) <= NEWTON_TOLERANCE * jnp.max(jnp.abs(mu))
+            return k + 1, mu, done
+
+        def more(state):
+            k, _, done = state
+            return (k < iterations) & ~done
+
+        start = (jnp.zeros((), iterations.dtype), jnp.zeros_like(target), jnp.zeros((), bool))
+        return jax.lax.while_loop(more, newton, start)[1]
+
+    return jax.vmap(one)(xi.reshape(-1, xi.shape[-1])).reshape(xi.shape)
 
 
 def latent_starts(model, data: BodyObservations) -> jax.Array:
