@@ -18,6 +18,7 @@ from ._models._base import (
 )
 from ._models._baseline import MLPBaseline as MLPBaseline, NeuralODE as NeuralODE
 from ._models._deeponet import DeepONet as DeepONet
+from ._models._drag import DRAG_KINDS as DRAG_KINDS, Dissipative as Dissipative, LearnedDrag as LearnedDrag
 from ._models._equivariant import GroupAveraged as GroupAveraged
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._models._isospectral import IsospectralPolynomial as IsospectralPolynomial
@@ -73,12 +74,18 @@ from ._training._body import (
     weak_form_quadratic as weak_form_quadratic,
 )
 from ._training._deeponet import BodyDeepONet as BodyDeepONet, fit_deeponet as fit_deeponet
+from ._training._dissipative import fit_dissipative as fit_dissipative
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import (
     FAMILIES as FAMILIES,
     Family as Family,
     quadratic_estimate as quadratic_estimate,
     select_quadratic as select_quadratic,
+)
+from ._training._criterion import (
+    FamilyChoice as FamilyChoice,
+    FamilyScore as FamilyScore,
+    SkippedFamily as SkippedFamily,
 )
 from ._training._fit_splitting import fit_splitting as fit_splitting
 from ._training._phase import fit_phase as fit_phase

@@ -34,6 +34,7 @@ from ._forces import (
     LinearDrag as LinearDrag,
     QuadraticDrag as QuadraticDrag,
     force_from_params as force_from_params,
+    forces_flow as forces_flow,
 )
 from ._generalized_rigid_body import GeneralizedRigidBody as GeneralizedRigidBody
 from ._heavy_top import HeavyTop as HeavyTop

@@ -1,0 +1,154 @@
+"""Learned dissipation (`learn.LearnedDrag`, `learn.Dissipative`, `learn.fit_dissipative`): the drag's
+matrix positive semidefinite and its sub-step never raising the learned energy for any weights
+and steps, the zero drag as the G-LPNet, files, a fit that finds a forced body's inertia, and bad
+input."""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import EPS
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import integrators as it
+import learn
+from integrators.splitting import Strang, TripleJump
+from liepoisson.systems import Forced, QuadraticDrag, RigidBody
+
+BODY = RigidBody((1.0, 1.9, 2.1))
+
+
+def _net(seed: int, method=Strang) -> learn.GLPNet:
+    """A G-LPNet of a quadratic H~ with random weights: curvatures of either sign, any axes."""
+    rng = np.random.default_rng(seed)
+    terms = learn.RidgeTerms(3, 3, activation="identity", full_vectors=True, linear_term=False, bias=True)
+    terms = eqx.tree_at(lambda t: (t.a, t.c, t.b), terms,
+                        (jnp.asarray(rng.normal(size=3)), jnp.asarray(rng.normal(size=(3, 3))),
+                         jnp.asarray(rng.normal(size=3))))
+    return learn.GLPNet(BODY, terms=terms, method=method, h=0.1)
+
+
+def _drag(seed: int, kind: str, any_axes: bool) -> learn.LearnedDrag:
+    """A drag with random weights of either sign (D must be positive semidefinite anyway)."""
+    rng = np.random.default_rng(seed + 1)
+    drag = learn.LearnedDrag(3, kind, any_axes=any_axes)
+    drag = eqx.tree_at(lambda d: d.factor, drag, jnp.asarray(rng.normal(size=drag.factor.shape)))
+    if drag.quadratic_factor is not None:
+        drag = eqx.tree_at(lambda d: d.quadratic_factor, drag, jnp.asarray(rng.normal(size=3)))
+    if drag.directions is not None:
+        drag = eqx.tree_at(lambda d: d.directions, drag, jnp.asarray(rng.normal(size=(3, 3))))
+    return drag
+
+
+KINDS = [(k, a) for k in learn.DRAG_KINDS for a in (False, True)]
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from(KINDS))
+def test_drag_matrix_is_positive_semidefinite_for_any_weights(seed, kind_axes):
+    drag = _drag(seed, *kind_axes)
+    xi = np.random.default_rng(seed).normal(size=(8, 3)) * 10.0
+    D = np.asarray(jax.vmap(drag.matrix)(xi))
+    np.testing.assert_allclose(D, np.swapaxes(D, 1, 2), atol=0)
+    low = np.linalg.eigvalsh(D)[:, 0]
+    # a sum of rank-one squares: its zero eigenvalues are zero to a few roundings of |D|
+    assert np.all(low >= -16 * EPS * np.abs(D).max(axis=(1, 2)))
+    assert np.all(np.einsum("sa,sa->s", xi, np.asarray(jax.vmap(drag.force)(xi))) <= 0.0)
+
+
+@functools.cache
+def _compiled_drag_flow():
+    return jax.jit(lambda model, t, y: model.drag_flow(t, y))
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.sampled_from(KINDS), st.floats(1e-3, 5.0))
+def test_the_drag_step_never_raises_the_learned_energy(seed, kind_axes, t):
+    # for any weights of H~ (curvatures of either sign) and of the drag, and any t > 0:
+    # H~(mu1) - H~(mu0) = -t xi_bar^T D xi_bar <= 0 exactly for a quadratic H~; round-off is
+    # relative to the energy's terms at both ends (|mu|^2 |A| + |b||mu|)
+    model = learn.Dissipative(_net(seed), _drag(seed, *kind_axes))
+    mu = np.random.default_rng(seed + 2).normal(size=(6, 3)) * 3.0
+    flow = _compiled_drag_flow()
+    for y in mu:
+        y1 = np.asarray(flow(model, t, jnp.asarray(y)))
+        if not np.all(np.isfinite(y1)):  # I + t D A/2 singular: possible only for an indefinite H~
+            continue
+        H0, H1 = float(model.hamiltonian(y)), float(model.hamiltonian(y1))
+        scale = (np.abs(y) ** 2).sum() + (np.abs(y1) ** 2).sum() + 1.0
+        A, b = model.quadratic_part()
+        assert H1 <= H0 + 256 * EPS * scale * (float(np.abs(np.asarray(A)).max()) + float(np.abs(np.asarray(b)).max()))
+
+
+def test_no_drag_is_the_glpnet():
+    net = _net(3, TripleJump)
+    model = learn.Dissipative(net, eqx.tree_at(lambda d: d.factor, learn.LearnedDrag(3, "quadratic"),
+                                               jnp.zeros(3)))
+    y = jnp.asarray([0.3, -1.2, 0.8])
+    # two compositions of the same flows (a scan over the modules, a list): a few roundings
+    np.testing.assert_allclose(np.asarray(model.step(y)), np.asarray(net.step(y)), rtol=0, atol=64 * EPS)
+    g = jnp.asarray([0.0, 0.0, 0.0, 1.0])
+    for a, b in zip(model.lifted_step(g, y), net.lifted_step(g, y)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=64 * EPS)
+
+
+def test_the_drag_takes_angular_momentum_away():
+    # not a Casimir-keeping map: |Pi| decays under the drag's step (air drag on a body), on the
+    # rigid body's own H~ (curvatures 1/I on the axes)
+    terms = learn.RidgeTerms(3, 3, activation="identity", full_vectors=False, linear_term=False, bias=False)
+    terms = eqx.tree_at(lambda t: (t.a, t.c), terms, (jnp.asarray(1.0 / BODY.inertia), jnp.ones(3)))
+    net = learn.GLPNet(BODY, terms=terms, method=Strang, h=0.1)
+    np.testing.assert_allclose(float(net.hamiltonian(jnp.asarray([0.3, 2.0, 0.1]))),
+                               float(BODY.hamiltonian(jnp.asarray([0.3, 2.0, 0.1]))), rtol=1e-14)
+    model = learn.Dissipative(net, learn.LearnedDrag(3, "linear", scale=0.5))
+    ys = np.asarray(model.rollout(jnp.asarray([0.3, 2.0, 0.1]), 20))
+    C = np.asarray(BODY.casimirs(ys))[:, 0]
+    assert C[-1] < C[0] * (1 - 1e-3)
+
+
+def test_files_round_trip(tmp_path):
+    model = learn.Dissipative(_net(5), _drag(5, "ridge", True))
+    path = tmp_path / "m.h5"
+    model.save(path)
+    back = learn.load(path)
+    assert isinstance(back, learn.Dissipative) and back.drag.kind == "ridge" and back.drag.any_axes
+    y = jnp.asarray([0.3, -1.2, 0.8])
+    np.testing.assert_array_equal(np.asarray(back.step(y)), np.asarray(model.step(y)))
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="identity activation"):
+        learn.Dissipative(learn.GLPNet(BODY, 3, activation="sigmoid", h=0.1), learn.LearnedDrag(3))
+    with pytest.raises(ValueError, match="dimension 4"):
+        learn.Dissipative(_net(0), learn.LearnedDrag(4))
+    with pytest.raises(TypeError, match="learn.GLPNet"):
+        learn.Dissipative("net", learn.LearnedDrag(3))
+    with pytest.raises(ValueError, match="kind must be one of"):
+        learn.LearnedDrag(3, "cubic")
+    with pytest.raises(ValueError, match="scale must be"):
+        learn.LearnedDrag(3, scale=-1.0)
+    data = it.Observations(BODY, np.arange(3) * 0.1, np.ones((3, 3)))
+    with pytest.raises(ValueError, match="kinds must be"):
+        learn.fit_dissipative(BODY, data, kinds=("viscous",))
+
+
+@pytest.mark.slow  # ~60 s: four flights fitted with the quadratic drag
+def test_fit_dissipative_finds_a_forced_body():
+    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
+    rng = np.random.default_rng(0)
+    n = 6
+    omega = np.column_stack([rng.normal(0, 0.3, n), rng.uniform(8, 12, n), rng.normal(0, 0.3, n)])
+    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (n, 1)),
+                           np.arange(61) * 0.01, measure="velocities", noise=1e-3, seed=1)
+    model, records = learn.fit_dissipative(RigidBody(I), data, kinds=("linear", "quadratic"), progress=False)
+    assert records[-1].stages[-1].details["family"].endswith("quadratic drag")
+    A, _ = model.quadratic_part()
+    fitted = np.linalg.inv(np.asarray(A))
+    # the inertia at the identifiable scale (ratios) within 2%: noise 1e-3 over 0.6 s flights
+    np.testing.assert_allclose(np.diag(fitted) / fitted[1, 1], I / I[1], rtol=2e-2)
