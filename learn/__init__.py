@@ -75,6 +75,7 @@ from ._training._body import (
 )
 from ._training._deeponet import BodyDeepONet as BodyDeepONet, fit_deeponet as fit_deeponet
 from ._training._dissipative import fit_dissipative as fit_dissipative
+from ._training._inertia import Inertia as Inertia, inertia as inertia, inertia_matrix as inertia_matrix
 from ._training._fit import default_optimiser as default_optimiser, fit as fit
 from ._training._families import (
     FAMILIES as FAMILIES,
