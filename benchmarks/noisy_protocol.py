@@ -3,14 +3,14 @@ I = (2, 1, 2/3), 30 trajectories x 21 observations at h = 0.1 of Pi with Gaussia
 per component, 12 new starts on |Pi| = 1 predicted to t = 100 from their true state.
 
     python -m benchmarks.noisy_protocol [--noise 1e-3 1e-2] [--data-seed 1 2] [--models G-LPNet limit SINDy]
-        [--selection bic|held-out] [--out benchmarks/results/noisy_protocol.json]
+        [--selection held-out bic] [--out benchmarks/results/noisy_protocol.json]
 
 W2's rigid body (`paper.w2_observations`: initial states on |Pi| = 1 drawn by the data seed,
 `integrators.observe` of heyoka's motion; noise relative to the states' RMS size, 1 here, so
 sigma per component; the test starts and heyoka's reference its `test_set`). Models:
 
 - **G-LPNet**: `learn.fit_splitting(system, observations)` (its defaults, as the issue's call;
-  `--selection` passed if given). Per family fitted: its sum of squared residuals, BIC, effective parameters and
+  one row per `--selection` given, passed as `selection=`). Per family fitted: its sum of squared residuals, BIC, effective parameters and
   Levenberg-Marquardt steps, beside
 - **the SSR of the true parameters** on the same data: from the true starts (the noise itself)
   and from starts fitted with the true Hamiltonian (each trajectory's start by least squares,
@@ -147,7 +147,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--noise", nargs="+", type=float, default=[1e-3, 1e-2])
     parser.add_argument("--data-seed", nargs="+", type=int, default=[w2.DATA_SEED])
     parser.add_argument("--models", nargs="+", choices=list(MODELS), default=list(MODELS))
-    parser.add_argument("--selection", default=None, help="fit_splitting's selection= (default: its own)")
+    parser.add_argument("--selection", nargs="+", default=None,
+                        help="fit_splitting's selection=, one G-LPNet row each (default: one row, its own default)")
     parser.add_argument("--out", default=default_out("noisy_protocol"))
     args = parser.parse_args(argv)
     protocol = w2.protocols()["rigid body"]
@@ -160,16 +161,19 @@ def main(argv: list[str] | None = None) -> None:
             truth = true_ssr(protocol, data, clean)
             print(f"seed {seed}, noise {noise:g}: SSR of the true parameters {truth['true_starts']:.5g} (true starts), "
                   f"{truth['fitted_starts']:.5g} (fitted starts); n sigma^2 = {truth['n'] * noise**2:.5g}", flush=True)
-            for name in args.models:
+            runs = [(name, None) for name in args.models if name != "G-LPNet"]
+            if "G-LPNet" in args.models:
+                runs = [("G-LPNet", selection) for selection in args.selection or [None]] + runs
+            for name, selection in runs:
                 if name == "G-LPNet":
-                    row = glpnet(protocol, data, y0, reference, args.selection)
+                    row = glpnet(protocol, data, y0, reference, selection)
                 elif name == "limit":
                     row = limit(protocol, data, y0, reference)
                 else:
                     row = sindy(protocol, data, y0, reference)
-                row = {"data_seed": seed, "noise": noise, **row, "true_ssr": truth}
+                row = {"data_seed": seed, "noise": noise, **row, "selection": selection, "true_ssr": truth}
                 rows.append(row)
-                print(f"  {name}: state error at t = 100 {row['state_error']:.4g}, fit {row['fit_seconds']:.1f} s"
+                print(f"  {name}{'' if selection is None else f' ({selection})'}: state error at t = 100 {row['state_error']:.4g}, fit {row['fit_seconds']:.1f} s"
                       + (f", chose {row['family']!r}" if "family" in row else "")
                       + (f", SSR {row['ssr']:.5g}" if "ssr" in row else "")
                       + (f", threshold {row['threshold']}" if "threshold" in row else ""), flush=True)

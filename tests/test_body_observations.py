@@ -302,7 +302,8 @@ def test_families_that_cannot_hold_the_rotated_body_are_skipped():
     # sigmoid extension ("general"), whose start it is
     obs = observations(n=4, m=11, noise=1e-3)
     families = [f for f in learn.FAMILIES if f.name in ("quadratic", "quadratic, any axes, even", "general")]
-    _, records = learn.fit_splitting(ROTATED, obs, families=families, iterations=10, progress=False)
+    with pytest.warns(UserWarning, match="not fitted"):
+        _, records = learn.fit_splitting(ROTATED, obs, families=families, iterations=10, progress=False)
     assert [r.stages[-1].details["family"] for r in records] == ["quadratic, any axes, even"]
     assert records[-1].stages[-1].details["skipped"] == ["quadratic", "general"]
 

@@ -6,6 +6,8 @@ information criterion's parameter count, `RidgeTerms(bias=False)` and LPNets tha
 step as an input. Small data and few BFGS iterations: the whole file runs in under a minute
 (with -n 0)."""
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -538,7 +540,10 @@ def test_an_extension_of_a_family_that_misfits_is_skipped():
     times = 0.1 * np.arange(8)
     for system, skipped in ((rotated, ["general"]), (BODY, [])):
         obs = it.observe(system, y0 / np.linalg.norm(y0, axis=1, keepdims=True), times, noise=1e-3, seed=1)
-        _, records = learn.fit_splitting(system, obs, families=families, iterations=5, progress=False)
+        with warnings.catch_warnings(record=True) as caught:  # a skipped family warns
+            warnings.simplefilter("always")
+            _, records = learn.fit_splitting(system, obs, families=families, iterations=5, progress=False)
+        assert [str(w.message).split(" not fitted")[0] for w in caught] == [f"fit_splitting: family {s!r}" for s in skipped]
         details = [r.stages[-1].details for r in records]
         assert sorted(d["family"] for d in details) == sorted(f.name for f in families if f.name not in skipped)
         assert details[-1]["skipped"] == skipped
@@ -615,7 +620,8 @@ def test_exact_data_a_family_explains_within_its_step_skip_its_extensions_along_
     names = ("quadratic, even", "quadratic", "quadratic, any axes, even", "general")
     families = [f for f in learn.FAMILIES if f.name in names]
     exact = _observations(0.0, size=1.0, n=4)
-    _, records = learn.fit_splitting(BODY, exact, families=families, iterations=20, progress=False)
+    with pytest.warns(UserWarning, match="not fitted"):
+        _, records = learn.fit_splitting(BODY, exact, families=families, iterations=20, progress=False)
     details = {r.stages[-1].details["family"]: r.stages[-1].details for r in records}
     assert sorted(details) == ["quadratic, any axes, even", "quadratic, even"]
     assert records[-1].stages[-1].details["skipped"] == ["quadratic", "general"]

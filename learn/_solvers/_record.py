@@ -43,6 +43,9 @@ class TrainingRecord:
     losses of the returned weights (`val_loss` NaN without a validation set); `wall_time_s`
     the training time of all stages. `h`, `seed`, `validation_fraction`, `loss`, `normalise`,
     `n_train` and `n_val` describe the data and the objective; `stages` the optimisers.
+    `choice`: on the records of `learn.fit_splitting` on observations, its `learn.FamilyChoice`
+    (the families' criteria, the skipped families, the one chosen); `None` otherwise. It is not
+    saved (the last stage's `details` keep each family's criterion).
     """
 
     model: str
@@ -58,6 +61,7 @@ class TrainingRecord:
     train_loss: float
     val_loss: float
     wall_time_s: float
+    choice: Any = None
 
     def __repr__(self) -> str:
         stages = " + ".join(s.optimiser for s in self.stages)
@@ -69,7 +73,7 @@ class TrainingRecord:
     def save(self, path: str | os.PathLike) -> None:
         """Write to an HDF5 file (scalars and stages as attributes, history as datasets),
         atomically."""
-        attrs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "history"}
+        attrs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("history", "choice")}
         attrs["class"] = _KIND
         attrs["stages"] = [dataclasses.asdict(s) for s in self.stages]
         _checkpoint.write(path, attrs, {"history": self.history})
@@ -80,7 +84,7 @@ class TrainingRecord:
         attrs, groups = _checkpoint.read(path)
         if attrs.get("class") != _KIND:
             raise ValueError(f"path {os.fspath(path)!r} holds a {attrs.get('class')}, not a {_KIND}")
-        names = {f.name for f in dataclasses.fields(cls)} - {"history", "stages"}
+        names = {f.name for f in dataclasses.fields(cls)} - {"history", "stages", "choice"}
         try:
             values = {k: attrs[k] for k in names}
             stages = tuple(StageRecord(**s) for s in attrs["stages"])

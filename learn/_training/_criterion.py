@@ -3,6 +3,7 @@ parameters and the one formula, shared by the trajectory fits and the selection 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -36,3 +37,81 @@ def lowest(criteria: Sequence[tuple[float, int]]) -> int:
     parameters, then the first (so that round-off does not decide between equal fits)."""
     best = min(b for b, _ in criteria)
     return min((k, i) for i, (b, k) in enumerate(criteria) if b <= best + BIC_RESOLUTION)[1]
+
+
+@dataclasses.dataclass(frozen=True)
+class FamilyScore:
+    r"""One family fitted by `learn.fit_splitting`: its `family` name, its sum of squared
+    residuals `ssr` over `n` observed components, `effective_parameters` $k$, Bayesian
+    information criterion `bic` $= n\log(\mathrm{SSR}/n) + k\log n$ and, with held-out
+    selection, `held_out_error`: the mean squared prediction error per observed component of
+    the held-out trajectories (each refitted fold's map, the held-out trajectory's start fitted
+    to its observations with the map held), with `held_out_standard_error` the standard error
+    of its difference from the lowest family's over the groups (`None` without held-out
+    selection)."""
+
+    family: str
+    ssr: float
+    n: int
+    effective_parameters: int
+    bic: float
+    held_out_error: float | None = None
+    held_out_standard_error: float | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class SkippedFamily:
+    """A family `learn.fit_splitting` did not fit: its `family` name and the `reason` (which
+    rule, the figures, and what to pass to fit it anyway)."""
+
+    family: str
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
+class FamilyChoice:
+    r"""How `learn.fit_splitting` chose among families: `chosen` (a family name), by
+    `selection` (`"bic"` or `"held-out"`), the `scores` of every family fitted (in fitting order),
+    the families `skipped` with their reasons, and for held-out selection the number of
+    `folds` and of `groups`. `by_bic` and `by_held_out` name what each criterion chooses (the
+    latter `None` without held-out errors)."""
+
+    chosen: str
+    selection: str
+    scores: tuple[FamilyScore, ...]
+    skipped: tuple[SkippedFamily, ...] = ()
+    folds: int | None = None
+    groups: int | None = None
+
+    def score(self, family: str) -> FamilyScore:
+        """The `FamilyScore` of the family named `family`."""
+        for s in self.scores:
+            if s.family == family:
+                return s
+        raise KeyError(f"family {family!r} was not fitted; fitted: {[s.family for s in self.scores]}")
+
+    @property
+    def by_bic(self) -> str:
+        """The family the information criterion chooses (`lowest`)."""
+        return self.scores[lowest([(s.bic, s.effective_parameters) for s in self.scores])].family
+
+    @property
+    def by_held_out(self) -> str | None:
+        """The family held-out prediction chooses (`lowest_held_out`), `None` if not measured."""
+        if any(s.held_out_error is None for s in self.scores):
+            return None
+        return self.scores[lowest_held_out(self.scores)].family
+
+
+def lowest_held_out(scores: Sequence[FamilyScore]) -> int:
+    """The index of the chosen family by held-out prediction: of the families whose held-out
+    error is within one standard error (`held_out_standard_error`, of the per-group paired
+    difference) of the lowest, the one with the fewest effective parameters, then the first
+    fitted (the one-standard-error rule: a difference the held-out groups cannot resolve does
+    not buy parameters). A difference below `BIC_RESOLUTION` / $n$ of the lowest error (the
+    criterion's resolution, $n$ the observed components) is round-off: two families giving the
+    same map tie."""
+    best = min(s.held_out_error for s in scores)
+    within = [(s.effective_parameters, i) for i, s in enumerate(scores)
+              if s.held_out_error - best <= (s.held_out_standard_error or 0.0) + best * BIC_RESOLUTION / s.n]
+    return min(within)[1]

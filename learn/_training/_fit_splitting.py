@@ -8,7 +8,7 @@ import dataclasses
 import functools
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -26,9 +26,23 @@ from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
 from ._body import BodyLoss, weak_form_quadratic
-from ._criterion import BIC_RESOLUTION, lowest
+from ._criterion import (
+    BIC_RESOLUTION,
+    FamilyChoice,
+    FamilyScore,
+    SkippedFamily,
+    lowest,
+    lowest_held_out,
+)
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
+from ._held_out import (
+    group_folds,
+    group_scores,
+    held_out_errors,
+    segment_trajectories,
+    trajectory_groups,
+)
 from ._observed import TrajectoryLoss, discretisation_ssr, information_criterion
 from ._problem import Fitted
 from ._units import state_size
@@ -44,10 +58,12 @@ def fit_splitting(
     activation: str | None = None,
     key: int | jax.Array = 0,
     h: float | None = None,
-    validation_fraction: float = 0.2,
+    validation_fraction: float | None = None,
     seed: int = 0,
     progress: bool | None = None,
     families: Sequence[Family] | None = None,
+    selection: str | None = None,
+    groups: Sequence[Hashable] | None = None,
 ) -> tuple[GLPNet, Sequence[TrainingRecord]]:
     r"""A G-LPNet for any Poisson system with test flows, as a data-driven splitting method;
     returns `(network, records)`, one `TrainingRecord` per fit.
@@ -76,28 +92,46 @@ def fit_splitting(
     (100) times the best's so far); a family containing one whose residuals are within that
     family's own discretisation error (exact data it explains as far as its step allows:
     `Family.contains`, `discretisation_ssr`) is skipped too, since it could only fit the
-    step's error; the one with the lowest Bayesian information criterion
-    (`information_criterion`) is returned (of criteria within 0.1 of the lowest, which the
-    criterion cannot tell apart, the one with the fewest effective parameters, then the first
-    fitted): with noisy data, parameters the data do not need cost accuracy (conventions,
-    [Observations][conventions-observations]). The records are those of every family fitted, the chosen one last; each last stage's `details` hold its
-    criterion.
+    step's error; a skipped family is announced by a `UserWarning` naming it, why, and how to
+    fit it anyway. Every family is fitted to every trajectory (`validation_fraction` must be 0
+    or `None` on observations: a validation split's noisy loss would veto converged fits), then
+    chosen by `selection`:
+
+    - `"held-out"` (the default on observations): whole groups of trajectories (`groups`, one
+      label per trajectory, e.g. recording sessions; each trajectory its own group by default)
+      are dealt by `seed` into 5 folds (as scikit-learn's `GroupKFold`; fewer groups, one per
+      fold); each family is refitted without each fold (Levenberg-Marquardt from its fit on
+      every trajectory) and scored by the mean squared residual of the fold's trajectories, each
+      rolled out from its start fitted to its own observations with the refitted map held (so
+      the noise of a first observation does not enter). Of the families within one standard
+      error of the lowest held-out error (the per-group paired difference), the one with the
+      fewest effective parameters, then the first fitted (`learn.FamilyChoice`);
+    - `"bic"`: the lowest Bayesian information criterion (`information_criterion`; of criteria
+      within 0.1 of the lowest, which the criterion cannot tell apart, the one with the fewest
+      effective parameters, then the first fitted).
+
+    With noisy data, parameters the data do not need cost accuracy; which criterion suits which
+    data: conventions, [Observations][conventions-observations]. The records are those of every
+    family fitted, the chosen one last; each last stage's `details` hold its criterion and
+    held-out error, and every record's `choice` the typed `learn.FamilyChoice` (every family's
+    `learn.FamilyScore`, the `learn.SkippedFamily` with their reasons, the chosen family).
 
     With `integrators.BodyObservations` (configurations and/or body velocities, what a star
     tracker and a gyroscope record) the momenta are latent: each family is fitted by
     Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
     and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
-    the criterion chooses as above ("quadratic, selected" is not offered: its selection reads
+    the information criterion chooses as above ("quadratic, selected" is not offered: its selection reads
     momenta); a family whose start misfits the weak-form equations `SCREEN_RATIO` (10) times
     more than the best start, that extends one whose residuals are 100 times the best's, or
     that contains one fitted within its discretisation error is skipped (named in each
-    record's `details["skipped"]`).
+    record's `details["skipped"]` and `choice.skipped`); `selection` is `"bic"` only.
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
     families to choose from on observations (default `learn.FAMILIES`; e.g.
     `(learn.FAMILIES[3],)` for any quadratic form alone), fitted in the order given (the
-    skipping rules look back only). The other arguments are `learn.fit`'s.
+    skipping rules look back only). The other arguments are `learn.fit`'s (`validation_fraction`
+    `None`: 0.2 on pairs and trajectories).
     """
     check_conservative(system)
     if method is not None:  # a wrong method fails before the first fit
@@ -106,7 +140,17 @@ def fit_splitting(
             raise ValueError("method=LieTrotter would not continue from the Strang fit: the paper's Lie-Trotter "
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
-    common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress}
+    observed = isinstance(data, (Observations, BodyObservations))
+    if validation_fraction is None:  # on observations every trajectory is fitted; folds hold some out
+        validation_fraction = 0.0 if observed else 0.2
+    elif observed and validation_fraction != 0:
+        raise ValueError(
+            f"validation_fraction={validation_fraction!r}: on observations every family is fitted to every "
+            "trajectory and held-out trajectories choose the family (selection='held-out', whole groups with "
+            "groups=); a validation split would veto converged fits on the noise of its trajectories. Pass 0 or None")
+    selection = check_selection(selection, data, groups)
+    common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress,
+              "selection": selection, "groups": groups}
     if families is not None:
         if activation is not None:
             raise ValueError("give activation= or families=, not both (a family has its activation)")
@@ -118,6 +162,30 @@ def fit_splitting(
             raise ValueError("families= chooses between families on observations (integrators.Observations or "
                              "BodyObservations); pairs and trajectories fit one family (activation=)")
     return _recipe(data, system, method, loss, activation, iterations, key, common, families)
+
+
+#: The family criteria of `fit_splitting` on observations (`FamilyChoice.selection`).
+SELECTIONS = ("held-out", "bic")
+
+
+def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable] | None) -> str | None:
+    """`selection` checked and resolved (`None`: "held-out" on `integrators.Observations`, "bic"
+    on body observations); `None` for pairs and trajectories, which refuse it and `groups`."""
+    if not isinstance(data, (Observations, BodyObservations)):
+        if selection is not None or groups is not None:
+            raise ValueError("selection= and groups= choose between families on observations "
+                             "(integrators.Observations); pairs and trajectories fit one family")
+        return None
+    if selection is None:
+        selection = "held-out" if isinstance(data, Observations) else "bic"
+    if selection not in SELECTIONS:
+        raise ValueError(f"selection must be one of {SELECTIONS}; got {selection!r}")
+    if isinstance(data, BodyObservations) and (selection != "bic" or groups is not None):
+        raise ValueError("body observations choose their family by the information criterion only "
+                         "(selection='bic', no groups=); held-out selection is for integrators.Observations")
+    if groups is not None and selection != "held-out":
+        raise ValueError(f"groups= are held out by selection='held-out'; got selection={selection!r}")
+    return selection
 
 
 def check_conservative(system: AbstractPoissonSystem) -> None:
@@ -154,6 +222,7 @@ def _recipe(data, system, method, loss, activation, iterations, key, common, fam
     strang_method = Strang(ordering=None if method is None else method.ordering)
     net = GLPNet(system, system.dim, key=key, method=strang_method, linear_term=True,
                  activation="sigmoid" if activation is None else activation)
+    common = {k: common[k] for k in ("h", "validation_fraction", "seed", "progress")}
     strang, first = fit(net, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=True), **common)
     if method is None:
         return strang, (first,)
@@ -177,7 +246,7 @@ RTOL = 1e-10
 @_recipe.register
 def _(data: Observations, system, method, loss, activation, iterations, key, common, families=None):
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
-    through `method`; the lowest BIC wins."""
+    through `method` to every trajectory; chosen by held-out prediction or the lowest BIC."""
     warn_dissipative_data(data)
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
@@ -187,13 +256,15 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
              "normalise": False}
     families = families or FAMILIES if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
+    group_of = trajectory_groups(common["groups"], len(data)) if common["selection"] == "held-out" else None
     # each family from the least-squares quadratic of the finite differences, in the data's units
     size = state_size(system, data)
     rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
     fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
     for k, family in enumerate(families):
-        if extends_a_misfit(family, ssr) or contains_an_explanation(family, explained):
-            skipped.append(family.name)
+        reason = skip_reason(family, ssr, explained)
+        if reason is not None:
+            skipped.append(skip(family, reason))
             continue
         net = GLPNet(system, terms=family.start(system, data, size), method=method)
         start = loss.problem(net, data, **split)
@@ -212,13 +283,75 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         if explained_within_its_step(criterion):
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
+        fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+    scores = [score_of(f[4].name, f[5]) for f in fits]
+    choice = FamilyChoice(scores[0].family, "bic", tuple(scores), tuple(skipped))
+    if group_of is not None and len(fits) > 1:
+        choice = held_out_choice(fits, data, loss, group_of, iterations, rtol, context, choice)
+    index = lowest_held_out(choice.scores) if choice.selection == "held-out" else lowest(
+        [(s.bic, s.effective_parameters) for s in choice.scores])
+    choice = dataclasses.replace(choice, chosen=choice.scores[index].family)
+    return chosen_last(fits, index, choice)
+
+
+def held_out_choice(fits: Sequence[Any], data: Observations, loss: TrajectoryLoss, group_of: Any, iterations: int,
+                    rtol: float, context: Context, choice: FamilyChoice) -> FamilyChoice:
+    """`choice` with each fitted family's held-out error (`learn._training._held_out`): folds
+    of whole groups, each family refitted per fold from its fit on every trajectory."""
+    folds = group_folds(group_of, context.seed)
+    rows = segment_trajectories(data, loss.window)
+    errors = {}
+    for f in fits:
+        fold_context = dataclasses.replace(context, desc=f"{f[4].name}: held-out folds")
+        errors[f[4].name] = held_out_errors(f[2], rows, folds, iterations, rtol, fold_context)
+    by_family = group_scores(errors, group_of)
+    scores = tuple(dataclasses.replace(s, held_out_error=by_family[s.family][0],
+                                       held_out_standard_error=by_family[s.family][1]) for s in choice.scores)
+    return dataclasses.replace(choice, selection="held-out", scores=scores, folds=len(folds),
+                               groups=int(group_of.max()) + 1)
+
+
+def score_of(name: str, criterion: dict[str, Any]) -> FamilyScore:
+    """The `FamilyScore` of a family's `information_criterion`."""
+    return FamilyScore(family=name, ssr=float(criterion["ssr"]), n=int(criterion["n"]),
+                       effective_parameters=int(criterion["effective_parameters"]), bic=float(criterion["bic"]))
+
+
+def chosen_last(fits: Sequence[Any], index: int, choice: FamilyChoice) -> tuple[Any, tuple[TrainingRecord, ...]]:
+    """`(the chosen map, records)`: every fitted family's record (`details` with its criterion,
+    the family's name, the skipped families' names, its held-out error), the chosen one last,
+    `choice` on each."""
+    records = []
+    for f, score in zip(fits, choice.scores, strict=True):
+        problem, results, criterion = f[2], list(f[3]), f[5]
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": family.name, "skipped": skipped,
-                                  "target_loss": target}))
-        fits.append((criterion["bic"], len(fits), problem.map(problem.y0), training_record(problem, results)))
-    best = fits[lowest([(f[0], f[3].stages[-1].details["effective_parameters"]) for f in fits])]
-    return best[2], tuple(f[3] for f in fits if f is not best) + (best[3],)
+            last.record, details={**last.record.details, **criterion, "family": f[4].name,
+                                  "skipped": [s.family for s in choice.skipped],
+                                  "held_out_error": score.held_out_error}))
+        records.append(dataclasses.replace(training_record(problem, results), choice=choice))
+    best = fits[index][2]
+    return best.map(best.y0), tuple(r for k, r in enumerate(records) if k != index) + (records[index],)
+
+
+def skip_reason(family: Family, ssr: dict[str, float], explained: Sequence[Family]) -> str | None:
+    """Why `family` is not fitted (`extends_a_misfit`, `contains_an_explanation`), `None` if it is."""
+    if extends_a_misfit(family, ssr):
+        return (f"it extends {family.nested!r}, whose residuals are {ssr[family.nested] / min(ssr.values()):.3g} "
+                f"times the best family's so far (more than PRUNE_RATIO = {PRUNE_RATIO:g}): its extra pieces lie "
+                "along the same directions, which missed structure they cannot supply")
+    within = [f.name for f in explained if extends_along_its_directions(family, f)]
+    if within:
+        return (f"it extends {within[0]!r} along the same directions, which fitted the observations within its own "
+                "discretisation error: its extra terms could only fit the step's error")
+    return None
+
+
+def skip(family: Family, reason: str) -> SkippedFamily:
+    """A `SkippedFamily`, announced by a `UserWarning` that says how to fit it anyway."""
+    warnings.warn(f"fit_splitting: family {family.name!r} not fitted: {reason}. To fit it anyway, pass it alone: "
+                  f"families=[f for f in learn.FAMILIES if f.name == {family.name!r}]", UserWarning, stacklevel=5)
+    return SkippedFamily(family.name, reason)
 
 
 def catch_up_target(start: Any, bics: Sequence[float]) -> float | None:
@@ -327,9 +460,12 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
     for k, family in enumerate(families):
         A, b, misfit = starts[family.bias, family.any_axes]
-        if (misfit > SCREEN_RATIO * least or extends_a_misfit(family, ssr)
-                or contains_an_explanation(family, explained)):
-            skipped.append(family.name)
+        reason = skip_reason(family, ssr, explained)
+        if misfit > SCREEN_RATIO * least:
+            reason = (f"its quadratic start misfits the weak-form equations {misfit / least:.3g} times more than the "
+                      f"best start (more than SCREEN_RATIO = {SCREEN_RATIO:g})")
+        if reason is not None:
+            skipped.append(skip(family, reason))
             continue
         net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
         start, target = loss.problem(net, data, **split), None
@@ -346,17 +482,10 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         if explained_within_its_step(criterion):
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
-        fits.append((criterion["bic"], len(fits), problem, results, family.name, {**criterion, "target_loss": target}))
-    best = fits[lowest([(f[0], f[5]["effective_parameters"]) for f in fits])]
-    records = []
-    for f in fits:
-        problem, results, name, criterion = f[2], list(f[3]), f[4], f[5]
-        last = results[-1]
-        results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": name, "skipped": skipped}))
-        records.append(training_record(problem, results))
-    chosen = fits.index(best)
-    return best[2].map(best[2].y0), tuple(r for k, r in enumerate(records) if k != chosen) + (records[chosen],)
+        fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+    scores = tuple(score_of(f[4].name, f[5]) for f in fits)
+    index = lowest([(s.bic, s.effective_parameters) for s in scores])
+    return chosen_last(fits, index, FamilyChoice(scores[index].family, "bic", scores, tuple(skipped)))
 
 
 def _momentum_size(A, b, velocities) -> float:
