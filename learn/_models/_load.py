@@ -9,6 +9,7 @@ from liepoisson.systems import AbstractPoissonSystem
 from .. import _files as _checkpoint
 from ._base import AbstractLearnedMap
 from ._baseline import MLPBaseline, NeuralODE
+from ._body_lpnet import BodyLPNet
 from ._drag import Dissipative
 from ._glpnet import GLPNet
 from ._isospectral import IsospectralPolynomial
@@ -23,7 +24,7 @@ def load(path: str | os.PathLike, system: AbstractPoissonSystem | None = None) -
     whatever its class (`LPNet`, `Reversible`, `GLPNet`, `MLPBaseline`), from the class the
     file names; `system` as in `AbstractLearnedMap.load`."""
     classes = {cls.__name__: cls for cls in (LPNet, Reversible, GLPNet, MLPBaseline, NeuralODE, IsospectralPolynomial,
-                                                    DAlembertMap, QuadraticDAlembertMap, Dissipative)}
+                                                    DAlembertMap, QuadraticDAlembertMap, Dissipative, BodyLPNet)}
     attrs, groups = _checkpoint.read(path)  # read once: the class is in the file
     attrs = upgrade_attributes(attrs, f"path {os.fspath(path)!r}")
     name = attrs.get("class")
