@@ -17,6 +17,7 @@ from ._models._base import (
     AbstractWarmStartableMap as AbstractWarmStartableMap,
 )
 from ._models._baseline import MLPBaseline as MLPBaseline, NeuralODE as NeuralODE
+from ._models._body_lpnet import BodyLPNet as BodyLPNet
 from ._models._deeponet import DeepONet as DeepONet
 from ._models._drag import DRAG_KINDS as DRAG_KINDS, Dissipative as Dissipative, LearnedDrag as LearnedDrag
 from ._models._equivariant import GroupAveraged as GroupAveraged
@@ -82,11 +83,6 @@ from ._training._families import (
     Family as Family,
     quadratic_estimate as quadratic_estimate,
     select_quadratic as select_quadratic,
-)
-from ._training._criterion import (
-    FamilyChoice as FamilyChoice,
-    FamilyScore as FamilyScore,
-    SkippedFamily as SkippedFamily,
 )
 from ._training._fit_splitting import fit_splitting as fit_splitting
 from ._training._phase import fit_phase as fit_phase
