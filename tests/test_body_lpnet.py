@@ -25,8 +25,13 @@ def _records():
                            measure="velocities", noise=1e-3, seed=3)
 
 
+def _start(**kwargs) -> learn.BodyLPNet:
+    A, b, _ = learn.weak_form_quadratic(_records(), linear=True, diagonal=False)
+    return learn.BodyLPNet.at_quadratic(BODY, A, b, **kwargs)
+
+
 def test_start_is_the_lie_euler_step_of_the_weak_form_quadratic():
-    model = learn.BodyLPNet.start(BODY, _records(), h=0.01)
+    model = _start(h=0.01)
     A, b, _ = learn.weak_form_quadratic(_records(), linear=True, diagonal=False)
     mu = jnp.asarray([0.3, 9.0, -0.2])
     # alpha = A mu + b exactly (the network starts at zero): one test flow of it
@@ -36,7 +41,7 @@ def test_start_is_the_lie_euler_step_of_the_weak_form_quadratic():
 
 
 def test_steps_keep_the_latent_casimirs_and_files_round_trip(tmp_path):
-    model = learn.BodyLPNet.start(BODY, _records(), h=0.01, key=2)
+    model = _start(h=0.01, key=2)
     ys = np.asarray(model.rollout(jnp.asarray([0.3, 9.0, -0.2]), 500))
     C = np.asarray(BODY.casimirs(ys))[:, 0]
     # 500 test flows: a random walk of roundings of |Pi|^2 ~ 81
@@ -54,13 +59,13 @@ def test_bad_input():
         learn.BodyLPNet("net")
     with pytest.raises(ValueError, match=r"readout must be a finite \(3, 3\)"):
         learn.BodyLPNet(learn.LPNet(BODY), np.eye(2))
-    with pytest.raises(TypeError, match="BodyObservations"):
-        learn.BodyLPNet.start(BODY, np.ones((3, 3)))
+    with pytest.raises(ValueError, match=r"A must have shape \(3, 3\)"):
+        learn.BodyLPNet.at_quadratic(BODY, np.eye(2), np.zeros(3))
 
 
 @pytest.mark.slow  # ~30 s: Levenberg-Marquardt on the network, the readout and the latent starts
 def test_fit_on_gyroscope_records_lowers_the_loss():
-    model = learn.BodyLPNet.start(BODY, _records(), hidden=(8,))
+    model = _start(hidden=(8,))
     fitted, record = learn.fit(model, _records(), loss=learn.BodyLoss(max_step=0.005),
                                optimiser=learn.LevenbergMarquardt(40), progress=False)
     before = record.stages[-1].details["train_loss_before"]

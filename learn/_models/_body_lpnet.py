@@ -10,7 +10,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from integrators import BodyObservations
 from integrators.internals import check_h, check_state
 
 from ._base import AbstractBodyMap, AbstractCasimirConservingMap
@@ -31,10 +30,10 @@ class BodyLPNet(AbstractBodyMap, AbstractCasimirConservingMap):
     $g_{n+1} = g_n\exp(h\,K(\mu_n + \mu_{n+1})/2)$ (second order; what a gyroscope integrates).
 
     **Arguments:** `lpnet`, a `learn.LPNet` (its parametrisation the test flow); `readout`,
-    $K$ `(dim, dim)` (default the identity). `BodyLPNet.start(system, data)` builds one at the
-    least-squares quadratic of body observations (`learn.weak_form_quadratic`): $K = A$ and
-    $\alpha(\mu) = A\mu + b$ plus a network that starts at zero, the Lie-Euler step of that
-    quadratic.
+    $K$ `(dim, dim)` (default the identity). `BodyLPNet.at_quadratic(system, A, b)` builds one
+    at a quadratic $\tfrac12\mu^\top A\mu + b^\top\mu$ (e.g. `learn.weak_form_quadratic(data)`'s,
+    the least squares of body observations): $K = A$ and $\alpha(\mu) = A\mu + b$ plus a
+    network that starts at zero, the Lie-Euler step of that quadratic.
     """
 
     lpnet: LPNet
@@ -51,14 +50,14 @@ class BodyLPNet(AbstractBodyMap, AbstractCasimirConservingMap):
         self.readout = jnp.asarray(0.5 * (K + K.T))
 
     @classmethod
-    def start(cls, system, data: BodyObservations, *, hidden=(16, 16), activation: str = "tanh",
-              key: int = 0, h: float | None = None) -> BodyLPNet:
-        """A `BodyLPNet` at the least-squares quadratic of `data` (see the class)."""
-        from .._training._body import weak_form_quadratic
-
-        if not isinstance(data, BodyObservations):
-            raise TypeError(f"data must be integrators.BodyObservations; got {type(data).__name__}")
-        A, b, _ = weak_form_quadratic(data, linear=True, diagonal=False)
+    def at_quadratic(cls, system, A: Any, b: Any, *, hidden=(16, 16), activation: str = "tanh",
+                     key: int = 0, h: float | None = None) -> BodyLPNet:
+        """A `BodyLPNet` at the quadratic $(A, b)$ (see the class)."""
+        A = np.asarray(A, dtype=np.float64)
+        b = np.asarray(b, dtype=np.float64)
+        if A.shape != (system.dim, system.dim) or b.shape != (system.dim,):
+            raise ValueError(f"A must have shape ({system.dim}, {system.dim}) and b ({system.dim},); got {A.shape} "
+                             f"and {b.shape}")
         network = PlusAffine(AffineMLP(system.dim, system.dim, hidden, activation, key=key, init="zero"),
                              shift=b, linear=A)
         return cls(LPNet(system, network=network, h=h), A)
