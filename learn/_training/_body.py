@@ -182,8 +182,12 @@ class BodyLoss(AbstractLoss):
         if not isinstance(data, BodyObservations):
             raise TypeError(f"learn.BodyLoss compares a map with integrators.BodyObservations; got {type(data).__name__}")
         if not isinstance(model, AbstractBodyMap):
-            raise TypeError(f"learning from body observations needs a map that carries the configuration and has a "
-                            f"learned Hamiltonian (learn.GLPNet); got {type(model).__name__}")
+            hint = (" (an LPNet reads no body velocity: wrap it, learn.BodyLPNet(lpnet), or start one with "
+                    "learn.BodyLPNet.at_quadratic(system, *learn.weak_form_quadratic(data)[:2]))"
+                    if type(model).__name__ == "LPNet" else "")
+            raise TypeError(f"learning from body observations needs a map that carries the configuration and reads "
+                            f"a body velocity (learn.GLPNet, learn.Dissipative, learn.BodyLPNet); got "
+                            f"{type(model).__name__}{hint}")
         if normalise:
             raise ValueError("normalise=True is for an MLP on pairs; not for body observations")
         if model.system.group != data.group:
