@@ -84,6 +84,11 @@ from ._training._families import (
     quadratic_estimate as quadratic_estimate,
     select_quadratic as select_quadratic,
 )
+from ._training._criterion import (
+    FamilyChoice as FamilyChoice,
+    FamilyScore as FamilyScore,
+    SkippedFamily as SkippedFamily,
+)
 from ._training._fit_splitting import fit_splitting as fit_splitting
 from ._training._phase import fit_phase as fit_phase
 from ._training._identify import (
