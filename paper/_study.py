@@ -189,7 +189,7 @@ class SplittingModel(AbstractStepMapModel, AbstractHamiltonianModel):
     iterations: int | None = None
     key: int = 0
     seed: int = 0
-    validation_fraction: float = 0.2
+    validation_fraction: float | None = None  # fit_splitting's: 0.2 on pairs, 0 on observations
     loss: learn.TrajectoryLoss | None = None
     activation: str | None = None
 
