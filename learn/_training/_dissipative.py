@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -14,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from integrators import BodyObservations, Observations
-from integrators.splitting import Strang
+from integrators.splitting import TripleJump
 from liepoisson.internals import positive_float, show_progress
 from liepoisson.systems import AbstractLiePoissonSystem
 
@@ -26,17 +27,19 @@ from .._solvers._stage import Context
 from ._body import BodyLoss, weak_form_quadratic
 from ._criterion import lowest
 from ._families import FAMILIES, Family
-from ._fit import solve, training_record
+from ._fit import training_record
 from ._observed import TrajectoryLoss, information_criterion
+from ._steps import solve_within_noise
 from ._units import state_size
 
 #: Levenberg-Marquardt steps per drag family.
 ITERATIONS = 200
 
-#: The sub-step the fits take, as a rotation angle: each interval is cut into steps of
-#: $h|\xi|_{\max} \le$ this (`learn.BodyLoss(max_step=...)`): at 0.05 rad a Strang step's local
-#: error, $O((h|\xi|)^3)$ relative, is ~1e-4 of the state, below gyro noise of 1e-3 of the rates.
-STEP_ANGLE = 0.05
+#: The first sub-step the fits take, as a rotation angle: each interval is cut into steps of
+#: $h|\xi|_{\max} \le$ this (`learn.BodyLoss(max_step=...)`); the sub-steps are then doubled
+#: while the fitted map's own discretisation error exceeds a tenth of its misfit
+#: (`solve_within_noise`).
+STEP_ANGLE = 0.1
 
 #: The drag a fit starts from: its rate $|AD|$ is this fraction per unit of the data's span
 #: (a nonzero start: $LL^\top$ has no gradient at $L = 0$).
@@ -49,7 +52,7 @@ def fit_dissipative(
     *,
     kinds: Sequence[str] = DRAG_KINDS,
     any_axes: bool = False,
-    method: Any = Strang,
+    method: Any = TripleJump,
     loss: BodyLoss | TrajectoryLoss | None = None,
     iterations: int | None = None,
     seed: int = 0,
@@ -65,9 +68,13 @@ def fit_dissipative(
     or, with `any_axes`, in any axes), started at a small drag (`START_RATE`) and fitted with
     $\widetilde H$ and the starts by Levenberg-Marquardt (`iterations`, default `ITERATIONS`) on
     `loss` (default for body observations `learn.BodyLoss` with sub-steps of at most
-    `STEP_ANGLE` rad of the fastest observed rotation; for observations `learn.TrajectoryLoss`).
+    `STEP_ANGLE` rad of the fastest observed rotation; for observations `learn.TrajectoryLoss`),
+    composed by `method` (default `TripleJump`, order 4). The sub-steps are doubled while the
+    fitted map's own discretisation error is above a tenth of its misfit (at most 3 times; a
+    `UserWarning` if that was not enough), so that the map's step does not bias the inertia.
     The family with the lowest Bayesian information criterion is returned; each record's last
-    stage's `details` hold its `family`, `bic`, `ssr` and `effective_parameters`.
+    stage's `details` hold its `family`, `bic`, `ssr`, `effective_parameters`, `substeps` and
+    `discretisation_ssr`.
     """
     if not isinstance(system, AbstractLiePoissonSystem):
         raise TypeError(f"system must be a Lie-Poisson system (e.g. liepoisson.systems.RigidBody); got "
@@ -96,8 +103,15 @@ def fit_dissipative(
         if kind == "ridge":
             drag = eqx.tree_at(lambda d: d.quadratic_factor, drag, drag.quadratic_factor / math.sqrt(rate))
         start = loss.problem(Dissipative(net, drag), data, **split)
-        problem, results = solve(start, (LevenbergMarquardt(iterations, 1e-10, warm_start=False),), context)
+        problem, results, steps = solve_within_noise(
+            start, (LevenbergMarquardt(iterations, 1e-10, warm_start=False),), context)
+        if not steps.within_noise:
+            warnings.warn(f"the {kind} drag's fit errs by its own step more than the data's misfit (discretisation "
+                          f"sum of squares {steps.discretisation_ssr:.3g} against {steps.ssr:.3g} after "
+                          f"{steps.substeps} sub-steps): give a smaller max_step (loss=learn.BodyLoss(max_step=...))",
+                          UserWarning, stacklevel=2)
         criterion = information_criterion(problem, problem.y0)
+        criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
             last.record, details={**last.record.details, **criterion, "family": f"{family.name}, {kind} drag"}))

@@ -341,6 +341,14 @@ def discretisation_ssr(problem: FittedProblem, fitted: Fitted) -> float:
     return float(jnp.sum((compiled.residuals(x, args) - compiled.residuals(x, finer)) ** 2))
 
 
+def residual_ssr(problem: FittedProblem, fitted: Fitted) -> float:
+    """The sum of squared residuals of `fitted` on the training observations (compiled, as
+    Levenberg-Marquardt evaluates them)."""
+    compiled = residuals_of(problem.objective, fitted)
+    x = jax.flatten_util.ravel_pytree(eqx.filter(fitted, eqx.is_inexact_array))[0]
+    return float(jnp.sum(compiled.residuals(x, problem.train) ** 2))
+
+
 def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, float]:
     r"""The Bayesian information criterion of a map fitted to observations,
     $n\log(\mathrm{SSR}/n) + k\log n$: $n$ observed components, SSR the sum of squared
