@@ -12,8 +12,9 @@ from .w3_dissipation import EXPERIMENT as _W3
 from .w4_bodies import EXPERIMENT as _W4
 from .w5_zeitlin import EXPERIMENT as _W5
 from .w6_nonholonomic import EXPERIMENT as _W6
+from .w7_air import EXPERIMENT as _W7
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5, _W6)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5, _W6, _W7)}
 
 #: What `python -m paper` runs without a subcommand: the paper's six experiments. The studies
 #: beyond the paper (W1, an hour-scale sweep; W2, learning from observations; W3, dissipation;

@@ -1,0 +1,687 @@
+"""W7 (beyond the paper): bodies in air. A tossed body loses angular momentum to the air: on
+real flights of a racquet (about 1 s, spins of 5-30 rad/s about the intermediate axis, with
+the tennis-racket flips of Dzhanibekov's effect) drag took ~15% of |L| and 28% of the energy
+per flight. Here a simulated stand-in: an elongated flat body with its two larger moments
+close, `INERTIA` = (1, 6, 7) (the intermediate axis unstable: a spin about it flips), under
+quadratic drag $\\dot\\Pi = \\Pi\\times\\Omega - |\\Omega|\\,D\\,\\Omega$ (`liepoisson.systems.Forced(
+RigidBody(I), QuadraticDrag(D))`, `DRAG` symmetric positive definite with an off-diagonal
+term; heyoka's ground truth), which takes 8-20% of |L| over a 1-s flight at 5-15 rad/s. It is
+observed by a 100-Hz gyroscope only (`H`: body rates, never the momenta), with absolute noise
+`noise` rad/s per axis and a constant bias per session (each axis drawn with standard
+deviation `BIAS` rad/s; no model fits it).
+
+Protocol: fitted on one session of slower flights (`TRAIN_SPINS`: 5-15 rad/s about the
+intermediate axis, the other two rates 5-15% of the spin so that it flips, `FLIGHT` s each),
+tested on another session (its own bias) of flights twice as fast (`TEST_SPINS`, 10-30
+rad/s). Every model predicts each test flight from its first gyro sample (noise and bias
+included) and is measured against the true rates: the relative RMS rate error over the
+flight (mean over the test flights), and the flip period (the mean interval between the sign
+changes of the intermediate-axis rate) against the truth's, on the flights that flip at
+least twice. Models:
+
+- **dissipative G-LPNet**: `learn.Dissipative(GLPNet, LearnedDrag(3, "quadratic", any_axes=True))`
+  (a quadratic H~ along learned axes composed by Strang with the flow of a learned drag whose
+  matrix is positive semidefinite for every weight), started at the weak-form quadratic of
+  the rates (`learn.weak_form_quadratic`), momenta latent (`learn.BodyLoss`), by
+  Levenberg-Marquardt;
+- **conservative G-LPNet**: `learn.fit_splitting(RigidBody(), records)`: exactly Poisson,
+  no drag; what the structure without dissipation does with data that lose energy;
+- **LPNet**: not available: an LPNet from body records (momenta latent) is not implemented;
+- **SINDy** and **weak SINDy** (pysindy): a polynomial field of degree 2 for the rates (with
+  or without a constant), STLSQ with the threshold (and the constant) chosen on the rollout
+  errors of the TRAINING flights from their first samples, never the test;
+- **limit**: the true family (the principal moments' ratios I1/I2, I3/I2, the symmetric drag
+  matrix D at the scale I2 = 6, and each flight's initial rates) fitted by
+  `scipy.optimize.least_squares` (Levenberg-Marquardt, Jacobian by `jax.jacfwd`) on whole
+  training flights, integrated by RK4 in `LIMIT_SUBSTEPS` sub-steps per sampling interval,
+  from the truth 10% off and the first gyro samples: what these data allow at best;
+- **Euler, no drag**: Euler's equations with the true inertia and no drag (nothing fitted):
+  where a physicist would start.
+
+What is identified: the principal moments over the intermediate one, and the drag as a rate,
+$\\mathbb I^{-1}D(\\Omega)$ at $\\Omega$ = 10 rad/s about the intermediate axis (1/s; gauge-free:
+the scale of the latent momenta cancels), against the truth's.
+
+Rows are saved as they are measured (`<out>/W7/rows/`): an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import functools
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.optimize import least_squares
+
+import integrators as it
+import learn
+import liepoisson as lp
+from integrators.internals import figure, series_styles
+from integrators.splitting import Strang
+
+from ._experiment import (
+    AbstractExperiment,
+    Column,
+    fmt,
+    optional,
+    row_from_json,
+    row_to_json,
+    saved_row,
+    table_lines,
+)
+from ._sindy import MIN_WEAK_OBSERVATIONS, PolynomialField, _flow, _half_width, sindy_available
+
+#: The body: principal moments (an elongated flat body: the two larger close) and the
+#: quadratic drag matrix D in the body frame (symmetric, positive definite, coupling axes 1
+#: and 3), in units where I2 = 6.
+INERTIA = (1.0, 6.0, 7.0)
+DRAG = 6.0 * np.array([[0.006, 0.0, 0.002], [0.0, 0.018, 0.0], [0.002, 0.0, 0.014]])
+H = 0.01  # the gyroscope's sampling interval: 100 Hz
+FLIGHT = 1.0  # seconds per flight
+TRAIN_SPINS, TEST_SPINS = (5.0, 15.0), (10.0, 30.0)  # rad/s about the intermediate axis
+PERTURBATION = (0.05, 0.15)  # the other two rates, as a fraction of the spin
+BIAS = 0.01  # rad/s: the standard deviation of each axis's constant bias in a session
+#: The rate at which the drag is reported: rad/s about the intermediate axis.
+REFERENCE_SPIN = 10.0
+#: RK4 sub-steps per sampling interval of the limit's and Euler's integrations (0.03 rad per
+#: sub-step at 30 rad/s: their error is far below the gyroscope's noise).
+LIMIT_SUBSTEPS = 10
+#: STLSQ thresholds tried by SINDy and weak SINDy (the rates' equations have coefficients of
+#: order 1 for Euler's terms and 0.01-0.04 for the drag's).
+THRESHOLDS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
+FIT_LIMIT_S = 120.0  # every fit should take less
+DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
+
+
+def air_body() -> lp.systems.Forced:
+    """The tossed body: `RigidBody(INERTIA)` under `QuadraticDrag(DRAG)`."""
+    return lp.systems.Forced(lp.systems.RigidBody(INERTIA), lp.systems.QuadraticDrag(DRAG))
+
+
+@dataclasses.dataclass(frozen=True)
+class Session:
+    """Flights of one session: the sampling `times` `(m,)`, the true body rates `(n, m, 3)`,
+    the gyroscope `records` (rates plus noise and the session's `bias`)."""
+
+    times: np.ndarray
+    rates: np.ndarray
+    records: it.BodyObservations
+    bias: np.ndarray
+
+    @property
+    def measured(self) -> np.ndarray:
+        return np.stack(self.records.velocities)
+
+
+def initial_rates(n: int, spins: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
+    """`(n, 3)` rates: a spin about the intermediate axis (either sign) with the other two a
+    fraction `PERTURBATION` of it in a random direction."""
+    spin = rng.uniform(*spins, n) * rng.choice([-1.0, 1.0], n)
+    size = rng.uniform(*PERTURBATION, n) * np.abs(spin)
+    angle = rng.uniform(0.0, 2.0 * np.pi, n)
+    return np.column_stack([size * np.cos(angle), spin, size * np.sin(angle)])
+
+
+def session(n: int, spins: tuple[float, float], noise: float, seed: int, duration: float = FLIGHT) -> Session:
+    """`n` flights of `duration` s from `initial_rates(spins)`, heyoka's truth sampled every
+    `H`, the gyroscope's rates with absolute noise `noise` rad/s and the session's bias."""
+    rng = np.random.default_rng(seed)
+    omega0 = initial_rates(n, spins, rng)
+    steps = round(duration / H)
+    truth = it.ground_truth(air_body(), omega0 * np.asarray(INERTIA), H, steps)
+    rates = np.asarray(truth.states) / np.asarray(INERTIA)
+    bias = rng.normal(0.0, BIAS, 3)
+    measured = rates + noise * rng.normal(size=rates.shape) + bias
+    times = H * np.arange(steps + 1)
+    records = it.BodyObservations(lp.systems.RigidBody(), [times] * n, velocities=list(measured),
+                                  metadata={"noise_rad_s": noise, "bias_rad_s": bias.tolist()})
+    return Session(times, rates, records, bias)
+
+
+# -- the true family, integrated by RK4 in JAX (the limit and Euler's equations) --
+
+def _rates_field(omega, ratios, drag):
+    r"""$\dot\Omega = \mathbb I^{-1}(\mathbb I\Omega\times\Omega - |\Omega|D\Omega)$, `ratios`
+    the principal moments over I2 (I2 = `INERTIA[1]`), `drag` the 6 entries of D's upper triangle."""
+    inertia = jnp.stack([ratios[0], jnp.ones_like(ratios[0]), ratios[1]]) * INERTIA[1]
+    D = _symmetric(drag)
+    speed = jnp.linalg.norm(omega, axis=-1, keepdims=True)
+    return (jnp.cross(omega * inertia, omega) - speed * omega @ D) / inertia
+
+
+def _symmetric(upper):
+    a, b, c, d, e, f = (upper[k] for k in range(6))
+    return jnp.array([[a, b, c], [b, d, e], [c, e, f]])
+
+
+def _upper(D: np.ndarray) -> np.ndarray:
+    return np.asarray(D)[np.triu_indices(3)]
+
+
+@functools.partial(jax.jit, static_argnums=(3,))
+def true_family_rates(ratios, drag, omega0, n_intervals: int):
+    """Rates `(n, n_intervals + 1, 3)` of the true family from `omega0` `(n, 3)` every `H`
+    (RK4, `LIMIT_SUBSTEPS` sub-steps per interval)."""
+    k = H / LIMIT_SUBSTEPS
+
+    def rk4(w, _):
+        a = _rates_field(w, ratios, drag)
+        b = _rates_field(w + 0.5 * k * a, ratios, drag)
+        c = _rates_field(w + 0.5 * k * b, ratios, drag)
+        d = _rates_field(w + k * c, ratios, drag)
+        return w + k / 6.0 * (a + 2.0 * b + 2.0 * c + d), None
+
+    def interval(w, _):
+        w, _ = jax.lax.scan(rk4, w, None, length=LIMIT_SUBSTEPS)
+        return w, w
+
+    _, out = jax.lax.scan(interval, omega0, None, length=n_intervals)
+    return jnp.concatenate([omega0[None], out]).transpose(1, 0, 2)
+
+
+@dataclasses.dataclass(frozen=True)
+class TrueFamily:
+    """A member of the true family: the principal moments over I2 and D (at I2 = 6)."""
+
+    ratios: np.ndarray
+    D: np.ndarray
+
+
+# -- the models --
+
+@dataclasses.dataclass(frozen=True)
+class Identified:
+    """What a model found: the principal moments over the intermediate one (sorted), and the
+    drag rate $\\mathbb I^{-1}D(\\Omega)$ at `REFERENCE_SPIN` about the intermediate axis (1/s)."""
+
+    inertia_ratios: np.ndarray | None = None
+    drag_rate: np.ndarray | None = None
+    detail: str | None = None
+
+
+def _sorted_ratios(M: np.ndarray) -> np.ndarray:
+    values = np.linalg.eigvalsh(0.5 * (M + M.T))
+    return values / values[1]
+
+
+def true_drag_rate() -> np.ndarray:
+    return REFERENCE_SPIN * np.diag(1.0 / np.asarray(INERTIA)) @ DRAG
+
+
+class AbstractFlightModel(abc.ABC):
+    """A model of W7: fitted to the training session's gyro records, then predicting each test
+    flight's rates from its first gyro sample."""
+
+    label: str
+
+    @abc.abstractmethod
+    def fit(self, train: Session, steps: int) -> Any:
+        """The fitted model (`steps`: Levenberg-Marquardt steps, where it takes them)."""
+
+    @abc.abstractmethod
+    def predict(self, fitted: Any, omega0: np.ndarray, n_intervals: int) -> np.ndarray:
+        """Rates `(n, n_intervals + 1, 3)` every `H` from `omega0` `(n, 3)`."""
+
+    def identified(self, fitted: Any) -> Identified:
+        return Identified()
+
+
+class AbstractLearnedFlightModel(AbstractFlightModel):
+    """A learned map with latent momenta: starts from `learn.latent_momenta` of the first
+    sample, rolled out at `H`; the rates are its body velocities."""
+
+    def predict(self, fitted, omega0, n_intervals):
+        mu0 = np.asarray(learn.latent_momenta(fitted, omega0))
+        mu = fitted.with_h(H).rollout(mu0, n_intervals, nonfinite="return")
+        return np.asarray(jax.vmap(jax.vmap(fitted.body_velocity))(mu))
+
+
+def momentum_size(A: np.ndarray, b: np.ndarray, records: it.BodyObservations) -> float:
+    r"""The RMS size of the momenta $\mu = A^{-1}(\Omega - b)$ of the recorded rates: the scale
+    of the latent momenta the net's pieces start at."""
+    omega = np.concatenate(records.velocities)
+    mu = np.linalg.solve(A, (omega - b).T).T
+    size = float(np.sqrt(np.mean(np.sum(mu**2, axis=1))))
+    return size if size > 0.0 else 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class DissipativeFlightModel(AbstractLearnedFlightModel):
+    """The dissipative G-LPNet: a quadratic H~ along learned axes (`learn.FAMILIES`' "quadratic,
+    any axes, even", started at the weak-form quadratic of the rates) composed by Strang with a
+    learned quadratic drag along any axes, fitted with the momenta latent."""
+
+    label: str = "dissipative G-LPNet"
+    family: str = "quadratic, any axes, even"
+    drag: str = "quadratic"
+
+    def fit(self, train, steps):
+        body = lp.systems.RigidBody()
+        family = next(f for f in learn.FAMILIES if f.name == self.family)
+        A, b, _ = learn.weak_form_quadratic(train.records, linear=family.bias, diagonal=not family.any_axes)
+        terms = family.terms_of(body, A, b, momentum_size(A, b, train.records))
+        model = learn.Dissipative(learn.GLPNet(body, terms=terms, method=Strang()),
+                                  learn.LearnedDrag(3, self.drag, any_axes=True, scale=1e-3))
+        fitted, _ = learn.fit(model, train.records, loss=learn.BodyLoss(),
+                              optimiser=(learn.LevenbergMarquardt(steps),), progress=False)
+        return fitted
+
+    def identified(self, fitted):
+        A, _ = fitted.quadratic_part()
+        A = np.asarray(A)
+        reference = np.array([0.0, REFERENCE_SPIN, 0.0])
+        drag = A @ np.asarray(fitted.drag.matrix(reference))
+        return Identified(_sorted_ratios(np.linalg.inv(A)), drag, f"drag {self.drag}, H~ {self.family}")
+
+
+@dataclasses.dataclass(frozen=True)
+class ConservativeFlightModel(AbstractLearnedFlightModel):
+    """The conservative G-LPNet of `learn.fit_splitting` (its family chosen by BIC): no drag."""
+
+    label: str = "conservative G-LPNet"
+
+    def fit(self, train, steps):
+        net, _ = learn.fit_splitting(lp.systems.RigidBody(), train.records, loss=learn.BodyLoss(),
+                                     iterations=steps, seed=TRAIN_SEED, key=TRAIN_SEED, progress=False)
+        return net
+
+    def identified(self, fitted):
+        hessian = np.asarray(jax.hessian(fitted.hamiltonian)(np.zeros(3)))
+        terms = fitted.terms
+        family = f"{terms.activation}, {'any axes' if terms.full_vectors else 'axes'}"
+        return Identified(_sorted_ratios(np.linalg.inv(hessian)), np.zeros((3, 3)), f"H~ {family}")
+
+
+@dataclasses.dataclass(frozen=True)
+class LimitFlightModel(AbstractFlightModel):
+    """The true family fitted by `scipy.optimize.least_squares` on whole training flights from
+    the truth 10% off (ratios and D) and the first gyro samples (initial rates)."""
+
+    label: str = "limit"
+
+    def fit(self, train, steps):
+        measured = train.measured
+        n, m = measured.shape[:2]
+        truth = np.concatenate([[INERTIA[0] / INERTIA[1], INERTIA[2] / INERTIA[1]], _upper(DRAG)])
+        x0 = np.concatenate([1.1 * truth, measured[:, 0].ravel()])
+
+        def residuals(x):
+            rates = true_family_rates(x[:2], x[2:8], x[8:].reshape(n, 3), m - 1)
+            return (rates - measured).ravel()
+
+        residuals = jax.jit(residuals)
+        jacobian = jax.jit(jax.jacfwd(residuals))
+        result = least_squares(lambda x: np.asarray(residuals(x)), x0, jac=lambda x: np.asarray(jacobian(x)),
+                               method="lm", x_scale="jac", max_nfev=max(2 * steps, 20))
+        return TrueFamily(result.x[:2], np.asarray(_symmetric(result.x[2:8])))
+
+    def predict(self, fitted, omega0, n_intervals):
+        return np.asarray(true_family_rates(fitted.ratios, _upper(fitted.D), omega0, n_intervals))
+
+    def identified(self, fitted):
+        inertia = np.array([fitted.ratios[0], 1.0, fitted.ratios[1]]) * INERTIA[1]
+        drag = REFERENCE_SPIN * np.diag(1.0 / inertia) @ fitted.D
+        return Identified(np.sort(inertia) / np.sort(inertia)[1], drag)
+
+
+@dataclasses.dataclass(frozen=True)
+class EulerFlightModel(LimitFlightModel):
+    """Euler's equations with the true inertia and no drag: nothing fitted."""
+
+    label: str = "Euler, no drag"
+
+    def fit(self, train, steps):
+        return TrueFamily(np.array([INERTIA[0] / INERTIA[1], INERTIA[2] / INERTIA[1]]), np.zeros((3, 3)))
+
+
+def _rollout_error(field: Any, omega: np.ndarray, times: np.ndarray) -> float:
+    """Mean relative RMS error of the field's rollouts from each flight's first sample."""
+    errors = []
+    for w in omega:
+        pred = _flow(field, w[0], times, 100.0 * max(float(np.linalg.norm(w[0])), 1e-3))
+        errors.append(_relative_rms(pred, w))
+    return float(np.mean(errors))
+
+
+def _relative_rms(pred: np.ndarray, true: np.ndarray) -> float:
+    error = np.sqrt(np.mean(np.sum((pred - true) ** 2, axis=-1)) / np.mean(np.sum(true**2, axis=-1)))
+    return float(error) if np.isfinite(error) else np.inf
+
+
+@dataclasses.dataclass(frozen=True)
+class SelectedField:
+    """A polynomial field and how it was chosen."""
+
+    field: PolynomialField
+    threshold: float
+    constant: bool
+    train_error: float
+
+
+class AbstractSparseFlightModel(AbstractFlightModel):
+    """A sparse polynomial field of degree 2 for the rates (pysindy, STLSQ): every threshold of
+    `THRESHOLDS`, with and without a constant, fitted; the one whose rollouts from the training
+    flights' first samples follow their records best is kept. Integrated by LSODA."""
+
+    @abc.abstractmethod
+    def rows(self, records: it.BodyObservations, constant: bool) -> tuple[np.ndarray, np.ndarray, Any]:
+        """`(features, targets, library)` of the least-squares problem of STLSQ."""
+
+    def fit(self, train, steps):
+        import pysindy as ps
+
+        best = None
+        with warnings.catch_warnings():  # pysindy warns about ill-conditioned fits of noisy data
+            warnings.simplefilter("ignore")
+            for constant in (True, False):
+                features, targets, library = self.rows(train.records, constant)
+                for threshold in THRESHOLDS:
+                    coefficients = ps.STLSQ(threshold=threshold).fit(features, targets).coef_
+                    field = PolynomialField(library, coefficients)
+                    error = _rollout_error(field, train.measured, train.times)
+                    if best is None or error < best.train_error:
+                        best = SelectedField(field, threshold, constant, error)
+        return best
+
+    def predict(self, fitted, omega0, n_intervals):
+        times = H * np.arange(n_intervals + 1)
+        return np.stack([_flow(fitted.field, w, times, 100.0 * max(float(np.linalg.norm(w)), 1e-3))
+                         for w in omega0])
+
+    def identified(self, fitted):
+        terms = int(np.count_nonzero(fitted.field.coefficients))
+        return Identified(detail=f"threshold {fitted.threshold:g}, {'with' if fitted.constant else 'no'} constant, "
+                                 f"{terms} terms")
+
+
+@dataclasses.dataclass(frozen=True)
+class SINDyFlightModel(AbstractSparseFlightModel):
+    """SINDy on finite differences of the rates."""
+
+    label: str = "SINDy"
+
+    def rows(self, records, constant):
+        import pysindy as ps
+
+        library = ps.PolynomialLibrary(degree=2, include_bias=constant)
+        omega = list(records.velocities)
+        derivative = ps.FiniteDifference()
+        targets = np.concatenate([derivative(w, t=t) for w, t in zip(omega, records.times)])
+        features = np.asarray(library.fit_transform(np.concatenate(omega)))
+        return features, targets, library
+
+
+@dataclasses.dataclass(frozen=True)
+class WeakSINDyFlightModel(AbstractSparseFlightModel):
+    """Weak SINDy as W2's (`paper._sindy.WeakSINDyModel`: one weak library per flight, test
+    functions on supports of `window` samples, `test_functions` per sample), its rows stacked."""
+
+    label: str = "weak SINDy"
+    window: int = 9
+    test_functions: int = 4
+
+    def rows(self, records, constant):
+        import pysindy as ps
+
+        features, targets = [], []
+        for j, (t, w) in enumerate(zip(records.times, records.velocities)):
+            if t.size < MIN_WEAK_OBSERVATIONS:
+                continue
+            state = np.random.get_state()  # the library draws its supports from numpy's global stream
+            np.random.seed(TRAIN_SEED + j)
+            try:
+                library = ps.WeakPDELibrary(function_library=ps.PolynomialLibrary(degree=2, include_bias=constant),
+                                            spatiotemporal_grid=t, K=self.test_functions * t.size,
+                                            H_xt=_half_width(t, self.window))
+            finally:
+                np.random.set_state(state)
+            features.append(np.asarray(library.fit_transform(w)))
+            targets.append(np.asarray(library.convert_u_dot_integral(w)))
+        return np.concatenate(features), np.concatenate(targets), library.function_library
+
+
+def models() -> list[AbstractFlightModel]:
+    out: list[AbstractFlightModel] = [DissipativeFlightModel(), ConservativeFlightModel(), LimitFlightModel(),
+                                      EulerFlightModel()]
+    if sindy_available():
+        out += [SINDyFlightModel(), WeakSINDyFlightModel()]
+    return out
+
+
+# -- what is measured --
+
+def flip_times(times: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """The times where the intermediate-axis rate `rate` `(m,)` changes sign (linear
+    interpolation between samples)."""
+    s = np.flatnonzero(np.sign(rate[1:]) * np.sign(rate[:-1]) < 0)
+    return times[s] + (times[s + 1] - times[s]) * rate[s] / (rate[s] - rate[s + 1])
+
+
+def flip_period(times: np.ndarray, rate: np.ndarray) -> float:
+    """The mean interval between successive flips (NaN with fewer than two)."""
+    flips = flip_times(times, rate)
+    return float((flips[-1] - flips[0]) / (flips.size - 1)) if flips.size >= 2 else np.nan
+
+
+def measure(test: Session, rates: np.ndarray) -> dict[str, Any]:
+    """Rate error (mean over flights of the relative RMS error against the true rates) and flip
+    period error (median over the flights that flip at least twice; a prediction that does not
+    is missed)."""
+    errors = [_relative_rms(p, r) for p, r in zip(rates, test.rates)]
+    flip_errors, missed = [], 0
+    for p, r in zip(rates, test.rates):
+        true = flip_period(test.times, r[:, 1])
+        if np.isnan(true):
+            continue
+        found = flip_period(test.times, p[:, 1]) if np.all(np.isfinite(p)) else np.nan
+        missed += int(np.isnan(found))
+        flip_errors.append(np.inf if np.isnan(found) else abs(found / true - 1.0))
+    return {"rate_error": float(np.mean(errors)), "rate_errors": [float(e) for e in errors],
+            "flip_period_error": float(np.median(flip_errors)) if flip_errors else None,
+            "flights_flipping": len(flip_errors), "flips_missed": missed, "example_rates": rates[0].tolist()}
+
+
+@dataclasses.dataclass(frozen=True)
+class W7Row:
+    """One model at one noise level, on the test session."""
+
+    noise: float
+    model: str
+    fit_seconds: float
+    rate_error: float
+    rate_errors: Any
+    flip_period_error: float | None
+    flights_flipping: int
+    flips_missed: int
+    example_rates: Any = optional()
+    inertia_ratios: Any = optional()
+    drag_rate: Any = optional()
+    drag_error: float | None = optional()
+    detail: str | None = optional()
+
+
+def evaluate(model: AbstractFlightModel, train: Session, test: Session, *, noise: float, steps: int) -> W7Row:
+    start = time.perf_counter()
+    fitted = model.fit(train, steps)
+    fit_seconds = time.perf_counter() - start
+    rates = model.predict(fitted, test.measured[:, 0], test.times.size - 1)
+    found = model.identified(fitted)
+    drag = {}
+    if found.drag_rate is not None:
+        true = true_drag_rate()
+        drag = {"drag_rate": np.asarray(found.drag_rate).tolist(),
+                "drag_error": float(np.linalg.norm(found.drag_rate - true) / np.linalg.norm(true))}
+    return W7Row(noise=noise, model=model.label, fit_seconds=fit_seconds, **measure(test, rates), **drag,
+                 inertia_ratios=None if found.inertia_ratios is None else np.asarray(found.inertia_ratios).tolist(),
+                 detail=found.detail)
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    noises: tuple[float, ...]
+    n_train: int = 12
+    n_test: int = 12
+    duration: float = FLIGHT
+    steps: int = 200
+
+
+PROFILES = {
+    "smoke": Profile((0.02,), n_train=3, n_test=2, duration=0.3, steps=10),
+    "quick": Profile((0.02,)),
+    "full": Profile((0.01, 0.02, 0.05)),
+}
+
+
+def _ratios_cell(r: W7Row) -> str:
+    if r.inertia_ratios is None:
+        return "—"
+    a, _, c = r.inertia_ratios
+    return f"{a:.4f}, {c:.4f}"
+
+
+def _drag_cell(r: W7Row) -> str:
+    if r.drag_rate is None:
+        return "—"
+    diagonal = np.diag(np.asarray(r.drag_rate))
+    if not np.any(diagonal):
+        return "none"
+    return f"({', '.join(f'{d:.3f}' for d in diagonal)}), error {fmt(r.drag_error)}"
+
+
+def _fit_cell(r: W7Row) -> str:
+    return "—" if r.model == EulerFlightModel.label else f"{r.fit_seconds:.1f}"
+
+
+COLUMNS = (
+    Column("noise [rad/s]", lambda r: f"{r.noise:g}"),
+    Column("model", lambda r: r.model),
+    Column("rate error", lambda r: r.rate_error),
+    Column("flip period error", lambda r: r.flip_period_error),
+    Column("flips missed", lambda r: f"{r.flips_missed}/{r.flights_flipping}"),
+    Column("I1/I2, I3/I2", _ratios_cell),
+    Column(f"drag rate diag. at {REFERENCE_SPIN:g} rad/s [1/s]", _drag_cell),
+    Column("fit [s]", _fit_cell),
+    Column("chosen", lambda r: r.detail or "—"),
+)
+
+
+def _peer(rows: list[W7Row], row: W7Row, model: str) -> W7Row | None:
+    return next((r for r in rows if r.noise == row.noise and r.model == model), None)
+
+
+def line(row: W7Row) -> str:
+    return (f"noise {row.noise:g}, {row.model}: rate error {fmt(row.rate_error)}, flip period error "
+            f"{fmt(row.flip_period_error)}, fit {row.fit_seconds:.1f} s")
+
+
+def verdict(rows: list[W7Row]) -> list[str]:
+    out = []
+    for r in rows:
+        if r.model != DissipativeFlightModel.label:
+            continue
+        parts = [f"noise {r.noise:g}: dissipative G-LPNet rate error {fmt(r.rate_error)} on the faster session"]
+        limit = _peer(rows, r, LimitFlightModel.label)
+        if limit:
+            ratio = r.rate_error / limit.rate_error
+            parts.append(f"{ratio:.2f}x the limit's {fmt(limit.rate_error)} "
+                         f"({'within' if ratio <= 1.5 else 'NOT within'} 1.5x)")
+        for peer in (_peer(rows, r, m) for m in (SINDyFlightModel.label, WeakSINDyFlightModel.label)):
+            if peer:
+                below = r.rate_error < peer.rate_error
+                parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(peer.rate_error)}")
+        conservative = _peer(rows, r, ConservativeFlightModel.label)
+        if conservative:
+            parts.append(f"the conservative G-LPNet's {fmt(conservative.rate_error)} is "
+                         f"{conservative.rate_error / r.rate_error:.1f}x it (flip period error "
+                         f"{fmt(conservative.flip_period_error)} against {fmt(r.flip_period_error)})")
+        euler = _peer(rows, r, EulerFlightModel.label)
+        if euler:
+            parts.append(f"Euler's equations without drag {fmt(euler.rate_error)}")
+        out.append("; ".join(parts))
+    fits = [r for r in rows if r.model != EulerFlightModel.label]
+    if fits:
+        slowest = max(fits, key=lambda r: r.fit_seconds)
+        out.append(f"every fit {'under' if slowest.fit_seconds < FIT_LIMIT_S else 'NOT under'} "
+                   f"{FIT_LIMIT_S:g} s: the slowest, {slowest.model} at noise {slowest.noise:g}, "
+                   f"{slowest.fit_seconds:.1f} s")
+    return out
+
+
+def _plot(rows: list[W7Row], test: Session, noise: float, out_dir: Path) -> str:
+    """The first test flight's rates: truth, gyroscope and each model's prediction."""
+    chosen = [r for r in rows if r.noise == noise and r.example_rates is not None]
+    fig = figure(figsize=(12.0, 3.6))
+    for axis in range(3):
+        ax = fig.add_subplot(1, 3, axis + 1)
+        ax.plot(test.times, test.measured[0, :, axis], ".", color="0.6", markersize=2, label="gyroscope")
+        ax.plot(test.times, test.rates[0, :, axis], color="k", linewidth=2.0, label="truth")
+        for r, style in zip(chosen, series_styles(len(chosen))):
+            ax.plot(test.times, np.asarray(r.example_rates)[:, axis], label=r.model, **style)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"Omega_{axis + 1} [rad/s]")
+    fig.axes[0].legend(fontsize=7)
+    fig.suptitle(f"a test flight (twice the training spins), gyro noise {noise:g} rad/s")
+    fig.tight_layout()
+    name = f"test_flight_noise_{noise:g}.png"
+    fig.savefig(out_dir / name, dpi=110)
+    return name
+
+
+class W7(AbstractExperiment):
+    id = "W7"
+    title = "bodies in air: a tossed body under quadratic drag seen by a gyroscope, flips predicted"
+    paper_values = ()
+
+    def run(self, profile: str, out_dir: Path, progress: bool):
+        P = PROFILES[profile]
+        rows: list[W7Row] = []
+        figures = []
+        for noise in P.noises:
+            train = session(P.n_train, TRAIN_SPINS, noise, DATA_SEED, P.duration)
+            test = session(P.n_test, TEST_SPINS, noise, TEST_SEED, P.duration)
+            for model in models():
+                name = f"{profile}-{noise:g}-{model.label}.json".replace(" ", "_").replace(",", "")
+                row = saved_row(W7Row, out_dir / "rows" / name, functools.partial(
+                    evaluate, model, train, test, noise=noise, steps=P.steps))
+                rows.append(row)
+                if progress:
+                    print(line(row), flush=True)
+            figures.append(_plot(rows, test, noise, out_dir))
+        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows), "figures": figures,
+                "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
+                "protocol": {"train_flights": P.n_train, "test_flights": P.n_test, "duration_s": P.duration,
+                             "levenberg_marquardt_steps": P.steps},
+                "body": {"inertia": list(INERTIA), "drag": DRAG.tolist(), "true_drag_rate": true_drag_rate().tolist()},
+                "model": "dissipative G-LPNet (quadratic H~, learned quadratic drag, momenta latent)"}
+
+    def rows(self, metrics):
+        rows = [row_from_json(W7Row, r) for r in metrics.get("rows", [])]
+        return [(f"noise {r.noise:g} dissipative G-LPNet rate error", "—", fmt(r.rate_error),
+                 fmt(getattr(_peer(rows, r, LimitFlightModel.label), "rate_error", None)))
+                for r in rows if r.model == DissipativeFlightModel.label]
+
+    def markdown_table(self, metrics):
+        rows = [row_from_json(W7Row, r) for r in metrics.get("rows", [])]
+        true = np.diag(np.asarray(metrics.get("body", {}).get("true_drag_rate", true_drag_rate())))
+        protocol = metrics.get("protocol", {})
+        description = (
+            f"Seeds: {metrics.get('seeds')}. The body I = {INERTIA} under quadratic drag; fitted on a session of "
+            f"{protocol.get('train_flights')} flights of {protocol.get('duration_s')} s at {TRAIN_SPINS[0]:g}-{TRAIN_SPINS[1]:g} rad/s, tested on another of {protocol.get('test_flights')} at "
+            f"{TEST_SPINS[0]:g}-{TEST_SPINS[1]:g} rad/s, each flight predicted from its first gyro sample. Rate "
+            "error: relative RMS against the true rates, mean over the test flights; flip period error: median "
+            "relative error of the mean interval between sign changes of Omega_2 over the test flights that flip "
+            f"at least twice. Truth: I1/I2, I3/I2 = {INERTIA[0] / INERTIA[1]:.4f}, {INERTIA[2] / INERTIA[1]:.4f}; "
+            f"drag rate diagonal ({', '.join(f'{d:.3f}' for d in true)}) 1/s; drag error: relative (Frobenius) "
+            "error of the whole matrix. LPNet: not available (an LPNet from body records, momenta latent, is "
+            "not implemented).")
+        return self.study_markdown(metrics, description, [("Every model", table_lines(COLUMNS, rows))])
+
+
+EXPERIMENT = W7()
