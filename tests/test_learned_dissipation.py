@@ -152,3 +152,24 @@ def test_fit_dissipative_finds_a_forced_body():
     fitted = np.linalg.inv(np.asarray(A))
     # the inertia at the identifiable scale (ratios) within 2%: noise 1e-3 over 0.6 s flights
     np.testing.assert_allclose(np.diag(fitted) / fitted[1, 1], I / I[1], rtol=2e-2)
+
+
+@pytest.mark.slow  # ~40 s: two fits
+def test_a_gyroscope_bias_is_found():
+    # the rates read with a constant bias of 0.05 rad/s: fitted with each trajectory's start
+    body = RigidBody((1.0, 1.9, 2.1))
+    omega = np.array([[0.1, 8.0, 0.2], [0.3, -9.0, 0.1], [-0.2, 10.0, 0.3]])
+    exact = it.observe_body(body, omega * body.inertia, np.tile([0, 0, 0, 1.0], (3, 1)), np.arange(41) * 0.01,
+                            measure="velocities")
+    beta = np.array([0.05, -0.03, 0.04])
+    data = it.BodyObservations(body, exact.times, velocities=[v + beta for v in exact.velocities])
+    terms = learn.RidgeTerms(3, 3, activation="identity", full_vectors=False, linear_term=False, bias=False)
+    terms = eqx.tree_at(lambda t: (t.a, t.c), terms, (jnp.asarray(1.0 / body.inertia), jnp.ones(3)))
+    net = learn.GLPNet(body, terms=terms, method=TripleJump)
+    losses = {}
+    for bias in (False, True):
+        _, record = learn.fit(net, data, loss=learn.BodyLoss(max_step=0.005, bias=bias),
+                              optimiser=learn.LevenbergMarquardt(60), progress=False)
+        losses[bias] = float(np.asarray(record.history["train_loss"])[-1])
+    # exact data but for the bias: with it fitted, the misfit falls to the fit's tolerance
+    assert losses[True] < 1e-6 * losses[False]

@@ -36,7 +36,7 @@ from ._problem import Description, Fitted, FittedProblem
 
 
 class BodySegments(eqx.Module):
-    """Body observations as a training problem's `args`, one segment per trajectory (padded to
+    r"""Body observations as a training problem's `args`, one segment per trajectory (padded to
     the longest): `index` `(S,)` (the row of fitted starts), `steps` `(S, N)` the sub-steps
     each trajectory is rolled out by (each interval in `ceil(interval / max_step)` equal ones,
     0 where padded), `at` `(S, L)` the sub-step after which each observation is reached (-1
@@ -44,7 +44,8 @@ class BodySegments(eqx.Module):
     identity without configurations), `configurations` `(S, L, size)`, `velocities`
     `(S, L, dim)`, `weights` `(dim,)` of the configuration residual, `velocity_scale`;
     `measured` which of the two are compared; `substeps`: each sub-step taken in this many
-    equal steps (1; 2 for `discretisation_ssr`)."""
+    equal steps (1; 2 for `discretisation_ssr`); `bias`: each trajectory's start ends with a
+    gyroscope bias $\beta$ `(dim,)`, the velocity read as $\xi + \beta$."""
 
     index: jax.Array
     steps: jax.Array
@@ -57,11 +58,12 @@ class BodySegments(eqx.Module):
     velocity_scale: jax.Array
     substeps: int = eqx.field(static=True)
     measured: tuple[str, ...] = eqx.field(static=True)
+    bias: bool = eqx.field(static=True, default=False)
 
 
-def body_segments(data: BodyObservations, max_step: float | None) -> BodySegments:
+def body_segments(data: BodyObservations, max_step: float | None, bias: bool = False) -> BodySegments:
     """Every trajectory of `data` as one segment, each interval in equal sub-steps of at most
-    `max_step` (one per interval with `None`)."""
+    `max_step` (one per interval with `None`); `bias`: a gyroscope bias per trajectory fitted."""
     group, dim = data.group, data.dim
     length = max(t.size for t in data.times)
     S = len(data)
@@ -89,7 +91,7 @@ def body_segments(data: BodyObservations, max_step: float | None) -> BodySegment
         weights[3:] = 1.0 / position
     return BodySegments(jnp.arange(S, dtype=jnp.int32), jnp.asarray(steps), jnp.asarray(at, dtype=jnp.int32),
                         jnp.asarray(mask), jnp.asarray(gs[:, 0]), jnp.asarray(gs), jnp.asarray(vs),
-                        jnp.asarray(weights), jnp.asarray(data.velocity_scale()), 1, data.measured)
+                        jnp.asarray(weights), jnp.asarray(data.velocity_scale()), 1, data.measured, bool(bias))
 
 
 def sub_steps(intervals: np.ndarray, max_step: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -145,7 +147,7 @@ class BodyObjective(SegmentsObjective):
         dim = args.velocities.shape[-1]
         mu0 = fitted.starts[:, :dim]
         has_g = "configurations" in args.measured
-        g0 = group.right_exp(args.first, fitted.starts[:, dim:]) if has_g else args.first
+        g0 = group.right_exp(args.first, fitted.starts[:, dim : 2 * dim]) if has_g else args.first
         substeps = args.substeps  # over the segments as samples (see `SegmentsObjective`)
         gs, mus = vmap_samples(lambda g, m, steps, at: lifted_segment(model, g, m, steps, at, substeps))(
             g0, mu0, args.steps, args.at)
@@ -154,6 +156,8 @@ class BodyObjective(SegmentsObjective):
             parts.append(group.difference(args.configurations, gs) * args.weights)
         if "velocities" in args.measured:
             xi = jax.vmap(jax.vmap(model.body_velocity))(mus)
+            if args.bias:  # the gyroscope reads xi + beta, beta the last dim of each start
+                xi = xi + fitted.starts[:, None, -dim:]
             parts.append((xi - args.velocities) / args.velocity_scale)
         return jnp.concatenate(parts, axis=-1) * args.mask[..., None]
 
@@ -168,10 +172,13 @@ class BodyLoss(AbstractLoss):
     `learn.fit_splitting`)."""
 
     max_step: float | None = eqx.field(static=True, default=None)
+    bias: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         if self.max_step is not None:
             positive_float(self.max_step, "BodyLoss.max_step")
+        if not isinstance(self.bias, (bool, np.bool_)):
+            raise TypeError(f"BodyLoss.bias must be True or False; got {self.bias!r}")
 
     @property
     def name(self) -> str:
@@ -197,10 +204,15 @@ class BodyLoss(AbstractLoss):
         h = positive_float(h, "h") if h is not None else (
             float(model.h) if model.h is not None else float(np.median(data.intervals())))
         model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)
-        args = body_segments(data, self.max_step)
+        if self.bias and "velocities" not in data.measured:
+            raise ValueError("BodyLoss(bias=True) fits a gyroscope bias, but these observations hold no velocities")
+        args = body_segments(data, self.max_step, self.bias)
         description = Description(loss=self.name, h=h, n_train=int(data.n_observations), n_val=0, seed=int(seed),
                                   validation_fraction=0.0, max_step=self.max_step, substeps=substeps)
-        return FittedProblem(BodyObjective(), Fitted(model, latent_starts(model, data)), args, None, description)
+        starts = latent_starts(model, data)
+        if self.bias:
+            starts = jnp.concatenate([starts, jnp.zeros((starts.shape[0], data.dim), dtype=starts.dtype)], axis=1)
+        return FittedProblem(BodyObjective(), Fitted(model, starts), args, None, description)
 
 
 def substeps_for_body(data: BodyObservations, max_step: float | None) -> int:
