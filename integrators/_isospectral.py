@@ -46,6 +46,7 @@ from liepoisson.internals import dagger, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
 from ._lapack import serial_lapack
+from ._splitting._composition import TripleJump
 from ._lie_group import check_lie_poisson
 from ._step_map import AbstractStepMap, check_state
 
@@ -57,10 +58,6 @@ DEFAULT_TOL = 1e-10
 #: the iteration to contract).
 DEFAULT_MAX_ITER = 100
 
-# Yoshida's triple jump: a symmetric method of order 2 composed with steps g1 h, g0 h, g1 h
-# is of order 4 (Yoshida, Phys. Lett. A 150, 1990).
-_G1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
-_G0 = 1.0 - 2.0 * _G1
 
 
 def check_isospectral(system: AbstractLiePoissonSystem, what: str = "system") -> AbstractLiePoissonSystem:
@@ -339,7 +336,8 @@ class IsospectralTripleJump(IsospectralMidpoint):
     isospectral (each substep is a unitary conjugation). The composition of Modin & Viviani's
     isospectral methods of higher order (FoCM 2020, Sec. 5)."""
 
-    substeps: ClassVar[tuple[float, ...]] = (_G1, _G0, _G1)
+    # the coefficients of integrators.splitting.TripleJump (one table for both)
+    substeps: ClassVar[tuple[float, ...]] = tuple(float(c) for c in TripleJump.coefficients)
 
 
 ISOSPECTRAL_METHODS = {"IsospectralMidpoint": IsospectralMidpoint, "IsospectralTripleJump": IsospectralTripleJump}
