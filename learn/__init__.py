@@ -72,6 +72,7 @@ from ._training._body import (
     BodySegments as BodySegments,
     body_quadratic_estimate as body_quadratic_estimate,
     latent_momenta as latent_momenta,
+    weak_form_drag as weak_form_drag,
     weak_form_quadratic as weak_form_quadratic,
 )
 from ._training._deeponet import BodyDeepONet as BodyDeepONet, fit_deeponet as fit_deeponet

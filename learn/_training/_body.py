@@ -355,6 +355,26 @@ def weak_form_quadratic(data: BodyObservations, linear: bool = True, diagonal: b
     `misfit`: the squared smallest singular value of the weak-form equations (columns of unit
     norm), their least residual: a family of fewer coefficients (`diagonal`, no `linear`) has
     a subset of the columns, so its misfit is never below the fuller family's."""
+    A, b, _, misfit = _weak_form(data, linear, diagonal, None)
+    return A, b, misfit
+
+
+def weak_form_drag(data: BodyObservations, kind: str = "quadratic", linear: bool = False, diagonal: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    r"""`(A, b, D, misfit)`: `weak_form_quadratic` with a drag $-w(\xi)D\xi$ in the equations,
+    $\mathbb M\dot\xi = \mathbb B(\mathbb M\xi - c)\,\xi - w(\xi)D\xi$ ($w = 1$ for
+    `kind="linear"`, $|\xi|$ for `"quadratic"`; $D$ diagonal), still homogeneous and linear in
+    $(\mathbb M, c, D)$: the same weak form with $n$ more columns, in the scale
+    $\operatorname{tr}\mathbb M = n$ (so $D$ is relative to the inertia, as the data fix it; made
+    $\ge 0$). Its `misfit` against `weak_form_quadratic`'s tells whether the data lose energy
+    to something a drag explains (`learn.fit_splitting(dissipation="auto")`)."""
+    if kind not in ("linear", "quadratic"):
+        raise ValueError(f"kind must be 'linear' or 'quadratic'; got {kind!r}")
+    return _weak_form(data, linear, diagonal, kind)
+
+
+def _weak_form(data: BodyObservations, linear: bool, diagonal: bool, drag: str | None):
+    """The weak-form estimate of `weak_form_quadratic` / `weak_form_drag`: `(A, b, D, misfit)`."""
     system = data.system
     n = system.dim
     C = np.asarray(system.algebra.structure_constants)
@@ -371,7 +391,7 @@ def weak_form_quadratic(data: BodyObservations, linear: bool = True, diagonal: b
         Ls.append(float(system.algebra.sign) * np.einsum("abd,kb->kad", C, v))  # B(mu) xi = L mu
         Ws.append(W)
         dWs.append(dW)
-    unknowns = (n if diagonal else n * (n + 1) // 2) + (n if linear else 0)
+    unknowns = (n if diagonal else n * (n + 1) // 2) + (n if linear else 0) + (n if drag else 0)
     windows = sum(W.shape[0] for W in Ws)
     if windows * n < 2 * unknowns:
         raise ValueError(f"the data give {windows} windows of consecutive velocities ({windows * n} equations); "
@@ -388,23 +408,33 @@ def weak_form_quadratic(data: BodyObservations, linear: bool = True, diagonal: b
     if linear:  # + B(c) xi = L c
         columns.extend(np.concatenate([(W @ L[:, :, q]).reshape(-1) for L, W in zip(Ls, Ws, strict=True)])
                        for q in range(n))
-    D = np.stack(columns, axis=1)
-    norms = np.linalg.norm(D, axis=0)
+    if drag is not None:  # + int phi w(xi) D xi, D diagonal: component q of the equations
+        for q in range(n):
+            blocks = []
+            for xi, W in zip(xis, Ws, strict=True):
+                weight = np.ones(len(xi)) if drag == "linear" else np.linalg.norm(xi, axis=1)
+                block = np.zeros((W.shape[0], n))
+                block[:, q] = W @ (weight * xi[:, q])
+                blocks.append(block.reshape(-1))
+            columns.append(np.concatenate(blocks))
+    design = np.stack(columns, axis=1)
+    norms = np.linalg.norm(design, axis=0)
     norms = np.where(norms > 0, norms, 1.0)
-    _, singular, vt = np.linalg.svd(D / norms, full_matrices=False)
+    _, singular, vt = np.linalg.svd(design / norms, full_matrices=False)
     theta = vt[-1] / norms
     M = np.zeros((n, n))
     M[i, j] = M[j, i] = theta[: i.size]
-    c = theta[i.size :] if linear else np.zeros(n)
+    c = theta[i.size : i.size + n] if linear else np.zeros(n)
+    drag_diagonal = theta[i.size + (n if linear else 0):] if drag else np.zeros(n)
     # the singular vector's sign is arbitrary: the one with the larger positive part; then the
     # inertia made positive definite (noise, or motions that do not fix every direction, leave
     # eigenvalues near zero or below: clipped at 1e-3 of the largest) and scaled to trace n
     values, vectors = np.linalg.eigh(M)
     if values.max() < -values.min():
-        values, c = -values[::-1], -c
+        values, c, drag_diagonal = -values[::-1], -c, -drag_diagonal
         vectors = vectors[:, ::-1]
     values = np.maximum(values, 1e-3 * values.max())
     scale = n / values.sum()
     M, c = (vectors * (values * scale)) @ vectors.T, c * scale
     A = np.linalg.inv(M)
-    return A, A @ c, float(singular[-1] ** 2)
+    return A, A @ c, np.diag(np.maximum(drag_diagonal * scale, 0.0)), float(singular[-1] ** 2)

@@ -4,6 +4,7 @@ learned Hamiltonian and a drag family, chosen by the information criterion."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 from collections.abc import Sequence
@@ -24,7 +25,7 @@ from .._models._glpnet import GLPNet, check_method
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
-from ._body import BodyLoss, weak_form_quadratic
+from ._body import BodyLoss, weak_form_drag
 from ._criterion import lowest
 from ._families import FAMILIES, Family
 from ._fit import training_record
@@ -65,7 +66,9 @@ def fit_dissipative(
     $\widetilde H$ is a quadratic on the basis axes (`any_axes`: any symmetric form; from
     the least-squares quadratic of the observations, as `learn.fit_splitting` starts), the
     drag each of `kinds` (`learn.LearnedDrag`: `"linear"`, `"quadratic"`, `"ridge"`, on the axes
-    or, with `any_axes`, in any axes), started at a small drag (`START_RATE`) and fitted with
+    or, with `any_axes`, in any axes), started on body observations at the weak form's estimate
+    with a diagonal drag (`learn.weak_form_drag`), on observed states at a small drag, each
+    coefficient at least a rate `START_RATE` per unit of the data's span; fitted with
     $\widetilde H$ and the starts by Levenberg-Marquardt (`iterations`, default `ITERATIONS`) on
     `loss` (default for body observations `learn.BodyLoss` with sub-steps of at most
     `STEP_ANGLE` rad of the fastest observed rotation; for observations `learn.TrajectoryLoss`),
@@ -86,23 +89,20 @@ def fit_dissipative(
     iterations = ITERATIONS if iterations is None else int(iterations)
     family = next(f for f in FAMILIES if f.name == ("quadratic, any axes, even" if any_axes else "quadratic, even"))
     if isinstance(data, BodyObservations):
-        net, loss, span, rate = _body_start(system, data, family, method, loss)
+        loss = _body_loss(data, loss)
+        start_of = functools.partial(_body_model, system, data, family, method, any_axes)
     elif isinstance(data, Observations):
-        net, loss, span, rate = _observed_start(system, data, family, method, loss)
+        loss = TrajectoryLoss() if loss is None else loss
+        if not isinstance(loss, TrajectoryLoss):
+            raise TypeError(f"loss must be a learn.TrajectoryLoss for observations; got {type(loss).__name__}")
+        start_of = functools.partial(_observed_model, system, data, family, method, any_axes)
     else:
         raise TypeError(f"data must be integrators.BodyObservations or Observations; got {type(data).__name__}")
     context = Context(seed=int(seed), progress=show_progress(progress))
     split = {"h": None, "validation_fraction": 0.0, "seed": int(seed), "normalise": False}
-    A, _ = _affine(net)  # grad H~ = A mu + b: the drag's rate is A D
-    curvature = float(np.mean(np.abs(np.linalg.eigvalsh(0.5 * (A + A.T))))) or 1.0
     fits = []
     for kind in kinds:
-        linear_scale = START_RATE / (span * curvature)
-        scale = linear_scale / rate if kind == "quadratic" else linear_scale
-        drag = LearnedDrag(system.dim, kind, any_axes=any_axes, scale=scale)
-        if kind == "ridge":
-            drag = eqx.tree_at(lambda d: d.quadratic_factor, drag, drag.quadratic_factor / math.sqrt(rate))
-        start = loss.problem(Dissipative(net, drag), data, **split)
+        start = loss.problem(start_of(kind), data, **split)
         problem, results, steps = solve_within_noise(
             start, (LevenbergMarquardt(iterations, 1e-10, warm_start=False),), context)
         if not steps.within_noise:
@@ -121,34 +121,62 @@ def fit_dissipative(
     return fits[best][1], records
 
 
-def _body_start(system, data: BodyObservations, family: Family, method, loss):
-    """The net from the weak-form quadratic of body observations, the loss, the span and the
-    observed rotation rate (for the drag's start)."""
+def _body_loss(data: BodyObservations, loss: BodyLoss | None) -> BodyLoss:
+    """`loss`, or `learn.BodyLoss` in sub-steps of `STEP_ANGLE` of the fastest observed rotation."""
     if loss is None:
         fastest = max(float(np.max(np.linalg.norm(v, axis=1))) for v in _velocities(data))
-        loss = BodyLoss(max_step=STEP_ANGLE / fastest if fastest > 0 else None)
-    elif not isinstance(loss, BodyLoss):
+        return BodyLoss(max_step=STEP_ANGLE / fastest if fastest > 0 else None)
+    if not isinstance(loss, BodyLoss):
         raise TypeError(f"loss must be a learn.BodyLoss for body observations; got {type(loss).__name__}")
-    A, b, _ = weak_form_quadratic(data, linear=family.bias, diagonal=not family.any_axes)
-    velocities = _velocities(data)
-    xi = np.concatenate(velocities)
+    return loss
+
+
+def _body_model(system, data: BodyObservations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
+    r"""The start of a drag family on body observations: $\widetilde H$ and a diagonal drag from
+    the weak form with the drag (`weak_form_drag`: linear for "linear", quadratic for
+    "quadratic", both for "ridge"), each drag coefficient at least its floor (`_floor`: a zero
+    factor has no gradient)."""
+    estimates = {k: weak_form_drag(data, k, linear=family.bias, diagonal=not family.any_axes)
+                 for k in (("linear", "quadratic") if kind == "ridge" else (kind,))}
+    A, b, _, _ = estimates["quadratic" if kind != "linear" else "linear"]
+    xi = np.concatenate(_velocities(data))
     mu = np.linalg.solve(A, (xi - b).T).T
     size = float(np.sqrt(np.mean(np.sum(mu**2, axis=1)))) or 1.0
     net = GLPNet(system, terms=family.terms_of(system, A, b, size), method=method)
     rate = float(np.sqrt(np.mean(np.sum(xi**2, axis=1)))) or 1.0
-    return net, loss, _span(data), rate
+    floor = _floor(net, data, rate)
+    roots = {k: np.sqrt(np.maximum(np.diag(D), floor[k])) for k, (_, _, D, _) in estimates.items()}
+    drag = LearnedDrag(system.dim, kind, any_axes=any_axes)
+    if kind == "ridge":
+        drag = eqx.tree_at(lambda d: (d.factor, d.quadratic_factor), drag,
+                           (jnp.asarray(roots["linear"]), jnp.asarray(roots["quadratic"])))
+    else:
+        root = roots[kind]
+        drag = eqx.tree_at(lambda d: d.factor, drag, jnp.asarray(np.diag(root) if any_axes else root))
+    return Dissipative(net, drag)
 
 
-def _observed_start(system, data: Observations, family: Family, method, loss):
-    """As `_body_start`, for observed states."""
-    loss = TrajectoryLoss() if loss is None else loss
-    if not isinstance(loss, TrajectoryLoss):
-        raise TypeError(f"loss must be a learn.TrajectoryLoss for observations; got {type(loss).__name__}")
+def _observed_model(system, data: Observations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
+    r"""The start of a drag family on observed states: $\widetilde H$ from the finite
+    differences (`Family.start`), the drag at its floor (`_floor`)."""
     net = GLPNet(system, terms=family.start(system, data, state_size(system, data)), method=method)
     A, b = _affine(net)
     xi = np.concatenate(list(data.states)) @ A.T + b
     rate = float(np.sqrt(np.mean(np.sum(xi**2, axis=1)))) or 1.0
-    return net, loss, _span(data), rate
+    floor = _floor(net, data, rate)
+    drag = LearnedDrag(system.dim, kind, any_axes=any_axes, scale=floor["quadratic" if kind == "quadratic" else "linear"])
+    if kind == "ridge":
+        drag = eqx.tree_at(lambda d: d.quadratic_factor, drag, jnp.full(system.dim, math.sqrt(floor["quadratic"])))
+    return Dissipative(net, drag)
+
+
+def _floor(net: GLPNet, data, rate: float) -> dict[str, float]:
+    """The smallest drag a fit starts from, by kind: a rate $|AD|$ of `START_RATE` per unit of
+    the data's mean span (divided by the RMS rate for the quadratic drag)."""
+    A, _ = _affine(net)
+    curvature = float(np.mean(np.abs(np.linalg.eigvalsh(0.5 * (A + A.T))))) or 1.0
+    linear = START_RATE / (_span(data) * curvature)
+    return {"linear": linear, "quadratic": linear / rate}
 
 
 def _affine(net: GLPNet) -> tuple[np.ndarray, np.ndarray]:
