@@ -96,7 +96,7 @@ def test_held_out_prediction_prefers_the_even_quadratic_over_spurious_linear_ter
     np.testing.assert_allclose(np.asarray(net.h), 0.1)
 
 
-def test_a_skipped_family_warns_with_its_reason_and_how_to_fit_it():
+def test_a_skipped_family_warns_with_its_reason_and_how_to_fit_it(tmp_path):
     """Exact data: the even quadratic explains them within its step's error, so "quadratic"
     (the same pieces with linear terms) is skipped, with a warning saying how to fit it."""
     data = it.observe(BODY, sphere(4, 0), 0.1 * np.arange(6), noise=0.0, seed=0)
@@ -108,3 +108,7 @@ def test_a_skipped_family_warns_with_its_reason_and_how_to_fit_it():
     assert isinstance(choice.skipped[0], learn.SkippedFamily) and "discretisation error" in choice.skipped[0].reason
     assert records[-1].stages[-1].details["skipped"] == ["quadratic"]
     assert choice.score("quadratic, even").held_out_error is None and choice.by_held_out is None
+    # a record is saved without its choice (its details keep the criterion)
+    records[-1].save(tmp_path / "record.h5")
+    back = learn.TrainingRecord.load(tmp_path / "record.h5")
+    assert back.choice is None and back.stages[-1].details["family"] == "quadratic, even"
