@@ -19,14 +19,18 @@ flight (mean over the test flights), and the flip period (the mean interval betw
 changes of the intermediate-axis rate) against the truth's, on the flights that flip at
 least twice. Models:
 
-- **dissipative G-LPNet**: `learn.Dissipative(GLPNet, LearnedDrag(3, "quadratic", any_axes=True))`
-  (a quadratic H~ along learned axes composed by Strang with the flow of a learned drag whose
-  matrix is positive semidefinite for every weight), started at the weak-form quadratic of
-  the rates (`learn.weak_form_quadratic`), momenta latent (`learn.BodyLoss`), by
+- **dissipative G-LPNet**: `learn.fit_dissipative(RigidBody(), records, any_axes=True)`: a
+  quadratic H~ along learned axes composed by TripleJump with the flow of a learned drag whose
+  matrix is positive semidefinite for every weight (linear, quadratic or ridge drag, the
+  lowest BIC), started at the weak-form quadratic of the rates, momenta latent
+  (`learn.BodyLoss`, sub-steps of 0.1 rad refined until their error is below the noise), by
   Levenberg-Marquardt;
 - **conservative G-LPNet**: `learn.fit_splitting(RigidBody(), records)`: exactly Poisson,
-  no drag; what the structure without dissipation does with data that lose energy;
-- **LPNet**: not available: an LPNet from body records (momenta latent) is not implemented;
+  no drag (one step per sampling interval); what the structure without dissipation does with
+  data that lose energy;
+- **LPNet**: `learn.BodyLPNet` (an LPNet's Lie-Euler step on latent momenta with a learned
+  linear gyroscope readout), started at the step of the weak-form quadratic, fitted on
+  `learn.BodyLoss` in sub-steps: it keeps the latent Casimir |mu|, so it cannot lose |L|;
 - **SINDy** and **weak SINDy** (pysindy): a polynomial field of degree 2 for the rates (with
   or without a constant), STLSQ with the threshold (and the constant) chosen on the rollout
   errors of the TRAINING flights from their first samples, never the test;
@@ -50,6 +54,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import functools
+import math
 import time
 import warnings
 from pathlib import Path
@@ -64,7 +69,6 @@ import integrators as it
 import learn
 import liepoisson as lp
 from integrators.internals import figure, series_styles
-from integrators.splitting import Strang
 
 from ._experiment import (
     AbstractExperiment,
@@ -95,6 +99,11 @@ REFERENCE_SPIN = 10.0
 LIMIT_SUBSTEPS = 10
 #: STLSQ thresholds tried by SINDy and weak SINDy (the rates' equations have coefficients of
 #: order 1 for Euler's terms and 0.01-0.04 for the drag's).
+#: The learned maps predict in sub-steps of at most this rotation (rad; 7 per sampling interval at
+#: 33 rad/s): what they learned is a Hamiltonian and a drag, not a step at the training spins.
+PREDICTION_ANGLE = 0.05
+#: The LPNet's training sub-steps (s): 0.04 rad at 16 rad/s.
+LPNET_MAX_STEP = 0.0025
 THRESHOLDS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
 FIT_LIMIT_S = 120.0  # every fit should take less
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
@@ -235,50 +244,55 @@ class AbstractFlightModel(abc.ABC):
 
 class AbstractLearnedFlightModel(AbstractFlightModel):
     """A learned map with latent momenta: starts from `learn.latent_momenta` of the first
-    sample, rolled out at `H`; the rates are its body velocities."""
+    sample, rolled out in the fewest equal sub-steps of `H` that turn the fastest test flight by
+    at most `PREDICTION_ANGLE` rad; the rates are its body velocities."""
 
     def predict(self, fitted, omega0, n_intervals):
         mu0 = np.asarray(learn.latent_momenta(fitted, omega0))
-        mu = fitted.with_h(H).rollout(mu0, n_intervals, nonfinite="return")
+        k = max(1, math.ceil(H * float(np.max(np.linalg.norm(omega0, axis=-1))) / PREDICTION_ANGLE))
+        mu = fitted.with_h(H / k).rollout(mu0, k * n_intervals, save_every=k, nonfinite="return")
         return np.asarray(jax.vmap(jax.vmap(fitted.body_velocity))(mu))
-
-
-def momentum_size(A: np.ndarray, b: np.ndarray, records: it.BodyObservations) -> float:
-    r"""The RMS size of the momenta $\mu = A^{-1}(\Omega - b)$ of the recorded rates: the scale
-    of the latent momenta the net's pieces start at."""
-    omega = np.concatenate(records.velocities)
-    mu = np.linalg.solve(A, (omega - b).T).T
-    size = float(np.sqrt(np.mean(np.sum(mu**2, axis=1))))
-    return size if size > 0.0 else 1.0
 
 
 @dataclasses.dataclass(frozen=True)
 class DissipativeFlightModel(AbstractLearnedFlightModel):
-    """The dissipative G-LPNet: a quadratic H~ along learned axes (`learn.FAMILIES`' "quadratic,
-    any axes, even", started at the weak-form quadratic of the rates) composed by Strang with a
-    learned quadratic drag along any axes, fitted with the momenta latent."""
+    """The dissipative G-LPNet of `learn.fit_dissipative`: a quadratic H~ along learned axes
+    composed by TripleJump with a learned drag along any axes (linear, quadratic or ridge, the
+    lowest BIC), fitted with the momenta latent in sub-steps refined until their error is below
+    the noise."""
 
     label: str = "dissipative G-LPNet"
-    family: str = "quadratic, any axes, even"
-    drag: str = "quadratic"
+    #: The drag families tried (`None`: `learn.fit_dissipative`'s, all of them).
+    kinds: tuple[str, ...] | None = None
+    #: Levenberg-Marquardt steps per drag family (and per refinement of the sub-steps): on
+    #: W7's flights the loss is flat from the 5th.
+    iterations: int = 40
 
     def fit(self, train, steps):
-        body = lp.systems.RigidBody()
-        family = next(f for f in learn.FAMILIES if f.name == self.family)
-        A, b, _ = learn.weak_form_quadratic(train.records, linear=family.bias, diagonal=not family.any_axes)
-        terms = family.terms_of(body, A, b, momentum_size(A, b, train.records))
-        model = learn.Dissipative(learn.GLPNet(body, terms=terms, method=Strang()),
-                                  learn.LearnedDrag(3, self.drag, any_axes=True, scale=1e-3))
-        fitted, _ = learn.fit(model, train.records, loss=learn.BodyLoss(),
-                              optimiser=(learn.LevenbergMarquardt(steps),), progress=False)
-        return fitted
+        kinds = {} if self.kinds is None else {"kinds": self.kinds}
+        model, records = learn.fit_dissipative(lp.systems.RigidBody(), train.records, any_axes=True,
+                                               iterations=min(steps, self.iterations), seed=TRAIN_SEED,
+                                               progress=False, **kinds)
+        details = records[-1].stages[-1].details
+        return DissipativeFit(model, f"{details.get('family')}, {details.get('substeps')} sub-step(s) per max_step")
+
+    def predict(self, fitted, omega0, n_intervals):
+        return super().predict(fitted.model, omega0, n_intervals)
 
     def identified(self, fitted):
-        A, _ = fitted.quadratic_part()
+        A, _ = fitted.model.quadratic_part()
         A = np.asarray(A)
         reference = np.array([0.0, REFERENCE_SPIN, 0.0])
-        drag = A @ np.asarray(fitted.drag.matrix(reference))
-        return Identified(_sorted_ratios(np.linalg.inv(A)), drag, f"drag {self.drag}, H~ {self.family}")
+        drag = A @ np.asarray(fitted.model.drag.matrix(reference))
+        return Identified(_sorted_ratios(np.linalg.inv(A)), drag, fitted.chosen)
+
+
+@dataclasses.dataclass(frozen=True)
+class DissipativeFit:
+    """A fitted `learn.Dissipative` and the family `learn.fit_dissipative` chose."""
+
+    model: learn.Dissipative
+    chosen: str
 
 
 @dataclasses.dataclass(frozen=True)
@@ -286,10 +300,14 @@ class ConservativeFlightModel(AbstractLearnedFlightModel):
     """The conservative G-LPNet of `learn.fit_splitting` (its family chosen by BIC): no drag."""
 
     label: str = "conservative G-LPNet"
+    #: The names of the families of H~ tried (`None`: `learn.fit_splitting`'s, all of them).
+    families: tuple[str, ...] | None = None
 
     def fit(self, train, steps):
+        families = {} if self.families is None else {
+            "families": [f for f in learn.FAMILIES if f.name in self.families]}
         net, _ = learn.fit_splitting(lp.systems.RigidBody(), train.records, loss=learn.BodyLoss(),
-                                     iterations=steps, seed=TRAIN_SEED, key=TRAIN_SEED, progress=False)
+                                     iterations=steps, seed=TRAIN_SEED, key=TRAIN_SEED, progress=False, **families)
         return net
 
     def identified(self, fitted):
@@ -297,6 +315,28 @@ class ConservativeFlightModel(AbstractLearnedFlightModel):
         terms = fitted.terms
         family = f"{terms.activation}, {'any axes' if terms.full_vectors else 'axes'}"
         return Identified(_sorted_ratios(np.linalg.inv(hessian)), np.zeros((3, 3)), f"H~ {family}")
+
+
+@dataclasses.dataclass(frozen=True)
+class LPNetFlightModel(AbstractLearnedFlightModel):
+    """The LPNet on latent momenta (`learn.BodyLPNet`: a Lie-Euler step of a learned generator,
+    one hidden layer of 16, tanh, and a learned linear gyroscope readout), started at the step
+    of the weak-form quadratic and fitted on `learn.BodyLoss` in sub-steps of at most
+    `LPNET_MAX_STEP` (the Lie-Euler step is of order 1): each step keeps the latent Casimir
+    |mu|, so it cannot lose angular momentum to the air."""
+
+    label: str = "LPNet"
+
+    def fit(self, train, steps):
+        A, b, _ = learn.weak_form_quadratic(train.records, linear=True, diagonal=False)
+        model = learn.BodyLPNet.at_quadratic(lp.systems.RigidBody(), A, b, hidden=(16,), key=TRAIN_SEED)
+        fitted, _ = learn.fit(model, train.records, loss=learn.BodyLoss(max_step=LPNET_MAX_STEP),
+                              optimiser=learn.LevenbergMarquardt(steps), progress=False)
+        return fitted
+
+    def identified(self, fitted):
+        K = np.asarray(fitted.readout)
+        return Identified(_sorted_ratios(np.linalg.inv(0.5 * (K + K.T))), np.zeros((3, 3)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -447,9 +487,11 @@ class WeakSINDyFlightModel(AbstractSparseFlightModel):
         return np.concatenate(features), np.concatenate(targets), library.function_library
 
 
-def models() -> list[AbstractFlightModel]:
-    out: list[AbstractFlightModel] = [DissipativeFlightModel(), ConservativeFlightModel(), LimitFlightModel(),
-                                      EulerFlightModel()]
+def models(profile: Profile) -> list[AbstractFlightModel]:
+    """W7's models, the G-LPNets' families as `profile` restricts them."""
+    out: list[AbstractFlightModel] = [DissipativeFlightModel(kinds=profile.drag_kinds),
+                                      ConservativeFlightModel(families=profile.families), LPNetFlightModel(),
+                                      LimitFlightModel(), EulerFlightModel()]
     if sindy_available():
         out += [SINDyFlightModel(), WeakSINDyFlightModel()]
     return out
@@ -530,10 +572,15 @@ class Profile:
     n_test: int = 12
     duration: float = FLIGHT
     steps: int = 200
+    #: The dissipative G-LPNet's drag families and the conservative one's families of H~
+    #: (`None`: all; the smoke profile tries one each, to compile fewer maps).
+    drag_kinds: tuple[str, ...] | None = None
+    families: tuple[str, ...] | None = None
 
 
 PROFILES = {
-    "smoke": Profile((0.02,), n_train=3, n_test=2, duration=0.3, steps=10),
+    "smoke": Profile((0.02,), n_train=3, n_test=2, duration=0.3, steps=10, drag_kinds=("quadratic",),
+                     families=("quadratic, any axes, even",)),
     "quick": Profile((0.02,)),
     "full": Profile((0.01, 0.02, 0.05)),
 }
@@ -601,6 +648,9 @@ def verdict(rows: list[W7Row]) -> list[str]:
             parts.append(f"the conservative G-LPNet's {fmt(conservative.rate_error)} is "
                          f"{conservative.rate_error / r.rate_error:.1f}x it (flip period error "
                          f"{fmt(conservative.flip_period_error)} against {fmt(r.flip_period_error)})")
+        lpnet = _peer(rows, r, LPNetFlightModel.label)
+        if lpnet:
+            parts.append(f"the LPNet's (it keeps |mu|) {fmt(lpnet.rate_error)}")
         euler = _peer(rows, r, EulerFlightModel.label)
         if euler:
             parts.append(f"Euler's equations without drag {fmt(euler.rate_error)}")
@@ -646,7 +696,7 @@ class W7(AbstractExperiment):
         for noise in P.noises:
             train = session(P.n_train, TRAIN_SPINS, noise, DATA_SEED, P.duration)
             test = session(P.n_test, TEST_SPINS, noise, TEST_SEED, P.duration)
-            for model in models():
+            for model in models(P):
                 name = f"{profile}-{noise:g}-{model.label}.json".replace(" ", "_").replace(",", "")
                 row = saved_row(W7Row, out_dir / "rows" / name, functools.partial(
                     evaluate, model, train, test, noise=noise, steps=P.steps))
@@ -679,8 +729,7 @@ class W7(AbstractExperiment):
             "relative error of the mean interval between sign changes of Omega_2 over the test flights that flip "
             f"at least twice. Truth: I1/I2, I3/I2 = {INERTIA[0] / INERTIA[1]:.4f}, {INERTIA[2] / INERTIA[1]:.4f}; "
             f"drag rate diagonal ({', '.join(f'{d:.3f}' for d in true)}) 1/s; drag error: relative (Frobenius) "
-            "error of the whole matrix. LPNet: not available (an LPNet from body records, momenta latent, is "
-            "not implemented).")
+            "error of the whole matrix.")
         return self.study_markdown(metrics, description, [("Every model", table_lines(COLUMNS, rows))])
 
 
