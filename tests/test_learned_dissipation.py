@@ -195,3 +195,27 @@ def test_weak_form_drag_tells_a_body_in_air_from_one_in_vacuum():
             np.testing.assert_array_equal(np.diag(found) >= 0.0, True)
     # measured 48 in air, 1.02 in vacuum: a drag explains what the quadratic cannot, or nothing
     assert ratios["air"] > 10.0 and ratios["vacuum"] < 1.5
+
+
+def test_fit_splitting_dissipation_argument():
+    data = it.observe_body(BODY, np.array([[0.1, 8.0, 0.2]]) * BODY.inertia, np.array([[0, 0, 0, 1.0]]),
+                           np.arange(21) * 0.01, measure="velocities")
+    with pytest.raises(ValueError, match="dissipation must be 'auto', None or a sequence of"):
+        learn.fit_splitting(BODY, data, dissipation=("viscous",))
+    observed = it.Observations(BODY, np.arange(3) * 0.1, np.ones((3, 3)))
+    with pytest.raises(ValueError, match="fit them with learn.fit_dissipative"):
+        learn.fit_splitting(BODY, observed, dissipation=("quadratic",))
+
+
+@pytest.mark.slow  # ~2 min: the families and the drag families on six short flights
+def test_fit_splitting_offers_drag_families_to_a_body_in_air_and_chooses_one():
+    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
+    rng = np.random.default_rng(0)
+    omega = np.column_stack([rng.normal(0, 0.3, 6), rng.uniform(8, 12, 6), rng.normal(0, 0.3, 6)])
+    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (6, 1)),
+                           np.arange(61) * 0.01, measure="velocities", noise=2e-3, seed=1)
+    with pytest.warns(UserWarning):  # families skipped by the screens are announced
+        model, records = learn.fit_splitting(RigidBody(I), data, progress=False)
+    choice = records[-1].choice
+    assert {"quadratic, even, linear drag", "quadratic, even, quadratic drag"} <= {s.family for s in choice.scores}
+    assert choice.chosen.endswith("drag") and isinstance(model, learn.Dissipative)

@@ -89,8 +89,8 @@ def fit_dissipative(
     iterations = ITERATIONS if iterations is None else int(iterations)
     family = next(f for f in FAMILIES if f.name == ("quadratic, any axes, even" if any_axes else "quadratic, even"))
     if isinstance(data, BodyObservations):
-        loss = _body_loss(data, loss)
-        start_of = functools.partial(_body_model, system, data, family, method, any_axes)
+        loss = body_loss_from_data(data, loss)
+        start_of = functools.partial(body_drag_start, system, data, family, method, any_axes)
     elif isinstance(data, Observations):
         loss = TrajectoryLoss() if loss is None else loss
         if not isinstance(loss, TrajectoryLoss):
@@ -121,7 +121,7 @@ def fit_dissipative(
     return fits[best][1], records
 
 
-def _body_loss(data: BodyObservations, loss: BodyLoss | None) -> BodyLoss:
+def body_loss_from_data(data: BodyObservations, loss: BodyLoss | None) -> BodyLoss:
     """`loss`, or `learn.BodyLoss` in sub-steps of `STEP_ANGLE` of the fastest observed rotation."""
     if loss is None:
         fastest = max(float(np.max(np.linalg.norm(v, axis=1))) for v in _velocities(data))
@@ -131,7 +131,7 @@ def _body_loss(data: BodyObservations, loss: BodyLoss | None) -> BodyLoss:
     return loss
 
 
-def _body_model(system, data: BodyObservations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
+def body_drag_start(system, data: BodyObservations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
     r"""The start of a drag family on body observations: $\widetilde H$ and a diagonal drag from
     the weak form with the drag (`weak_form_drag`: linear for "linear", quadratic for
     "quadratic", both for "ridge"), each drag coefficient at least its floor (`_floor`: a zero
