@@ -217,5 +217,7 @@ def test_fit_splitting_offers_drag_families_to_a_body_in_air_and_chooses_one():
     with pytest.warns(UserWarning):  # families skipped by the screens are announced
         model, records = learn.fit_splitting(RigidBody(I), data, progress=False)
     choice = records[-1].choice
-    assert {"quadratic, even, linear drag", "quadratic, even, quadratic drag"} <= {s.family for s in choice.scores}
+    # on the axes of the best conservative family (on these flights, any axes)
+    drags = sorted(s.family.rsplit(", ", 1)[-1] for s in choice.scores if s.family.endswith("drag"))
+    assert drags == ["linear drag", "quadratic drag"]
     assert choice.chosen.endswith("drag") and isinstance(model, learn.Dissipative)
