@@ -221,3 +221,21 @@ def test_fit_splitting_offers_drag_families_to_a_body_in_air_and_chooses_one():
     drags = sorted(s.family.rsplit(", ", 1)[-1] for s in choice.scores if s.family.endswith("drag"))
     assert drags == ["linear drag", "quadratic drag"]
     assert choice.chosen.endswith("drag") and isinstance(model, learn.Dissipative)
+
+
+@pytest.mark.slow  # ~2 min: two families, each refitted without each of two sessions
+def test_held_out_sessions_choose_the_drag_on_body_records():
+    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
+    rng = np.random.default_rng(1)
+    omega = np.column_stack([rng.normal(0, 0.3, 6), rng.uniform(8, 12, 6), rng.normal(0, 0.3, 6)])
+    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (6, 1)),
+                           np.arange(61) * 0.01, measure="velocities", noise=2e-3, seed=1)
+    sessions = ["monday"] * 3 + ["tuesday"] * 3
+    _, records = learn.fit_splitting(RigidBody(I), data, families=[learn.FAMILIES[0]], dissipation=("quadratic",),
+                                     selection="held-out", groups=sessions, progress=False)
+    choice = records[-1].choice
+    assert choice.selection == "held-out" and choice.groups == 2 and choice.folds == 2
+    errors = {s.family: s.held_out_error for s in choice.scores}
+    # the drag predicts the other session far better than the conservative quadratic
+    assert errors["quadratic, even, quadratic drag"] < 0.1 * errors["quadratic, even"]
+    assert choice.chosen == "quadratic, even, quadratic drag"

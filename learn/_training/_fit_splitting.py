@@ -13,6 +13,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import BodyObservations, Observations, Trajectories
@@ -130,7 +131,9 @@ def fit_splitting(
     momenta); a family whose start misfits the weak-form equations `SCREEN_RATIO` (10) times
     more than the best start, that extends one whose residuals are 100 times the best's, or
     that contains one fitted within its discretisation error is skipped (named in each
-    record's `details["skipped"]` and `choice.skipped`); `selection` is `"bic"` only. With
+    record's `details["skipped"]` and `choice.skipped`); `selection` is `"bic"` by default,
+    `"held-out"` on request (whole trajectories, or `groups`, held out as above: the choice
+    that must transfer to a new recording session). With
     `dissipation` the families also hold a G-LPNet of a quadratic $\widetilde H$ composed with a
     learned drag (`learn.Dissipative`, fitted as `learn.fit_dissipative` does: sub-steps until
     the map's own error is below a tenth of its misfit), one family per drag kind
@@ -208,7 +211,9 @@ SELECTIONS = ("held-out", "bic")
 
 def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable] | None) -> str | None:
     """`selection` checked and resolved (`None`: "held-out" on `integrators.Observations`, "bic"
-    on body observations); `None` for pairs and trajectories, which refuse it and `groups`."""
+    on body observations, where held-out folds refit every family five times over sub-stepped
+    rollouts: asked for, e.g. with `groups=` of recording sessions); `None` for pairs and
+    trajectories, which refuse it and `groups`."""
     if not isinstance(data, (Observations, BodyObservations)):
         if selection is not None or groups is not None:
             raise ValueError("selection= and groups= choose between families on observations "
@@ -218,9 +223,6 @@ def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable]
         selection = "held-out" if isinstance(data, Observations) else "bic"
     if selection not in SELECTIONS:
         raise ValueError(f"selection must be one of {SELECTIONS}; got {selection!r}")
-    if isinstance(data, BodyObservations) and (selection != "bic" or groups is not None):
-        raise ValueError("body observations choose their family by the information criterion only "
-                         "(selection='bic', no groups=); held-out selection is for integrators.Observations")
     if groups is not None and selection != "held-out":
         raise ValueError(f"groups= are held out by selection='held-out'; got selection={selection!r}")
     return selection
@@ -325,19 +327,25 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     scores = [score_of(f[4].name, f[5]) for f in fits]
     choice = FamilyChoice(scores[0].family, common["selection"], tuple(scores), tuple(skipped))
     if group_of is not None and len(fits) > 1:  # one family fitted: nothing to hold out for
-        choice = held_out_choice(fits, data, loss, group_of, iterations, rtol, context, choice)
+        choice = held_out_choice(fits, segment_trajectories(data, loss.window), group_of, iterations, rtol, context,
+                                 choice)
+    return chosen_last(fits, *chosen_by(choice))
+
+
+def chosen_by(choice: FamilyChoice) -> tuple[int, FamilyChoice]:
+    """The index of the family `choice`'s criterion chooses (held-out errors where measured,
+    else the BIC), and `choice` naming it."""
     index = lowest_held_out(choice.scores) if choice.by_held_out is not None else lowest(
         [(s.bic, s.effective_parameters) for s in choice.scores])
-    choice = dataclasses.replace(choice, chosen=choice.scores[index].family)
-    return chosen_last(fits, index, choice)
+    return index, dataclasses.replace(choice, chosen=choice.scores[index].family)
 
 
-def held_out_choice(fits: Sequence[Any], data: Observations, loss: TrajectoryLoss, group_of: Any, iterations: int,
+def held_out_choice(fits: Sequence[Any], rows: np.ndarray, group_of: Any, iterations: int,
                     rtol: float, context: Context, choice: FamilyChoice) -> FamilyChoice:
     """`choice` with each fitted family's held-out error (`learn._training._held_out`): folds
-    of whole groups, each family refitted per fold from its fit on every trajectory."""
+    of whole groups, each family refitted per fold from its fit on every trajectory; `rows`:
+    the trajectory of each segment of the fits' problems."""
     folds = group_folds(group_of, context.seed)
-    rows = segment_trajectories(data, loss.window)
     errors = {}
     for f in fits:
         fold_context = dataclasses.replace(context, desc=f"{f[4].name}: held-out folds")
@@ -527,8 +535,11 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
     fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped)
     scores = tuple(score_of(f[4].name, f[5]) for f in fits)
-    index = lowest([(s.bic, s.effective_parameters) for s in scores])
-    return chosen_last(fits, index, FamilyChoice(scores[index].family, "bic", scores, tuple(skipped)))
+    choice = FamilyChoice(scores[0].family, common["selection"], scores, tuple(skipped))
+    if common["selection"] == "held-out" and len(fits) > 1:  # whole trajectories (one segment each) held out
+        group_of = trajectory_groups(common["groups"], len(data))
+        choice = held_out_choice(fits, np.arange(len(data)), group_of, iterations, rtol, context, choice)
+    return chosen_last(fits, *chosen_by(choice))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -576,7 +587,6 @@ def drag_fits(system, data: BodyObservations, method, iterations: int, rtol: flo
 def _momentum_size(A, b, velocities) -> float:
     r"""The RMS size of the momenta $\mu = A^{-1}(\xi - b)$ of the velocities (the latent
     states' scale), 1 if 0."""
-    import numpy as np
 
     xi = np.concatenate(velocities)
     mu = np.linalg.solve(A, (xi - b).T).T

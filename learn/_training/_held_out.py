@@ -125,7 +125,8 @@ def held_out_errors(problem: Any, segment_trajectory: np.ndarray, folds: Sequenc
     train, objective = problem.train, problem.objective
     n_trajectories = int(segment_trajectory.max()) + 1
     ssr, count = np.zeros(n_trajectories), np.zeros(n_trajectories)
-    components = np.asarray(jnp.sum(train.mask, axis=1)) * train.states.shape[-1]
+    width = jax.eval_shape(lambda: objective.residuals(problem.y0, train)).shape[-1]  # compared per observation
+    components = np.asarray(jnp.sum(train.mask, axis=1)) * width
     for held in folds:
         out = np.isin(segment_trajectory, held)
         fold = dataclasses.replace(problem, train=_masked(train, np.flatnonzero(~out)))
