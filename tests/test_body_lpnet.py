@@ -66,7 +66,7 @@ def test_bad_input():
 @pytest.mark.slow  # ~30 s: Levenberg-Marquardt on the network, the readout and the latent starts
 def test_fit_on_gyroscope_records_lowers_the_loss():
     model = _start(hidden=(8,))
-    fitted, record = learn.fit(model, _records(), loss=learn.BodyLoss(max_step=0.005),
+    _, record = learn.fit(model, _records(), loss=learn.BodyLoss(max_step=0.005),
                                optimiser=learn.LevenbergMarquardt(40), progress=False)
     before = record.stages[-1].details["train_loss_before"]
     after = float(np.asarray(record.history["train_loss"])[-1])

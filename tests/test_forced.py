@@ -24,8 +24,8 @@ from liepoisson.systems import (
     Forced,
     FreeRigidBodyTerm,
     Kirchhoff,
-    LinearDrag,
     LiePoissonSystem,
+    LinearDrag,
     QuadraticDrag,
     RigidBody,
 )

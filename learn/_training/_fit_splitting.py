@@ -27,9 +27,7 @@ from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
-from ._body import BodyLoss, weak_form_drag, weak_form_quadratic
-from ._dissipative import body_loss_from_data, body_drag_start
-from ._steps import solve_within_noise
+from ._body import weak_form_drag, weak_form_quadratic
 from ._criterion import (
     BIC_RESOLUTION,
     FamilyChoice,
@@ -38,6 +36,7 @@ from ._criterion import (
     lowest,
     lowest_held_out,
 )
+from ._dissipative import body_drag_start, body_loss_from_data
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._held_out import (
@@ -49,6 +48,7 @@ from ._held_out import (
 )
 from ._observed import TrajectoryLoss, discretisation_ssr, information_criterion
 from ._problem import Fitted
+from ._steps import solve_within_noise
 from ._units import state_size
 
 
