@@ -265,8 +265,8 @@ class DissipativeFlightModel(AbstractLearnedFlightModel):
     #: The drag families tried (`None`: `learn.fit_dissipative`'s, all of them).
     kinds: tuple[str, ...] | None = None
     #: Levenberg-Marquardt steps per drag family (and per refinement of the sub-steps): on
-    #: W7's flights the loss is flat from the 5th.
-    iterations: int = 40
+    #: W7's flights the loss is flat from the 5th (BENCHMARKS.md, "W7: bodies in air").
+    iterations: int = 20
 
     def fit(self, train, steps):
         kinds = {} if self.kinds is None else {"kinds": self.kinds}
@@ -274,7 +274,7 @@ class DissipativeFlightModel(AbstractLearnedFlightModel):
                                                iterations=min(steps, self.iterations), seed=TRAIN_SEED,
                                                progress=False, **kinds)
         details = records[-1].stages[-1].details
-        return DissipativeFit(model, f"{details.get('family')}, {details.get('substeps')} sub-step(s) per max_step")
+        return DissipativeFit(model, f"{details.get('family')}, sub-steps x{details.get('substeps')}")
 
     def predict(self, fitted, omega0, n_intervals):
         return super().predict(fitted.model, omega0, n_intervals)
