@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import integrators as it
 import learn
 from integrators.splitting import Strang, TripleJump
-from liepoisson.systems import Forced, QuadraticDrag, RigidBody
+from liepoisson.systems import Forced, LinearDrag, QuadraticDrag, RigidBody
 
 BODY = RigidBody((1.0, 1.9, 2.1))
 
@@ -202,9 +202,9 @@ def test_fit_splitting_dissipation_argument():
                            np.arange(21) * 0.01, measure="velocities")
     with pytest.raises(ValueError, match="dissipation must be 'auto', None or a sequence of"):
         learn.fit_splitting(BODY, data, dissipation=("viscous",))
-    observed = it.Observations(BODY, np.arange(3) * 0.1, np.ones((3, 3)))
-    with pytest.raises(ValueError, match="fit them with learn.fit_dissipative"):
-        learn.fit_splitting(BODY, observed, dissipation=("quadratic",))
+    pairs = it.ground_truth(BODY, np.ones((2, 3)), 0.1, 3)
+    with pytest.raises(ValueError, match="pairs and trajectories fit one conservative family"):
+        learn.fit_splitting(BODY, pairs, dissipation=("quadratic",))
 
 
 @pytest.mark.slow  # ~2 min: the families and the drag families on six short flights
@@ -239,3 +239,15 @@ def test_held_out_sessions_choose_the_drag_on_body_records():
     # the drag predicts the other session far better than the conservative quadratic
     assert errors["quadratic, even, quadratic drag"] < 0.1 * errors["quadratic, even"]
     assert choice.chosen == "quadratic, even, quadratic drag"
+
+
+@pytest.mark.slow  # ~2 min: every family and the drag families on observed states
+def test_fit_splitting_offers_drag_families_on_observed_states_leaving_their_orbit():
+    body = RigidBody((2.0, 1.0, 2.0 / 3.0))
+    y0 = np.random.default_rng(0).normal(size=(20, 3))
+    y0 /= np.linalg.norm(y0, axis=1, keepdims=True)
+    data = it.observe(Forced(body, LinearDrag(0.05)), y0, np.arange(21) * 0.1, noise=1e-3, seed=1)
+    model, records = learn.fit_splitting(body, data, selection="bic", progress=False)
+    choice = records[-1].choice
+    # |Pi| decays along every trajectory: the drag families are offered, and one is chosen
+    assert choice.chosen.endswith("drag") and isinstance(model, learn.Dissipative)

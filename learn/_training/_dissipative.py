@@ -95,7 +95,7 @@ def fit_dissipative(
         loss = TrajectoryLoss() if loss is None else loss
         if not isinstance(loss, TrajectoryLoss):
             raise TypeError(f"loss must be a learn.TrajectoryLoss for observations; got {type(loss).__name__}")
-        start_of = functools.partial(_observed_model, system, data, family, method, any_axes)
+        start_of = functools.partial(observed_drag_start, system, data, family, method, any_axes)
     else:
         raise TypeError(f"data must be integrators.BodyObservations or Observations; got {type(data).__name__}")
     context = Context(seed=int(seed), progress=show_progress(progress))
@@ -156,7 +156,7 @@ def body_drag_start(system, data: BodyObservations, family: Family, method, any_
     return Dissipative(net, drag)
 
 
-def _observed_model(system, data: Observations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
+def observed_drag_start(system, data: Observations, family: Family, method, any_axes: bool, kind: str) -> Dissipative:
     r"""The start of a drag family on observed states: $\widetilde H$ from the finite
     differences (`Family.start`), the drag at its floor (`_floor`)."""
     net = GLPNet(system, terms=family.start(system, data, state_size(system, data)), method=method)

@@ -36,7 +36,7 @@ from ._criterion import (
     lowest,
     lowest_held_out,
 )
-from ._dissipative import body_drag_start, body_loss_from_data
+from ._dissipative import body_drag_start, body_loss_from_data, observed_drag_start
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._held_out import (
@@ -142,6 +142,9 @@ def fit_splitting(
     with a drag (`learn.weak_form_drag`) fits the rates `DRAG_SCREEN_RATIO` (3) times better than
     without (a body that loses energy to the air; in vacuum 1.01), and names the
     ratio in `choice.skipped` otherwise; `None` offers none. The criterion chooses among all.
+    On observed states (`integrators.Observations`) the same drag families are offered when the
+    observed Casimirs follow a trend in time `DRAG_SCREEN_RATIO` times better than a constant
+    (`casimir_trend_ratio`: states leaving their orbit), started at a small drag.
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
@@ -189,19 +192,41 @@ def fit_splitting(
 DRAG_SCREEN_RATIO = 3.0
 
 
+def casimir_trend_ratio(system: AbstractPoissonSystem, data: Observations) -> float:
+    r"""How much better the observed Casimirs follow a linear trend in time than a constant, per
+    trajectory: $\sum$ SSR(constant) / $\sum$ SSR(line), the largest over the Casimirs (each
+    scaled by its spread). Noise alone gives about 1 + 1/(n - 2); a force that moves the states
+    off their orbit (air drag taking $|\Pi|$ away) gives its trend. 0 for a system without
+    Casimirs (no orbit to leave: the screen cannot tell, and offers nothing)."""
+    if not system.n_casimirs:
+        return 0.0
+    constant, line = np.zeros(system.n_casimirs), np.zeros(system.n_casimirs)
+    for t, y in zip(data.times, data.states, strict=True):
+        if t.size < 3:
+            continue
+        c = np.asarray(system.casimirs(y)).reshape(t.size, -1)
+        c = c - c.mean(axis=0)
+        constant += np.sum(c**2, axis=0)
+        design = np.column_stack([np.ones_like(t), t - t.mean()])
+        residual = c - design @ np.linalg.lstsq(design, c, rcond=None)[0]
+        line += np.sum(residual**2, axis=0)
+    return float(np.max(constant / np.maximum(line, 1e-300)))
+
+
 def check_dissipation(dissipation: Any, data: Any, activation: str | None, families: Any) -> tuple[str, ...] | str:
     """`dissipation` as `"auto"` or a tuple of drag kinds (empty: none)."""
     if dissipation is None:
         return ()
     if isinstance(dissipation, str) and dissipation == "auto":
         # a fixed activation or family list is a conservative choice made by the caller
-        return "auto" if isinstance(data, BodyObservations) and activation is None and families is None else ()
+        observed = isinstance(data, (Observations, BodyObservations))
+        return "auto" if observed and activation is None and families is None else ()
     kinds = (dissipation,) if isinstance(dissipation, str) else tuple(dissipation)
     if not kinds or any(k not in DRAG_KINDS for k in kinds):
         raise ValueError(f"dissipation must be 'auto', None or a sequence of {DRAG_KINDS}; got {dissipation!r}")
-    if not isinstance(data, BodyObservations):
-        raise ValueError("dissipation= offers drag families on body observations (integrators.BodyObservations); on "
-                         "observed states fit them with learn.fit_dissipative(system, data)")
+    if not isinstance(data, (Observations, BodyObservations)):
+        raise ValueError("dissipation= offers drag families on observations (integrators.Observations, "
+                         "BodyObservations); pairs and trajectories fit one conservative family")
     return kinds
 
 
@@ -324,6 +349,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+    fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped, loss)
     scores = [score_of(f[4].name, f[5]) for f in fits]
     choice = FamilyChoice(scores[0].family, common["selection"], tuple(scores), tuple(skipped))
     if group_of is not None and len(fits) > 1:  # one family fitted: nothing to hold out for
@@ -549,12 +575,22 @@ class _DragFamily:
     name: str
 
 
-def drag_fits(system, data: BodyObservations, method, iterations: int, rtol: float, context: Context,
-              dissipation: tuple[str, ...] | str, fits: list, skipped: list) -> list:
+def drag_fits(system, data: BodyObservations | Observations, method, iterations: int, rtol: float,
+              context: Context, dissipation: tuple[str, ...] | str, fits: list, skipped: list,
+              loss: TrajectoryLoss | None = None) -> list:
     """The fits of the drag families `dissipation` asks (`"auto"`: the linear and quadratic drag when
-    the weak form with a drag fits `DRAG_SCREEN_RATIO` times better), in the fits' tuple form."""
+    the data show a loss a drag explains: `drag_screen`), in the fits' tuple form."""
     if not dissipation:
         return []
+    if dissipation == "auto" and isinstance(data, Observations):
+        ratio = casimir_trend_ratio(system, data)
+        if ratio < DRAG_SCREEN_RATIO:
+            skipped.append(SkippedFamily("drag families", (
+                f"the observed Casimirs follow a trend in time only {ratio:.3g} times better than a constant "
+                f"(less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): nothing the data show leaves the orbit; "
+                "pass dissipation=('linear', 'quadratic') to fit them anyway")))
+            return []
+        dissipation = ("linear", "quadratic")
     if dissipation == "auto":
         # the fullest quadratic against it with a drag: the drag must explain what no quadratic does
         _, _, conservative = weak_form_quadratic(data, linear=True, diagonal=False)
@@ -570,11 +606,14 @@ def drag_fits(system, data: BodyObservations, method, iterations: int, rtol: flo
     best = min(fits, key=lambda f: f[0]) if fits else None
     any_axes = bool(best is not None and best[4].any_axes)
     family = next(f for f in FAMILIES if f.name == ("quadratic, any axes, even" if any_axes else "quadratic, even"))
-    loss = body_loss_from_data(data, None)
+    if isinstance(data, BodyObservations):
+        loss, make = body_loss_from_data(data, None), body_drag_start
+    else:
+        loss, make = TrajectoryLoss() if loss is None else loss, observed_drag_start
     split = {"h": None, "validation_fraction": 0.0, "seed": context.seed, "normalise": False}
     out = []
     for kind in dissipation:
-        start = loss.problem(body_drag_start(system, data, family, method, any_axes, kind), data, **split)
+        start = loss.problem(make(system, data, family, method, any_axes, kind), data, **split)
         problem, results, steps = solve_within_noise(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),),
                                                      context)
         criterion = information_criterion(problem, problem.y0)
