@@ -73,8 +73,9 @@ class FamilyChoice:
     r"""How `learn.fit_splitting` chose among families: `chosen` (a family name), by
     `selection` (`"bic"` or `"held-out"`), the `scores` of every family fitted (in fitting order),
     the families `skipped` with their reasons, and for held-out selection the number of
-    `folds` and of `groups` (`None`, and no held-out errors, when one family alone was fitted). `by_bic` and `by_held_out` name what each criterion chooses (the
-    latter `None` without held-out errors)."""
+    `folds` and of `groups` (`None`, and no held-out errors, when one family alone was fitted).
+    `by_bic` and `by_held_out` name what each criterion chooses (the latter `None` without
+    held-out errors)."""
 
     chosen: str
     selection: str

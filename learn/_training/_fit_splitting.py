@@ -13,6 +13,7 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import numpy as np
 from numpy.typing import ArrayLike
 
 from integrators import BodyObservations, Observations, Trajectories
@@ -20,12 +21,13 @@ from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.internals import refuse_nonholonomic, show_progress
 from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
 
+from .._models._drag import DRAG_KINDS, Dissipative
 from .._models._glpnet import GLPNet, check_method
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context
-from ._body import BodyLoss, weak_form_quadratic
+from ._body import weak_form_drag, weak_form_quadratic
 from ._criterion import (
     BIC_RESOLUTION,
     FamilyChoice,
@@ -34,6 +36,7 @@ from ._criterion import (
     lowest,
     lowest_held_out,
 )
+from ._dissipative import body_drag_start, body_loss_from_data, observed_drag_start
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._held_out import (
@@ -45,6 +48,7 @@ from ._held_out import (
 )
 from ._observed import TrajectoryLoss, discretisation_ssr, information_criterion
 from ._problem import Fitted
+from ._steps import solve_within_noise
 from ._units import state_size
 
 
@@ -64,7 +68,8 @@ def fit_splitting(
     families: Sequence[Family] | None = None,
     selection: str | None = None,
     groups: Sequence[Hashable] | None = None,
-) -> tuple[GLPNet, Sequence[TrainingRecord]]:
+    dissipation: str | Sequence[str] | None = "auto",
+) -> tuple[GLPNet | Dissipative, Sequence[TrainingRecord]]:
     r"""A G-LPNet for any Poisson system with test flows, as a data-driven splitting method;
     returns `(network, records)`, one `TrainingRecord` per fit.
 
@@ -119,12 +124,27 @@ def fit_splitting(
     With `integrators.BodyObservations` (configurations and/or body velocities, what a star
     tracker and a gyroscope record) the momenta are latent: each family is fitted by
     Levenberg-Marquardt on `learn.BodyLoss` (the lifted step rolled out from a fitted momentum
-    and configuration per trajectory), started from the inertia of `learn.body_quadratic_estimate`;
+    and configuration per trajectory; without `loss`, in sub-steps of 0.1 rad of the fastest
+    observed rotation, doubled while the fitted map's own discretisation error exceeds a tenth
+    of its misfit: conventions, "The step of a fit"), started from the inertia of `learn.body_quadratic_estimate`;
     the information criterion chooses as above ("quadratic, selected" is not offered: its selection reads
     momenta); a family whose start misfits the weak-form equations `SCREEN_RATIO` (10) times
     more than the best start, that extends one whose residuals are 100 times the best's, or
     that contains one fitted within its discretisation error is skipped (named in each
-    record's `details["skipped"]` and `choice.skipped`); `selection` is `"bic"` only.
+    record's `details["skipped"]` and `choice.skipped`); `selection` is `"bic"` by default,
+    `"held-out"` on request (whole trajectories, or `groups`, held out as above: the choice
+    that must transfer to a new recording session). With
+    `dissipation` the families also hold a G-LPNet of a quadratic $\widetilde H$ composed with a
+    learned drag (`learn.Dissipative`, fitted as `learn.fit_dissipative` does: sub-steps until
+    the map's own error is below a tenth of its misfit), one family per drag kind
+    (`learn.DRAG_KINDS`; `dissipation` a sequence of them), on the axes of the best conservative
+    family so far; `"auto"` (the default) offers the linear and quadratic drags when the weak form
+    with a drag (`learn.weak_form_drag`) fits the rates `DRAG_SCREEN_RATIO` (3) times better than
+    without (a body that loses energy to the air; in vacuum 1.01), and names the
+    ratio in `choice.skipped` otherwise; `None` offers none. The criterion chooses among all.
+    On observed states (`integrators.Observations`) the same drag families are offered when the
+    observed Casimirs follow a trend in time `DRAG_SCREEN_RATIO` times better than a constant
+    (`casimir_trend_ratio`: states leaving their orbit), started at a small drag.
 
     `activation` fixes the pieces' $\sigma$ (`"sigmoid"`, the default for pairs and
     trajectories; `"identity"`: a quadratic $\widetilde H$ on the axes); `families`, the
@@ -161,7 +181,53 @@ def fit_splitting(
         if not isinstance(data, (Observations, BodyObservations)):
             raise ValueError("families= chooses between families on observations (integrators.Observations or "
                              "BodyObservations); pairs and trajectories fit one family (activation=)")
+    common["dissipation"] = check_dissipation(dissipation, data, activation, families)
     return _recipe(data, system, method, loss, activation, iterations, key, common, families)
+
+
+#: With `dissipation="auto"`, drag families are offered on body observations when the weak form
+#: with a drag misfits the rates this many times less than the fullest quadratic without
+#: (`learn.weak_form_drag`, any axes and linear terms; measured 15-26 for a tossed body losing 15%
+#: of |L| a second, 1.01-1.02 for the same in vacuum, 1.00-1.01 on W4's satellite and vehicle).
+DRAG_SCREEN_RATIO = 3.0
+
+
+def casimir_trend_ratio(system: AbstractPoissonSystem, data: Observations) -> float:
+    r"""How much better the observed Casimirs follow a linear trend in time than a constant, per
+    trajectory: $\sum$ SSR(constant) / $\sum$ SSR(line), the largest over the Casimirs (each
+    scaled by its spread). Noise alone gives about 1 + 1/(n - 2); a force that moves the states
+    off their orbit (air drag taking $|\Pi|$ away) gives its trend. 0 for a system without
+    Casimirs (no orbit to leave: the screen cannot tell, and offers nothing)."""
+    if not system.n_casimirs:
+        return 0.0
+    constant, line = np.zeros(system.n_casimirs), np.zeros(system.n_casimirs)
+    for t, y in zip(data.times, data.states, strict=True):
+        if t.size < 3:
+            continue
+        c = np.asarray(system.casimirs(y)).reshape(t.size, -1)
+        c = c - c.mean(axis=0)
+        constant += np.sum(c**2, axis=0)
+        design = np.column_stack([np.ones_like(t), t - t.mean()])
+        residual = c - design @ np.linalg.lstsq(design, c, rcond=None)[0]
+        line += np.sum(residual**2, axis=0)
+    return float(np.max(constant / np.maximum(line, 1e-300)))
+
+
+def check_dissipation(dissipation: Any, data: Any, activation: str | None, families: Any) -> tuple[str, ...] | str:
+    """`dissipation` as `"auto"` or a tuple of drag kinds (empty: none)."""
+    if dissipation is None:
+        return ()
+    if isinstance(dissipation, str) and dissipation == "auto":
+        # a fixed activation or family list is a conservative choice made by the caller
+        observed = isinstance(data, (Observations, BodyObservations))
+        return "auto" if observed and activation is None and families is None else ()
+    kinds = (dissipation,) if isinstance(dissipation, str) else tuple(dissipation)
+    if not kinds or any(k not in DRAG_KINDS for k in kinds):
+        raise ValueError(f"dissipation must be 'auto', None or a sequence of {DRAG_KINDS}; got {dissipation!r}")
+    if not isinstance(data, (Observations, BodyObservations)):
+        raise ValueError("dissipation= offers drag families on observations (integrators.Observations, "
+                         "BodyObservations); pairs and trajectories fit one conservative family")
+    return kinds
 
 
 #: The family criteria of `fit_splitting` on observations (`FamilyChoice.selection`).
@@ -170,7 +236,9 @@ SELECTIONS = ("held-out", "bic")
 
 def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable] | None) -> str | None:
     """`selection` checked and resolved (`None`: "held-out" on `integrators.Observations`, "bic"
-    on body observations); `None` for pairs and trajectories, which refuse it and `groups`."""
+    on body observations, where held-out folds refit every family five times over sub-stepped
+    rollouts: asked for, e.g. with `groups=` of recording sessions); `None` for pairs and
+    trajectories, which refuse it and `groups`."""
     if not isinstance(data, (Observations, BodyObservations)):
         if selection is not None or groups is not None:
             raise ValueError("selection= and groups= choose between families on observations "
@@ -180,9 +248,6 @@ def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable]
         selection = "held-out" if isinstance(data, Observations) else "bic"
     if selection not in SELECTIONS:
         raise ValueError(f"selection must be one of {SELECTIONS}; got {selection!r}")
-    if isinstance(data, BodyObservations) and (selection != "bic" or groups is not None):
-        raise ValueError("body observations choose their family by the information criterion only "
-                         "(selection='bic', no groups=); held-out selection is for integrators.Observations")
     if groups is not None and selection != "held-out":
         raise ValueError(f"groups= are held out by selection='held-out'; got selection={selection!r}")
     return selection
@@ -284,22 +349,29 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+    fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped, loss)
     scores = [score_of(f[4].name, f[5]) for f in fits]
     choice = FamilyChoice(scores[0].family, common["selection"], tuple(scores), tuple(skipped))
     if group_of is not None and len(fits) > 1:  # one family fitted: nothing to hold out for
-        choice = held_out_choice(fits, data, loss, group_of, iterations, rtol, context, choice)
+        choice = held_out_choice(fits, segment_trajectories(data, loss.window), group_of, iterations, rtol, context,
+                                 choice)
+    return chosen_last(fits, *chosen_by(choice))
+
+
+def chosen_by(choice: FamilyChoice) -> tuple[int, FamilyChoice]:
+    """The index of the family `choice`'s criterion chooses (held-out errors where measured,
+    else the BIC), and `choice` naming it."""
     index = lowest_held_out(choice.scores) if choice.by_held_out is not None else lowest(
         [(s.bic, s.effective_parameters) for s in choice.scores])
-    choice = dataclasses.replace(choice, chosen=choice.scores[index].family)
-    return chosen_last(fits, index, choice)
+    return index, dataclasses.replace(choice, chosen=choice.scores[index].family)
 
 
-def held_out_choice(fits: Sequence[Any], data: Observations, loss: TrajectoryLoss, group_of: Any, iterations: int,
+def held_out_choice(fits: Sequence[Any], rows: np.ndarray, group_of: Any, iterations: int,
                     rtol: float, context: Context, choice: FamilyChoice) -> FamilyChoice:
     """`choice` with each fitted family's held-out error (`learn._training._held_out`): folds
-    of whole groups, each family refitted per fold from its fit on every trajectory."""
+    of whole groups, each family refitted per fold from its fit on every trajectory; `rows`:
+    the trajectory of each segment of the fits' problems."""
     folds = group_folds(group_of, context.seed)
-    rows = segment_trajectories(data, loss.window)
     errors = {}
     for f in fits:
         fold_context = dataclasses.replace(context, desc=f"{f[4].name}: held-out folds")
@@ -438,9 +510,8 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
     through `method`; the lowest BIC wins."""
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
-    loss = BodyLoss() if loss is None else loss
-    if not isinstance(loss, BodyLoss):
-        raise TypeError(f"loss must be a learn.BodyLoss for body observations; got {type(loss).__name__}")
+    steps_from_data = loss is None  # sub-steps of STEP_ANGLE, refined until below the noise
+    loss = body_loss_from_data(data, loss)
     if system.group != data.group:
         raise ValueError(f"system {system!r} moves configurations on {system.group!r}; the observations are on "
                          f"{data.group!r}")
@@ -474,24 +545,87 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
             start = start.with_start(Fitted(net, nested.starts))
             target = catch_up_target(start, [f[0] for f in fits])
-        problem, results = solve(
-            start, (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),), context)
+        stages = (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),)
+        if steps_from_data:
+            problem, results, steps = solve_within_noise(start, stages, context)
+        else:
+            problem, results = solve(start, stages, context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
         criterion.update(step_accuracy(problem, family, families[k + 1 :]))
+        if steps_from_data:
+            criterion["substeps"] = steps.substeps
         if explained_within_its_step(criterion):
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
         fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+    fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped)
     scores = tuple(score_of(f[4].name, f[5]) for f in fits)
-    index = lowest([(s.bic, s.effective_parameters) for s in scores])
-    return chosen_last(fits, index, FamilyChoice(scores[index].family, "bic", scores, tuple(skipped)))
+    choice = FamilyChoice(scores[0].family, common["selection"], scores, tuple(skipped))
+    if common["selection"] == "held-out" and len(fits) > 1:  # whole trajectories (one segment each) held out
+        group_of = trajectory_groups(common["groups"], len(data))
+        choice = held_out_choice(fits, np.arange(len(data)), group_of, iterations, rtol, context, choice)
+    return chosen_last(fits, *chosen_by(choice))
+
+
+@dataclasses.dataclass(frozen=True)
+class _DragFamily:
+    """A drag family's name, where a `Family` stands in the fits."""
+
+    name: str
+
+
+def drag_fits(system, data: BodyObservations | Observations, method, iterations: int, rtol: float,
+              context: Context, dissipation: tuple[str, ...] | str, fits: list, skipped: list,
+              loss: TrajectoryLoss | None = None) -> list:
+    """The fits of the drag families `dissipation` asks (`"auto"`: the linear and quadratic drag when
+    the data show a loss a drag explains: `drag_screen`), in the fits' tuple form."""
+    if not dissipation:
+        return []
+    if dissipation == "auto" and isinstance(data, Observations):
+        ratio = casimir_trend_ratio(system, data)
+        if ratio < DRAG_SCREEN_RATIO:
+            skipped.append(SkippedFamily("drag families", (
+                f"the observed Casimirs follow a trend in time only {ratio:.3g} times better than a constant "
+                f"(less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): nothing the data show leaves the orbit; "
+                "pass dissipation=('linear', 'quadratic') to fit them anyway")))
+            return []
+        dissipation = ("linear", "quadratic")
+    if dissipation == "auto":
+        # the fullest quadratic against it with a drag: the drag must explain what no quadratic does
+        _, _, conservative = weak_form_quadratic(data, linear=True, diagonal=False)
+        ratios = {k: conservative / max(weak_form_drag(data, k, linear=True, diagonal=False)[3], 1e-300)
+                  for k in ("linear", "quadratic")}
+        if max(ratios.values()) < DRAG_SCREEN_RATIO:
+            skipped.append(SkippedFamily("drag families", (
+                f"the weak form with a drag fits the rates only {max(ratios.values()):.3g} times better than without "
+                f"(less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): nothing the data show is lost to a drag; "
+                "pass dissipation=('linear', 'quadratic') to fit them anyway")))
+            return []
+        dissipation = ("linear", "quadratic")
+    best = min(fits, key=lambda f: f[0]) if fits else None
+    any_axes = bool(best is not None and best[4].any_axes)
+    family = next(f for f in FAMILIES if f.name == ("quadratic, any axes, even" if any_axes else "quadratic, even"))
+    if isinstance(data, BodyObservations):
+        loss, make = body_loss_from_data(data, None), body_drag_start
+    else:
+        loss, make = TrajectoryLoss() if loss is None else loss, observed_drag_start
+    split = {"h": None, "validation_fraction": 0.0, "seed": context.seed, "normalise": False}
+    out = []
+    for kind in dissipation:
+        start = loss.problem(make(system, data, family, method, any_axes, kind), data, **split)
+        problem, results, steps = solve_within_noise(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),),
+                                                     context)
+        criterion = information_criterion(problem, problem.y0)
+        criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
+        out.append((criterion["bic"], len(fits) + len(out), problem, results,
+                    _DragFamily(f"{family.name}, {kind} drag"), criterion))
+    return out
 
 
 def _momentum_size(A, b, velocities) -> float:
     r"""The RMS size of the momenta $\mu = A^{-1}(\xi - b)$ of the velocities (the latent
     states' scale), 1 if 0."""
-    import numpy as np
 
     xi = np.concatenate(velocities)
     mu = np.linalg.solve(A, (xi - b).T).T
