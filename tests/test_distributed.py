@@ -41,6 +41,7 @@ def _y0(n: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).normal(size=(n, 3))
 
 
+@pytest.mark.slow  # the default run's time (7 s); resumption and sweeps on the cluster by default
 def test_chunked_ground_truth_on_a_cluster_is_bitwise_the_single_process_result(client):
     y0 = _y0(11)
     here = integrators.ground_truth(BODY, y0, 0.1, 40)

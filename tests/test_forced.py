@@ -97,6 +97,7 @@ def test_dissipative_forces_never_raise_the_energy(seed):
     assert np.all(np.asarray(system.energy_rate(Pi)) <= 0.0)
 
 
+@pytest.mark.slow  # the default run's time; the affine flow also enters the order tests
 def test_linear_drag_flow_is_exact():
     # the forces alone, mu' = -D (A mu + b): the affine exponential against DOP853
     system = Forced(lp.systems.HeavyTop(), LinearDrag(np.diag([0.3, 0.2, 0.5]), indices=(0, 1, 2)))
@@ -107,7 +108,7 @@ def test_linear_drag_flow_is_exact():
     np.testing.assert_allclose(np.asarray(system.force_flow(1.7, y0)), sol.y[:, -1], atol=1e-12)
 
 
-@pytest.mark.parametrize("method, order", [(Strang, 2), (TripleJump, 4)])
+@pytest.mark.parametrize("method, order", [(Strang, 2), pytest.param(TripleJump, 4, marks=pytest.mark.slow)])
 def test_orders_against_heyoka(method, order):
     system = _forced_body()
     y0, T = np.array([0.3, 10.0, 0.2]), 2.0

@@ -39,6 +39,7 @@ SYSTEMS = [
 ]
 
 
+@pytest.mark.slow  # the default run's time (7 s); the LPNet's training step on u(4) by default below
 @pytest.mark.parametrize("make", SYSTEMS)
 def test_lpnet_keeps_every_casimir_and_training_lowers_the_loss(make):
     system = make()

@@ -67,7 +67,7 @@ def _compiled_drag_flow():
     return jax.jit(lambda model, t, y: model.drag_flow(t, y))
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=8, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.sampled_from(KINDS), st.floats(1e-3, 5.0))
 def test_the_drag_step_never_raises_the_learned_energy(seed, kind_axes, t):
     # for any weights of H~ (curvatures of either sign) and of the drag, and any t > 0:

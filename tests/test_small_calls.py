@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import slow_except
 
 import integrators as it
 import learn
@@ -131,7 +132,9 @@ def starts(n_traj, seed=0):
 
 
 # -- latent_momenta --------------------------------------------------------------------------------
-@pytest.mark.parametrize("key, shape", [(0, (3,)), (1, (5, 3)), (2, (2, 2, 3))])
+# batches of more than one shape under -m slow (the default run's time): the single state by default
+@pytest.mark.parametrize("key, shape", [(0, (3,)), pytest.param(1, (5, 3), marks=pytest.mark.slow),
+                                        pytest.param(2, (2, 2, 3), marks=pytest.mark.slow)])
 def test_latent_momenta_is_the_python_loop_it_replaced(key, shape):
     net = learn.GLPNet(BODY, n_modules=3, key=key, h=H)
     # velocities the network reaches (its sigmoid ridges saturate: not every xi has momenta)
@@ -203,7 +206,7 @@ MAPS = {
 LENGTHS = [(0, 1), (5, 1), (128, 1), (129, 1), (300, 1), (390, 3)]
 
 
-@pytest.mark.parametrize("name", list(MAPS))
+@pytest.mark.parametrize("name", slow_except(list(MAPS), {"Strang"}))
 def test_rollout_is_bit_identical_to_one_scan(name):
     m = MAPS[name]()
     y0, _ = starts(4)
@@ -216,6 +219,7 @@ def test_rollout_is_bit_identical_to_one_scan(name):
     np.testing.assert_array_equal(np.asarray(single), np.asarray(old_rollout(m, y0[1], 129, 3)))
 
 
+@pytest.mark.slow  # the default run's time: the uncarried rollout's bit-identity by default
 def test_rollout_of_a_carried_state_is_bit_identical_to_one_scan():
     # the isospectral midpoint carries its matrix W (and a predictor's history) between steps:
     # the carry is made by a program of its own, then handed from piece to piece
@@ -227,7 +231,7 @@ def test_rollout_of_a_carried_state_is_bit_identical_to_one_scan():
                                       np.asarray(old_rollout(m, y0, n_steps, save_every)))
 
 
-@pytest.mark.parametrize("name", list(MAPS))
+@pytest.mark.parametrize("name", slow_except(list(MAPS), {"GLPNet"}))
 def test_lifted_rollout_is_bit_identical_to_one_scan(name):
     m = MAPS[name]()
     y0, g0 = starts(3, seed=1)
