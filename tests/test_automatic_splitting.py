@@ -90,7 +90,7 @@ _SLOW = pytest.mark.slow  # ~10 s each (heyoka + a compiled rollout); by default
     "make, method, order",
     [
         pytest.param(generic_so4, it.splitting.Strang, 2, marks=_SLOW),  # so(4) Strang also in test_any_algebra.py
-        (diamond_with_ridges, it.splitting.Strang, 2),
+        pytest.param(diamond_with_ridges, it.splitting.Strang, 2, marks=_SLOW),  # the default run's time
         pytest.param(diamond_with_ridges, it.splitting.TripleJump, 4, marks=_SLOW),
         pytest.param(generic_so4, it.splitting.TripleJump, 4, marks=_SLOW),
         pytest.param(user_rigid_body, it.splitting.Strang, 2, marks=_SLOW),  # also: equals the catalogue's Strang

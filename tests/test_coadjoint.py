@@ -439,6 +439,7 @@ def test_matrix_exponential_matches_scipy_on_both_paths(norm):
         np.testing.assert_allclose(first, reference, rtol=0, atol=64 * EPS * np.exp(norm))
 
 
+@pytest.mark.slow  # the default run's time (7 s); the Taylor path's values and bound by default above
 def test_matrix_flow_under_training_keeps_the_spectrum_and_matches_the_eager_flow():
     # An LPNet's step on u(N) inside a compiled, differentiated loss takes the Taylor path; its
     # values and gradients must be the eager flow's (jax.scipy expm, a plain vmap) to round-off,

@@ -96,6 +96,7 @@ def test_held_out_prediction_prefers_the_even_quadratic_over_spurious_linear_ter
     np.testing.assert_allclose(np.asarray(net.h), 0.1)
 
 
+@pytest.mark.slow  # the default run's time (5 s); refusals and the typed record by default
 def test_a_skipped_family_warns_with_its_reason_and_how_to_fit_it(tmp_path):
     """Exact data: the even quadratic explains them within its step's error, so "quadratic"
     (the same pieces with linear terms) is skipped, with a warning saying how to fit it."""

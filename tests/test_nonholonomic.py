@@ -335,6 +335,7 @@ def test_discrete_lagrange_dalembert_is_symmetric_and_reversible(y, h):
         assert np.max(np.abs(_step_at(method, p1, -h) - p)) > 1e-6 * size
 
 
+@pytest.mark.slow  # the default run's time (7 s)
 def test_composed_lagrange_dalembert_keeps_the_constraint_and_every_steady_motion():
     suslov = lp.systems.suslov(INERTIA, A)
     method = it.ComposedLagrangeDAlembert(suslov, 0.1)

@@ -231,7 +231,8 @@ def test_rollout_of_a_carried_state_is_bit_identical_to_one_scan():
                                       np.asarray(old_rollout(m, y0, n_steps, save_every)))
 
 
-@pytest.mark.parametrize("name", slow_except(list(MAPS), {"GLPNet"}))
+@pytest.mark.slow  # the default run's time; one compilation for every length of lifted rollouts by default
+@pytest.mark.parametrize("name", list(MAPS))
 def test_lifted_rollout_is_bit_identical_to_one_scan(name):
     m = MAPS[name]()
     y0, g0 = starts(3, seed=1)
