@@ -24,6 +24,7 @@ from ._ground_truth import (
     taylor_integrator as taylor_integrator,
 )
 from ._body_observations import BodyObservations as BodyObservations, observe_body as observe_body
+from ._observed_trajectories import AbstractObservedTrajectories as AbstractObservedTrajectories
 from ._imu_csv import read_gyro_csv as read_gyro_csv, write_gyro_csv as write_gyro_csv
 from ._observations import (
     Observations as Observations,

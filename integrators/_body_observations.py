@@ -40,7 +40,7 @@ from ._observations import (
     rows_by_trajectory,
     times_per_trajectory,
 )
-from ._validation_split import validation_split
+from ._observed_trajectories import AbstractObservedTrajectories
 
 FORMAT = "liepoisson-body-observations"
 FORMAT_VERSION = 1
@@ -122,7 +122,7 @@ def _rows(value: Any, name: str, n: int, width: int, times: list[np.ndarray]) ->
     return out
 
 
-class BodyObservations:
+class BodyObservations(AbstractObservedTrajectories):
     r"""Trajectories of a body observed at their own times: configurations $g_j(t_{j,k})$ on
     `system.group` (unit quaternions $(x, y, z, w)$, scalar last, for `liepoisson.Rotations`;
     quaternion and position for `liepoisson.Poses`), body velocities $\xi_j(t_{j,k})$
@@ -186,34 +186,10 @@ class BodyObservations:
         """What these observations hold: `("configurations", "velocities")` or one of them."""
         return tuple(k for k in MEASURED if getattr(self, k) is not None)
 
-    @property
-    def n_trajectories(self) -> int:
-        return len(self.times)
-
-    def __len__(self) -> int:
-        return len(self.times)
-
-    @property
-    def dim(self) -> int:
-        return self.system.dim
-
-    @property
-    def n_observations(self) -> int:
-        """All observation times of all trajectories."""
-        return int(sum(t.size for t in self.times))
-
     def __repr__(self) -> str:
         steps = np.concatenate([np.diff(t) for t in self.times])
         return (f"BodyObservations({self.system!r}, {' and '.join(self.measured)}, {self.n_trajectories} "
                 f"trajectories, {self.n_observations} observations, steps {steps.min():.3g}..{steps.max():.3g})")
-
-    def intervals(self) -> np.ndarray:
-        """Every interval between consecutive observations of a trajectory, `(N,)`."""
-        return np.concatenate([np.diff(t) for t in self.times])
-
-    def is_regular(self, rtol: float = 1e-9) -> bool:
-        dt = self.intervals()
-        return bool(np.all(np.abs(dt - dt[0]) <= rtol * dt[0]))
 
     def velocity_scale(self) -> float:
         r"""$\sqrt{\operatorname{mean}|\xi|^2}$ of the observed velocities (of the finite
@@ -238,24 +214,10 @@ class BodyObservations:
         g = self.configurations[j]
         return np.asarray(self.group.log_between(g[:-1], g[1:])) / np.diff(self.times[j])[:, None]
 
-    def select(self, indices: int | Any) -> BodyObservations:
-        """The trajectories `indices` (an int or a sequence of ints)."""
-        idx = np.atleast_1d(np.asarray(indices))
-        if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
-            raise TypeError(f"indices must be an int or a non-empty sequence of ints; got {indices!r}")
-        if np.any((idx < -len(self)) | (idx >= len(self))):
-            raise IndexError(f"indices {idx.tolist()} out of range for {len(self)} trajectories")
-        pick = (lambda xs: None if xs is None else [xs[i] for i in idx])
+    def _pick(self, indices: list[int]) -> BodyObservations:
+        pick = (lambda xs: None if xs is None else [xs[i] for i in indices])
         return BodyObservations(self.system, pick(self.times), pick(self.configurations), pick(self.velocities),
                                 metadata=self.metadata)
-
-    def split(self, validation_fraction: float, seed: int = 0) -> tuple[BodyObservations, BodyObservations | None]:
-        """`(training, validation)` by whole trajectories (random, seeded); `None` for none."""
-        seed = positive_int(seed, "seed", minimum=0)
-        train, val = validation_split(len(self), validation_fraction, seed, "trajectory")
-        if len(val) == 0:
-            return self, None
-        return self.select(train), self.select(val)
 
     def in_units(self, time: float) -> BodyObservations:
         """The same observations with times divided by `time` (e.g. 1e-3 for milliseconds to

@@ -21,7 +21,7 @@ from liepoisson.systems import AbstractPoissonSystem, system_for_file
 from ._files import atomic_path, open_hdf5
 from ._ground_truth import taylor_integrator
 from ._noise import AbstractNoiseLaw, noise_law, noise_level
-from ._validation_split import validation_split
+from ._observed_trajectories import AbstractObservedTrajectories
 
 FORMAT = "liepoisson-observations"
 FORMAT_VERSION = 1
@@ -204,7 +204,7 @@ def _trajectories_of(ys: np.ndarray | list[np.ndarray], dim: int) -> list[np.nda
     return ys
 
 
-class Observations:
+class Observations(AbstractObservedTrajectories):
     r"""Trajectories observed at their own times: trajectory $j$ is the states
     $y_j(t_{j,0}), \dots, y_j(t_{j,n_j-1})$ at strictly increasing times, uneven and different
     per trajectory, as measured (with noise: observations need not lie on one Casimir leaf).
@@ -263,54 +263,26 @@ class Observations:
         except (TypeError, ValueError) as err:
             raise TypeError(f"metadata must be a dict of JSON values; got {metadata!r}") from err
 
-    # -- shape -----------------------------------------------------------------------------
-    @property
-    def n_trajectories(self) -> int:
-        return len(self.states)
-
-    def __len__(self) -> int:
-        return len(self.states)
-
-    @property
-    def dim(self) -> int:
-        return self.system.dim
-
-    @property
-    def n_observations(self) -> int:
-        """All observations of all trajectories."""
-        return int(sum(y.shape[0] for y in self.states))
-
     def __repr__(self) -> str:
-        steps = np.concatenate([np.diff(t) for t in self.times])
+        steps = self.intervals()
         return (f"Observations({self.system!r}, {self.n_trajectories} trajectories, {self.n_observations} "
                 f"observations, steps {steps.min():.3g}..{steps.max():.3g})")
 
-    def intervals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""Every pair of consecutive observations: `(y0, y1, dt)`, arrays `(N, dim)`, `(N, dim)`,
-        `(N,)` with $y_1$ observed $dt$ after $y_0$ on the same trajectory."""
+        `(N,)` with $y_1$ observed $dt$ after $y_0$ on the same trajectory (`dt` is
+        `intervals()`)."""
         y0 = np.concatenate([y[:-1] for y in self.states])
         y1 = np.concatenate([y[1:] for y in self.states])
-        dt = np.concatenate([np.diff(t) for t in self.times])
-        return y0, y1, dt
-
-    def is_regular(self, rtol: float = 1e-9) -> bool:
-        """Whether every step between observations is the same (to `rtol`)."""
-        dt = self.intervals()[2]
-        return bool(np.all(np.abs(dt - dt[0]) <= rtol * dt[0]))
+        return y0, y1, self.intervals()
 
     def rms_size(self) -> float:
         r"""$\sqrt{\operatorname{mean}_k |y_k|^2}$ over every observation: the size noise is
         measured against."""
         return rms_size(self.states)
 
-    def select(self, indices: int | Sequence[int] | np.ndarray) -> Observations:
-        """The trajectories `indices` (an int or a sequence of ints)."""
-        idx = np.atleast_1d(np.asarray(indices))
-        if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
-            raise TypeError(f"indices must be an int or a non-empty sequence of ints; got {indices!r}")
-        if np.any((idx < -len(self)) | (idx >= len(self))):
-            raise IndexError(f"indices {idx.tolist()} out of range for {len(self)} trajectories")
-        return Observations(self.system, [self.times[i] for i in idx], [self.states[i] for i in idx],
+    def _pick(self, indices: list[int]) -> Observations:
+        return Observations(self.system, [self.times[i] for i in indices], [self.states[i] for i in indices],
                             metadata=self.metadata)
 
     def check_system(self, system: AbstractPoissonSystem, what: str = "system") -> AbstractPoissonSystem:
@@ -327,15 +299,6 @@ class Observations:
                 "with the observations' bracket and Casimirs (its Hamiltonian may differ: it is what is learned)"
             )
         return system
-
-    def split(self, validation_fraction: float, seed: int = 0) -> tuple[Observations, Observations | None]:
-        """`(training, validation)` by whole trajectories (random, seeded): a held-out
-        trajectory shares no observation with the training ones. `None` for no validation."""
-        seed = positive_int(seed, "seed", minimum=0)
-        train, val = validation_split(len(self), validation_fraction, seed, "trajectory")
-        if len(val) == 0:
-            return self, None
-        return self.select(train), self.select(val)
 
     # -- files -----------------------------------------------------------------------------
     def _long(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -143,9 +143,9 @@ def test_a_map_at_one_fixed_step_refuses_uneven_steps():
     uneven = it.Observations(BODY, [[0.0, 0.05, 0.35, 0.45]], [np.tile(y, (4, 1))])
     with pytest.raises(ValueError, match=r"data has uneven steps, from 0\.05 to 0\.3; MLPBaseline maps a state to the "
                                          r"next at one fixed step \(its step ignores h\)"):
-        check_one_step(mlp, uneven.intervals()[2], None, "data")
+        check_one_step(mlp, uneven.intervals(), None, "data")
     even = it.Observations(BODY, [0.1 * np.arange(4)], [np.tile(y, (4, 1))])
-    check_one_step(mlp, even.intervals()[2], 0.1, "data")  # one step, the map's h
+    check_one_step(mlp, even.intervals(), 0.1, "data")  # one step, the map's h
     with pytest.raises(ValueError, match=r"h = 0\.2, but data has steps of 0\.1; .* give h=0\.1 or leave h unset"):
-        check_one_step(mlp, even.intervals()[2], 0.2, "data")
-    check_one_step(learn.LPNet(BODY, key=0), uneven.intervals()[2], 0.1, "data")  # its step takes h
+        check_one_step(mlp, even.intervals(), 0.2, "data")
+    check_one_step(learn.LPNet(BODY, key=0), uneven.intervals(), 0.1, "data")  # its step takes h

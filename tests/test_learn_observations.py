@@ -85,7 +85,7 @@ def test_glpnet_fitted_on_uneven_steps_has_its_order_at_unseen_steps(exact_fit):
     data, model, _ = exact_fit
     assert isinstance(model, learn.GLPNet) and model.method == TripleJump()  # order 4
     assert model.activation == "identity"
-    steps = data.intervals()[2]
+    steps = data.intervals()
     assert not data.is_regular() and steps.min() >= 0.05 and steps.max() <= 0.3
     # At step h the rollout error is (the flow of H~ against that of H) + (TripleJump's splitting
     # error of H~, ~ C h^4). The first does not depend on h: it is the floor e(0.1) below, which
@@ -111,7 +111,7 @@ def test_observations_that_fit_no_common_leaf_are_refused():
     data = it.observe(BODY, _starts(3, 1.0), it.uneven_times(3, 6, seed=2), noise=0.5, seed=3)
     with pytest.raises(ValueError, match=r"data: the observations of trajectory \d spread over Casimir 0.*"
                                          r"no common leaf fits them"):
-        learn.fit(learn.GLPNet(BODY, 3, method=TripleJump), data, optimiser=learn.QuasiNewton(1, "bfgs"),
+        learn.fit(learn.GLPNet(BODY, 3, method=TripleJump), data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(1)),
                   progress=False)
 
 
@@ -132,7 +132,7 @@ def _small_data() -> it.Observations:
 )
 def test_bad_fit_arguments_with_observations(kwargs, error, match):
     with pytest.raises(error, match=match):
-        learn.fit(learn.GLPNet(BODY, 3), _small_data(), optimiser=learn.QuasiNewton(1, "bfgs"), progress=False,
+        learn.fit(learn.GLPNet(BODY, 3), _small_data(), optimiser=learn.KeepIfBetter(learn.ScipyBFGS(1)), progress=False,
                   **kwargs)
 
 
@@ -147,7 +147,7 @@ def test_observations_of_another_dimension_are_refused():
     top = lp.systems.HeavyTop()
     data = it.Observations(top, [0.0, 0.1, 0.25], np.random.default_rng(5).normal(size=(2, 3, 6)))
     with pytest.raises(ValueError, match=r"data has states of dimension 6 .*the model is for RigidBody.*dimension 3"):
-        learn.fit(learn.GLPNet(BODY, 3), data, optimiser=learn.QuasiNewton(1, "bfgs"), progress=False)
+        learn.fit(learn.GLPNet(BODY, 3), data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(1)), progress=False)
 
 
 @pytest.mark.parametrize(
@@ -175,14 +175,14 @@ def one_step():
     net = learn.GLPNet(BODY, 3, method=TripleJump, key=3, h=0.1)
     fitted, train, _, loss_fn, settings = observed_objective(net, data, learn.TrajectoryLoss(window=1, latent=False),
                                                              None, 0.0, 0)
-    y0, _, dt = data.intervals()
+    y0, _, dt = data.pairs()
     by_hand = np.stack([np.asarray(_step(net.with_h(float(d)), jnp.asarray(a))) for a, d in zip(y0, dt)])
     return data, fitted, train, loss_fn, settings, by_hand
 
 
 def test_one_step_loss_predicts_each_pair_at_its_own_step(one_step):
     data, fitted, train, loss_fn, settings, by_hand = one_step
-    _, y1, dt = data.intervals()
+    _, y1, dt = data.pairs()
     assert settings.description.substeps == 1 and settings.description.loss == "observations: window 1, observed starts"
     assert fitted.starts is None  # latent=False: segments start from their observations
     residuals = np.asarray(loss_fn.residuals(fitted, train))
@@ -195,7 +195,7 @@ def test_one_step_loss_predicts_each_pair_at_its_own_step(one_step):
 
 def test_one_step_loss_is_the_mean_over_pairs(one_step):
     data, fitted, train, loss_fn, _, by_hand = one_step
-    y1 = data.intervals()[1]
+    y1 = data.pairs()[1]
     want = np.mean(np.sum((by_hand - y1) ** 2, axis=-1)) / 3  # |step(y0) - y1|^2 / dim, averaged over pairs
     # residuals of ~0.03, each a few eps off (see above): a relative ~1e-13 at most
     assert float(loss_fn(fitted, train)) == pytest.approx(want, rel=1e-10)
@@ -221,7 +221,7 @@ def test_trajectory_loss_of_the_true_hamiltonian_is_round_off():
 
 def test_max_step_runs_each_interval_in_equal_sub_steps():
     data = _observations(noise=0.0, size=1.0, drop=0.2, n=6)
-    dt_max = float(np.max(data.intervals()[2]))
+    dt_max = float(np.max(data.intervals()))
     net = learn.GLPNet(BODY, terms=learn.RidgeTerms(3, 3, key=2, activation="identity"), method=TripleJump)
     loss = learn.TrajectoryLoss(latent=False, max_step=dt_max / 3)
     fitted, train, _, loss_fn, settings = observed_objective(net, data, loss, None, 0.0, 0)
@@ -296,7 +296,7 @@ def test_map_fitted_to_noisy_observations_keeps_the_casimir(noisy_fit):
 def test_parametric_hamiltonian_recovers_the_inverse_inertia_differences():
     data = _observations(noise=0.0, size=1.0, n=6)
     model = learn.ParametricHamiltonian(BODY, _quadratic_family, np.ones(3))
-    fitted, record = learn.fit(model, data, loss=learn.TrajectoryLoss(), optimiser=learn.QuasiNewton(200, "bfgs"),
+    fitted, record = learn.fit(model, data, loss=learn.TrajectoryLoss(), optimiser=learn.KeepIfBetter(learn.ScipyBFGS(200)),
                                validation_fraction=0.0, progress=False)
     assert isinstance(fitted, learn.ParametricHamiltonian) and record.loss == "observations: trajectory, latent starts"
     theta = np.asarray(fitted.theta)

@@ -95,7 +95,7 @@ def test_from_a_single_trajectory():
 
 
 def test_intervals_are_exactly_the_consecutive_pairs(obs):
-    y0, y1, dt = obs.intervals()
+    y0, y1, dt = obs.pairs()
     # By hand: (0,1), (1,2) of trajectory 0, then (0,1), (1,2), (2,3), (3,4) of trajectory 1;
     # never the pair (last of trajectory 0, first of trajectory 1).
     want0 = np.stack([Y0[0], Y0[1], Y1[0], Y1[1], Y1[2], Y1[3]])

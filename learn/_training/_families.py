@@ -106,7 +106,7 @@ class Family:
 
 def _design(system: AbstractPoissonSystem, data: Observations, linear: bool, diagonal: bool):
     """`(design, velocity, (i, j))` of the least-squares problem of `quadratic_estimate`."""
-    y0, y1, dt = data.intervals()
+    y0, y1, dt = data.pairs()
     mid = 0.5 * (y0 + y1)
     velocity = ((y1 - y0) / dt[:, None]).reshape(-1)
     B = np.asarray(system.poisson_tensor(mid))  # (N, n, n)

@@ -98,8 +98,8 @@ class TrajectoryLoss(AbstractLoss):
         elif model.h is not None:
             h = float(model.h)
         else:
-            h = float(np.median(data.intervals()[2]))
-        check_one_step(model, data.intervals()[2] / substeps, h if model.h is None else None, "data")
+            h = float(np.median(data.intervals()))
+        check_one_step(model, data.intervals() / substeps, h if model.h is None else None, "data")
         # No step while fitting (each interval sets its own), so that data in other units
         # reuse what was compiled; `FittedProblem.map` gives the fitted map `h`.
         model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)
@@ -173,7 +173,7 @@ def segments(observations: Observations, loss: TrajectoryLoss, substeps: int, he
 def substeps_for(observations: Observations, max_step: float | None) -> int:
     if max_step is None:
         return 1
-    return max(1, math.ceil(float(np.max(observations.intervals()[2])) / max_step - 1e-12))
+    return max(1, math.ceil(float(np.max(observations.intervals())) / max_step - 1e-12))
 
 
 def advance(model: Any, y: jax.Array, dt: jax.Array, substeps: int) -> jax.Array:
