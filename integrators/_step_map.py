@@ -12,7 +12,6 @@ from __future__ import annotations
 import abc
 import dataclasses
 import math
-import os
 from collections.abc import Callable
 from typing import Any
 
@@ -24,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from liepoisson import vmap_samples
 from liepoisson.internals import as_state, positive_float, positive_int, states
+from liepoisson.internals import check_fits_in_memory as fits_in_memory
 from liepoisson.systems import AbstractPoissonSystem
 
 from ._nonfinite import AbstractNonfinitePolicy, RaiseIfNonfinite, nonfinite_policy
@@ -225,38 +225,13 @@ class AbstractReconstructingStepMap(AbstractStepMap):
         return jax.device_put((gs[0], ys[0]) if single else (gs, ys))
 
 
-#: The largest share of the machine's physical memory one output array may take.
-MEMORY_FRACTION = 0.5
-#: The physical memory assumed where the operating system does not report it (`os.sysconf`).
-_FALLBACK_MEMORY = 2**40
-
-
-def physical_memory() -> tuple[int, bool]:
-    """The machine's physical memory in bytes (`os.sysconf`), and whether it was reported
-    (else `_FALLBACK_MEMORY`, 1 TiB, is assumed)."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # not available on this platform
-        return _FALLBACK_MEMORY, False
-    return (int(total), True) if total > 0 else (_FALLBACK_MEMORY, False)
-
-
 def check_fits_in_memory(shape: tuple[int, ...], what: str, remedy: str) -> None:
-    """`ValueError` (before anything is allocated) if a float64 array of `shape` is larger than
-    `MEMORY_FRACTION` (half) of the machine's physical memory: the size `what` needs, the
-    memory, and `remedy`, how to ask for less. The one size check of every rollout and
+    """`ValueError` (before anything is allocated) if a float64 array of `shape` would not fit
+    in the memory one request may take (`liepoisson.internals.check_fits_in_memory`): `what`
+    needs it, and `remedy` says how to ask for less. The one size check of every rollout and
     ground-truth request."""
-    need = 8 * math.prod(int(k) for k in shape)
-    total, reported = physical_memory()
-    limit = int(MEMORY_FRACTION * total)
-    if need > limit:
-        memory = (f"the machine's {total / 2**30:.3g} GiB of physical memory" if reported else
-                  f"the {total / 2**30:.3g} GiB of physical memory assumed (the system does not report it)")
-        raise ValueError(
-            f"{what} of shape {tuple(int(k) for k in shape)} need {need:,} bytes = {need / 2**30:.3g} GiB, more than "
-            f"the {limit / 2**30:.3g} GiB of memory available to one request ({MEMORY_FRACTION:.0%} of {memory}); "
-            f"{remedy}"
-        )
+    shape = tuple(int(k) for k in shape)
+    fits_in_memory(8 * math.prod(shape), f"{what} of shape {shape}", remedy)
 
 
 _FLOPS: dict[Any, float] = {}

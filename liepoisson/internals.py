@@ -9,6 +9,8 @@ argument, and progress bars. Not a user API: these names may change with the lib
   what)`: `ValueError` for a constrained system where `what` moves along coadjoint orbits.
 - `check_casimirs_agree(...)`: pairs whose Casimirs differ are named; `casimir_scale(gradients,
   y)`: |grad C_j(y)| |y|, the size a Casimir change is measured against.
+- `check_fits_in_memory(need, what, remedy)`: `ValueError` before allocating `need` bytes that
+  would not fit in the memory one request may take.
 - `jsonable(value)`: `value` as reading it back from JSON gives it (tuples as lists).
 - `show_progress(progress)`, `progress_bar(total, desc, unit, progress)`: tqdm bars, on by
   default only when stderr is a terminal.
@@ -19,6 +21,7 @@ from ._inverse import check_casimirs_agree as check_casimirs_agree
 from ._jsonable import jsonable as jsonable
 from ._matrix_algebra import SEMIDIRECT as SEMIDIRECT
 from ._matrix_algebra import dagger as dagger
+from ._memory import check_fits_in_memory as check_fits_in_memory
 from ._progress import progress_bar as progress_bar
 from ._progress import show_progress as show_progress
 from ._validation import (
