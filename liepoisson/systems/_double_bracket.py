@@ -14,12 +14,12 @@ from numpy.typing import ArrayLike
 
 from .._namespace import HEYOKA
 from ._base import (
-    AbstractDefinedByParams,
     AbstractDissipativeSystem,
     AbstractLiePoissonSystem,
     AbstractPoissonSystem,
     matvec,
 )
+from ._wrapped import AbstractWrappedSystem
 
 #: Relative asymmetry of a metric accepted as symmetric (a matrix typed or computed in
 #: float64 is symmetric to a few roundings of its largest entry).
@@ -78,7 +78,7 @@ def check_metric(metric: Any, dim: int, name: str = "metric") -> np.ndarray:
     return 0.5 * (K + K.T)
 
 
-class DoubleBracket(AbstractDissipativeSystem, AbstractDefinedByParams):
+class DoubleBracket(AbstractWrappedSystem, AbstractDissipativeSystem):
     r"""A Lie-Poisson system with double-bracket dissipation:
 
     $$\dot\mu = \mathbb B(\mu)\nabla H(\mu) + \gamma\,\mathbb B(\mu)\,K\,\mathbb B(\mu)\nabla H(\mu)
@@ -129,46 +129,17 @@ of $H$ there). The flow is not Poisson: no
         """The undamped system, `system`."""
         return self.system
 
-    def value_key(self) -> tuple[Any, ...] | None:
-        """Defined by its params when the damped system is (else equal only to itself)."""
-        return AbstractDefinedByParams.value_key(self) if self.system.value_key() is not None else None
 
     def __repr__(self) -> str:
         metric = "" if self._identity else f", metric={self.metric.tolist()}"
         return f"DoubleBracket({self.system!r}, gamma={self.gamma!r}{metric})"
 
-    @property
-    def params(self) -> dict[str, Any]:
-        return {
-            "system": self.system.name,
-            "system_params": self.system.params,
-            "gamma": self.gamma,
-            "metric": None if self._identity else self.metric.tolist(),
-        }
+    def own_params(self) -> dict[str, Any]:
+        return {"gamma": self.gamma, "metric": None if self._identity else self.metric.tolist()}
 
     @classmethod
-    def from_params(cls, params: dict[str, Any], rebuild) -> DoubleBracket:
-        """The system of `params` (as `params` returns them), the damped system rebuilt by
-        `rebuild(name, params)`."""
-        try:
-            inner = rebuild(params["system"], params["system_params"])
-            return cls(inner, params["gamma"], params.get("metric"))
-        except (KeyError, TypeError) as err:
-            raise ValueError(f"not a valid DoubleBracket definition: {type(err).__name__}: {err}") from err
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return self.system.state_names
-
-    def hamiltonian_components(self, y, xp):
-        return self.system.hamiltonian_components(y, xp)
-
-    def singular(self, y):
-        return self.system.singular(y)
-
-    @property
-    def singular_reason(self) -> str:  # type: ignore[override]
-        return self.system.singular_reason
+    def from_own_params(cls, system, params) -> DoubleBracket:
+        return cls(system, params["gamma"], params.get("metric"))
 
     def hamiltonian_splitting(self):
         raise ValueError(

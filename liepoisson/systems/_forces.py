@@ -27,7 +27,8 @@ from numpy.typing import ArrayLike
 
 from .._namespace import HEYOKA, JAX
 from .._validation import as_state
-from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem, AbstractPoissonSystem
+from ._base import AbstractLiePoissonSystem, AbstractPoissonSystem
+from ._wrapped import AbstractWrappedSystem
 
 #: Relative asymmetry of a drag matrix accepted as symmetric, and the relative size of a
 #: negative eigenvalue accepted as round-off of a positive semidefinite one (a matrix typed or
@@ -324,7 +325,7 @@ class AbstractForcedSystem(AbstractLiePoissonSystem):
         r"""$F(\nabla H(\mu))$ `(..., dim)`."""
 
 
-class Forced(AbstractForcedSystem, AbstractDefinedByParams):
+class Forced(AbstractWrappedSystem, AbstractForcedSystem):
     r"""A Lie-Poisson system driven by external forces in the body frame:
 
     $$\dot\mu = \mathbb B(\mu)\,\nabla H(\mu) + \sum_f F_f(\xi), \qquad \xi = \nabla H(\mu).$$
@@ -387,44 +388,21 @@ class Forced(AbstractForcedSystem, AbstractDefinedByParams):
         """Whether every force is dissipative ($\\dot H \\le 0$ for every state)."""
         return all(isinstance(f, AbstractDissipativeForce) for f in self.forces)
 
-    def value_key(self) -> tuple[Any, ...] | None:
-        return AbstractDefinedByParams.value_key(self) if self.system.value_key() is not None else None
 
     def __repr__(self) -> str:
         return f"Forced({self.system!r}, {list(self.forces)!r})"
 
-    @property
-    def params(self) -> dict[str, Any]:
-        return {"system": self.system.name, "system_params": self.system.params,
-                "forces": [f.params for f in self.forces]}
+    def own_params(self) -> dict[str, Any]:
+        return {"forces": [f.params for f in self.forces]}
 
     @classmethod
-    def from_params(cls, params: dict[str, Any], rebuild) -> Forced:
-        """The system of `params`, the unforced system rebuilt by `rebuild(name, params)`."""
-        try:
-            inner = rebuild(params["system"], params["system_params"])
-            return cls(inner, [force_from_params(p) for p in params["forces"]])
-        except (KeyError, TypeError) as err:
-            raise ValueError(f"not a valid Forced definition: {type(err).__name__}: {err}") from err
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return self.system.state_names
+    def from_own_params(cls, system, params) -> Forced:
+        return cls(system, [force_from_params(p) for p in params["forces"]])
 
     @property
     def group(self):
         """The system's configuration group: $\\dot g = g\\,\\nabla H$ as without forces."""
         return self.system.group
-
-    def hamiltonian_components(self, y, xp):
-        return self.system.hamiltonian_components(y, xp)
-
-    def singular(self, y):
-        return self.system.singular(y)
-
-    @property
-    def singular_reason(self) -> str:  # type: ignore[override]
-        return self.system.singular_reason
 
     def hamiltonian_splitting(self):
         raise ValueError(

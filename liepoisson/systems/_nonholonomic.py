@@ -35,7 +35,8 @@ from numpy.typing import ArrayLike
 from .._groups import AbstractLieGroup, MatrixGroup
 from .._namespace import HEYOKA
 from .._validation import finite_vector, positive_float
-from ._base import AbstractDefinedByParams, AbstractLiePoissonSystem, AbstractPoissonSystem
+from ._base import AbstractLiePoissonSystem, AbstractPoissonSystem
+from ._wrapped import AbstractWrappedSystem
 
 #: Constraint covectors whose smallest singular value is below this fraction of the largest
 #: are refused as dependent: a rank decided in float64, with a margin of ~1e4 over the
@@ -71,7 +72,7 @@ def check_constraints(constraints: Any, dim: int, name: str = "constraints") -> 
     return C
 
 
-class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
+class LiePoissonDAlembert(AbstractWrappedSystem, AbstractLiePoissonSystem):
     r"""The Lie-Poisson-d'Alembert system of `system` with the body velocity constrained to
     $\langle c_i, \nabla H(\mu)\rangle = 0$ (module docstring): energy conserved, Casimirs
     not; `constraint(y)` is the diagnostic, `reaction(y)` the force.
@@ -103,40 +104,16 @@ class LiePoissonDAlembert(AbstractLiePoissonSystem, AbstractDefinedByParams):
         self.algebra = system.algebra
         self.constraints = check_constraints(constraints, system.dim)
 
-    def value_key(self) -> tuple[Any, ...] | None:
-        """Defined by its params when the unconstrained system is (else equal only to itself)."""
-        return AbstractDefinedByParams.value_key(self) if self.system.value_key() is not None else None
 
     def __repr__(self) -> str:
         return f"LiePoissonDAlembert({self.system!r}, constraints={self.constraints.tolist()})"
 
-    @property
-    def params(self) -> dict[str, Any]:
-        return {"system": self.system.name, "system_params": self.system.params,
-                "constraints": self.constraints.tolist()}
+    def own_params(self) -> dict[str, Any]:
+        return {"constraints": self.constraints.tolist()}
 
     @classmethod
-    def from_params(cls, params: dict[str, Any], rebuild) -> LiePoissonDAlembert:
-        """The system of `params` (as `params` returns them), the unconstrained one rebuilt by
-        `rebuild(name, params)`."""
-        try:
-            return cls(rebuild(params["system"], params["system_params"]), params["constraints"])
-        except (KeyError, TypeError) as err:
-            raise ValueError(f"not a valid LiePoissonDAlembert definition: {type(err).__name__}: {err}") from err
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return self.system.state_names
-
-    def hamiltonian_components(self, y, xp):
-        return self.system.hamiltonian_components(y, xp)
-
-    def singular(self, y):
-        return self.system.singular(y)
-
-    @property
-    def singular_reason(self) -> str:  # type: ignore[override]
-        return self.system.singular_reason
+    def from_own_params(cls, system, params) -> LiePoissonDAlembert:
+        return cls(system, params["constraints"])
 
     @property
     def group(self) -> AbstractLieGroup | None:
