@@ -125,6 +125,24 @@ class AbstractLieAlgebra(abc.ABC):
         other. Usable inside `jax.jit`, `jax.vmap` and `jax.grad`. This is the coadjoint action
         of $\exp(t\alpha)$; it is a Poisson map and conserves every Casimir.
         """
+        return self._checked_flow(self._coadjoint_flow, "coadjoint_flow", alpha, t, mu)
+
+    def coadjoint_increment(self, alpha: ArrayLike, t: ArrayLike, mu: ArrayLike) -> jax.Array:
+        r"""$\exp(t\,\mathbb{M}(\alpha))\,\mu - \mu$: the change `coadjoint_flow` makes,
+        without the cancellation of that difference where the algebra's flow has a closed form
+        (so(3), se(3) and their direct sums: a rounding error of order
+        $\epsilon\,|t\alpha|\,|\mu|$ instead of $\epsilon|\mu|$). Arguments as
+        `coadjoint_flow`; what a compensated composition (`integrators.splitting.Compensated`)
+        adds to the state it carries in two parts."""
+        return self._checked_flow(self._coadjoint_increment, "coadjoint_increment", alpha, t, mu)
+
+    def _coadjoint_increment(self, alpha: jax.Array, t: jax.Array, mu: jax.Array) -> jax.Array:
+        """`_coadjoint_flow(alpha, t, mu) - mu` (algebras with a closed form override it)."""
+        return self._coadjoint_flow(alpha, t, mu) - mu
+
+    def _checked_flow(self, flow: Any, name: str, alpha: ArrayLike, t: ArrayLike, mu: ArrayLike) -> jax.Array:
+        """`flow(alpha, t, mu)` (body convention) on validated, broadcast input, its time
+        reversed for `sign = +1`; `FloatingPointError` for a concrete non-finite result."""
         alpha = as_state(alpha, "alpha", self.dim)
         mu = as_state(mu, "mu", self.dim)
         t = as_scalar_time(t)
@@ -133,14 +151,14 @@ class AbstractLieAlgebra(abc.ABC):
         mu = jnp.broadcast_to(mu, batch + (self.dim,))
         # The flows are written for sign = -1; sign = +1 reverses time.
         t = jnp.broadcast_to(-self.sign * t, batch)
-        out = self._coadjoint_flow(alpha, t, mu)
+        out = flow(alpha, t, mu)
         if not isinstance(out, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(out))):
             # Finite inputs (checked above), non-finite result: exp(t M(alpha)) overflowed, which
             # happens on non-compact algebras, where the flow grows like exp(|t alpha|).
             k = np.unravel_index(int(np.argmax(~np.isfinite(np.asarray(out)).any(axis=-1))), batch) if batch else ()
             size = float(np.abs(np.asarray(t)[k]) * np.linalg.norm(np.asarray(alpha)[k]))
             raise FloatingPointError(
-                f"coadjoint_flow overflowed at batch index {tuple(int(i) for i in k)}: |t| |alpha| = {size:.3g}; "
+                f"{name} overflowed at batch index {tuple(int(i) for i in k)}: |t| |alpha| = {size:.3g}; "
                 f"exp(t M(alpha)) on {self.name} grows like exp(|t alpha|) and exceeds float64. "
                 "Use smaller alpha or t (a learned map far outside its training data produces such alpha)"
             )

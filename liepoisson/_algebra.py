@@ -221,6 +221,9 @@ class LieAlgebra(AbstractLieAlgebra):
     def _coadjoint_flow(self, alpha, t, mu):
         return self.exact_flow(self._C, alpha, t, mu)
 
+    def _coadjoint_increment(self, alpha, t, mu):
+        return self.exact_flow.increment(self._C, alpha, t, mu)
+
     def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
         return self.exact_flow.parameters(self._C, mu0, mu1, t, casimir_gradients)
 

@@ -7,7 +7,9 @@ $\mathbb{M}(\alpha)_{ad} = -C_{abd}\,\alpha_b$, so that $\dot\mu = \mathbb{B}(\m
 exponential; `RodriguesFlow` (so(3)) and `SE3Flow` (se(3)) are closed-form fast paths with
 the same interface, tested against it. Each flow also knows its inverse, `parameters`: the
 closed form of the shortest rotation for so(3), Gauss-Newton (`gauss_newton_parameters`)
-otherwise.
+otherwise; and its increment $\exp(t\,\mathbb{M}(\alpha))\mu - \mu$, `increment`, which the
+closed forms give without the cancellation of the difference (a compensated composition adds
+it to a state carried in two parts).
 """
 
 from __future__ import annotations
@@ -66,6 +68,16 @@ def rotate(k: jax.Array, v: jax.Array) -> jax.Array:
     return v - sinc[..., None] * kv + c1[..., None] * _cross(k, kv)
 
 
+def rotation_increment(k: jax.Array, v: jax.Array) -> jax.Array:
+    r"""$\exp(-\hat k)\,v - v = -\frac{\sin\theta}{\theta}\,k\times v
+    + \frac{1-\cos\theta}{\theta^2}\,k\times(k\times v)$, $\theta = |k|$: the change
+    `rotate` makes, with a rounding error of order $\epsilon\,\theta\,|v|$ (the difference
+    `rotate(k, v) - v` carries the $\epsilon|v|$ of the rounded sum). Exactly zero for $k = 0$."""
+    sinc, c1, _ = rotation_coefficients(jnp.sum(k * k, axis=-1))
+    kv = _cross(k, v)
+    return c1[..., None] * _cross(k, kv) - sinc[..., None] * kv
+
+
 @jax.jit
 def _shortest_rotation(a: jax.Array, b: jax.Array) -> jax.Array:
     r"""$\theta\,(a\times b)/|a\times b|$, $\theta = \operatorname{atan2}(|a\times b|, a\cdot b)$:
@@ -117,6 +129,16 @@ class AbstractCoadjointFlow(abc.ABC):
         self, structure_constants: np.ndarray, alpha: jax.Array, t: jax.Array, mu: jax.Array
     ) -> jax.Array:
         """`alpha`, `mu` of shape `(..., n)` and `t` of shape `(...)`, already broadcast."""
+
+    def increment(
+        self, structure_constants: np.ndarray, alpha: jax.Array, t: jax.Array, mu: jax.Array
+    ) -> jax.Array:
+        r"""$\exp(t\,\mathbb{M}(\alpha))\mu - \mu$, shapes as `__call__`. Here the
+        difference of the flow and `mu` (its rounding error is $\epsilon|\mu|$, that of the
+        flow's last sum); a closed form overrides it with one whose error is of order
+        $\epsilon\,|t\,\mathbb{M}(\alpha)|\,|\mu|$, what a compensated composition
+        (`integrators.splitting.Compensated`) gains by."""
+        return self(structure_constants, alpha, t, mu) - mu
 
     @abc.abstractmethod
     def parameters(
@@ -185,6 +207,9 @@ class RodriguesFlow(AbstractCoadjointFlow):
     def __call__(self, structure_constants, alpha, t, mu):
         return rotate(t[..., None] * alpha, mu)
 
+    def increment(self, structure_constants, alpha, t, mu):
+        return rotation_increment(t[..., None] * alpha, mu)
+
     def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
         _check_not_antiparallel(mu0, mu1, ("mu0", "mu1"))
         # exp(-t hat(alpha)) = exp(hat w) for t alpha = -w
@@ -213,6 +238,20 @@ class SE3Flow(AbstractCoadjointFlow):
         ktb = _cross(k, tb)
         Vtb = tb - c1[..., None] * ktb + c2[..., None] * _cross(k, ktb)
         return jnp.concatenate([Pi_r - _cross(Vtb, p_t), p_t], axis=-1)
+
+    def increment(self, structure_constants, alpha, t, mu):
+        r"""$(R\Pi - \Pi - (tVb)\times p(t),\ Rp - p)$, the rotations' parts as in
+        `rotation_increment`."""
+        k = t[..., None] * alpha[..., :3]
+        Pi, p = mu[..., :3], mu[..., 3:]
+        sinc, c1, c2 = rotation_coefficients(jnp.sum(k * k, axis=-1))
+        kp, kPi = _cross(k, p), _cross(k, Pi)
+        dp = c1[..., None] * _cross(k, kp) - sinc[..., None] * kp
+        dPi = c1[..., None] * _cross(k, kPi) - sinc[..., None] * kPi
+        tb = t[..., None] * alpha[..., 3:]
+        ktb = _cross(k, tb)
+        Vtb = tb - c1[..., None] * ktb + c2[..., None] * _cross(k, ktb)
+        return jnp.concatenate([dPi - _cross(Vtb, p + dp), dp], axis=-1)
 
     def parameters(self, structure_constants, mu0, mu1, t, casimir_gradients):
         # One exp(t M(A, b)) has no simple closed-form inverse (`se3_rotation_shear` is a
@@ -243,6 +282,14 @@ class DirectSumFlow(AbstractCoadjointFlow):
         for flow, n, C in zip(self.flows, self.dims, self.blocks):
             sl = slice(start, start + n)
             out.append(flow(C, alpha[..., sl], t, mu[..., sl]))
+            start += n
+        return jnp.concatenate(out, axis=-1)
+
+    def increment(self, structure_constants, alpha, t, mu):
+        out, start = [], 0
+        for flow, n, C in zip(self.flows, self.dims, self.blocks):
+            sl = slice(start, start + n)
+            out.append(flow.increment(C, alpha[..., sl], t, mu[..., sl]))
             start += n
         return jnp.concatenate(out, axis=-1)
 

@@ -106,6 +106,10 @@ class DirectSum(AbstractLieAlgebra):
         return jnp.concatenate([g._coadjoint_flow(a, t, m)
                                 for g, a, m in zip(self.summands, self._blocks(alpha), self._blocks(mu))], axis=-1)
 
+    def _coadjoint_increment(self, alpha, t, mu):
+        return jnp.concatenate([g._coadjoint_increment(a, t, m)
+                                for g, a, m in zip(self.summands, self._blocks(alpha), self._blocks(mu))], axis=-1)
+
     def _flow_parameters(self, mu0, mu1, t, casimir_gradients):
         # Each summand's Casimirs depend on its own block only: the problem separates.
         out, row = [], 0

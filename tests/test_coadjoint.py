@@ -488,3 +488,70 @@ def test_common_path_first_on_a_matrix_flow_beyond_the_taylor_bound():
     assert np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(grad)))
     eager = float(jnp.sum(jnp.sin(g.coadjoint_flow(alpha, 1.0, mu))))
     np.testing.assert_allclose(float(value), eager, rtol=0, atol=64 * EPS * np.abs(np.asarray(mu)).size)
+
+
+# -- increments (what a compensated composition adds) -------------------------------------------
+def _reference_increment(g, alpha, t, mu):
+    """(exp(t M(alpha)) - I) mu at 40 digits (mpmath's expm; M_ad = sign C_abd alpha_b, as
+    `reference_coadjoint_flow`), rounded once: independent of the library's closed forms."""
+    import mpmath
+
+    with mpmath.workdps(40):
+        C = g.structure_constants
+        n = g.dim
+        M = mpmath.matrix(n, n)
+        for a in range(n):
+            for d in range(n):
+                M[a, d] = g.sign * mpmath.fsum(mpmath.mpf(float(C[a, b, d])) * mpmath.mpf(float(alpha[b]))
+                                               for b in range(n))
+        E = mpmath.expm(mpmath.mpf(float(t)) * M)
+        m = mpmath.matrix([mpmath.mpf(float(x)) for x in mu])
+        d = (E - mpmath.eye(n)) * m
+        size = mpmath.mnorm(mpmath.mpf(float(t)) * M, "f")
+        return np.array([float(x) for x in d]), float(size)
+
+
+def _parallel_or_zero(dim):
+    """alpha = 0, or mu parallel to alpha (the rotation leaves it fixed), or generic pairs."""
+    v = vectors(dim)
+    return st.one_of(
+        st.tuples(st.just(np.zeros(dim)), v),
+        st.tuples(v, st.floats(-3.0, 3.0, allow_nan=False)).map(lambda p: (p[0], p[1] * p[0])),
+        st.tuples(v, v),
+    )
+
+
+@pytest.mark.parametrize("name", ["so3", "so3_spatial", "se3", "so3+heisenberg", "generic_so3"])
+@given(data=st.data())
+def test_coadjoint_increment_is_the_flow_minus_the_state_without_its_rounding(name, data):
+    g = algebra(name)
+    alpha, mu = data.draw(_parallel_or_zero(g.dim), label="alpha, mu")
+    t = data.draw(times, label="t")
+    increment = np.asarray(g.coadjoint_increment(alpha, t, mu))
+    difference = np.asarray(g.coadjoint_flow(alpha, t, mu)) - mu
+    reference, size = _reference_increment(g, alpha, t, mu)
+    assert np.all(np.isfinite(increment))
+    norm = np.linalg.norm(mu)
+    # The plain difference carries the rounding of the flow's last sum, eps |mu| a component
+    # (and the flow's own few eps |t M| |mu|): 8 eps |mu| (1 + |tM|) holds both.
+    assert np.max(np.abs(increment - difference)) <= 8 * EPS * norm * (1 + size)
+    # The increment itself: the closed forms (so(3), se(3), a direct sum of them with Heisenberg's)
+    # lose a few roundings of terms of size |tM| |mu| and |tM|^2 |mu| (the rotation's second-order
+    # part; Heisenberg's flow is the generic difference, exact here: its M^2 = 0 and the sum
+    # mu + t M mu is exact to eps |mu|, so it gets the plain bound); generic_so3 is the plain
+    # difference, eps |mu|.
+    closed_form = name in ("so3", "so3_spatial", "se3")
+    bound = 8 * EPS * norm * (size + size**2) if closed_form else 8 * EPS * norm * (1 + size + size**2)
+    assert np.max(np.abs(increment - reference)) <= bound
+    if not np.any(alpha) or t == 0.0:
+        assert not np.any(increment)  # the identity flow adds exactly nothing
+
+
+def test_coadjoint_increment_refuses_what_coadjoint_flow_refuses():
+    g = lp.so3()
+    with pytest.raises(ValueError, match="alpha"):
+        g.coadjoint_increment(np.ones(2), 0.1, np.ones(3))
+    with pytest.raises(ValueError, match="mu"):
+        g.coadjoint_increment(np.ones(3), 0.1, np.ones(4))
+    with pytest.raises(FloatingPointError, match="coadjoint_increment overflowed"):
+        lp.sl2().coadjoint_increment(np.array([1e3, 0.0, 0.0]), 1.0, np.ones(3))

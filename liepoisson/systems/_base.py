@@ -187,6 +187,26 @@ class AbstractPoissonSystem(abc.ABC):
             jnp.broadcast_to(y, batch + (self.dim,)),
         )
 
+    def test_flow_increment(self, alpha: ArrayLike, t: ArrayLike, y: ArrayLike) -> jax.Array:
+        r"""`test_flow(alpha, t, y) - y`, the change the test flow makes, computed without
+        the cancellation of that difference where the flow has a closed form (Lie-Poisson
+        systems on so(3), se(3): `AbstractLieAlgebra.coadjoint_increment`); the difference
+        itself otherwise. Arguments as `test_flow`. What a compensated composition
+        (`integrators.splitting.Compensated`) adds to the state it carries in two parts."""
+        alpha = as_state(alpha, "alpha", self.dim)
+        y = as_state(y, "y", self.dim)
+        t = as_scalar_time(t)
+        batch = broadcast_batch(self.dim, alpha=alpha.shape[:-1], y=y.shape[:-1], t=t.shape)
+        return self._test_flow_increment(
+            jnp.broadcast_to(alpha, batch + (self.dim,)),
+            jnp.broadcast_to(t, batch),
+            jnp.broadcast_to(y, batch + (self.dim,)),
+        )
+
+    def _test_flow_increment(self, alpha: jax.Array, t: jax.Array, y: jax.Array) -> jax.Array:
+        """`_test_flow(alpha, t, y) - y` (systems with a closed form override it)."""
+        return self._test_flow(alpha, t, y) - y
+
     def test_flow_parameters(
         self, y0: ArrayLike, y1: ArrayLike, t: ArrayLike, *, rtol: float = 1e-10
     ) -> np.ndarray:
@@ -324,6 +344,9 @@ class AbstractLiePoissonSystem(AbstractPoissonSystem):
 
     def _test_flow(self, alpha, t, y):
         return self.algebra.coadjoint_flow(alpha, t, y)
+
+    def _test_flow_increment(self, alpha, t, y):
+        return self.algebra.coadjoint_increment(alpha, t, y)
 
     def vector_field(self, y: ArrayLike) -> jax.Array:
         r"""$\dot\mu = \mathbb B(\mu)\,\xi(\mu)$, $\xi$ = `generator` ($\nabla H$ unless damped)."""
