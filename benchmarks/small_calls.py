@@ -40,7 +40,7 @@ from liepoisson import vmap_samples
 from ._report import add_output_arguments, saved_results, write_json
 
 
-# -- the implementations replaced (commit 46d8bf6) ---------------------------------------------
+# -- the implementations replaced (commit 46d8bf6; tests/test_small_calls.py compares with them) --
 def former_latent_momenta(model, xi, iterations=20):
     xi = jnp.asarray(xi, dtype=jnp.float64)
     dim = model.system.dim
@@ -75,17 +75,20 @@ def _former_rollout_compiled(step_map, y0, n_saved, save_every):
     return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
 
 
-def former_rollout(m, y0, n_steps, save_every=1):
+def former_rollout(m, y0, n_steps, save_every=1, check=True):
+    """The former `rollout` (the states returned as they are, non-finite ones too, with
+    `check=False`)."""
     y0 = np.asarray(y0, dtype=np.float64)
     every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32)
     out = _former_rollout_compiled(traced_h(m), jnp.asarray(y0.reshape(-1, m.system.dim)), n_steps // save_every,
                                    every)
-    it.RaiseIfNonfinite().check(m, out, save_every)
+    if check:
+        it.RaiseIfNonfinite().check(m, out, save_every)
     return out[0] if y0.ndim == 1 else out
 
 
 @eqx.filter_jit
-def _former_lifted_compiled(step_map, g0, y0, n_saved, save_every):
+def former_lifted_compiled(step_map, g0, y0, n_saved, save_every):
     step = jax.vmap(step_map.lifted_step)
 
     def body(gy, _):
@@ -99,7 +102,7 @@ def _former_lifted_compiled(step_map, g0, y0, n_saved, save_every):
 
 def former_lifted_rollout(m, g0, y0, n_steps, save_every=1):
     G, Y = jnp.asarray(g0)[None], jnp.asarray(y0)[None]
-    gs, ys = _former_lifted_compiled(traced_h(m), G, Y, n_steps // save_every, save_every)
+    gs, ys = former_lifted_compiled(traced_h(m), G, Y, n_steps // save_every, save_every)
     bad = ~(jnp.all(jnp.isfinite(ys), axis=(1, 2)) & jnp.all(jnp.isfinite(gs), axis=(1, 2)))
     if bool(jnp.any(bad)):
         raise FloatingPointError("diverged")

@@ -14,69 +14,19 @@ from helpers import slow_except
 import integrators as it
 import learn
 import liepoisson as lp
+from benchmarks.small_calls import former_latent_momenta, former_lifted_compiled, former_rollout
 from integrators import splitting
 from integrators.internals import traced_h
-from liepoisson import vmap_samples
 
 EPS = np.finfo(np.float64).eps
 BODY = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
 H = 0.1
 
 
-# -- the implementations replaced (commit 46d8bf6) ---------------------------------------------
-def python_loop_momenta(model, xi, iterations=20):
-    """The former `latent_momenta`: 20 Newton steps in a Python loop, op by op."""
-    xi = jnp.asarray(xi, dtype=jnp.float64)
-    dim = model.system.dim
-    flat = xi.reshape(-1, dim)
-    grad = jax.vmap(model.body_velocity)
-    hess = jax.vmap(jax.jacfwd(model.body_velocity))
-    mu = jnp.zeros_like(flat)
-    for _ in range(iterations):
-        mu = mu - jnp.einsum("sij,sj->si", jnp.linalg.pinv(hess(mu)), grad(mu) - flat)
-    return mu.reshape(xi.shape)
-
-
-@eqx.filter_jit
-def scan_rollout(step_map, y0, n_saved, save_every):
-    """The former `_rollout_compiled`: one program per `n_saved`."""
-    step = vmap_samples(step_map.step_carry)
-    uncarry = vmap_samples(step_map.uncarry)
-    if isinstance(save_every, int) and save_every == 1:
-
-        def body(c, _):
-            c = step(c)
-            return c, uncarry(c)
-
-    else:
-
-        def body(c, _):
-            c = jax.lax.fori_loop(0, save_every, lambda _, z: step(z), c)
-            return c, uncarry(c)
-
-    _, ys = jax.lax.scan(body, vmap_samples(step_map.carry)(y0), None, length=n_saved)
-    return jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1)
-
-
+# -- the implementations replaced (commit 46d8bf6), kept by the benchmark that times them --------
 def old_rollout(m, y0, n_steps, save_every=1):
-    y0 = np.asarray(y0, dtype=np.float64)
-    every = 1 if save_every == 1 else jnp.asarray(save_every, dtype=jnp.int32)
-    out = scan_rollout(traced_h(m), jnp.asarray(y0.reshape(-1, m.system.dim)), n_steps // save_every, every)
-    return out[0] if y0.ndim == 1 else out
-
-
-@eqx.filter_jit
-def scan_lifted_rollout(step_map, g0, y0, n_saved, save_every):
-    """The former `_lifted_rollout_compiled`: one program per `n_saved` and `save_every`."""
-    step = jax.vmap(step_map.lifted_step)
-
-    def body(gy, _):
-        gy = jax.lax.fori_loop(0, save_every, lambda _, z: step(*z), gy) if save_every > 1 else step(*gy)
-        return gy, gy
-
-    _, (gs, ys) = jax.lax.scan(body, (g0, y0), None, length=n_saved)
-    return (jnp.concatenate([g0[:, None], jnp.swapaxes(gs, 0, 1)], axis=1),
-            jnp.concatenate([y0[:, None], jnp.swapaxes(ys, 0, 1)], axis=1))
+    """The former `rollout`, its states returned as they are (non-finite ones too)."""
+    return former_rollout(m, y0, n_steps, save_every, check=False)
 
 
 # -- counting compilations ------------------------------------------------------------------------
@@ -141,7 +91,7 @@ def test_latent_momenta_is_the_python_loop_it_replaced(key, shape):
     mu_true = np.random.default_rng(key).normal(size=shape)
     xi = np.asarray(jax.vmap(net.body_velocity)(mu_true.reshape(-1, 3))).reshape(shape)
     mu = np.asarray(learn.latent_momenta(net, xi))
-    want = np.asarray(python_loop_momenta(net, xi))
+    want = np.asarray(former_latent_momenta(net, xi))
     assert mu.shape == shape
     # the same Newton steps, stopped once a step is at round-off (the loop took 20): both solve
     # grad H(mu) = xi to a rounding, so they differ by a few roundings of mu times the
@@ -238,7 +188,7 @@ def test_lifted_rollout_is_bit_identical_to_one_scan(name):
     y0, g0 = starts(3, seed=1)
     for n_steps, save_every in [(0, 1), (7, 1), (129, 1), (260, 2)]:
         gs, ys = m.lifted_rollout(g0, y0, n_steps, save_every=save_every)
-        ref_g, ref_y = scan_lifted_rollout(traced_h(m), jnp.asarray(g0), jnp.asarray(y0), n_steps // save_every,
+        ref_g, ref_y = former_lifted_compiled(traced_h(m), jnp.asarray(g0), jnp.asarray(y0), n_steps // save_every,
                                            save_every)
         np.testing.assert_array_equal(np.asarray(gs), np.asarray(ref_g))
         np.testing.assert_array_equal(np.asarray(ys), np.asarray(ref_y))
