@@ -30,6 +30,7 @@ from ._noise import noise_level
 from ._observations import (
     _per_trajectory,
     check_times,
+    file_groups,
     format_version,
     long_columns,
     observation_plan,
@@ -40,7 +41,7 @@ from ._observations import (
     rows_by_trajectory,
     times_per_trajectory,
 )
-from ._observed_trajectories import AbstractObservedTrajectories
+from ._observed_trajectories import AbstractObservedTrajectories, check_groups
 
 FORMAT = "liepoisson-body-observations"
 FORMAT_VERSION = 1
@@ -141,10 +142,12 @@ class BodyObservations(AbstractObservedTrajectories):
       much better read scalar first are refused as such (`check_scalar_last`).
     - `velocities`: one `(n_j, dim)` array per trajectory, or `None`. At least one of the two.
     - `metadata`: JSON values kept with the data and in its file.
+    - `groups`: one label (a string or an integer) per trajectory, e.g. its recording session
+      (a fit holds whole groups out and shares a gyroscope bias within one); `None`: none.
     """
 
     def __init__(self, system: AbstractLiePoissonSystem, times: Any, configurations: Any = None,
-                 velocities: Any = None, *, metadata: dict[str, Any] | None = None):
+                 velocities: Any = None, *, metadata: dict[str, Any] | None = None, groups: Any = None):
         system = _check_system(system)
         group = system.group
         if configurations is None and velocities is None:
@@ -171,6 +174,7 @@ class BodyObservations(AbstractObservedTrajectories):
             self.velocities = tuple(_rows(velocities, "velocities", n, system.dim, list(self.times)))
         if self.configurations is not None and self.velocities is not None:
             check_scalar_last(group, self.times, self.configurations, self.velocities)
+        self.groups = check_groups(groups, n)
         try:
             self.metadata: dict[str, Any] = jsonable(dict(metadata or {}))
         except (TypeError, ValueError) as err:
@@ -217,7 +221,18 @@ class BodyObservations(AbstractObservedTrajectories):
     def _pick(self, indices: list[int]) -> BodyObservations:
         pick = (lambda xs: None if xs is None else [xs[i] for i in indices])
         return BodyObservations(self.system, pick(self.times), pick(self.configurations), pick(self.velocities),
-                                metadata=self.metadata)
+                                metadata=self.metadata, groups=self._picked_groups(indices))
+
+    @classmethod
+    def _joined(cls, datasets, groups, metadata) -> BodyObservations:
+        measured = datasets[0].measured
+        for k, d in enumerate(datasets[1:], 1):
+            if d.measured != measured:
+                raise ValueError(f"datasets[{k}] holds {' and '.join(d.measured)}, datasets[0] {' and '.join(measured)}: "
+                                 "concatenate observations of the same measurements")
+        join = (lambda key: None if key not in measured else [x for d in datasets for x in getattr(d, key)])
+        return cls(datasets[0].system, [t for d in datasets for t in d.times], join("configurations"),
+                   join("velocities"), metadata=metadata, groups=groups)
 
     def in_units(self, time: float) -> BodyObservations:
         """The same observations with times divided by `time` (e.g. 1e-3 for milliseconds to
@@ -227,13 +242,13 @@ class BodyObservations(AbstractObservedTrajectories):
         time = positive_float(time, "time")
         return BodyObservations(self.system, [t / time for t in self.times], self.configurations,
                                 None if self.velocities is None else [v * time for v in self.velocities],
-                                metadata={**self.metadata, "time_unit": time})
+                                metadata={**self.metadata, "time_unit": time}, groups=self.groups)
 
     # -- files -----------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
         """Write to HDF5, atomically: datasets `trajectory` (each observation's trajectory),
         `t`, and `configurations` `(N, group.size)` and/or `velocities` `(N, dim)`; the system,
-        the group and the metadata as attributes."""
+        the group, the metadata and the trajectories' groups (if any) as attributes."""
         import h5py
 
         index = np.concatenate([np.full(t.size, j) for j, t in enumerate(self.times)])
@@ -248,16 +263,20 @@ class BodyObservations(AbstractObservedTrajectories):
             f.attrs["system_params"] = json.dumps(self.system.params)
             f.attrs["group"] = self.group.name
             f.attrs["metadata"] = json.dumps(self.metadata)
+            if self.groups is not None:
+                f.attrs["groups"] = json.dumps(list(self.groups))
             f.attrs["liepoisson_version"] = liepoisson.__version__
 
     @classmethod
     def from_columns(cls, system: AbstractLiePoissonSystem, trajectory: ArrayLike, t: ArrayLike, *,
                      configurations: ArrayLike | None = None, velocities: ArrayLike | None = None,
-                     metadata: dict[str, Any] | None = None, source: str = "the data") -> BodyObservations:
+                     metadata: dict[str, Any] | None = None, groups: Any = None,
+                     source: str = "the data") -> BodyObservations:
         """From the long format (one row per observation, as a logger writes them): the
         trajectory label of each row (any integers), its time, and its configuration
         `(N, group.size)` and/or body velocity `(N, dim)`; rows in any order (sorted by time
-        within each trajectory; repeated times are refused)."""
+        within each trajectory; repeated times are refused); `groups` one label per
+        trajectory, in the order of their sorted labels."""
         measured = {k: v for k, v in (("configurations", configurations), ("velocities", velocities))
                     if v is not None}
         if not measured:
@@ -266,7 +285,7 @@ class BodyObservations(AbstractObservedTrajectories):
         label, t, columns = long_columns(trajectory, t, measured, source)
         times, per_trajectory = rows_by_trajectory(label, t, columns)
         try:
-            return cls(system, times, **dict(zip(measured, per_trajectory)), metadata=metadata)
+            return cls(system, times, **dict(zip(measured, per_trajectory)), metadata=metadata, groups=groups)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
@@ -318,6 +337,7 @@ class BodyObservations(AbstractObservedTrajectories):
                 name = f.attrs["system"]
                 params = json.loads(f.attrs["system_params"])
                 metadata = json.loads(f.attrs.get("metadata", "{}"))
+                groups = file_groups(f, path)
         except ValueError:
             raise
         except (OSError, KeyError, TypeError) as err:
@@ -329,7 +349,8 @@ class BodyObservations(AbstractObservedTrajectories):
         labels = np.unique(index)
         rows = [np.flatnonzero(index == v) for v in labels]
         return cls(system, [t[r] for r in rows],
-                   *[[data[k][r] for r in rows] if k in data else None for k in MEASURED], metadata=metadata)
+                   *[[data[k][r] for r in rows] if k in data else None for k in MEASURED], metadata=metadata,
+                   groups=groups)
 
 
 def displacement_scale(poses: list[np.ndarray]) -> float:

@@ -217,7 +217,7 @@ def _increasing(path: str, t: np.ndarray, lines: list[int], column: str) -> None
 def read_gyro_csv(path: str | os.PathLike, system: AbstractLiePoissonSystem, *, time: str | None = None,
                   rates: Sequence[str] | None = None, units: str | None = None,
                   segments: Sequence[tuple[float, float]] | None = None,
-                  events: str | None = None) -> BodyObservations:
+                  events: str | None = None, group: str | int | None = None) -> BodyObservations:
     r"""Gyroscope rates $\Omega(t)$ from a CSV export of a phone or an IMU logger, as
     `BodyObservations` holding velocities only.
 
@@ -238,6 +238,10 @@ def read_gyro_csv(path: str | os.PathLike, system: AbstractLiePoissonSystem, *, 
       event column (default: the column named `event`, `events`, `label` or `marker`; or
       `events=` names it) are one trajectory each; without events, the whole file is one.
 
+    - `group`: a label (e.g. the recording session) given to every trajectory of the file
+      (`BodyObservations.groups`); `None`: none. Sessions read one file each are joined by
+      `BodyObservations.concatenate`.
+
     Times must be strictly increasing within each trajectory (and across the file when cut
     by windows), every time and rate finite, each trajectory at least two rows. The metadata
     record the file's name, the units read and each trajectory's window `[t0, t1]` and lines.
@@ -246,6 +250,8 @@ def read_gyro_csv(path: str | os.PathLike, system: AbstractLiePoissonSystem, *, 
     if not isinstance(system.group, Rotations):
         raise TypeError(f"system must be a rotating body (group liepoisson.Rotations, body velocity the angular "
                         f"velocity) for gyroscope rates; got {system!r} with group {system.group!r}")
+    if group is not None and (isinstance(group, bool) or not isinstance(group, (str, int))):
+        raise TypeError(f"group must be a label, a string or an integer (the recording session); got {group!r}")
     if segments is not None and events is not None:
         raise ValueError(f"give segments= (time windows) or events= (an event column), not both; got segments="
                          f"{segments!r} and events={events!r}")
@@ -283,7 +289,8 @@ def read_gyro_csv(path: str | os.PathLike, system: AbstractLiePoissonSystem, *, 
     metadata = {"source": "integrators.read_gyro_csv", "file": os.path.basename(path), "units": unit,
                 "time": header[t_index], "rates": [header[i] for i in r_index],
                 "segments": [[t0, t1] for t0, t1 in windows], "lines": [[lines[k[0]], lines[k[-1]]] for k in picks]}
-    return BodyObservations(system, [t[k] for k in picks], velocities=[rad[k] for k in picks], metadata=metadata)
+    return BodyObservations(system, [t[k] for k in picks], velocities=[rad[k] for k in picks], metadata=metadata,
+                            groups=None if group is None else [group] * len(picks))
 
 
 def _sequence(segments: Any) -> list[Any]:

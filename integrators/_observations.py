@@ -21,7 +21,7 @@ from liepoisson.systems import AbstractPoissonSystem, system_for_file
 from ._files import atomic_path, open_hdf5
 from ._ground_truth import taylor_integrator
 from ._noise import AbstractNoiseLaw, noise_law, noise_level
-from ._observed_trajectories import AbstractObservedTrajectories
+from ._observed_trajectories import AbstractObservedTrajectories, check_groups
 
 FORMAT = "liepoisson-observations"
 FORMAT_VERSION = 1
@@ -220,12 +220,14 @@ class Observations(AbstractObservedTrajectories):
       array); a single 1-D array is shared by every trajectory.
     - `states`: one `(n_j, dim)` array per trajectory (a list, or an `(n_traj, n, dim)` array).
     - `metadata`: JSON values kept with the data and in its file (how it was made).
+    - `groups`: one label (a string or an integer) per trajectory, e.g. its recording session,
+      kept in its file; `None` (default): none.
 
     Missing values are refused, not masked: drop the observation (its time with it).
     """
 
     def __init__(self, system: AbstractPoissonSystem, times: Any, states: Any, *,
-                 metadata: dict[str, Any] | None = None):
+                 metadata: dict[str, Any] | None = None, groups: Any = None):
         if not isinstance(system, AbstractPoissonSystem):
             raise TypeError(f"system must be an AbstractPoissonSystem; got {type(system).__name__}")
         dim = system.dim
@@ -258,6 +260,7 @@ class Observations(AbstractObservedTrajectories):
         self.system = system
         self.times: tuple[np.ndarray, ...] = tuple(t.copy() for t in ts)
         self.states: tuple[np.ndarray, ...] = tuple(y.copy() for y in ys)
+        self.groups = check_groups(groups, len(ys))
         try:
             self.metadata: dict[str, Any] = jsonable(dict(metadata or {}))
         except (TypeError, ValueError) as err:
@@ -283,7 +286,12 @@ class Observations(AbstractObservedTrajectories):
 
     def _pick(self, indices: list[int]) -> Observations:
         return Observations(self.system, [self.times[i] for i in indices], [self.states[i] for i in indices],
-                            metadata=self.metadata)
+                            metadata=self.metadata, groups=self._picked_groups(indices))
+
+    @classmethod
+    def _joined(cls, datasets, groups, metadata) -> Observations:
+        return cls(datasets[0].system, [t for d in datasets for t in d.times], [y for d in datasets for y in d.states],
+                   metadata=metadata, groups=groups)
 
     def check_system(self, system: AbstractPoissonSystem, what: str = "system") -> AbstractPoissonSystem:
         """`system` if it has the Poisson structure of the observations' system (equal, or the
@@ -308,7 +316,7 @@ class Observations(AbstractObservedTrajectories):
     def save(self, path: str | os.PathLike) -> None:
         """Write to HDF5, atomically (a temporary file renamed into place): datasets
         `trajectory` (index of each observation's trajectory), `t`, `states` `(N, dim)`; the
-        system and metadata as attributes."""
+        system, metadata and groups (if any) as attributes."""
         import h5py
 
         index, t, y = self._long()
@@ -321,18 +329,22 @@ class Observations(AbstractObservedTrajectories):
             f.attrs["system"] = self.system.name
             f.attrs["system_params"] = json.dumps(self.system.params)
             f.attrs["metadata"] = json.dumps(self.metadata)
+            if self.groups is not None:
+                f.attrs["groups"] = json.dumps(list(self.groups))
             f.attrs["liepoisson_version"] = liepoisson.__version__
 
     @classmethod
     def from_columns(cls, system: AbstractPoissonSystem, trajectory: ArrayLike, t: ArrayLike, states: ArrayLike,
-                     *, metadata: dict[str, Any] | None = None, source: str = "the data") -> Observations:
+                     *, metadata: dict[str, Any] | None = None, groups: Any = None,
+                     source: str = "the data") -> Observations:
         """From the long format (one row per observation): the trajectory label of each row
         (any integers), its time and its state `(N, dim)`; rows in any order (sorted by time
-        within each trajectory; repeated times are refused)."""
+        within each trajectory; repeated times are refused); `groups` one label per trajectory,
+        in the order of their sorted labels."""
         label, t, (y,) = long_columns(trajectory, t, {"states": states}, source)
         times, (states,) = rows_by_trajectory(label, t, (y,))
         try:
-            return cls(system, times, states, metadata=metadata)
+            return cls(system, times, states, metadata=metadata, groups=groups)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
@@ -375,12 +387,24 @@ class Observations(AbstractObservedTrajectories):
                 name = _text(f.attrs["system"])
                 params = _json_attribute(f.attrs["system_params"], "system_params", path)
                 metadata = _json_attribute(f.attrs.get("metadata", "{}"), "metadata", path)
+                groups = file_groups(f, path)
         except ValueError:
             raise
         except (OSError, KeyError, TypeError) as err:
             raise ValueError(f"{path!r} is damaged or lacks a field of an observations file: {err}") from err
         system = system_for_file(name, params, system, f"the file {path!r}")
-        return cls.from_columns(system, *columns, metadata=metadata, source=repr(path))
+        return cls.from_columns(system, *columns, metadata=metadata, groups=groups, source=repr(path))
+
+
+def file_groups(f: Any, path: str) -> list[str | int] | None:
+    """The `groups` attribute of an observations file (`None` if absent), or a `ValueError`
+    naming the file when it is not a JSON list of labels."""
+    groups = _json_attribute(f.attrs.get("groups", "null"), "groups", path)
+    if groups is not None and not (isinstance(groups, list) and all(
+            isinstance(g, (str, int)) and not isinstance(g, bool) for g in groups)):
+        raise ValueError(f"{path!r}: its attribute groups must be a JSON list of labels (strings or integers), one "
+                         f"per trajectory; got {groups!r}")
+    return groups
 
 
 def _text(value: Any) -> str:
