@@ -45,7 +45,7 @@ def run(kind: str, iterations: int, data, system, reference) -> dict:
 
     model = learn.LPNet(system, network=network(kind), parametrisation=learn.TestFlowParametrisation(system))
     start = time.perf_counter()
-    net, record = learn.fit(model, data, optimiser=learn.QuasiNewton(iterations, "lbfgsb"), validation_fraction=0.2,
+    net, record = learn.fit(model, data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(iterations)), validation_fraction=0.2,
                             seed=0, normalise=True, progress=False, callback=note)
     wall = time.perf_counter() - start
     metrics = measure_rollout(net, record, system, reference.states)["metrics"]

@@ -153,10 +153,10 @@ def study(system: LiePoissonSystem, epochs: int, bfgs: int, seed: int, h: float 
     if "reversible_equivariant" in chosen and reversing_symmetries(system) and sign_symmetries(system):
         models[f"LPNet 3x16 rev. equiv., + L-BFGS-B {lbfgs}"] = _timed_fit(
             reversible_equivariant_lpnet(system, key=seed), data,
-            seed=seed, optimiser=[learn.Adam(epochs), learn.QuasiNewton(lbfgs, "lbfgsb")])
+            seed=seed, optimiser=[learn.Adam(epochs), learn.KeepIfBetter(learn.ScipyLBFGSB(lbfgs))])
     if "glpnet" in chosen:
         models["G-LPNet"] = _timed_fit(learn.GLPNet(system, key=seed), data, seed=seed,
-                                       optimiser=learn.QuasiNewton(bfgs, "bfgs", warm_start=True))
+                                       optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(bfgs))))
     if "fit_splitting" in chosen:
         models["G-LPNet TripleJump"] = _timed_fit_splitting(system, data, bfgs, seed)
     if "mlp" in chosen:

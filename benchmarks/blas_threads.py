@@ -1,5 +1,5 @@
 r"""SciPy's L-BFGS-B loop with NumPy's BLAS on all cores against one thread (what
-`learn.QuasiNewton` does since issue 29): wall time per iteration of E5's LPNet and baseline.
+`learn.ScipyLBFGSB` does since issue 29): wall time per iteration of E5's LPNet and baseline.
 
     python -m benchmarks.blas_threads [--iterations 200] [--trajectories 250 500] [--out FILE.json]
     python -m benchmarks.blas_threads --report   # the table of the saved results
@@ -47,7 +47,7 @@ def run(kind: str, threads: str, iterations: int, data, system) -> dict:
              if threads == "all" else contextlib.nullcontext())
     with patch:
         start = time.perf_counter()
-        _, record = learn.fit(_model(kind, system), data, optimiser=learn.QuasiNewton(iterations, "lbfgsb"),
+        _, record = learn.fit(_model(kind, system), data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(iterations)),
                               validation_fraction=0.2, seed=0, normalise=True, progress=False)
         wall = time.perf_counter() - start
     row = {"model": kind, "blas_threads": threads, "trajectories": int(data.states.shape[0]),
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
         data = it.ground_truth(system, y0s, h=0.1, n_steps=100, seed=e5.DATA_SEED)
         for kind in MODELS:
             # A first short fit compiles the loss, so that neither timed setting pays for it.
-            learn.fit(_model(kind, system), data, optimiser=learn.QuasiNewton(2, "lbfgsb"), validation_fraction=0.2,
+            learn.fit(_model(kind, system), data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(2)), validation_fraction=0.2,
                       seed=0, normalise=True, progress=False)
             for threads in ("all", "one"):
                 results.append(run(kind, threads, args.iterations, data, system))

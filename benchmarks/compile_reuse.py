@@ -67,7 +67,7 @@ def main(argv=None) -> None:
         data = it.ground_truth(system, data_y0, h=h, n_steps=20, seed=0, progress=False)
         t0 = time.perf_counter()
         learn.fit(learn.GLPNet(system, n_modules=args.fit_modules, key=0, method=it.splitting.Strang), data,
-                  optimiser=learn.QuasiNewton(args.fit_iterations, "bfgs", warm_start=True), validation_fraction=0.0,
+                  optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(args.fit_iterations))), validation_fraction=0.0,
                   progress=False)
         fits.append(time.perf_counter() - t0)
     what = f"G-LPNet (sym., {args.fit_modules} modules) BFGS fit, {args.fit_iterations} iterations"

@@ -118,7 +118,7 @@ def child_sweep(workers: int, points: int, epochs: int, out: str, model: str) ->
         def make(point):
             return learn.GLPNet(body, n_modules=6, key=point["seed"])
 
-        fit = {"optimiser": learn.QuasiNewton(epochs, "bfgs", warm_start=True), "validation_fraction": 0.0}
+        fit = {"optimiser": learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(epochs))), "validation_fraction": 0.0}
 
     cluster, client = _cluster(workers) if workers else (None, None)
     try:

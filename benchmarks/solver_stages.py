@@ -9,7 +9,7 @@ Two problems, each fitted from the same start by both:
 - **E6 (pairs, BFGS).** E6's data (50 rigid-body trajectories of 20 steps, h = 0.1) and its
   G-LPNet (6 modules, 18 weights) from its identity-activation fit (`--iterations` SciPy BFGS
   iterations with the warm start: the start both share); then `--iterations` more of
-  `learn.QuasiNewton(method="bfgs")` (SciPy, the loop on the host) against
+  `learn.ScipyBFGS` (SciPy, the loop on the host) against
   `learn.Optimistix(optx.BFGS(rtol=0, atol=0))` (the whole solve compiled).
 - **W2 (observations, Levenberg-Marquardt).** W2's rigid body, 30 trajectories x 21
   observations, noise 1e-3, the quadratic G-LPNet (TripleJump) on whole trajectories with
@@ -56,12 +56,12 @@ def e6(iterations: int) -> list[dict]:
     y0s = np.random.default_rng(6).uniform(-2.0, 2.0, size=(50, 3))
     data = it.ground_truth(system, y0s, h=0.1, n_steps=20, seed=6, progress=False)
     start, _ = learn.fit(learn.GLPNet(system, n_modules=6, key=0), data,
-                              optimiser=learn.QuasiNewton(iterations, "bfgs", warm_start=True),
+                              optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(iterations))),
                               validation_fraction=0.0, seed=0, progress=False)
     rows = []
-    for name, stage in [("SciPy BFGS (learn.QuasiNewton)", learn.QuasiNewton(iterations, "bfgs")),
+    for name, stage in [("SciPy BFGS (learn.ScipyBFGS)", learn.KeepIfBetter(learn.ScipyBFGS(iterations))),
                         ("optimistix BFGS (learn.Optimistix)",
-                         learn.Optimistix(optx.BFGS(rtol=0.0, atol=0.0), max_steps=iterations))]:
+                         learn.KeepIfBetter(learn.Optimistix(optx.BFGS(rtol=0.0, atol=0.0), max_steps=iterations)))]:
         row = {"problem": "E6 G-LPNet, pairs", "solver": name, **_timed(start, data, stage)}
         print(row, flush=True)
         rows.append(row)
@@ -74,11 +74,11 @@ def w2_observations(steps: int) -> list[dict]:
     terms = learn.RidgeTerms(3, 3, key=0, activation="identity", linear_term=False, bias=False)
     net = learn.GLPNet(protocol.system, terms=terms, method=TripleJump)
     first, _ = learn.fit(net, data, loss=learn.TrajectoryLoss(window=1, latent=False),
-                              optimiser=learn.LevenbergMarquardt(200), validation_fraction=0.0, progress=False)
+                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(200)), validation_fraction=0.0, progress=False)
     rows = []
-    for name, stage in [("learn.LevenbergMarquardt (host loop, block Jacobian)", learn.LevenbergMarquardt(steps, 0.0)),
+    for name, stage in [("learn.LevenbergMarquardt (host loop, block Jacobian)", learn.KeepIfBetter(learn.LevenbergMarquardt(steps, 0.0))),
                         ("optimistix LevenbergMarquardt (learn.Optimistix)",
-                         learn.Optimistix(optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), max_steps=steps))]:
+                         learn.KeepIfBetter(learn.Optimistix(optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), max_steps=steps)))]:
         row = {"problem": "W2 G-LPNet, observations", "solver": name,
                **_timed(first, data, stage, loss=learn.TrajectoryLoss())}
         print(row, flush=True)

@@ -12,7 +12,7 @@ from the same weights:
   (E5: L-BFGS-B from the random start, inputs and outputs normalised); E6's G-LPNet by SciPy
   BFGS with the warm start.
 - **new**: the same first stage, then optax's L-BFGS compiled inside JAX in chunks of
-  iterations (`learn.QuasiNewton(method="lbfgs")`); E6's 18 weights by Levenberg-Marquardt
+  iterations (`learn.OptaxLBFGS`); E6's 18 weights by Levenberg-Marquardt
   (`learn.LevenbergMarquardt`, a lineax Cholesky per step) with the warm start.
 
 The figure is the paper's training loss (the MSE the paper reports for the experiment). The
@@ -81,8 +81,8 @@ def _cases() -> dict[str, Case]:
             lambda: it.ground_truth(rb, PI0, h=H, n_steps=999),
             lambda: learn.LPNet(rb, hidden=(16, 16, 16), activation="sigmoid", key=0),
             {"validation_fraction": 0.2, "seed": 0},
-            (adam1, learn.QuasiNewton(full1.refine_iterations, "lbfgsb")),
-            (adam1, learn.QuasiNewton(full1.refine_iterations, "lbfgs")), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
+            (adam1, learn.KeepIfBetter(learn.ScipyLBFGSB(full1.refine_iterations))),
+            (adam1, learn.KeepIfBetter(learn.OptaxLBFGS(full1.refine_iterations))), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
         ),
         "E2": Case(
             lambda: it.ground_truth(
@@ -90,24 +90,24 @@ def _cases() -> dict[str, Case]:
                 seed=e2.DATA_SEED),
             lambda: learn.LPNet(rb, hidden=(32, 32, 32), activation="sigmoid", key=0),
             {"validation_fraction": 0.2, "seed": 0},
-            (adam2, learn.QuasiNewton(full2.refine_iterations, "lbfgsb")),
-            (adam2, learn.QuasiNewton(full2.refine_iterations, "lbfgs")), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
+            (adam2, learn.KeepIfBetter(learn.ScipyLBFGSB(full2.refine_iterations))),
+            (adam2, learn.KeepIfBetter(learn.OptaxLBFGS(full2.refine_iterations))), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
         ),
         "E3": Case(
             lambda: it.ground_truth(pendulum, e3.INITIAL_CONDITIONS, h=H, n_steps=999),
             lambda: learn.LPNet(pendulum, hidden=e3.HIDDEN, activation="sigmoid", key=0,
                                 parametrisation=learn.TestFlowParametrisation(pendulum)),
             {"validation_fraction": 0.5, "seed": 0},
-            (adam3, learn.QuasiNewton(full3.refine_iterations, "lbfgsb")),
-            (adam3, learn.QuasiNewton(full3.refine_iterations, "lbfgs")), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
+            (adam3, learn.KeepIfBetter(learn.ScipyLBFGSB(full3.refine_iterations))),
+            (adam3, learn.KeepIfBetter(learn.OptaxLBFGS(full3.refine_iterations))), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
         ),
         "E4": Case(
             lambda: it.ground_truth(charged, e4.Y0, h=H, n_steps=q4.n_points - 1),
             lambda: learn.LPNet(charged, hidden=e4.HIDDEN, activation="sigmoid", key=0,
                                 parametrisation=learn.TestFlowParametrisation(charged)),
             {"validation_fraction": 0.2, "seed": 0},
-            (adam4, learn.QuasiNewton(1000, "lbfgsb")),
-            (adam4, learn.QuasiNewton(1000, "lbfgs")), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
+            (adam4, learn.KeepIfBetter(learn.ScipyLBFGSB(1000))),
+            (adam4, learn.KeepIfBetter(learn.OptaxLBFGS(1000))), f"Adam, {lbfgsb}", f"Adam, {lbfgs}",
         ),
         "E5": Case(
             lambda: it.ground_truth(
@@ -118,16 +118,16 @@ def _cases() -> dict[str, Case]:
             lambda: learn.LPNet(kirchhoff, hidden=e5.HIDDEN, activation="sigmoid", key=0,
                                 parametrisation=learn.TestFlowParametrisation(kirchhoff)),
             {"validation_fraction": 0.2, "seed": 0, "normalise": True},
-            (learn.QuasiNewton(full5.refine_iterations, "lbfgsb"),),
-            (learn.QuasiNewton(full5.refine_iterations, "lbfgs"),), lbfgsb, lbfgs,
+            (learn.KeepIfBetter(learn.ScipyLBFGSB(full5.refine_iterations)),),
+            (learn.KeepIfBetter(learn.OptaxLBFGS(full5.refine_iterations)),), lbfgsb, lbfgs,
         ),
         "E6": Case(
             lambda: it.ground_truth(rb, np.random.default_rng(e6.DATA_SEED).uniform(-2.0, 2.0, size=(50, 3)), h=H,
                                     n_steps=20, seed=e6.DATA_SEED),
             lambda: learn.GLPNet(rb, n_modules=6, key=0),
             {"validation_fraction": 0.0, "seed": 0},
-            (learn.QuasiNewton(q6.max_iter, "bfgs", warm_start=True),),
-            (learn.LevenbergMarquardt(200, warm_start=True),), "SciPy BFGS, warm start",
+            (learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(q6.max_iter))),),
+            (learn.KeepIfBetter(learn.WarmStart(learn.LevenbergMarquardt(200))),), "SciPy BFGS, warm start",
             "Levenberg-Marquardt (lineax), warm start",
         ),
     }

@@ -10,7 +10,7 @@ $\Phi_s(\langle\alpha_s, W\rangle)$, identity activation (each piece a quadratic
 energy is: a sum of $N^2 - 1$ squares in the Laplacian's eigenbasis) and learned full vectors
 $\alpha_s$, started at $\widetilde H = 0$ (`init="zero"`: the identity step, vectors of unit
 expected length; `--init random` is the paper's start, vectors of length about $\sqrt{256}$),
-fitted by L-BFGS-B (`learn.QuasiNewton`'s default) to the pairs of
+fitted by L-BFGS-B (`learn.ScipyLBFGSB`) to the pairs of
 W5's full profile (12 fields x 40 steps of quflow's step H, the isospectral midpoint at H/16);
 tested as W5 tests (`paper.w5_zeitlin.measure`, 8 fields x 400 steps against the isospectral
 triple jump at H/16). Every step is 2M - 1 conjugations, each an exact Poisson map: the
@@ -54,7 +54,7 @@ def run(N: int, modules: int, iterations: int, init: str, model_path: Path) -> l
     net = learn.GLPNet(system, n_modules=modules, method=Strang(), activation="identity", full_vectors=True, h=H,
                        init=init)
     begin = time.perf_counter()
-    fitted, record = learn.fit(net, pairs, h=H, optimiser=learn.QuasiNewton(iterations), validation_fraction=0.2,
+    fitted, record = learn.fit(net, pairs, h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(iterations)), validation_fraction=0.2,
                                progress=True)
     fit_seconds = time.perf_counter() - begin
     fitted.save(model_path)

@@ -53,7 +53,11 @@ from ._solvers._problem import (
     AbstractProblem as AbstractProblem,
     AbstractStructuredJacobian as AbstractStructuredJacobian,
 )
-from ._solvers._quasi_newton import QuasiNewton as QuasiNewton
+from ._solvers._quasi_newton import (
+    OptaxLBFGS as OptaxLBFGS,
+    ScipyBFGS as ScipyBFGS,
+    ScipyLBFGSB as ScipyLBFGSB,
+)
 from ._solvers._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
 from ._solvers._stage import (
     AbstractResumableStage as AbstractResumableStage,

@@ -97,7 +97,7 @@ def compare(system, ours: Trained, baseline: Trained | None, reference, out_dir,
     return metrics, {key: run["rollout"] for key, run in runs.items()}
 
 
-def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, progress, n_modules=6,
+def glpnet_on_same_data(system, data, reference, out_dir, iterations, starts, progress, n_modules=6,
                         full_vectors=False, integrals=None, method=it.splitting.LieTrotter):
     """A G-LPNet (`n_modules` modules composed by the splitting `method`, exactly Poisson) trained on
     the same pairs (all of them, as the paper trains G-LPNets) and rolled out from the same
@@ -105,7 +105,7 @@ def glpnet_on_same_data(system, data, reference, out_dir, iterations, restarts, 
     `(model, metrics)`."""
     gnet, record = learn.fit(
         learn.GLPNet(system, n_modules=n_modules, key=0, full_vectors=full_vectors, method=method), data,
-        optimiser=learn.QuasiNewton(iterations, "bfgs", restarts=restarts, warm_start=True),
+        optimiser=learn.KeepIfBetter(learn.Restarts(learn.WarmStart(learn.ScipyBFGS(iterations)), starts)),
         validation_fraction=0.0, seed=0, progress=progress,
     )
     gnet.save(out_dir / "glpnet.h5")
@@ -120,7 +120,7 @@ def refine_after_adam(adam: Trained, data, iterations, system, reference, progre
     refinement's is in the refined record."""
     net, rec = adam
     refined = learn.fit(
-        net, data, optimiser=learn.QuasiNewton(iterations, "lbfgsb"),
+        net, data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(iterations)),
         validation_fraction=rec.validation_fraction, seed=rec.seed, loss=rec.loss, progress=progress,
     )
     metrics = measure_rollout(net, rec, system, reference.states)["metrics"]

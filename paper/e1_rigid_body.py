@@ -39,15 +39,15 @@ class Profile:
     final_learning_rate: float
     refine_iterations: int
     glpnet_iterations: int
-    glpnet_restarts: int
+    glpnet_starts: int
 
 
 PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(300, 2, 300, 1e-4, refine_iterations=20, glpnet_iterations=20, glpnet_restarts=1),
-    "quick": Profile(30_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_restarts=2),
+    "smoke": Profile(300, 2, 300, 1e-4, refine_iterations=20, glpnet_iterations=20, glpnet_starts=1),
+    "quick": Profile(30_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_starts=2),
     # full: the paper's 1e5 Adam epochs, then 10k L-BFGS-B (30k until issue 29: BENCHMARKS.md)
-    "full": Profile(100_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_restarts=4),
+    "full": Profile(100_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_starts=4),
 }
 
 
@@ -77,7 +77,7 @@ class E1(AbstractExperiment):
         # The independent trainings start together (in worker processes with --scheduler processes) and are
         # collected in order: the G-LPNet (the longest) first, the seeds, the baseline.
         glpnet = start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
-                       P.glpnet_restarts, progress=progress)
+                       P.glpnet_starts, progress=progress)
         seeds = start_lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=(16, 16, 16), activation="sigmoid", key=seed),
             lambda seed: {
@@ -94,7 +94,7 @@ class E1(AbstractExperiment):
             data,
             optimiser=(
                 learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=P.final_learning_rate),
-                learn.QuasiNewton(P.refine_iterations, "lbfgsb"),
+                learn.KeepIfBetter(learn.ScipyLBFGSB(P.refine_iterations)),
             ),
             validation_fraction=0.2,
             seed=0,

@@ -39,13 +39,13 @@ class Profile:
     refine_iterations: int
     seeds: int = 1
     glpnet_iterations: int = 3500
-    glpnet_restarts: int = 2
+    glpnet_starts: int = 2
 
 
 PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
     "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
-                     glpnet_restarts=1),
+                     glpnet_starts=1),
     # quick: Adam 10k + L-BFGS-B 5k; full: 30k + 10k over 3 seeds (100k + 30k until issue 29;
     # what each reaches: BENCHMARKS.md, "Quick-profile budgets" and "--full in 45 minutes").
     "quick": Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
@@ -82,7 +82,7 @@ class E2(AbstractExperiment):
         # Network seeds vary; the split is the same (seed 0) for all.
         # The independent trainings start together (in worker processes with --scheduler processes).
         glpnet = start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
-                       P.glpnet_restarts, progress=progress)
+                       P.glpnet_starts, progress=progress)
         seeds = start_lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=(32, 32, 32), activation="sigmoid", key=seed),
             lambda seed: {"optimiser": adam, **split},
@@ -90,7 +90,7 @@ class E2(AbstractExperiment):
         )
         baseline = start_training(
             learn.fit, learn.MLPBaseline(system, hidden=(32, 32, 32), activation="sigmoid", key=0), data,
-            optimiser=(adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb")), **split, progress=progress,
+            optimiser=(adam, learn.KeepIfBetter(learn.ScipyLBFGSB(P.refine_iterations))), **split, progress=progress,
         )
         trained, seed_metrics = collect_lpnet_seeds(seeds, "E2")
         net, record = trained[0]

@@ -50,7 +50,7 @@ class Profile:
     prediction_steps: int
     refine_iterations: int
     glpnet_iterations: int
-    glpnet_restarts: int
+    glpnet_starts: int
     glpnet_modules: int = 18
     seeds: int = 1
 
@@ -58,12 +58,12 @@ class Profile:
 PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless. It skips
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
-    "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_restarts=1),
-    "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_restarts=1, glpnet_modules=12),
+    "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_starts=1),
+    "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_starts=1, glpnet_modules=12),
     # full: 5 network seeds (1 until issue 29). One seed's energy error lands on either side of
     # the paper's 1% (it even moves with the number of XLA threads); the median over seeds is
     # the robust figure (the seeds: BENCHMARKS.md, "--full in 45 minutes").
-    "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_restarts=1, seeds=5),
+    "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_starts=1, seeds=5),
 }
 INITIAL_CONDITIONS = np.array([[0.0, 1.0, 1.0], [0.0, 1.5, 2.35], [0.0, 2.0, 4.2]])
 HIDDEN = (16, 16, 16)
@@ -103,7 +103,7 @@ class E3(AbstractExperiment):
         fit = {"optimiser": adam, "validation_fraction": 0.5, "seed": 0}
         # The independent trainings start together (in worker processes with --scheduler processes).
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
-                        P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True)
+                        P.glpnet_starts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True)
                   if P.glpnet_iterations else None)
         seeds = start_lpnet_seeds(
             lambda seed: learn.LPNet(system, hidden=HIDDEN, activation="sigmoid", key=seed,
@@ -113,7 +113,7 @@ class E3(AbstractExperiment):
         )
         baseline = start_training(
             learn.fit, learn.MLPBaseline(system, hidden=HIDDEN, activation="sigmoid", key=0), data,
-            **{**fit, "optimiser": (adam, learn.QuasiNewton(P.refine_iterations, "lbfgsb"))}, progress=progress,
+            **{**fit, "optimiser": (adam, learn.KeepIfBetter(learn.ScipyLBFGSB(P.refine_iterations)))}, progress=progress,
         )
         trained, seed_metrics = collect_lpnet_seeds(seeds, "E3")
         net, record = trained[0]

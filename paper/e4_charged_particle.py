@@ -47,7 +47,7 @@ class Profile:
     batch_size: int | None
     prediction_steps: int
     glpnet_iterations: int
-    glpnet_restarts: int
+    glpnet_starts: int
     glpnet_modules: int = 12
     glpnet_symmetric: bool = True
 
@@ -55,13 +55,13 @@ class Profile:
 PROFILES = {
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless. It skips
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
-    "smoke": Profile(2000, 20, 1000, 300, glpnet_iterations=0, glpnet_restarts=1),
+    "smoke": Profile(2000, 20, 1000, 300, glpnet_iterations=0, glpnet_starts=1),
     # quick skips the G-LPNet too: its compilation and a few hundred iterations take ~40 s.
-    "quick": Profile(20_000, 900, 1000, 2000, glpnet_iterations=0, glpnet_restarts=1),
+    "quick": Profile(20_000, 900, 1000, 2000, glpnet_iterations=0, glpnet_starts=1),
     # full: 3000 epochs (45,000 Adam steps; 6000 until issue 29, which changed no claim: the
     # losses are reached, the energy and integral at neither; the paper's budget: reference/E4/sweep.md);
     # the G-LPNet (no paper claim) 1000 BFGS iterations (2000 until issue 29).
-    "full": Profile(20_000, 3000, 1000, 2000, glpnet_iterations=1000, glpnet_restarts=1),
+    "full": Profile(20_000, 3000, 1000, 2000, glpnet_iterations=1000, glpnet_starts=1),
 }
 Y0 = np.array([1.0, 0.5, 0.5, 1.0])  # (p1, p2, x1, x2)
 HIDDEN = (32, 32, 32)
@@ -103,7 +103,7 @@ class E4(AbstractExperiment):
         integrals = {"integral": system.angular_integral}
         # The independent trainings start together (in worker processes with --scheduler processes).
         glpnet = (start_training(glpnet_on_same_data, system, data, reference, out_dir, P.glpnet_iterations,
-                        P.glpnet_restarts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True,
+                        P.glpnet_starts, progress=progress, n_modules=P.glpnet_modules, full_vectors=True,
                         integrals=integrals,
                         method=it.splitting.Strang() if P.glpnet_symmetric else it.splitting.LieTrotter())
                   if P.glpnet_iterations else None)

@@ -45,7 +45,7 @@ BUDGETS = {  # name -> optimiser stages
     "adam45k": (learn.Adam(3000, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=1000),),
     "adam90k": (learn.Adam(6000, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=1000),),
     "adam90k+lbfgsb1k": (learn.Adam(6000, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=1000),
-                         learn.QuasiNewton(1000, "lbfgsb")),
+                         learn.KeepIfBetter(learn.ScipyLBFGSB(1000))),
 }
 BUDGETS["paper2e5"] = (learn.Adam(200_000, learning_rate=1e-3, final_learning_rate=1e-5),)  # full batch
 MODELS = ("lpnet", "reversible", "reversible_equivariant")

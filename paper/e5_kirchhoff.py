@@ -76,7 +76,7 @@ def stages(P: Profile, refine: int) -> tuple:
     random start)."""
     adam = ((learn.Adam(P.epochs, learning_rate=1e-3, final_learning_rate=1e-5, batch_size=P.batch_size),)
             if P.epochs else ())
-    return adam + ((learn.QuasiNewton(refine, "lbfgsb"),) if refine else ())
+    return adam + ((learn.KeepIfBetter(learn.ScipyLBFGSB(refine)),) if refine else ())
 
 
 class E5(AbstractExperiment):

@@ -48,7 +48,7 @@ class Profile:
     save_every: int
     lpnet_epochs: int
     glpnet_iterations: int
-    glpnet_restarts: int
+    glpnet_starts: int
     systems: tuple[str, ...] = ("rigid body", "Kirchhoff")
     all_baselines: bool = True
     all_orderings: bool = True  # every Strang ordering, or the default and its reverse
@@ -59,11 +59,11 @@ PROFILES = {
     # 5 step sizes. Both time every Strang ordering: maps of equal work must measure equal.
     # "smoke" exercises the pipeline in seconds (tests): one system, one h, three baselines.
     "smoke": Profile((0.1,), n_test=4, long_steps=200, save_every=10, lpnet_epochs=30,
-                     glpnet_iterations=20, glpnet_restarts=1, systems=("rigid body",), all_baselines=False),
+                     glpnet_iterations=20, glpnet_starts=1, systems=("rigid body",), all_baselines=False),
     "quick": Profile((0.025, 0.1, 0.4), n_test=100, long_steps=10_000, save_every=10,
-                     lpnet_epochs=3_000, glpnet_iterations=400, glpnet_restarts=1),
+                     lpnet_epochs=3_000, glpnet_iterations=400, glpnet_starts=1),
     "full": Profile((0.025, 0.05, 0.1, 0.2, 0.4), n_test=100, long_steps=100_000, save_every=10,
-                    lpnet_epochs=30_000, glpnet_iterations=3_000, glpnet_restarts=2),
+                    lpnet_epochs=30_000, glpnet_iterations=3_000, glpnet_starts=2),
 }
 T_ERROR = 100.0  # global error measured at t = 100
 N_OUTPUTS = 25  # outputs every 4.0 time units: every h in the list divides 4.0
@@ -161,9 +161,9 @@ def _learned_models(P: Profile) -> list[AbstractStudyModel]:
     return [
         LPNetModel("LPNet", (Training(learn.Adam(P.lpnet_epochs, learning_rate=1e-3, final_learning_rate=1e-5),
                                       validation_fraction=0.2, seed=0),)),
-        GLPNetModel("G-LPNet (sym.)", (Training(learn.QuasiNewton(P.glpnet_iterations, "bfgs",
-                                                                  restarts=P.glpnet_restarts, warm_start=True),
-                                                validation_fraction=0.0, seed=0),),
+        GLPNetModel("G-LPNet (sym.)", (Training(
+            learn.KeepIfBetter(learn.Restarts(learn.WarmStart(learn.ScipyBFGS(P.glpnet_iterations)), P.glpnet_starts)),
+            validation_fraction=0.0, seed=0),),
                     method=it.splitting.Strang()),
     ]
 

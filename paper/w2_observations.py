@@ -344,7 +344,7 @@ def models(protocol: Protocol, profile: Profile) -> list[AbstractStudyModel]:
     limit, SINDy and weak SINDy (if pysindy is installed) and the MLP, fitted with `TRAIN_SEED`."""
     out: list[AbstractStudyModel] = [
         SplittingModel("G-LPNet", iterations=profile.steps, key=TRAIN_SEED, seed=TRAIN_SEED, validation_fraction=0.0),
-        ParametricModel("limit", (Training(learn.LevenbergMarquardt(profile.steps, rtol=1e-12),
+        ParametricModel("limit", (Training(learn.KeepIfBetter(learn.LevenbergMarquardt(profile.steps, rtol=1e-12)),
                                            loss=learn.TrajectoryLoss(), validation_fraction=0.0, seed=TRAIN_SEED),),
                         family=protocol.family,
                         theta0=protocol.theta0 or (1.0,) * len(protocol.true_theta)),
@@ -359,7 +359,7 @@ def mlp(iterations: int, seed: int = TRAIN_SEED) -> MLPModel:
     """The residual MLP (3x16) on consecutive pairs: Adam (10 epochs per iteration, learning rate
     1e-3 decaying to 1e-5, full batch), then L-BFGS-B (`iterations`)."""
     optimiser = (learn.Adam(10 * iterations, learning_rate=1e-3, final_learning_rate=1e-5),
-                 learn.QuasiNewton(iterations, "lbfgsb"))
+                 learn.KeepIfBetter(learn.ScipyLBFGSB(iterations)))
     return MLPModel("MLP", (Training(optimiser, loss=learn.TrajectoryLoss(window=1, latent=False),
                                      validation_fraction=0.0, seed=seed),), key=seed)
 

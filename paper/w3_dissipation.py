@@ -243,7 +243,7 @@ PROFILES = {
 
 def lpnet(P: Profile) -> LPNetModel:
     """An LPNet (paper architecture, normalised) fitted to exact pairs by Adam, then L-BFGS-B."""
-    return LPNetModel("LPNet", (Training((learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)), normalise=True),),
+    return LPNetModel("LPNet", (Training((learn.Adam(P.adam), learn.KeepIfBetter(learn.ScipyLBFGSB(P.lbfgs))), normalise=True),),
                       key=TRAIN_SEED)
 
 
@@ -252,8 +252,8 @@ def noisy_lpnet(P: Profile, noise: float) -> LPNetModel:
     then L-BFGS-B, unnormalised), then Levenberg-Marquardt on whole trajectories from fitted
     clean starts (errors in variables, `learn.TrajectoryLoss()`)."""
     return LPNetModel(f"LPNet, noise {noise:g}", (
-        Training((learn.Adam(P.adam), learn.QuasiNewton(P.lbfgs)), loss=learn.TrajectoryLoss(window=1, latent=False)),
-        Training(learn.LevenbergMarquardt(P.lm_steps)),
+        Training((learn.Adam(P.adam), learn.KeepIfBetter(learn.ScipyLBFGSB(P.lbfgs))), loss=learn.TrajectoryLoss(window=1, latent=False)),
+        Training(learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))),
     ), key=TRAIN_SEED, h=H)
 
 

@@ -255,7 +255,7 @@ class LimitBodyModel(LearnedBodyModel):
         n = protocol.A.shape[0]
         theta0 = 1.1 * protocol.A[np.triu_indices(n)]
         model = learn.ParametricHamiltonian(protocol.system, _quadratic_form(n), theta0, substeps=10)
-        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.LevenbergMarquardt(steps, rtol=1e-12),
+        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(steps, rtol=1e-12)),
                               validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
         return fitted
 
@@ -296,7 +296,7 @@ class LPNetBodyModel(AbstractBodyModel):
         observed = it.Observations(protocol.system, list(data.times), list(momenta))
         net = learn.LPNet(protocol.system, hidden=(16, 16, 16), activation="sigmoid", key=TRAIN_SEED, h=h,
                           parametrisation=learn.TestFlowParametrisation(protocol.system))
-        net, _ = learn.fit(net, observed, loss="state", optimiser=learn.QuasiNewton(LPNET_ITERATIONS, "lbfgsb"),
+        net, _ = learn.fit(net, observed, loss="state", optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(LPNET_ITERATIONS)),
                            validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
         pairs = it.Trajectories(momenta, h, protocol.system, times=data.times[0] - data.times[0][0],
                                 configurations=np.stack(data.configurations))
@@ -419,7 +419,7 @@ class NeuralODEBodyModel(AbstractVelocityFieldModel):
         net = learn.NeuralODE(as_states.system, hidden=(32, 32), activation="tanh", key=TRAIN_SEED,
                               input_scaling=(tuple(xi.mean(0)), tuple(xi.std(0))),
                               output_scaling=((0.0,) * xi.shape[1], tuple(rates.std(0))))
-        fitted, _ = learn.fit(net, as_states, optimiser=learn.QuasiNewton(NEURAL_ODE_ITERATIONS * steps, "bfgs"),
+        fitted, _ = learn.fit(net, as_states, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(NEURAL_ODE_ITERATIONS * steps)),
                               validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
         return _NetworkField(fitted)
 

@@ -171,7 +171,7 @@ def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
     for degree in DEGREES:
         begin = time.perf_counter()
         fitted, record = learn.fit(learn.IsospectralPolynomial(system, degree=degree, h=H, tol=TOL), (y0, y1), h=H,
-                                   optimiser=learn.LevenbergMarquardt(P.lm_steps), validation_fraction=0.2,
+                                   optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps)), validation_fraction=0.2,
                                    progress=progress)
         fit_seconds = time.perf_counter() - begin
         rows.append(measure(system, f"learned, degree {degree}", fitted, H, reference, 1,
@@ -189,7 +189,7 @@ def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
     fitted, record = learn.fit(
         lpnet_start(system, H),
         (trajectories[:P.lpnet_fields, :-1].reshape(-1, system.dim), trajectories[:P.lpnet_fields, 1:].reshape(-1, system.dim)),
-        h=H, optimiser=learn.QuasiNewton(P.lpnet_iterations), validation_fraction=0.2, normalise=True,
+        h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(P.lpnet_iterations)), validation_fraction=0.2, normalise=True,
         progress=progress)
     rows.append(measure(system, "learned LPNet, alpha affine in W", fitted, H, reference, 1, theta=None,
                         fit_seconds=time.perf_counter() - begin, train_loss=float(record.train_loss)))

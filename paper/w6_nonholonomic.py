@@ -311,15 +311,15 @@ def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6
     for noise in P.noises:
         models = [
             ("DAlembertMap", "learned", lambda: learn.DAlembertMap(system, key=DATA_SEED, h=H),
-             learn.LevenbergMarquardt(P.lm_steps)),
+             learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))),
             ("QuadraticDAlembertMap", "learned", lambda: learn.QuadraticDAlembertMap(system, h=H),
-             learn.LevenbergMarquardt(P.lm_steps)),
+             learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))),
             ("neural ODE", "baseline", lambda: learn.NeuralODE(system, hidden=(16, 16), key=DATA_SEED, h=H),
-             learn.QuasiNewton(P.bfgs_steps, "bfgs"))]
+             learn.KeepIfBetter(learn.ScipyBFGS(P.bfgs_steps)))]
         if name in MIRRORS:  # the family with the body's mirror symmetry
             models.insert(2, ("QuadraticDAlembertMap, mirror", "learned",
                               lambda: learn.QuadraticDAlembertMap(system, h=H, reflection=MIRRORS[name]),
-                              learn.LevenbergMarquardt(P.lm_steps)))
+                              learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))))
         for label, kind, make, optimiser in models:
             def learned(label=label, kind=kind, make=make, optimiser=optimiser, noise=noise):
                 data = observations(system, P, noise)

@@ -334,7 +334,7 @@ class LPNetFlightModel(AbstractLearnedFlightModel):
         A, b, _ = learn.weak_form_quadratic(train.records, linear=True, diagonal=False)
         model = learn.BodyLPNet.at_quadratic(lp.systems.RigidBody(), A, b, hidden=(16,), key=TRAIN_SEED)
         fitted, _ = learn.fit(model, train.records, loss=learn.BodyLoss(max_step=LPNET_MAX_STEP),
-                              optimiser=learn.LevenbergMarquardt(steps), progress=False)
+                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(steps)), progress=False)
         return fitted
 
     def identified(self, fitted):

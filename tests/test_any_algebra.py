@@ -92,7 +92,7 @@ def test_lpnet_trains_and_rolls_out_on_the_orbit(name):
 def test_glpnet_trains_and_is_an_exact_poisson_map(name):
     system, data = system_and_data(name)
     model = learn.GLPNet(system, n_modules=3, key=0)  # few modules: compiles fast
-    fitted, record = learn.fit(model, data, optimiser=learn.QuasiNewton(10, "bfgs"), progress=False,
+    fitted, record = learn.fit(model, data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(10)), progress=False,
                                validation_fraction=0.0)
     assert np.isfinite(record.train_loss)
     y = np.asarray(fitted.rollout(data.states[:, 0], 200))

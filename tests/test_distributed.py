@@ -214,7 +214,7 @@ SWEEP_DATA = integrators.ground_truth(BODY, _y0(6, seed=5), 0.1, 12)
 SWEEP_GRID = {"n_modules": [2, 3], "seed": [0, 1]}
 # without the identity warm start (tested in test_learn_warm_start.py): it is a second compiled
 # program per network size, and a sweep hands any optimiser to learn.fit alike
-SWEEP_OPTIMISER = learn.QuasiNewton(25, "bfgs")
+SWEEP_OPTIMISER = learn.KeepIfBetter(learn.ScipyBFGS(25))
 
 
 def _make_glpnet(point):

@@ -114,8 +114,8 @@ def test_fit_checks_its_flags():
     data = it.ground_truth(RB, Y, h=0.1, n_steps=3, progress=False)
     with pytest.raises(TypeError, match="normalise must be True or False; got 'no'"):
         learn.fit(learn.LPNet(RB, hidden=(4,)), data, normalise="no", epochs=1, progress=False)
-    with pytest.raises(TypeError, match="QuasiNewton.warm_start must be True or False"):
-        learn.QuasiNewton(10, warm_start="yes")
+    with pytest.raises(ValueError, match="ScipyBFGS.rtol must be a number in \\[0, 1\\); got 'yes'"):
+        learn.ScipyBFGS(10, rtol="yes")
 
 
 def test_group_averaged_scalings_come_from_the_group_orbit():
@@ -175,7 +175,7 @@ def test_a_fit_from_a_zero_start_lowers_the_loss():
     y1 = np.asarray(jax.vmap(lambda y: RB.test_flow(RB.hamiltonian_gradient(y), 0.1, y))(jnp.asarray(y0)))
     net = learn.LPNet(RB, hidden=(8,), init="zero", h=0.1).normalised(y0, y1, 0.1)
     before = float(learn.state_mse(net, jnp.asarray(y0), jnp.asarray(y1)))
-    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.QuasiNewton(15), validation_fraction=0.0,
+    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(15)), validation_fraction=0.0,
                                  progress=False, normalise=False)
     assert record.train_loss < 0.1 * before
     assert np.any(fitted.network.mlp.layers[-1].weight != 0.0)
@@ -209,6 +209,6 @@ def test_a_glpnet_fit_from_a_zero_start_lowers_the_loss():
     y1 = np.asarray(it.splitting.Strang(RB, 0.1).rollout(y0, 1))[:, -1]
     net = learn.GLPNet(RB, n_modules=6, init="zero", h=0.1, method=it.splitting.Strang)
     before = float(learn.state_mse(net, jnp.asarray(y0), jnp.asarray(y1)))
-    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.QuasiNewton(15), validation_fraction=0.0,
+    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(15)), validation_fraction=0.0,
                                progress=False)
     assert record.train_loss < 0.1 * before

@@ -63,7 +63,7 @@ def test_a_constant_input_component_gives_a_finite_fit():
 def test_an_lpnet_on_it_trains_saves_and_loads(tmp_path):
     data = it.ground_truth(RB, X[:8] / np.linalg.norm(X[:8], axis=1, keepdims=True), h=0.1, n_steps=10,
                            progress=False)
-    net, record = learn.fit(learn.LPNet(RB, network=plus()), data, optimiser=learn.QuasiNewton(30, "lbfgsb"),
+    net, record = learn.fit(learn.LPNet(RB, network=plus()), data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(30)),
                             normalise=True, validation_fraction=0.0, progress=False)
     # normalise=True fitted the affine part to the first-order alphas (Casimir-projected, so not
     # affine in y) and scaled the inner network to what is left: a third to two thirds of their

@@ -220,9 +220,9 @@ def test_refit_of_the_composed_network_beats_the_strang_fit():
     y0 = np.random.default_rng(1).uniform(-1.0, 1.0, size=(10, 3))
     data = it.ground_truth(system, y0, h=0.2, n_steps=10, progress=False)
     strang, r1 = learn.fit(learn.GLPNet(system, 3, key=0, method=it.splitting.Strang), data, progress=False,
-                           optimiser=learn.QuasiNewton(300, "bfgs", warm_start=True))
+                           optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(300))))
     composed = learn.GLPNet(system, terms=strang.terms, method=it.splitting.TripleJump, h=strang.h)
-    _, r2 = learn.fit(composed, data, progress=False, optimiser=learn.QuasiNewton(300, "bfgs", warm_start=False))
+    _, r2 = learn.fit(composed, data, progress=False, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(300)))
     assert r2.stages[0].kept and r2.train_loss < 0.2 * r1.train_loss, (r1.train_loss, r2.train_loss)
 
 
@@ -358,7 +358,7 @@ def test_linear_term_fits_a_quadratic_plus_cosine_piece_a_sigmoid_cannot():
     losses = {}
     for linear_term in (False, True):
         _, rec = learn.fit(learn.GLPNet(system, 3, key=0, method=it.splitting.Strang, linear_term=linear_term),
-                           data, progress=False, optimiser=learn.QuasiNewton(300, "bfgs", warm_start=True))
+                           data, progress=False, optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(300))))
         losses[linear_term] = rec.train_loss
     assert losses[True] < 0.01 * losses[False], losses
 
@@ -382,7 +382,7 @@ def test_compiled_losses_are_shared_across_step_sizes_without_mixing_them():
 
     body = lp.systems.RigidBody()
     y0 = np.random.default_rng(0).uniform(-1.0, 1.0, size=(6, 3))
-    opt = learn.QuasiNewton(15, "bfgs")
+    opt = learn.KeepIfBetter(learn.ScipyBFGS(15))
 
     def fitted(h):
         data = it.ground_truth(body, y0, h=h, n_steps=5, seed=0)

@@ -157,7 +157,7 @@ def test_checkpoint_resume_continues(tmp_path, rb, pairs, monkeypatch, batch_siz
     with pytest.raises(ValueError, match="learning_rate"):
         learn.fit(net, pairs, checkpoint=resume, **{**kwargs, "optimiser": learn.Adam(150, learning_rate=5e-3)})
     # Adam's checkpoint does not depend on the refinement that follows it
-    _, refined = learn.fit(net, pairs, checkpoint=resume, **{**kwargs, "optimiser": (adam, learn.QuasiNewton(5))})
+    _, refined = learn.fit(net, pairs, checkpoint=resume, **{**kwargs, "optimiser": (adam, learn.KeepIfBetter(learn.ScipyLBFGSB(5)))})
     assert refined.stages[-1].details["val_loss_before"] == resumed_record.val_loss
 
 
@@ -205,11 +205,9 @@ def test_fit_bad_inputs_name_the_argument(rb, pairs):
     with pytest.raises(TypeError, match="checkpoint"):
         learn.fit(net, pairs, h=H, optimiser=adam, checkpoint="ckpt.h5")
     with pytest.raises(ValueError, match="checkpoint"):
-        learn.fit(net, pairs, h=H, optimiser=learn.QuasiNewton(2), checkpoint=learn.Checkpoint("c.h5", resume=True))
+        learn.fit(net, pairs, h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(2)), checkpoint=learn.Checkpoint("c.h5", resume=True))
     with pytest.raises(TypeError, match="Checkpoint.path"):
         learn.Checkpoint(3)
-    with pytest.raises(ValueError, match="method"):
-        learn.QuasiNewton(10, method="adam")
     with pytest.raises(TypeError, match="optimiser"):
         learn.fit(net, pairs, h=H, optimiser="adam")
     with pytest.raises(ValueError, match="epochs.*optimiser"):
@@ -219,20 +217,20 @@ def test_fit_bad_inputs_name_the_argument(rb, pairs):
     with pytest.raises(ValueError, match="alpha"):
         learn.fit(learn.MLPBaseline(rb, hidden=(4,)), pairs, h=H, loss="alpha", optimiser=adam)
     with pytest.raises(ValueError, match="normalise"):
-        learn.fit(learn.GLPNet(rb), pairs, h=H, normalise=True, optimiser=learn.QuasiNewton(2))
-    with pytest.raises(ValueError, match="warm_start"):
-        learn.fit(net, pairs, h=H, optimiser=learn.QuasiNewton(2, warm_start=True))
+        learn.fit(learn.GLPNet(rb), pairs, h=H, normalise=True, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(2)))
+    with pytest.raises(ValueError, match="learn.WarmStart: a LPNet has no warm start"):
+        learn.fit(net, pairs, h=H, optimiser=learn.WarmStart(learn.ScipyLBFGSB(2)))
     with pytest.raises(ValueError, match="h=0.2"):  # the model's step against the data's
         learn.fit(learn.LPNet(rb, hidden=(4,), h=0.2), pairs, h=H, optimiser=adam)
 
 
 # 12 s each; BFGS G-LPNet fits run by default in tests/test_any_algebra.py and test_learn_warm_start.py.
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["bfgs", "lbfgs"])
-def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, method):
+@pytest.mark.parametrize("solver", [learn.ScipyBFGS, learn.OptaxLBFGS])
+def test_glpnet_fit_decreases_loss(tmp_path, rb, many_pairs, solver):
     g = learn.GLPNet(rb, n_modules=6, key=0)
     # the paper's G-LPNet training: quasi-Newton with the identity warm start on all pairs
-    stage = learn.QuasiNewton(100, method, restarts=2, warm_start=True)
+    stage = learn.KeepIfBetter(learn.Restarts(learn.WarmStart(solver(100)), 2))
     f, record = learn.fit(g, many_pairs, h=H, optimiser=stage, validation_fraction=0.0, progress=False)
     hist = record.history["train_loss"]
     assert hist[-1] < 0.1 * hist[0]
@@ -261,10 +259,10 @@ def test_baseline_fit_and_casimir_drift(tmp_path, rb, pairs):
 @pytest.mark.parametrize("cls", [learn.LPNet, pytest.param(learn.MLPBaseline, marks=pytest.mark.slow)])
 def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
     net = cls(rb, hidden=(8, 8), key=0)
-    stages = (ADAM_200, learn.QuasiNewton(150))
+    stages = (ADAM_200, learn.KeepIfBetter(learn.ScipyLBFGSB(150)))
     _, record = learn.fit(net, pairs, h=H, optimiser=stages, progress=False)
     adam, refine = record.stages
-    assert (adam.optimiser, refine.optimiser) == ("Adam", "QuasiNewton")
+    assert (adam.optimiser, refine.optimiser) == ("Adam", "ScipyLBFGSB")
     assert refine.kept and refine.iterations > 0
     # the refinement starts from Adam's weights
     assert refine.details["val_loss_before"] == adam.val_loss
@@ -283,7 +281,7 @@ def test_quasi_newton_refinement_lowers_the_loss(rb, pairs, cls):
 
 @pytest.mark.slow  # the numbering after Adam's epochs by default in test_quasi_newton_refinement_lowers_the_loss
 def test_refinement_iterations_numbered_after_adam_epochs(rb, pairs):
-    stages = (ADAM_20, learn.QuasiNewton(5))
+    stages = (ADAM_20, learn.KeepIfBetter(learn.ScipyLBFGSB(5)))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)
     n = record.stages[-1].iterations
     # Adam's entry e is the loss after e updates; iteration k of the refinement comes after all
@@ -316,46 +314,48 @@ def test_refinement_is_dropped_when_validation_gets_worse():
     x = jnp.linspace(-1, 1, 20)
     start = _Line(jnp.asarray(0.0))
     problem = ToyProblem(_LineLoss(), start, (x, 2 * x), (x, 0 * x))
-    result = learn.QuasiNewton(20, "lbfgsb").run(problem, learn.Context())
+    result = learn.KeepIfBetter(learn.ScipyLBFGSB(20)).run(problem, learn.Context())
     kept, rec = result.y, result.record
     assert not rec.kept
     assert float(kept.w) == 0.0
-    # the minimiser did lower the training loss; the validation loss decided against it
-    assert rec.details["start_train_losses"][0] < rec.details["train_loss_before"]
+    # the minimiser alone does lower the training loss; the validation loss decided against it
+    alone = learn.ScipyLBFGSB(20).run(problem, learn.Context()).record
+    assert alone.train_loss < rec.details["train_loss_before"] and alone.val_loss > rec.details["val_loss_before"]
     assert rec.train_loss == rec.details["train_loss_before"] and rec.val_loss == rec.details["val_loss_before"]
     # without validation data the training loss decides, and w reaches 2
-    result = learn.QuasiNewton(20, "bfgs").run(dataclasses.replace(problem, validation=None), learn.Context())
+    result = learn.KeepIfBetter(learn.ScipyBFGS(20)).run(dataclasses.replace(problem, validation=None), learn.Context())
     assert result.record.kept and float(result.y.w) == pytest.approx(2.0, rel=1e-10)
     # Levenberg-Marquardt solves the same least-squares problem (one step for a linear one)
-    result = learn.LevenbergMarquardt(5).run(dataclasses.replace(problem, validation=None), learn.Context())
+    result = learn.KeepIfBetter(learn.LevenbergMarquardt(5)).run(dataclasses.replace(problem, validation=None),
+                                                                 learn.Context())
     assert result.record.kept and float(result.y.w) == pytest.approx(2.0, rel=1e-12)
 
 
 def test_refinement_bad_arguments():
-    with pytest.raises(ValueError, match="iterations"):
-        learn.QuasiNewton(-1)
-    with pytest.raises(TypeError, match="iterations"):
-        learn.QuasiNewton(1.5)
-    with pytest.raises(ValueError, match="method"):
-        learn.QuasiNewton(5, "newton")
-    with pytest.raises(ValueError, match="restarts"):
-        learn.QuasiNewton(5, restarts=0)
+    with pytest.raises(ValueError, match="ScipyLBFGSB.iterations"):
+        learn.ScipyLBFGSB(-1)
+    with pytest.raises(TypeError, match="OptaxLBFGS.iterations"):
+        learn.OptaxLBFGS(1.5)
+    with pytest.raises(ValueError, match="ScipyBFGS.rtol"):
+        learn.ScipyBFGS(5, rtol=1.0)
+    with pytest.raises(ValueError, match="Restarts.starts"):
+        learn.Restarts(learn.ScipyBFGS(5), 0)
 
 
 def test_refine_only_continues_from_the_current_weights(rb, pairs, fitted):
     model, record = fitted
-    _, again_record = learn.fit(model, pairs, h=H, optimiser=learn.QuasiNewton(50), progress=False)
+    _, again_record = learn.fit(model, pairs, h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(50)), progress=False)
     (stage,) = again_record.stages
     # the starting point is the fitted network: its losses are fitted's
     assert stage.details["val_loss_before"] == pytest.approx(record.val_loss, rel=1e-12)
-    assert stage.optimiser == "QuasiNewton" and len(again_record.history["epoch"]) == stage.iterations
+    assert stage.optimiser == "ScipyLBFGSB" and len(again_record.history["epoch"]) == stage.iterations
     assert again_record.val_loss < record.val_loss
     with pytest.raises(TypeError, match="optimiser"):  # nothing to train
         learn.fit(model, pairs, h=H, optimiser=())
 
 
 def test_training_record_round_trip(tmp_path, rb, pairs):
-    stages = (ADAM_20, learn.QuasiNewton(5))
+    stages = (ADAM_20, learn.KeepIfBetter(learn.ScipyLBFGSB(5)))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False)
     record.save(tmp_path / "record.h5")
     loaded = learn.TrainingRecord.load(tmp_path / "record.h5")
@@ -369,22 +369,22 @@ def test_training_record_round_trip(tmp_path, rb, pairs):
 
 
 # SciPy's L-BFGS-B (every iteration reported) by default; optax's L-BFGS (its chunks) with -m slow
-@pytest.mark.parametrize("method", ["lbfgsb", pytest.param("lbfgs", marks=pytest.mark.slow)])
-def test_callback_follows_every_stage_as_it_runs(rb, pairs, method):
+@pytest.mark.parametrize("solver", [learn.ScipyLBFGSB, pytest.param(learn.OptaxLBFGS, marks=pytest.mark.slow)])
+def test_callback_follows_every_stage_as_it_runs(rb, pairs, solver):
     """`callback` sees each optimiser's progress while it runs (what a live plot or a
     time-to-figure measurement needs): Adam's chunks, every quasi-Newton iteration (SciPy) or
     chunk (optax), every Levenberg-Marquardt step; the iteration counts rise within a stage,
     and the losses reported inside a second-order stage are its history's."""
     seen: list[learn.Progress] = []
-    stages = (ADAM_20, learn.QuasiNewton(12, method))
+    stages = (ADAM_20, learn.KeepIfBetter(solver(12)))
     _, record = learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=stages, progress=False,
                           callback=seen.append)
     assert {p.stage for p in seen} == {0, 1}
     assert all(isinstance(p, learn.Progress) for p in seen)
     qn = [p for p in seen if p.stage == 1]
-    assert all(p.optimiser == "QuasiNewton" and p.total == 12 for p in qn)
+    assert all(p.optimiser == solver.__name__ and p.total == 12 for p in qn)
     inside = [p for p in qn if np.isnan(p.val_loss)]  # during the run; the last one is the start's result
-    assert len(inside) >= (record.stages[1].iterations if method == "lbfgsb" else 1)
+    assert len(inside) >= (record.stages[1].iterations if solver is learn.ScipyLBFGSB else 1)
     assert all(np.diff([p.iteration for p in inside]) > 0)
     history = record.history["train_loss"][20:]
     for p in inside:
@@ -414,7 +414,7 @@ def test_scipy_quasi_newton_runs_numpy_blas_on_one_thread(rb, pairs):
     with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
         if blas_threads() != {2}:
             pytest.skip("NumPy's BLAS cannot be set to 2 threads here (not visible to threadpoolctl, or serial)")
-        learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=learn.QuasiNewton(5, "lbfgsb"),
+        learn.fit(learn.LPNet(rb, hidden=(4,), key=0), pairs, h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(5)),
                   progress=False, callback=lambda p: seen.append((p.val_loss, blas_threads())))
         assert blas_threads() == {2}
     # Reports from inside SciPy's loop carry no validation loss (NaN); the end-of-start one does.
@@ -439,7 +439,7 @@ class _WeightedStateLoss(learn.AbstractPairsLoss):
 # by default through Levenberg-Marquardt (residuals); BFGS (the loss's gradient) and Adam (the same
 # gradient, minibatched) with -m slow
 @pytest.mark.parametrize("optimiser", [pytest.param(learn.Adam(200, learning_rate=1e-2), marks=pytest.mark.slow),
-                                       pytest.param(learn.QuasiNewton(60, "bfgs"), marks=pytest.mark.slow),
+                                       pytest.param(learn.KeepIfBetter(learn.ScipyBFGS(60)), marks=pytest.mark.slow),
                                        learn.LevenbergMarquardt(20)],
                          ids=["Adam", "BFGS", "Levenberg-Marquardt"])
 def test_a_new_loss_is_one_class_and_trains_through_every_solver(rb, pairs, optimiser):

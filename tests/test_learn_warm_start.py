@@ -42,8 +42,8 @@ def test_warm_start_beats_cold_start_on_rigid_body():
     net = learn.GLPNet(system, 6, key=0)
     # as the paper: BFGS on all pairs (no validation set)
     settings = {"validation_fraction": 0.0, "progress": False}
-    _, warm = learn.fit(net, data, optimiser=learn.QuasiNewton(400, "bfgs", warm_start=True), **settings)
-    _, cold = learn.fit(net, data, optimiser=learn.QuasiNewton(400, "bfgs", warm_start=False), **settings)
+    _, warm = learn.fit(net, data, optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(400))), **settings)
+    _, cold = learn.fit(net, data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(400)), **settings)
     assert warm.train_loss < 1e-8
     assert warm.train_loss < 0.1 * cold.train_loss
 

@@ -76,7 +76,7 @@ def test_levenberg_marquardt_keeps_the_start_when_it_cannot_improve():
     x = jnp.linspace(0.0, 1.0, 40)
     truth = jnp.asarray([2.0, -1.5, 0.3])
     y = truth[0] * jnp.exp(truth[1] * x) + truth[2]
-    fitted, rec, _ = _fit_curve(truth, y, learn.LevenbergMarquardt(10))
+    fitted, rec, _ = _fit_curve(truth, y, learn.KeepIfBetter(learn.LevenbergMarquardt(10)))
     assert not rec.kept and rec.train_loss == 0.0
     np.testing.assert_array_equal(np.asarray(fitted.theta), np.asarray(truth))
 
@@ -134,7 +134,6 @@ def test_levenberg_marquardt_is_deterministic():
     ({"iterations": 0}, ValueError, "LevenbergMarquardt.iterations"),
     ({"rtol": -1e-3}, ValueError, r"LevenbergMarquardt.rtol must be a number in \[0, 1\)"),
     ({"rtol": True}, ValueError, "LevenbergMarquardt.rtol"),
-    ({"warm_start": "yes"}, TypeError, "LevenbergMarquardt.warm_start must be True or False"),
     ({"target": -1.0}, ValueError, "LevenbergMarquardt.target must be None or a loss >= 0"),
     ({"target": True}, ValueError, "LevenbergMarquardt.target"),
 ])
@@ -373,7 +372,7 @@ def test_interrupted_levenberg_marquardt_fit_resumes_bit_identically(glpnet_pair
     import learn._files as ckpt
     import learn._solvers._levenberg_marquardt as least_squares
 
-    stage = learn.LevenbergMarquardt(24, rtol=0.0, warm_start=True)
+    stage = learn.KeepIfBetter(learn.WarmStart(learn.LevenbergMarquardt(24, rtol=0.0)))
     kwargs = {"optimiser": stage, "validation_fraction": 0.0, "progress": False}
     net = learn.GLPNet(BODY, n_modules=3, key=1)
     straight, straight_record = learn.fit(net, glpnet_pairs, **kwargs)
@@ -406,19 +405,19 @@ def test_interrupted_levenberg_marquardt_fit_resumes_bit_identically(glpnet_pair
     assert len(straight_record.history["train_loss"]) == 24  # every step taken: the interruptions came before the end
     with pytest.raises(ValueError, match="rtol"):
         learn.fit(net, glpnet_pairs, checkpoint=learn.Checkpoint(path, resume=True),
-                  **{**kwargs, "optimiser": learn.LevenbergMarquardt(24, rtol=1e-3, warm_start=True)})
+                  **{**kwargs, "optimiser": learn.KeepIfBetter(learn.WarmStart(learn.LevenbergMarquardt(24, rtol=1e-3)))})
 
 
 def test_checkpoint_needs_one_adam_or_levenberg_marquardt_stage(glpnet_pairs, tmp_path):
     with pytest.raises(ValueError, match="exactly one Adam or LevenbergMarquardt stage"):
-        learn.fit(learn.GLPNet(BODY, n_modules=3), glpnet_pairs, optimiser=learn.QuasiNewton(5, "bfgs"),
+        learn.fit(learn.GLPNet(BODY, n_modules=3), glpnet_pairs, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(5)),
                   checkpoint=learn.Checkpoint(tmp_path / "x.h5"), progress=False)
 
 
 def test_levenberg_marquardt_refuses_a_jacobian_too_large_for_memory(glpnet_pairs):
     net = learn.LPNet(BODY, hidden=(512, 512), key=0)  # 2.7e5 weights: as many forward passes a step
     with pytest.raises(ValueError, match=r"the Jacobian would be 144 residuals x \d+ unknowns, \d+ forward passes "
-                                         r"\(at most 2000.* use learn.QuasiNewton"):
+                                         r"\(at most 2000.* use learn.ScipyLBFGSB"):
         learn.fit(net, glpnet_pairs, optimiser=learn.LevenbergMarquardt(5), validation_fraction=0.0, progress=False)
 
 

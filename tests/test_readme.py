@@ -12,13 +12,13 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 # so that a changed example cannot silently run the full budget).
 SMALLER_BUDGETS = {
     "learn.Adam(30_000)": "learn.Adam(200)",
-    "learn.QuasiNewton(5_000)": "learn.QuasiNewton(20)",
+    "learn.KeepIfBetter(learn.ScipyLBFGSB(5_000))": "learn.KeepIfBetter(learn.ScipyLBFGSB(20))",
     "learn.fit_splitting(body, obs, validation_fraction=0.0)": (
         "learn.fit_splitting(body, obs, iterations=10, validation_fraction=0.0, activation='identity', "
         "progress=False)"
     ),
-    "optimiser=(learn.Adam(3000), learn.QuasiNewton(1000))": (
-        "optimiser=(learn.Adam(20), learn.QuasiNewton(5)), progress=False"
+    "optimiser=(learn.Adam(3000), learn.KeepIfBetter(learn.ScipyLBFGSB(1000)))": (
+        "optimiser=(learn.Adam(20), learn.KeepIfBetter(learn.ScipyLBFGSB(5))), progress=False"
     ),
     # the timing of each map in the comparison: one short run, not the fastest of five runs of
     # at least 0.05 s (step_timing is tested in test_compare.py)
@@ -27,7 +27,7 @@ SMALLER_BUDGETS = {
     # is tested in test_learn_warm_start.py)
     "learn.fit(learn.GLPNet(body, n_modules=6), data)": (
         "learn.fit(learn.GLPNet(body, n_modules=6), data, "
-        "optimiser=learn.QuasiNewton(10, 'bfgs'), progress=False)"
+        "optimiser=learn.KeepIfBetter(learn.ScipyBFGS(10)), progress=False)"
     ),
 }
 

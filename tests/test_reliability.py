@@ -40,7 +40,7 @@ def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("files")
     data = it.ground_truth(BODY, Y0, h=0.1, n_steps=4, seed=0)
     data.save(d / "data.h5")
-    model, record = learn.fit(learn.GLPNet(BODY, key=0), data, optimiser=learn.QuasiNewton(3, "bfgs"),
+    model, record = learn.fit(learn.GLPNet(BODY, key=0), data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(3)),
                               validation_fraction=0.0, progress=False)
     model.save(d / "glpnet.h5")
     record.save(d / "record.h5")

@@ -229,7 +229,7 @@ _Y_NAN = np.array([0.1, np.nan, 0.3])
         (lambda: learn.GLPNet(_BODY, n_modules=0), ValueError, "n_modules must be an integer >= 1; got 0"),
         (lambda: learn.Adam(0), ValueError, "Adam.epochs must be an integer >= 1; got 0"),
         (lambda: _fit(seed=-1), ValueError, "seed must be an integer >= 0; got -1"),
-        (lambda: learn.QuasiNewton(2.5), TypeError, "QuasiNewton.iterations must be an integer >= 1; got float 2.5"),
+        (lambda: learn.ScipyLBFGSB(2.5), TypeError, "ScipyLBFGSB.iterations must be an integer >= 1; got float 2.5"),
         # step sizes and rates (positive_float)
         (lambda: _strang(h=0.0), ValueError, "h must be finite and > 0; got 0.0"),
         (lambda: learn.LPNet(_BODY, h=-1.0), ValueError, "h must be finite and > 0; got -1.0"),

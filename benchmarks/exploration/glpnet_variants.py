@@ -55,7 +55,7 @@ def main(argv=None) -> None:
         net = learn.GLPNet(system, key=0, method=method, activation=args.activation)
     t0 = time.perf_counter()
     fitted, rec = learn.fit(net, data, seed=0, progress=False,
-                            optimiser=learn.QuasiNewton(args.iterations, "bfgs", warm_start=True))
+                            optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(args.iterations))))
     seconds = time.perf_counter() - t0
     cmp = it.compare({"g": fitted, "strang": it.splitting.Strang(system, H)}, system, y_test, t_final=200.0,
                      n_outputs=200)

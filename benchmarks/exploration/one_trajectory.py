@@ -47,7 +47,7 @@ def main(argv=None) -> None:
     end = np.asarray(data.states)[:, -1]
     rows = []
     for seed in args.seeds:
-        stages = [learn.Adam(args.adam)] + ([learn.QuasiNewton(args.lbfgs, "lbfgsb")] if args.lbfgs else [])
+        stages = [learn.Adam(args.adam)] + ([learn.KeepIfBetter(learn.ScipyLBFGSB(args.lbfgs))] if args.lbfgs else [])
         t0 = time.perf_counter()
         net, rec = learn.fit(lpnet(system, key=seed), data, optimiser=stages, seed=seed, progress=False)
         seconds = time.perf_counter() - t0

@@ -57,7 +57,7 @@ def main(argv=None) -> None:
     data = training_data(system, y_train, args.seed)
     t0 = time.perf_counter()
     net, rec = learn.fit(lpnet(system, width=args.width, key=args.seed, symmetry=symmetry, equivariant=args.equivariant),
-                         data, optimiser=[learn.Adam(args.adam), learn.QuasiNewton(args.lbfgs, "lbfgsb")], seed=args.seed,
+                         data, optimiser=[learn.Adam(args.adam), learn.KeepIfBetter(learn.ScipyLBFGSB(args.lbfgs))], seed=args.seed,
                          progress=False)
     seconds = time.perf_counter() - t0
     r = [int(v) for v in net.symmetry]

@@ -94,7 +94,7 @@ def main(argv=None) -> None:
         y_train, y_test = initial_conditions(system.dim, seed)
         data = training_data(system, y_train, seed)
         test = training_data(system, y_test, seed)
-        stages = [learn.Adam(args.adam)] + ([learn.QuasiNewton(args.lbfgs, "lbfgsb")] if args.lbfgs else [])
+        stages = [learn.Adam(args.adam)] + ([learn.KeepIfBetter(learn.ScipyLBFGSB(args.lbfgs))] if args.lbfgs else [])
         model = lpnet(system, width=args.width, key=seed, symmetry="auto" if args.reversible else None,
                       equivariant=args.equivariant, network_wrapper=LinearSkip if args.skip else None)
         t0 = time.perf_counter()

@@ -91,7 +91,7 @@ def main(argv=None) -> None:
     net = learn.GLPNet(system, n, key=0, method=it.splitting.Strang, activation=args.activation,
                        linear_term=args.linear_term)
     s1, r1 = learn.fit(net, data, seed=0, progress=False,
-                       optimiser=learn.QuasiNewton(args.iterations, "bfgs", warm_start=True))
+                       optimiser=learn.KeepIfBetter(learn.WarmStart(learn.ScipyBFGS(args.iterations))))
     t1 = time.perf_counter() - t0
     tj = (untied_composition(s1, it.splitting.TripleJump) if args.untied
           else learn.GLPNet(system, terms=s1.terms, method=it.splitting.TripleJump, h=s1.h))
@@ -99,7 +99,7 @@ def main(argv=None) -> None:
     print("strang-fit loss", r1.train_loss, "tj init mse", mse, flush=True)
     t0 = time.perf_counter()
     s2, r2 = learn.fit(tj, data, seed=0, progress=False,
-                       optimiser=learn.QuasiNewton(args.iterations, "bfgs", warm_start=False))
+                       optimiser=learn.KeepIfBetter(learn.ScipyBFGS(args.iterations)))
     t2 = time.perf_counter() - t0
     maps = {"strangfit": s1, "tj": s2, "strang": it.splitting.Strang(system, H),
             "TJ exact": it.splitting.TripleJump(system, H)}

@@ -100,5 +100,6 @@ class BodyLPNet(AbstractBodyMap, AbstractCasimirConservingMap):
 
     def default_optimiser(self):
         from .._solvers._levenberg_marquardt import LevenbergMarquardt
+        from .._solvers._stage import KeepIfBetter
 
-        return (LevenbergMarquardt(200),)
+        return (KeepIfBetter(LevenbergMarquardt(200)),)

@@ -24,7 +24,8 @@ from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
 
-from .._solvers._quasi_newton import QuasiNewton
+from .._solvers._quasi_newton import ScipyBFGS
+from .._solvers._stage import KeepIfBetter, Restarts, WarmStart
 from ._base import AbstractBodyMap, AbstractCasimirConservingMap, AbstractWarmStartableMap
 from ._learned_terms import RidgeTerms, ridge_potential
 from ._mlp import ACTIVATIONS, activation_antiderivative
@@ -51,7 +52,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
     `integrators.splitting.Splitting(net.learned_system(), h, net.method)`, its `ordering`
     included: a symmetric one runs at other step sizes (`with_h`).
     Exactly Poisson and Casimir-conserving for any parameters; trained by default with BFGS
-    and the identity warm start (`learn.fit(gnet, data)`, see `learn.QuasiNewton`).
+    and the identity warm start (`learn.fit(gnet, data)`, see `learn.ScipyBFGS`).
 
     **Arguments:** `system`; `n_modules` $M$ (default $2n$ for a system of dimension $n$: each
     basis direction twice, the paper's 6 for so(3)), `order`, `key`, `activation` (paper:
@@ -194,7 +195,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
     # -- what learn.fit asks -------------------------------------------------------------------
     def default_optimiser(self):
         """BFGS with the identity warm start (3500 iterations, 4 starts), as the paper."""
-        return (QuasiNewton(3500, "bfgs", restarts=4, warm_start=True),)
+        return (KeepIfBetter(Restarts(WarmStart(ScipyBFGS(3500)), 4)),)
 
     def warm_start(self):
         """The same network with the identity activation (flows of quadratics, a smooth

@@ -24,6 +24,7 @@ from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
+from .._solvers._stage import KeepIfBetter
 from ._base import AbstractCasimirConservingMap
 
 
@@ -81,7 +82,7 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
     `max_iter` as `IsospectralMidpoint` (default: iterate until `tol`). Fit by
     `learn.fit(model, (y0, y1), h=...)` on pairs with its default optimiser,
     Levenberg-Marquardt, whose forward-mode Jacobian passes through the iteration's while loop;
-    a reverse-mode optimiser (Adam, QuasiNewton) needs `iterations=k` (straight-line steps).
+    a reverse-mode optimiser (Adam, ScipyBFGS) needs `iterations=k` (straight-line steps).
     """
 
     theta: jax.Array
@@ -136,4 +137,4 @@ class IsospectralPolynomial(IsospectralMidpoint, AbstractCasimirConservingMap):
 
     def default_optimiser(self):
         """Levenberg-Marquardt, 50 steps (a few coefficients; forward-mode Jacobian)."""
-        return (LevenbergMarquardt(50),)
+        return (KeepIfBetter(LevenbergMarquardt(50)),)

@@ -35,6 +35,7 @@ from liepoisson.internals import positive_float
 from liepoisson.systems import LiePoissonDAlembert
 
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
+from .._solvers._stage import KeepIfBetter
 from ._base import AbstractLearnedMap
 from ._mlp import AffineMLP
 from ._network_spec import network_from_spec
@@ -332,4 +333,4 @@ class QuadraticDAlembertMap(AbstractDAlembertMap):
 
     def default_optimiser(self):
         """Levenberg-Marquardt, 100 steps (four parameters)."""
-        return (LevenbergMarquardt(100),)
+        return (KeepIfBetter(LevenbergMarquardt(100)),)

@@ -17,7 +17,8 @@ from integrators.internals import check_h, check_state, rk4_steps
 from liepoisson.internals import check_system, positive_float, positive_int, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
 
-from .._solvers._quasi_newton import QuasiNewton
+from .._solvers._quasi_newton import ScipyBFGS
+from .._solvers._stage import KeepIfBetter
 from ._base import AbstractBodyMap
 
 
@@ -112,4 +113,4 @@ class ParametricHamiltonian(AbstractBodyMap):
 
     def default_optimiser(self):
         """BFGS, 1000 iterations (a few parameters and, with observations, the fitted starts)."""
-        return (QuasiNewton(1000, "bfgs"),)
+        return (KeepIfBetter(ScipyBFGS(1000)),)

@@ -40,13 +40,10 @@ from ._problem import AbstractLeastSquares, AbstractProblem, AbstractStructuredJ
 from ._stage import (
     AbstractIterationsStage,
     AbstractResumableStage,
-    AbstractStage,
     Context,
-    KeepIfBetter,
     Result,
-    WarmStart,
+    finished_record,
     history,
-    unselected_record,
 )
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
@@ -151,33 +148,6 @@ def _damped_step(A, g, D, lam):
 
 
 @dataclasses.dataclass(frozen=True)
-class _Steps(AbstractIterationsStage):
-    """Levenberg-Marquardt steps from the problem's start (no selection: the wrappers do that);
-    resumable from a checkpoint written in the same phase."""
-
-    iterations: int
-    rtol: float
-    target: float | None = None
-
-    def run(self, problem: AbstractProblem, context: Context) -> Result:
-        start = time.perf_counter()
-        saved = resumed = None
-        if context.checkpoint is not None:
-            saved = _Saved(context.checkpoint, context.owner or problem, context.file_settings, context.earlier)
-            if context.checkpoint.resumable():
-                read = saved.read()
-                resumed = read if read["phase"] == context.phase else None
-        # JAX's Cholesky each step runs in SciPy's OpenBLAS, whose idle workers spin on the
-        # cores the Jacobian's XLA threads need (BENCHMARKS.md, "W2 `--full`: seven systems")
-        with serial_lapack_block():
-            y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
-                                  context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
-                                  context.phase, resumed, context.earlier, context.on_step(), self.target)
-        record = unselected_record("LevenbergMarquardt", len(values), start)
-        return Result(y, record, history(values))
-
-
-@dataclasses.dataclass(frozen=True)
 class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     r"""Levenberg-Marquardt on the residuals $r$ of a least-squares objective
     (`learn.AbstractLeastSquares`: the state and alpha losses, `learn.TrajectoryLoss`). Each
@@ -191,27 +161,26 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     in tens of steps where BFGS takes hundreds (benchmarks, [Levenberg-Marquardt on the
     trajectory loss][levenberg-marquardt-on-the-trajectory-loss-learnlevenbergmarquardt]);
     each step costs $p$ forward passes for $p$ weights ($p + d$ with fitted starts: a
-    structured Jacobian), so for the thousands of weights of an MLP use `QuasiNewton` (a step
-    that would hold more than 2000 passes is refused).
+    structured Jacobian), so for the thousands of weights of an MLP use `learn.ScipyLBFGSB`
+    (a step that would hold more than 2000 passes is refused).
 
     `iterations`: steps at most; `rtol`: stop once the loss has fallen by less than `rtol` of
-    its value over the last 3 steps (0: only when no damping lowers it); `warm_start`: as
-    `QuasiNewton`'s (half the steps on the simpler problem a G-LPNet offers, then the rest
-    from its fit: `learn.WarmStart`); `target`: a loss that only matters if reached (a fit
-    that must beat another's information criterion): stop once, falling at its rate over
-    the last 3 steps for all the steps left, the loss would stay above it, or, where that
-    rate is lower than over the 3 steps before, falling by decreases that keep shrinking in
-    that ratio (Aitken's extrapolation of a linearly converging fit's limit) (judged after 6
-    steps). A fit whose decreases shrink more slowly than that, or grow again, is stopped
-    early by the second rule (BENCHMARKS.md, "Every W4 fit under 2 minutes"). The result is
-    kept only if it lowers the selection loss
-    (validation, or training without a validation set: `learn.KeepIfBetter`). Deterministic;
-    resumable with a `learn.Checkpoint`.
+    its value over the last 3 steps (0: only when no damping lowers it); `target`: a loss that
+    only matters if reached (a fit that must beat another's information criterion): stop once,
+    falling at its rate over the last 3 steps for all the steps left, the loss would stay
+    above it, or, where that rate is lower than over the 3 steps before, falling by decreases
+    that keep shrinking in that ratio (Aitken's extrapolation of a linearly converging fit's
+    limit) (judged after 6 steps). A fit whose decreases shrink more slowly than that, or grow
+    again, is stopped early by the second rule (BENCHMARKS.md, "Every W4 fit under 2
+    minutes"). Every accepted step lowers the training loss; the result is the last step's
+    (`learn.KeepIfBetter` keeps it only if it lowers the selection loss; `learn.WarmStart`
+    first fits the simpler problem a G-LPNet offers). Its result carries the residuals and
+    Jacobian of its last step (`Result.linearisation`). Deterministic; resumable with a
+    `learn.Checkpoint`.
     """
 
     iterations: int = 200
     rtol: float = 1e-10
-    warm_start: bool = False
     target: float | None = None
 
     def __post_init__(self):
@@ -221,30 +190,32 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
         if self.target is not None and (isinstance(self.target, bool) or not isinstance(self.target, (int, float))
                                         or not self.target >= 0):
             raise ValueError(f"LevenbergMarquardt.target must be None or a loss >= 0; got {self.target!r}")
-        if not isinstance(self.warm_start, (bool, np.bool_)):
-            raise TypeError(f"LevenbergMarquardt.warm_start must be True or False; got {self.warm_start!r}")
-
-    def composed(self) -> AbstractStage:
-        """The stage as wrappers around the steps: keep-if-better, after the warm start if
-        asked."""
-        steps: AbstractStage = _Steps(self.iterations, self.rtol, self.target)
-        return KeepIfBetter(WarmStart(steps) if self.warm_start else steps)
 
     def check(self, problem: AbstractProblem, context: Context) -> None:
         super().check(problem, context)
         if not isinstance(problem.objective, AbstractLeastSquares):
             raise ValueError(f"learn.LevenbergMarquardt needs a least-squares loss (a learn.AbstractLeastSquares, "  # noqa: TRY004
-                             f"with residuals); {problem.objective!r} is not one: use learn.QuasiNewton")
+                             f"with residuals); {problem.objective!r} is not one: use learn.ScipyBFGS")
         check_size(problem.objective, problem.y0, problem.train)
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         self.check(problem, context)
-        context = dataclasses.replace(context, total=self.iterations,
-                                      file_settings={**context.file_settings, **dataclasses.asdict(self)})
-        result = self.composed().run(problem, context)
-        record = dataclasses.replace(result.record, optimiser="LevenbergMarquardt",
-                                     settings=dataclasses.asdict(self))
-        return Result(result.y, record, result.history)
+        start = time.perf_counter()
+        saved = resumed = None
+        if context.checkpoint is not None:
+            settings = {**context.file_settings, **dataclasses.asdict(self)}
+            saved = _Saved(context.checkpoint, context.owner or problem, settings, context.earlier)
+            if context.checkpoint.resumable():
+                read = saved.read()
+                resumed = read if read["phase"] == context.phase else None
+        # JAX's Cholesky each step runs in SciPy's OpenBLAS, whose idle workers spin on the
+        # cores the Jacobian's XLA threads need (BENCHMARKS.md, "W2 `--full`: seven systems")
+        with serial_lapack_block():
+            y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
+                                  context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
+                                  context.phase, resumed, context.earlier, context.on_step(), self.target)
+        record = finished_record(problem, self, len(values), start, y)
+        return Result(y, record, history(values))
 
 
 class _Saved:
@@ -396,7 +367,7 @@ def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
             f"learn.LevenbergMarquardt: the Jacobian would be {n_residuals} residuals x {n_unknowns} unknowns, "
             f"{passes} forward passes (at most {MAX_PASSES}), holding {held} (at most {MAX_JACOBIAN}, "
             f"{8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps of a few hundred weights (a G-LPNet); for an MLP use "
-            "learn.QuasiNewton or learn.Adam"
+            "learn.ScipyLBFGSB or learn.Adam"
         )
     if blockwise:
         _LAST.clear()  # a whole Jacobian kept from an earlier fit would outlive the point of blocks

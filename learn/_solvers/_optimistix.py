@@ -16,45 +16,7 @@ import optimistix as optx
 from liepoisson.internals import positive_int
 
 from ._problem import AbstractLeastSquares, AbstractProblem
-from ._stage import AbstractStage, Context, KeepIfBetter, Result, history, unselected_record
-
-
-@dataclasses.dataclass(frozen=True)
-class _Solve(AbstractStage):
-    """One optimistix solve from the problem's start (the selection is `KeepIfBetter`'s)."""
-
-    solver: Any
-    max_steps: int
-
-    @property
-    def budget(self) -> int:
-        return self.max_steps
-
-    def with_budget(self, budget: int) -> _Solve:
-        return dataclasses.replace(self, max_steps=budget)
-
-    def run(self, problem: AbstractProblem, context: Context) -> Result:
-        params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
-        objective = problem.objective
-        start = time.perf_counter()
-        if isinstance(self.solver, optx.AbstractLeastSquaresSolver):
-            def residuals(p, args):
-                return objective.residuals(eqx.combine(p, static), args)
-
-            solution = optx.least_squares(residuals, self.solver, params, args=problem.train,
-                                          max_steps=self.max_steps, throw=False)
-        else:
-            def value(p, args):
-                return objective(eqx.combine(p, static), args)
-
-            solution = optx.minimise(value, self.solver, params, args=problem.train, max_steps=self.max_steps,
-                                     throw=False)
-        y = eqx.combine(solution.value, static)
-        steps = int(solution.stats["num_steps"])
-        loss = float(objective(y, problem.train))
-        record = dataclasses.replace(unselected_record("Optimistix", steps, start), train_loss=loss,
-                                     details={"result": str(solution.result)})
-        return Result(y, record, history([loss], [steps]))
+from ._stage import AbstractStage, Context, Result, finished_record, history
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,9 +24,10 @@ class Optimistix(AbstractStage):
     r"""An optimistix solver as a stage: a minimiser (`optx.BFGS`, `optx.NonlinearCG`,
     `optx.OptaxMinimiser`, ...) on the loss, or a least-squares solver
     (`optx.LevenbergMarquardt`, `optx.GaussNewton`, ...) on the residuals of a
-    `learn.AbstractLeastSquares` objective; at most `max_steps` steps, the result kept only if it
-    lowers the selection loss (`learn.KeepIfBetter`). The history holds the final loss only
-    (the solve is one compiled program)."""
+    `learn.AbstractLeastSquares` objective; at most `max_steps` steps; the result is the
+    solver's (`learn.KeepIfBetter` keeps it only if it lowers the selection loss), its record's
+    `details["result"]` optimistix's `RESULTS`. The history holds the final loss only (the
+    solve is one compiled program)."""
 
     solver: Any
     max_steps: int = 1000
@@ -90,7 +53,25 @@ class Optimistix(AbstractStage):
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         self.check(problem, context)
-        result = KeepIfBetter(_Solve(self.solver, self.max_steps)).run(problem, context)
-        record = dataclasses.replace(result.record, settings={"solver": type(self.solver).__name__,
-                                                              "max_steps": self.max_steps})
-        return Result(result.y, record, result.history)
+        params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
+        objective = problem.objective
+        start = time.perf_counter()
+        if isinstance(self.solver, optx.AbstractLeastSquaresSolver):
+            def residuals(p, args):
+                return objective.residuals(eqx.combine(p, static), args)
+
+            solution = optx.least_squares(residuals, self.solver, params, args=problem.train,
+                                          max_steps=self.max_steps, throw=False)
+        else:
+            def value(p, args):
+                return objective(eqx.combine(p, static), args)
+
+            solution = optx.minimise(value, self.solver, params, args=problem.train, max_steps=self.max_steps,
+                                     throw=False)
+        y = eqx.combine(solution.value, static)
+        steps = int(solution.stats["num_steps"])
+        loss = float(objective(y, problem.train))
+        record = finished_record(problem, self, steps, start, y, {"result": str(solution.result)})
+        record = dataclasses.replace(record, settings={"solver": type(self.solver).__name__,
+                                                       "max_steps": self.max_steps})
+        return Result(y, record, history([loss], [steps]))

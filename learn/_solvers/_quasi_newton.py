@@ -1,6 +1,7 @@
-"""Quasi-Newton minimisation of a full-batch loss with JAX gradients: the `QuasiNewton` stage
-of `learn.fit` (its restarts, warm start and keep-if-better are the wrappers `learn.Restarts`,
-`learn.WarmStart` and `learn.KeepIfBetter`).
+"""Quasi-Newton minimisation of a full-batch loss with JAX gradients: the stages
+`learn.ScipyBFGS`, `learn.ScipyLBFGSB` and `learn.OptaxLBFGS` of `learn.fit` (restarts, a warm
+start and keep-if-better are the wrappers `learn.Restarts`, `learn.WarmStart` and
+`learn.KeepIfBetter`).
 
 `minimiser(method, loss)` compiles the value and gradient of `loss(x, data)` (a flat parameter
 vector `x`) once per loss and returns `minimise(x0, data, max_iter, progress, desc) -> (x,
@@ -28,7 +29,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -45,17 +46,7 @@ from liepoisson.internals import positive_int
 
 from ._compiled import compiled
 from ._problem import AbstractProblem
-from ._stage import (
-    AbstractIterationsStage,
-    AbstractStage,
-    Context,
-    KeepIfBetter,
-    Restarts,
-    Result,
-    WarmStart,
-    history,
-    unselected_record,
-)
+from ._stage import AbstractIterationsStage, Context, Result, finished_record, history
 
 _SCIPY = {"bfgs": "BFGS", "lbfgsb": "L-BFGS-B"}
 _LBFGS_CHUNK = 100
@@ -88,7 +79,7 @@ def minimiser(method: str, loss: Callable[[jax.Array, Any], jax.Array]):
     return compiled(("lbfgs", loss), lambda: _optax_lbfgs(loss))
 
 
-#: `QuasiNewton(rtol=...)` compares the loss with its value this many iterations earlier.
+#: `ScipyBFGS(rtol=...)` and `ScipyLBFGSB(rtol=...)` compare the loss with its value this many iterations earlier.
 RTOL_WINDOW = 20
 
 
@@ -178,77 +169,70 @@ def _optax_lbfgs(loss):
     return minimise
 
 
-@dataclasses.dataclass(frozen=True)
-class _OneStart(AbstractIterationsStage):
-    """One quasi-Newton run from the problem's start (no selection: the wrappers do that)."""
+class _AbstractQuasiNewton(AbstractIterationsStage):
+    """One quasi-Newton run from the problem's start, its method `_method` (no selection:
+    `learn.KeepIfBetter`, `learn.Restarts` do that)."""
 
     iterations: int
-    method: str
-    rtol: float
+    _method: ClassVar[str]
+
+    def __post_init__(self):
+        positive_int(self.iterations, f"{type(self).__name__}.iterations")
+        rtol = getattr(self, "rtol", 0.0)
+        if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 <= rtol < 1:
+            raise ValueError(f"{type(self).__name__}.rtol must be a number in [0, 1); got {rtol!r}")
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         flat = problem.flat()
         x0, h = flat.ravel(problem.y0)
-        minimise = minimiser(self.method, flat)
+        minimise = minimiser(self._method, flat)
         start = time.perf_counter()
         x, hist = minimise(x0, (problem.train, h), self.iterations, context.progress,
-                           context.desc or f"{problem.name} {self.method}", self.rtol, context.on_step())
+                           context.desc or f"{problem.name} {self.name}", getattr(self, "rtol", 0.0),
+                           context.on_step())
         params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
         y = eqx.combine(ravel_pytree(params)[1](jnp.asarray(x)), static)
-        record = unselected_record("QuasiNewton", len(hist["train_loss"]), start)
+        record = finished_record(problem, self, len(hist["train_loss"]), start, y)
         return Result(y, record, history(hist["train_loss"], hist["epoch"]))
 
 
 @dataclasses.dataclass(frozen=True)
-class QuasiNewton(AbstractIterationsStage):
-    r"""Full-batch quasi-Newton minimisation with JAX gradients, for every learned map.
+class ScipyBFGS(_AbstractQuasiNewton):
+    r"""SciPy's BFGS (dense inverse Hessian) on the full-batch loss with JAX gradients: for a
+    few dozen weights (the paper's choice for G-LPNets).
 
-    `iterations` per start; `method`: `"lbfgsb"` (SciPy L-BFGS-B, 50 correction pairs: thousands
-    of parameters, an MLP), `"bfgs"` (SciPy BFGS, dense: a few dozen parameters, the paper's
-    choice for G-LPNets) or `"lbfgs"` (optax, compiled in chunks); `restarts` starts in total,
-    the first from the current weights, the others from fresh random weights
-    (`learn.Restarts`); `warm_start` (problems that offer one: a G-LPNet's): each start first
-    fits a simpler map for half the iterations (for a G-LPNet the identity activation: flows of
-    quadratics, a smooth problem), maps it onto the model (`linear_to_activation`: the linear
-    regime of $\sigma$) and finishes there (`learn.WarmStart`).
-
-    `rtol` (SciPy methods): stop a start once the loss has fallen by less than `rtol` of its
-    value over the last 20 iterations (0, the default: run every iteration; a fit to noisy
-    data reaches its noise floor long before, e.g. `rtol=1e-9`).
-
-    The best start by validation loss (training loss without a validation set) is kept, and
-    only if it beats the weights the stage started from (`learn.KeepIfBetter`).
-    """
+    `iterations` at most; `rtol`: stop once the loss has fallen by less than `rtol` of its value
+    over the last 20 iterations (0, the default: run every iteration, or until the line search
+    makes no progress at float64 resolution; a fit to noisy data reaches its noise floor long
+    before, e.g. `rtol=1e-9`). The result is the last iterate: wrap it in `learn.KeepIfBetter`
+    to keep it only if it lowers the selection loss, in `learn.Restarts` for fresh starts and
+    in `learn.WarmStart` for a simpler problem first (the paper's G-LPNet training:
+    `learn.KeepIfBetter(learn.Restarts(learn.WarmStart(learn.ScipyBFGS(3500)), 4))`)."""
 
     iterations: int = 3500
-    method: str = "lbfgsb"
-    restarts: int = 1
-    warm_start: bool = False
     rtol: float = 0.0
+    _method: ClassVar[str] = "bfgs"
 
-    def __post_init__(self):
-        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
-            raise ValueError(f"QuasiNewton.rtol must be a number in [0, 1); got {self.rtol!r}")
-        positive_int(self.iterations, "QuasiNewton.iterations")
-        check_method(self.method)
-        if not isinstance(self.warm_start, (bool, np.bool_)):
-            raise TypeError(f"QuasiNewton.warm_start must be True or False; got {self.warm_start!r}")
-        positive_int(self.restarts, "QuasiNewton.restarts")
 
-    def composed(self) -> AbstractStage:
-        """The stage as wrappers around one run: keep-if-better of the best of `restarts`
-        starts, each after the warm start if asked."""
-        stage: AbstractStage = _OneStart(self.iterations, self.method, self.rtol)
-        if self.warm_start:
-            stage = WarmStart(stage)
-        return KeepIfBetter(Restarts(stage, self.restarts))
+@dataclasses.dataclass(frozen=True)
+class ScipyLBFGSB(_AbstractQuasiNewton):
+    r"""SciPy's L-BFGS-B with 50 correction pairs on the full-batch loss with JAX gradients: for
+    thousands of weights (the MLP of an LPNet; Adam refined by it,
+    `(learn.Adam(30_000), learn.KeepIfBetter(learn.ScipyLBFGSB(5000)))`).
 
-    def check(self, problem: AbstractProblem, context: Context) -> None:
-        self.composed().check(problem, context)
+    `iterations` and `rtol` as `learn.ScipyBFGS`'s; the result is the last iterate (wrappers:
+    `learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`)."""
 
-    def run(self, problem: AbstractProblem, context: Context) -> Result:
-        context = dataclasses.replace(context, total=self.restarts * self.iterations,
-                                      desc=context.desc or f"{problem.name} {self.method}")
-        result = self.composed().run(problem, context)
-        record = dataclasses.replace(result.record, optimiser="QuasiNewton", settings=dataclasses.asdict(self))
-        return Result(result.y, record, result.history)
+    iterations: int = 3500
+    rtol: float = 0.0
+    _method: ClassVar[str] = "lbfgsb"
+
+
+@dataclasses.dataclass(frozen=True)
+class OptaxLBFGS(_AbstractQuasiNewton):
+    r"""optax's L-BFGS with its zoom line search, compiled in chunks of 100 iterations (the loop
+    on the device): `iterations` at most; the result is the iterate of lowest training loss at
+    the end of a chunk (wrappers: `learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`)."""
+
+    iterations: int = 3500
+    _method: ClassVar[str] = "lbfgs"

@@ -15,7 +15,7 @@ _KIND = "TrainingRecord"
 
 @dataclasses.dataclass(frozen=True)
 class StageRecord:
-    """One stage of a fit (an `Adam` or a `QuasiNewton` run).
+    """One stage of a fit (an `Adam`, `ScipyLBFGSB`, `LevenbergMarquardt`, ... run).
 
     `optimiser` is the stage's class name and `settings` its fields; `iterations` the epochs or
     iterations run; `train_loss`/`val_loss` are those of the weights the stage hands on (its

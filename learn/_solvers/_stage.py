@@ -9,7 +9,7 @@ import abc
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import numpy as np
@@ -25,8 +25,8 @@ from ._record import StageRecord
 class Progress:
     """What a `learn.fit` callback receives: the stage (index and optimiser name), how far it
     is (`iteration` of `total` epochs or iterations: `Adam` reports every compiled chunk of
-    epochs, `QuasiNewton` every iteration (SciPy) or chunk (optax) and at the end of each start,
-    `LevenbergMarquardt` every step and at the end) and the latest losses (`val_loss` NaN
+    epochs, `ScipyBFGS` and `ScipyLBFGSB` every iteration, `OptaxLBFGS` every chunk,
+    `LevenbergMarquardt` every step, `Restarts` the end of each start, `KeepIfBetter` the end) and the latest losses (`val_loss` NaN
     where not measured: inside a quasi-Newton or Levenberg-Marquardt run)."""
 
     stage: int
@@ -96,7 +96,17 @@ def history(train_loss: Any, epoch: Any = None) -> dict[str, np.ndarray]:
 class AbstractStage(abc.ABC):
     """A solver stage: `run(problem, context)` minimises from `problem.y0` and returns a
     `Result`. `budget` is its iterations (or epochs); `with_budget(n)` the same stage with
-    another, which is how a wrapper splits a stage."""
+    another, which is how a wrapper splits a stage. Restarts, a warm start and keeping the
+    result only if it is better are wrappers around a stage (`Restarts`, `WarmStart`,
+    `KeepIfBetter`), never its options."""
+
+    #: Whether the stage writes its state to the fit's `learn.Checkpoint` and resumes from it.
+    resumable: ClassVar[bool] = False
+
+    @property
+    def name(self) -> str:
+        """What records and progress reports call the stage: its solver's class name."""
+        return type(self).__name__
 
     @abc.abstractmethod
     def run(self, problem: AbstractProblem, context: Context) -> Result:
@@ -128,15 +138,22 @@ class AbstractIterationsStage(AbstractStage):
         return dataclasses.replace(self, iterations=budget)
 
 
-def unselected_record(optimiser: str, iterations: int, started: float) -> StageRecord:
-    """The record of one run before any selection (its losses are the wrappers' to fill in,
-    `KeepIfBetter`, `Restarts`): `started` the `time.perf_counter()` at its start."""
-    return StageRecord(optimiser=optimiser, settings={}, iterations=iterations, train_loss=float("nan"),
-                       val_loss=float("nan"), kept=True, wall_time_s=time.perf_counter() - started)
+def finished_record(problem: AbstractProblem, stage: AbstractStage, iterations: int, started: float, y: Any,
+                    details: dict[str, Any] | None = None) -> StageRecord:
+    """The record of a stage's run from `problem`'s start that handed on `y` (its losses;
+    `kept` True: the selection is `KeepIfBetter`'s), `started` the `time.perf_counter()` at
+    its start."""
+    losses = problem.losses(y)
+    settings = dataclasses.asdict(stage) if dataclasses.is_dataclass(stage) else {}
+    return StageRecord(optimiser=stage.name, settings=settings, iterations=iterations, train_loss=losses.train,
+                       val_loss=losses.validation, kept=True, wall_time_s=time.perf_counter() - started,
+                       details=details or {})
 
 
 class AbstractResumableStage(AbstractStage):
     """A stage that writes its state to the fit's `learn.Checkpoint` and resumes from it."""
+
+    resumable = True
 
     def check(self, problem: AbstractProblem, context: Context) -> None:
         if context.checkpoint is not None:
@@ -151,6 +168,14 @@ class AbstractWrappedStage(AbstractStage):
     @property
     def budget(self) -> int:
         return self.stage.budget
+
+    @property
+    def name(self) -> str:
+        return self.stage.name
+
+    @property
+    def resumable(self) -> bool:  # type: ignore[override]
+        return self.stage.resumable
 
     def check(self, problem: AbstractProblem, context: Context) -> None:
         self.stage.check(problem, context)

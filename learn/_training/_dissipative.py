@@ -24,7 +24,7 @@ from .._models._drag import DRAG_KINDS, Dissipative, LearnedDrag
 from .._models._glpnet import GLPNet, check_method
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._record import TrainingRecord
-from .._solvers._stage import Context
+from .._solvers._stage import Context, KeepIfBetter
 from ._body import BodyLoss, weak_form_drag
 from ._criterion import lowest
 from ._families import FAMILIES, Family
@@ -104,7 +104,7 @@ def fit_dissipative(
     for kind in kinds:
         start = loss.problem(start_of(kind), data, **split)
         problem, results, steps = solve_within_noise(
-            start, (LevenbergMarquardt(iterations, 1e-10, warm_start=False),), context)
+            start, (KeepIfBetter(LevenbergMarquardt(iterations, 1e-10)),), context)
         if not steps.within_noise:
             warnings.warn(f"the {kind} drag's fit errs by its own step more than the data's misfit (discretisation "
                           f"sum of squares {steps.discretisation_ssr:.3g} against {steps.ssr:.3g} after "

@@ -1,6 +1,6 @@
 r"""Training as a free function: `learn.fit(model, data, optimiser=...)` returns a new model and
 its `TrainingRecord`. The loss builds the training problem from the map and the data; the
-optimiser stages (`learn.Adam`, `learn.QuasiNewton`, `learn.LevenbergMarquardt`, or any
+optimiser stages (`learn.Adam`, `learn.ScipyLBFGSB`, `learn.LevenbergMarquardt`, ..., or any
 `learn.AbstractStage`) run one after the other, each from the weights the previous one
 handed on."""
 
@@ -22,7 +22,6 @@ from .._solvers._adam import Adam
 from .._solvers._checkpoint import Checkpoint
 from .._solvers._record import StageRecord, TrainingRecord
 from .._solvers._stage import (
-    AbstractResumableStage,
     AbstractStage,
     Callback,
     Context,
@@ -69,10 +68,11 @@ def fit(
       fitted initial states; conventions, [Observations][conventions-observations]), the
       held-out fraction taken by whole trajectories, the map's `h` set to `h=`, its own, or the
       median interval.
-    - `optimiser`: a stage (`Adam`, `QuasiNewton`, `LevenbergMarquardt`, or any
-      `learn.AbstractStage`, e.g. wrapped in `learn.Restarts`) or a sequence of them run one
-      after the other (e.g. `(Adam(100_000), QuasiNewton(30_000))`: Adam refined by
-      L-BFGS-B); default `default_optimiser(model)`. `epochs=N` is short for
+    - `optimiser`: a stage (`Adam`, `ScipyBFGS`, `ScipyLBFGSB`, `OptaxLBFGS`,
+      `LevenbergMarquardt`, `Optimistix`, or any `learn.AbstractStage`), possibly wrapped
+      (`learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`), or a sequence of them run one
+      after the other (e.g. `(Adam(100_000), KeepIfBetter(ScipyLBFGSB(30_000)))`: Adam refined
+      by L-BFGS-B where that lowers the validation loss); default `default_optimiser(model)`. `epochs=N` is short for
       `optimiser=Adam(N)`.
     - `validation_fraction` of the pairs held out (random, seeded by `seed`, which also seeds
       mini-batches and restarts).
@@ -89,7 +89,8 @@ def fit(
     - `checkpoint`: a `Checkpoint` for the one resumable stage (`Adam` or `LevenbergMarquardt`).
     - `progress`: tqdm bars with the losses (`None`: only when stderr is a terminal);
       `callback(learn.Progress)`: called as training goes (after every 1000 Adam epochs, every
-      quasi-Newton or Levenberg-Marquardt iteration, the end of every start), e.g. to log.
+      SciPy or Levenberg-Marquardt iteration, every optax chunk, the end of every start), e.g. to
+      log.
     """
     model = check_learned_map(model)
     stages = _stages(model, optimiser, epochs, checkpoint)
@@ -113,8 +114,8 @@ def solve(problem: MapProblem, stages: Sequence[AbstractStage], context: Context
         stage.check(problem, context)
     results: list[Result] = []
     for index, stage in enumerate(stages):
-        report = None if callback is None else _reporter(callback, index, type(stage).__name__)
-        result = stage.run(problem, dataclasses.replace(context, report=report))
+        report = None if callback is None else _reporter(callback, index, stage.name)
+        result = stage.run(problem, dataclasses.replace(context, report=report, total=stage.budget))
         problem = problem.with_start(result.y)
         results.append(result)
     return problem, results
@@ -157,11 +158,11 @@ def _stages(model: AbstractLearnedMap, optimiser: Any, epochs: int | None,
     except TypeError:
         stages = ()
     if not stages or not all(isinstance(s, AbstractStage) for s in stages):
-        raise TypeError("optimiser must be a learn.Adam, learn.QuasiNewton or learn.LevenbergMarquardt (a "
+        raise TypeError("optimiser must be a learn.Adam, learn.ScipyLBFGSB, learn.LevenbergMarquardt, ... (a "
                         f"learn.AbstractStage), or a sequence of them; got {optimiser!r}")
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
         raise TypeError(f"checkpoint must be a learn.Checkpoint; got {type(checkpoint).__name__}")
-    if checkpoint is not None and sum(isinstance(s, AbstractResumableStage) for s in stages) != 1:
+    if checkpoint is not None and sum(s.resumable for s in stages) != 1:
         raise ValueError("checkpoint needs exactly one Adam or LevenbergMarquardt stage in optimiser")
     return stages
 

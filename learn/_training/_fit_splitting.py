@@ -24,9 +24,9 @@ from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
 from .._models._drag import DRAG_KINDS, Dissipative
 from .._models._glpnet import GLPNet, check_method
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
-from .._solvers._quasi_newton import QuasiNewton
+from .._solvers._quasi_newton import ScipyBFGS
 from .._solvers._record import TrainingRecord
-from .._solvers._stage import Context
+from .._solvers._stage import AbstractStage, Context, KeepIfBetter, WarmStart
 from ._body import weak_form_drag, weak_form_quadratic
 from ._criterion import (
     BIC_RESOLUTION,
@@ -77,7 +77,7 @@ def fit_splitting(
        direction $e_k$ ($n$ = `system.dim`), $\Phi_k' = a_k\sigma(x) + e_kx + b_k$, whose step
        is the Strang splitting of $\widetilde H = \sum_k\Phi_k(c_ky_k)$, order 2. Fitted by
        BFGS (`iterations`, default 1000) from the identity warm start
-       (`QuasiNewton(..., warm_start=True)`).
+       (`learn.WarmStart(learn.ScipyBFGS(...))`).
     2. **Refit by `method`** (default `integrators.splitting.TripleJump()`; `None` stops at
        step 1): the same learned pieces composed by `method`, fitted again by BFGS from there:
        the pieces move from the modified Hamiltonian of the Strang fit to that of the method.
@@ -288,11 +288,11 @@ def _recipe(data, system, method, loss, activation, iterations, key, common, fam
     net = GLPNet(system, system.dim, key=key, method=strang_method, linear_term=True,
                  activation="sigmoid" if activation is None else activation)
     common = {k: common[k] for k in ("h", "validation_fraction", "seed", "progress")}
-    strang, first = fit(net, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=True), **common)
+    strang, first = fit(net, data, optimiser=KeepIfBetter(WarmStart(ScipyBFGS(iterations))), **common)
     if method is None:
         return strang, (first,)
     refit = GLPNet(system, terms=strang.terms, method=method, h=strang.h)
-    fitted, second = fit(refit, data, optimiser=QuasiNewton(iterations, "bfgs", warm_start=False), **common)
+    fitted, second = fit(refit, data, optimiser=KeepIfBetter(ScipyBFGS(iterations)), **common)
     return fitted, (first, second)
 
 
@@ -341,7 +341,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
             warm_start = False
             target = catch_up_target(start, [f[0] for f in fits])
         problem, results = solve(
-            start, (LevenbergMarquardt(iterations, rtol, warm_start=warm_start, target=target),), context)
+            start, (_lm(LevenbergMarquardt(iterations, rtol, target=target), warm_start),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0)
         criterion.update(step_accuracy(problem, family, families[k + 1 :]))
@@ -356,6 +356,11 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         choice = held_out_choice(fits, segment_trajectories(data, loss.window), group_of, iterations, rtol, context,
                                  choice)
     return chosen_last(fits, *chosen_by(choice))
+
+
+def _lm(stage: LevenbergMarquardt, warm_start: bool) -> AbstractStage:
+    """`stage` kept only if it lowers the loss, after the warm start if `warm_start`."""
+    return KeepIfBetter(WarmStart(stage) if warm_start else stage)
 
 
 def chosen_by(choice: FamilyChoice) -> tuple[int, FamilyChoice]:
@@ -545,7 +550,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
             start = start.with_start(Fitted(net, nested.starts))
             target = catch_up_target(start, [f[0] for f in fits])
-        stages = (LevenbergMarquardt(iterations, rtol, warm_start=False, target=target),)
+        stages = (KeepIfBetter(LevenbergMarquardt(iterations, rtol, target=target)),)
         if steps_from_data:
             problem, results, steps = solve_within_noise(start, stages, context)
         else:
@@ -614,7 +619,7 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
     out = []
     for kind in dissipation:
         start = loss.problem(make(system, data, family, method, any_axes, kind), data, **split)
-        problem, results, steps = solve_within_noise(start, (LevenbergMarquardt(iterations, rtol, warm_start=False),),
+        problem, results, steps = solve_within_noise(start, (KeepIfBetter(LevenbergMarquardt(iterations, rtol)),),
                                                      context)
         criterion = information_criterion(problem, problem.y0)
         criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})

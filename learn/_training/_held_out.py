@@ -19,7 +19,7 @@ import numpy as np
 from integrators import Observations
 
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
-from .._solvers._stage import Context
+from .._solvers._stage import Context, KeepIfBetter
 from ._problem import Fitted
 
 #: Folds of held-out selection at most (fewer groups: one group per fold).
@@ -130,7 +130,7 @@ def held_out_errors(problem: Any, segment_trajectory: np.ndarray, folds: Sequenc
     for held in folds:
         out = np.isin(segment_trajectory, held)
         fold = dataclasses.replace(problem, train=_masked(train, np.flatnonzero(~out)))
-        result = LevenbergMarquardt(iterations, rtol).run(fold, context)
+        result = KeepIfBetter(LevenbergMarquardt(iterations, rtol)).run(fold, context)
         model = result.y.model
         per_segment = fit_held_out_starts(objective, model, problem.y0.starts, _masked(train, np.flatnonzero(out)))
         np.add.at(ssr, segment_trajectory[out], per_segment[out])

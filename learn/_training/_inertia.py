@@ -20,6 +20,7 @@ from liepoisson.internals import positive_int, progress_bar
 
 from .._models._base import AbstractBodyMap
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
+from .._solvers._stage import KeepIfBetter
 from ._body import BodyLoss, latent_momenta
 from ._identify import PrincipalAxes, quadratic_part
 
@@ -93,7 +94,7 @@ def inertia(model: AbstractBodyMap, data: BodyObservations | Observations | None
     with progress_bar(n_bootstrap, "bootstrap", "fit", progress) as bar:
         for _ in range(n_bootstrap):
             resample = data.select(rng.integers(0, len(data), size=len(data)))
-            refit, _ = fit(model, resample, loss=loss, optimiser=(LevenbergMarquardt(BOOTSTRAP_ITERATIONS),),
+            refit, _ = fit(model, resample, loss=loss, optimiser=(KeepIfBetter(LevenbergMarquardt(BOOTSTRAP_ITERATIONS)),),
                            progress=False)
             m, ax = _principal(inertia_matrix(refit, resample))
             samples_m.append(m)

@@ -26,7 +26,7 @@ from .._models._mlp import AffineMLP
 from .._models._parametrisation import AbstractLiftedParametrisation
 from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._record import TrainingRecord
-from .._solvers._stage import Context
+from .._solvers._stage import Context, KeepIfBetter
 from ._fit import solve, training_record
 from ._losses import MeanSquares, Pairs
 from ._problem import Description, MapProblem
@@ -149,7 +149,7 @@ def fit_phase(net: LPNet, data: Trajectories, *, hidden: tuple[int, ...] = (16, 
     problem = MapProblem(loss, PhaseNetwork(network, h), Pairs(jnp.asarray(states), jnp.asarray(rates)), None,
                          description)
     context = Context(seed=0, progress=show_progress(progress))
-    solved, results = solve(problem, (LevenbergMarquardt(iterations),), context)
+    solved, results = solve(problem, (KeepIfBetter(LevenbergMarquardt(iterations)),), context)
     record = training_record(solved, results)
     fitted = eqx.tree_at(lambda m: m.phase, net, solved.y0.network, is_leaf=lambda v: v is None)
     return fitted, dataclasses.replace(record, model="LPNet phase")

@@ -94,8 +94,8 @@ class MapProblem(AbstractProblem):
 def _warm_start(model: AbstractLearnedMap):
     """`model.warm_start()`; `ValueError` for a map that offers none."""
     if not isinstance(model, AbstractWarmStartableMap):
-        raise ValueError(f"warm_start=True: a {type(model).__name__} has no warm start (a G-LPNet's identity warm "  # noqa: TRY004
-                         "start); use warm_start=False")
+        raise ValueError(f"learn.WarmStart: a {type(model).__name__} has no warm start (a G-LPNet's identity warm "  # noqa: TRY004
+                         "start); fit it without learn.WarmStart")
     return model.warm_start()
 
 

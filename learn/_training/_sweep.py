@@ -23,8 +23,8 @@ from .._models._base import AbstractLearnedMap, check_learned_map
 from .._models._load import load
 from .._solvers._adam import Adam
 from .._solvers._checkpoint import Checkpoint
-from .._solvers._quasi_newton import QuasiNewton
 from .._solvers._record import TrainingRecord
+from .._solvers._stage import AbstractStage
 from ._fit import fit
 
 #: The keys of a grid point that are passed on to `learn.fit` (as well as to `make_model`).
@@ -271,7 +271,7 @@ def _checkpoint(folder: Path, point, fit_kwargs, every: int | None) -> Checkpoin
     stages = point.get("optimiser", fit_kwargs.get("optimiser"))
     if stages is None and point.get("epochs", fit_kwargs.get("epochs")) is not None:
         stages = Adam(1)
-    stages = (stages,) if isinstance(stages, (Adam, QuasiNewton)) else tuple(stages or ())
+    stages = (stages,) if isinstance(stages, AbstractStage) else tuple(stages or ())
     if sum(isinstance(s, Adam) for s in stages) != 1:
         return None
     folder.mkdir(parents=True, exist_ok=True)
