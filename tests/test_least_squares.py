@@ -173,38 +173,33 @@ def test_fit_with_levenberg_marquardt_recovers_the_rigid_body_from_exact_observa
     assert record.stages[-1].optimiser == "LevenbergMarquardt" and record.train_loss < 1e-18
 
 
-def test_the_last_jacobian_is_read_again_only_at_the_same_point_of_the_same_data(monkeypatch):
-    """The criterion reads the fitted map's Jacobian where Levenberg-Marquardt left it; a
-    kept Jacobian is never returned for another point, other data or another structure."""
+def test_levenberg_marquardt_hands_on_its_last_jacobian_read_only_at_its_point_and_data():
+    """The criterion reads the fitted map's Jacobian where Levenberg-Marquardt left it, in the
+    stage's result (no module state); it is never read for another point, other data or data
+    that could change in place, and a start kept by `KeepIfBetter` has none."""
     from learn._solvers import _levenberg_marquardt as lm
 
     x = jnp.linspace(0.0, 1.0, 40)
     args = (x, 2.0 * jnp.exp(-1.5 * x) + 0.3)
-    fn = lm.residuals_of(_CurveLoss(), _Curve(jnp.zeros(3)))
-    calls = []
-    monkeypatch.setattr(fn, "_jacobian_jit", lambda z, a: calls.append(1) or jax.jit(fn._jacobian)(z, a))
-    theta = jnp.array([1.0, -1.0, 0.0])
-    r, J = fn.jacobian(theta, args)
-    again = fn.jacobian(jnp.array([1.0, -1.0, 0.0]), args)  # an equal x, another array: kept
-    assert len(calls) == 1 and again[1] is J
-    # the kept residuals are those of the point
-    np.testing.assert_array_equal(np.asarray(fn.residuals(theta, args)), np.asarray(fn._residuals_jit(theta, args)))
-    fn.jacobian(theta + jnp.array([0.0, 0.0, 1e-300]), args)  # another point (by 1e-300)
-    fn.jacobian(theta.at[2].set(-0.0), args)  # -0.0 is another point to the bit
-    fn.jacobian(theta, (args[0], args[1] + 0.0))  # equal data in another object
-    assert len(calls) == 4
-    # data of NumPy arrays may change in place: never kept
-    mutable = (np.asarray(args[0]), np.asarray(args[1]).copy())
-    fn.jacobian(theta, mutable)
-    mutable[1][:] += 1.0
-    r_changed, _ = fn.jacobian(theta, mutable)
-    assert len(calls) == 6
-    np.testing.assert_allclose(np.asarray(r_changed), np.asarray(r) - 1.0, rtol=0, atol=4 * EPS)
-    moved = theta.at[2].set(0.5)
-    np.testing.assert_allclose(np.asarray(fn.residuals(moved, (args[0], args[1] + 0.0))),
-                               np.asarray(r) + 0.5, rtol=0, atol=4 * EPS)  # c shifts every residual
-    other = lm.residuals_of(_CurveLoss(), _Curve(jnp.zeros(4)))  # another structure: its own
-    assert other._kept(jnp.zeros(3), args) is None
+    problem = ToyProblem(_CurveLoss(), _Curve(jnp.asarray([1.0, 0.0, 0.0])), args)
+    result = learn.LevenbergMarquardt(20, rtol=0.0).run(problem, learn.Context())
+    lin, theta = result.linearisation, result.y.theta
+    assert lin.at(theta, args) and lin.at(jnp.array(np.asarray(theta)), args)  # an equal x in another array
+    # they are the residuals and Jacobian of the compiled Jacobian at that point, to the bit
+    r, J = lm.residuals_of(_CurveLoss(), result.y).jacobian(theta, args)
+    np.testing.assert_array_equal(np.asarray(lin.residuals), np.asarray(r))
+    np.testing.assert_array_equal(np.asarray(lin.jacobian), np.asarray(J))
+    assert not lin.at(jnp.asarray(np.nextafter(np.asarray(theta), np.inf)), args)  # one ulp away
+    assert not lin.at(jnp.asarray(theta).at[0].set(-theta[0]), args)
+    assert not lin.at(theta, (args[0], args[1] + 0.0))  # equal data in another object
+    mutable = (np.asarray(x), np.asarray(args[1]).copy())  # NumPy data may change in place: never read
+    on_numpy = learn.LevenbergMarquardt(20, rtol=0.0).run(ToyProblem(_CurveLoss(), problem.y0, mutable),
+                                                           learn.Context())
+    assert not on_numpy.linearisation.at(on_numpy.y.theta, mutable)
+    # a start kept (exact data from the truth: no step lowers a zero loss) hands on none
+    truth = _Curve(jnp.asarray([2.0, -1.5, 0.3]))
+    kept = learn.KeepIfBetter(learn.LevenbergMarquardt(5)).run(problem.with_start(truth), learn.Context())
+    assert not kept.record.kept and kept.linearisation is None
 
 
 @pytest.mark.slow

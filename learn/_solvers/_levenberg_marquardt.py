@@ -41,6 +41,7 @@ from ._stage import (
     AbstractIterationsStage,
     AbstractResumableStage,
     Context,
+    Linearisation,
     Result,
     finished_record,
     history,
@@ -73,43 +74,18 @@ WINDOW = 3
 TARGET_AFTER = 6
 
 
-#: `[compiled residuals, x, args, (r, J)]` of the last Jacobian evaluated (see `_Residuals`).
-_LAST: list[Any] = []
-
-
 class _Residuals(AbstractAtStructure):
     r"""The residuals $r(x)$ `(n,)` and Jacobian $J(x)$ `(n, p)` of `objective` for the `y`
-    whose flat trainable leaves are $x$, compiled once per structure.
-
-    The last Jacobian computed (of any structure: one kept, `_LAST`) is kept with its `x` and
-    `args`: the criterion and the discretisation error read the fitted map's residuals and
-    Jacobian where Levenberg-Marquardt's last step computed them (one evaluation fewer per
-    fit; BENCHMARKS.md, "Every W4 fit under 2 minutes"); the same structure, the same `args` object (of JAX arrays
-    only: immutable) and the same `x` to the bit return them without evaluating. Jacobians
-    of more than `DENSE_JACOBIAN` entries are not kept."""
+    whose flat trainable leaves are $x$, compiled once per structure. The Jacobian of a
+    fit's last step travels in its result (`Result.linearisation`): the criterion and the
+    discretisation error read the fitted map's residuals and Jacobian there (one evaluation
+    fewer per fit; BENCHMARKS.md, "Every W4 fit under 2 minutes")."""
 
     def __init__(self, objective: AbstractLeastSquares, y: Any):
         super().__init__(objective, y)
-        self._residuals_jit = jax.jit(self._residuals)
-        self._jacobian_jit = jax.jit(self._jacobian)
+        self.residuals = jax.jit(self._residuals)
+        self.jacobian = jax.jit(self._jacobian)
         self.normal_equations = jax.jit(self._normal_equations)
-
-    def residuals(self, x: jax.Array, args: Any) -> jax.Array:
-        kept = self._kept(x, args)
-        return self._residuals_jit(x, args) if kept is None else kept[0]
-
-    def jacobian(self, x: jax.Array, args: Any) -> tuple[jax.Array, jax.Array]:
-        kept = self._kept(x, args)
-        if kept is None:
-            kept = self._jacobian_jit(x, args)
-            if _keepable(x, args) and kept[1].size <= DENSE_JACOBIAN:
-                _LAST[:] = [self, np.asarray(x).tobytes(), args, kept]
-        return kept
-
-    def _kept(self, x, args) -> tuple[jax.Array, jax.Array] | None:
-        if not _LAST or _LAST[0] is not self or _LAST[2] is not args or not _keepable(x, args):
-            return None
-        return _LAST[3] if _LAST[1] == np.asarray(x).tobytes() else None
 
     def _residuals(self, x, args):
         return self.objective.residuals(self.model(x), args).reshape(-1)
@@ -119,14 +95,6 @@ class _Residuals(AbstractAtStructure):
 
     def _normal_equations(self, x, args):
         return self.objective.normal_equations(self.model(x), args)
-
-
-def _keepable(x: Any, args: Any) -> bool:
-    """Whether a Jacobian at `x` on `args` may be kept and read again: a concrete point, and
-    data of JAX arrays only (immutable: a NumPy array changed in place would be other data
-    in the same object)."""
-    return not isinstance(x, jax.core.Tracer) and all(
-        isinstance(a, jax.Array) and not isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves(args))
 
 
 def residuals_of(objective: AbstractLeastSquares, y: Any) -> _Residuals:
@@ -211,11 +179,12 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
         # JAX's Cholesky each step runs in SciPy's OpenBLAS, whose idle workers spin on the
         # cores the Jacobian's XLA threads need (BENCHMARKS.md, "W2 `--full`: seven systems")
         with serial_lapack_block():
-            y, values = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
-                                  context.progress, context.desc or f"{problem.name} Levenberg-Marquardt", saved,
-                                  context.phase, resumed, context.earlier, context.on_step(), self.target)
+            y, values, linearisation = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
+                                                 context.progress, context.desc or f"{problem.name} Levenberg-Marquardt",
+                                                 saved, context.phase, resumed, context.earlier, context.on_step(),
+                                                 self.target)
         record = finished_record(problem, self, len(values), start, y)
-        return Result(y, record, history(values))
+        return Result(y, record, history(values), linearisation)
 
 
 class _Saved:
@@ -259,12 +228,14 @@ class _Saved:
 
 def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=None, phase=1, resumed=None,
               earlier=(), on_step=None, target=None):
-    """`(model, losses)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
+    """`(model, losses, linearisation)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
     once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
     or no damping finds a lower loss; the loss after each step. With `saved`, the state is
     written every `saved.every` steps and at the end; `resumed` continues from a read state;
     `on_step(steps done, loss)` after every step; with `target`, also once the loss cannot
-    reach it at its recent rate (`_out_of_reach`)."""
+    reach it at its recent rate (`_out_of_reach`); `linearisation` the residuals and Jacobian
+    at the model returned (`None` where only the blocks' normal equations were formed, or the
+    Jacobian has more than `DENSE_JACOBIAN` entries)."""
     start = time.perf_counter()
     if resumed is not None:
         model = _files.replace_array_leaves(model, resumed["weights"], "weights")
@@ -342,7 +313,8 @@ def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=No
         bar.close()
     if saved is not None and D is not None and len(values) != last_saved:
         save()
-    return fn.model(x), values
+    linearisation = None if blockwise or J.size > DENSE_JACOBIAN else Linearisation(x, args, r, J)
+    return fn.model(x), values, linearisation
 
 
 def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
@@ -353,7 +325,7 @@ def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
     fn = residuals_of(objective, y)
     x = ravel_pytree(eqx.filter(y, eqx.is_inexact_array))[0]
     n_unknowns = x.size
-    n_residuals = jax.eval_shape(fn._residuals_jit, x, args).shape[0]
+    n_residuals = jax.eval_shape(fn.residuals, x, args).shape[0]
     passes = objective.forward_passes(y)
     entries = n_residuals * n_unknowns
     blockwise = False
@@ -369,8 +341,6 @@ def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:
             f"{8 * MAX_JACOBIAN / 1e9:.1f} GB); it suits maps of a few hundred weights (a G-LPNet); for an MLP use "
             "learn.ScipyLBFGSB or learn.Adam"
         )
-    if blockwise:
-        _LAST.clear()  # a whole Jacobian kept from an earlier fit would outlive the point of blocks
     return blockwise
 
 

@@ -77,13 +77,39 @@ class Context:
 
 
 @dataclasses.dataclass(frozen=True)
+class Linearisation:
+    r"""The residuals $r$ `(n,)` and Jacobian $J$ `(n, p)` of a least-squares objective at the
+    flat trainable leaves `x` of a `y`, on the data `args`: what `learn.LevenbergMarquardt`
+    computed at its last step, handed on in its `Result` so that what is measured on the fit
+    afterwards (its information criterion, its residuals) reads them instead of evaluating
+    them again."""
+
+    x: jax.Array
+    args: Any
+    residuals: jax.Array
+    jacobian: jax.Array
+
+    def at(self, x: Any, args: Any) -> bool:
+        """Whether these are the residuals and Jacobian at `x` (equal to the bit) on `args` (the
+        same object, of JAX arrays only: immutable, where a NumPy array changed in place would
+        be other data in the same object)."""
+        if args is not self.args or not all(isinstance(a, jax.Array) for a in jax.tree_util.tree_leaves(args)):
+            return False
+        x, mine = np.asarray(x), np.asarray(self.x)
+        return x.shape == mine.shape and x.dtype == mine.dtype and x.tobytes() == mine.tobytes()
+
+
+@dataclasses.dataclass(frozen=True)
 class Result:
     """What a stage returns: the new `y`, its record and its loss history (`epoch`,
-    `train_loss`, `val_loss` arrays, `val_loss` NaN where not measured)."""
+    `train_loss`, `val_loss` arrays, `val_loss` NaN where not measured); `linearisation` the
+    residuals and Jacobian where the stage computed them last (`learn.LevenbergMarquardt`;
+    `None` otherwise)."""
 
     y: Any
     record: StageRecord
     history: dict[str, np.ndarray]
+    linearisation: Linearisation | None = None
 
 
 def history(train_loss: Any, epoch: Any = None) -> dict[str, np.ndarray]:
@@ -205,7 +231,8 @@ class KeepIfBetter(AbstractWrappedStage):
         record = dataclasses.replace(
             result.record, train_loss=end.train, val_loss=end.validation, kept=kept,
             details={**result.record.details, "train_loss_before": before.train, "val_loss_before": before.validation})
-        return Result(result.y if kept else problem.y0, record, result.history)
+        return Result(result.y if kept else problem.y0, record, result.history,
+                      result.linearisation if kept else None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -248,7 +275,7 @@ class Restarts(AbstractWrappedStage):
             result.record, train_loss=losses.train, val_loss=losses.validation, wall_time_s=time.perf_counter() - start,
             details={**result.record.details, "best_start": best,
                      "start_train_losses": [run[2].train for run in runs]})
-        return Result(result.y, record, result.history)
+        return Result(result.y, record, result.history, result.linearisation)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -293,7 +320,7 @@ class WarmStart(AbstractWrappedStage):
                     for key in ("epoch", "train_loss", "val_loss")}
         record = dataclasses.replace(tail.record, iterations=int(combined["train_loss"].size),
                                      wall_time_s=time.perf_counter() - start)
-        return Result(tail.y, record, combined)
+        return Result(tail.y, record, combined, tail.linearisation)
 
 
 def _resumed_warm_history(context: Context, owner: AbstractProblem) -> dict[str, np.ndarray] | None:

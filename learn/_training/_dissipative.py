@@ -110,7 +110,7 @@ def fit_dissipative(
                           f"sum of squares {steps.discretisation_ssr:.3g} against {steps.ssr:.3g} after "
                           f"{steps.substeps} sub-steps): give a smaller max_step (loss=learn.BodyLoss(max_step=...))",
                           UserWarning, stacklevel=2)
-        criterion = information_criterion(problem, problem.y0)
+        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
         criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(

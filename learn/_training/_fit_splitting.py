@@ -343,8 +343,8 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         problem, results = solve(
             start, (_lm(LevenbergMarquardt(iterations, rtol, target=target), warm_start),), context)
         fitted[family.name] = problem.y0
-        criterion = information_criterion(problem, problem.y0)
-        criterion.update(step_accuracy(problem, family, families[k + 1 :]))
+        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
+        criterion.update(step_accuracy(problem, family, families[k + 1 :], results[-1].linearisation))
         if explained_within_its_step(criterion):
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
@@ -460,12 +460,13 @@ def extends_a_misfit(family: Family, ssr: dict[str, float]) -> bool:
 
 
 
-def step_accuracy(problem: Any, family: Family, later: Sequence[Family]) -> dict[str, Any]:
+def step_accuracy(problem: Any, family: Family, later: Sequence[Family], linearisation: Any = None) -> dict[str, Any]:
     """`{"discretisation_ssr": ...}` of a fitted family that a `later` family extends along its
-    directions (`discretisation_ssr`; none otherwise: nothing would be skipped on it)."""
+    directions (`discretisation_ssr`, reading the fit's `linearisation`; none otherwise: nothing
+    would be skipped on it)."""
     if not any(extends_along_its_directions(f, family) for f in later):
         return {}
-    return {"discretisation_ssr": discretisation_ssr(problem, problem.y0)}
+    return {"discretisation_ssr": discretisation_ssr(problem, problem.y0, linearisation)}
 
 
 def explained_within_its_step(criterion: dict[str, Any]) -> bool:
@@ -556,8 +557,8 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         else:
             problem, results = solve(start, stages, context)
         fitted[family.name] = problem.y0
-        criterion = information_criterion(problem, problem.y0)
-        criterion.update(step_accuracy(problem, family, families[k + 1 :]))
+        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
+        criterion.update(step_accuracy(problem, family, families[k + 1 :], results[-1].linearisation))
         if steps_from_data:
             criterion["substeps"] = steps.substeps
         if explained_within_its_step(criterion):
@@ -621,7 +622,7 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
         start = loss.problem(make(system, data, family, method, any_axes, kind), data, **split)
         problem, results, steps = solve_within_noise(start, (KeepIfBetter(LevenbergMarquardt(iterations, rtol)),),
                                                      context)
-        criterion = information_criterion(problem, problem.y0)
+        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
         criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
         out.append((criterion["bic"], len(fits) + len(out), problem, results,
                     _DragFamily(f"{family.name}, {kind} drag"), criterion))

@@ -33,6 +33,7 @@ from .._models._baseline import check_one_step
 from .._solvers._compiled import compiled as _compiled
 from .._solvers._levenberg_marquardt import check_size, residuals_of
 from .._solvers._problem import AbstractLeastSquares, AbstractStructuredJacobian
+from .._solvers._stage import Linearisation
 from ._criterion import bic, effective_parameters
 from ._losses import AbstractLoss
 from ._problem import Description, Fitted, FittedProblem
@@ -327,34 +328,44 @@ class SegmentsObjective(AbstractStructuredJacobian):
         return jnp.sum(difference**2, axis=-1), mask
 
 
-def discretisation_ssr(problem: FittedProblem, fitted: Fitted) -> float:
+def discretisation_ssr(problem: FittedProblem, fitted: Fitted, linearisation: Linearisation | None = None) -> float:
     r"""The sum of squared differences between the map's predictions of the training
     observations at the problem's sub-steps per interval and at twice as many: its own
     discretisation error to leading order (for a method of order $p$, $(1 - 2^{-p})^2$ of its
     sum of squares),
     in the units of the residuals' sum of squares. Exact data fitted to within it are fitted
-    as far as the step allows."""
+    as far as the step allows. `linearisation`: the fit's last residuals and Jacobian
+    (`Result.linearisation`), read where they are `fitted`'s."""
     objective, args = problem.objective, problem.train
     compiled = residuals_of(objective, fitted)
     x = jax.flatten_util.ravel_pytree(eqx.filter(fitted, eqx.is_inexact_array))[0]
     finer = dataclasses.replace(args, substeps=2 * args.substeps)
-    return float(jnp.sum((compiled.residuals(x, args) - compiled.residuals(x, finer)) ** 2))
+    return float(jnp.sum((_residuals(compiled, x, args, linearisation) - compiled.residuals(x, finer)) ** 2))
 
 
-def residual_ssr(problem: FittedProblem, fitted: Fitted) -> float:
+def residual_ssr(problem: FittedProblem, fitted: Fitted, linearisation: Linearisation | None = None) -> float:
     """The sum of squared residuals of `fitted` on the training observations (compiled, as
-    Levenberg-Marquardt evaluates them)."""
+    Levenberg-Marquardt evaluates them; `linearisation` as `discretisation_ssr`'s)."""
     compiled = residuals_of(problem.objective, fitted)
     x = jax.flatten_util.ravel_pytree(eqx.filter(fitted, eqx.is_inexact_array))[0]
-    return float(jnp.sum(compiled.residuals(x, problem.train) ** 2))
+    return float(jnp.sum(_residuals(compiled, x, problem.train, linearisation) ** 2))
 
 
-def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, float]:
+def _residuals(compiled: Any, x: jax.Array, args: Any, linearisation: Linearisation | None) -> jax.Array:
+    """The residuals at `x` on `args`: the linearisation's where it is at them, else computed."""
+    if linearisation is not None and linearisation.at(x, args):
+        return linearisation.residuals
+    return compiled.residuals(x, args)
+
+
+def information_criterion(problem: FittedProblem, fitted: Fitted,
+                          linearisation: Linearisation | None = None) -> dict[str, float]:
     r"""The Bayesian information criterion of a map fitted to observations,
     $n\log(\mathrm{SSR}/n) + k\log n$: $n$ observed components, SSR the sum of squared
     residuals, $k$ the map's effective parameters (the numerical rank of the residuals'
     Jacobian with respect to its weights: redundant weights count once; the fitted starts,
-    common to the maps compared, are left out). Lower is better."""
+    common to the maps compared, are left out). Lower is better. `linearisation`: the fit's
+    last residuals and Jacobian (`Result.linearisation`), read where they are `fitted`'s."""
     objective, args = problem.objective, problem.train
     # The residuals and Jacobian compiled for this structure (those Levenberg-Marquardt used):
     # the map's weights are the first columns, the fitted starts the rest.
@@ -365,6 +376,8 @@ def information_criterion(problem: FittedProblem, fitted: Fitted) -> dict[str, f
         by_weights = _compiled(("weight jacobian", compiled), lambda: jax.jit(
             lambda z, a: objective.weight_jacobian(compiled.model(z), a)))
         r, J = by_weights(x, args)
+    elif linearisation is not None and linearisation.at(x, args):
+        r, J = linearisation.residuals, linearisation.jacobian
     else:
         r, J = compiled.jacobian(x, args)
     J = np.asarray(J)[:, :weights]

@@ -50,8 +50,8 @@ def solve_within_noise(problem: Any, stages: Sequence[Any], context: Any, *,
     problem, results = solve(problem, stages, context)
     for k in range(doublings + 1):
         fitted = problem.y0
-        ssr = residual_ssr(problem, fitted)
-        error = discretisation_ssr(problem, fitted)
+        ssr = residual_ssr(problem, fitted, results[-1].linearisation)
+        error = discretisation_ssr(problem, fitted, results[-1].linearisation)
         check = StepCheck(problem.train.substeps, error, ssr, k)
         if error <= ratio * ssr or k == doublings:
             return problem, results, check
