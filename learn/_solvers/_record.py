@@ -45,7 +45,10 @@ class TrainingRecord:
     `n_train` and `n_val` describe the data and the objective; `stages` the optimisers.
     `choice`: on the records of `learn.fit_splitting` on observations, its `learn.FamilyChoice`
     (the families' criteria, the skipped families, the one chosen); `None` otherwise. It is not
-    saved (the last stage's `details` keep each family's criterion).
+    saved (the last stage's `details` keep each family's criterion). `gyro_bias`: with
+    `learn.BodyLoss(bias=True)`, the gyroscope bias fitted for each group of trajectories
+    `(G, dim)` (groups in order of first appearance, `BodyObservations.group_index`); `None`
+    otherwise.
     """
 
     model: str
@@ -62,6 +65,7 @@ class TrainingRecord:
     val_loss: float
     wall_time_s: float
     choice: Any = None
+    gyro_bias: np.ndarray | None = None
 
     def __repr__(self) -> str:
         stages = " + ".join(s.optimiser for s in self.stages)
@@ -71,12 +75,16 @@ class TrainingRecord:
         )
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write to an HDF5 file (scalars and stages as attributes, history as datasets),
-        atomically."""
-        attrs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("history", "choice")}
+        """Write to an HDF5 file (scalars and stages as attributes, history and the gyroscope
+        bias as datasets), atomically."""
+        attrs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                 if f.name not in ("history", "choice", "gyro_bias")}
         attrs["class"] = _KIND
         attrs["stages"] = [dataclasses.asdict(s) for s in self.stages]
-        _checkpoint.write(path, attrs, {"history": self.history})
+        arrays = {"history": self.history}
+        if self.gyro_bias is not None:
+            arrays["fitted"] = {"gyro_bias": np.asarray(self.gyro_bias)}
+        _checkpoint.write(path, attrs, arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> TrainingRecord:
@@ -84,11 +92,12 @@ class TrainingRecord:
         attrs, groups = _checkpoint.read(path)
         if attrs.get("class") != _KIND:
             raise ValueError(f"path {os.fspath(path)!r} holds a {attrs.get('class')}, not a {_KIND}")
-        names = {f.name for f in dataclasses.fields(cls)} - {"history", "stages", "choice"}
+        names = {f.name for f in dataclasses.fields(cls)} - {"history", "stages", "choice", "gyro_bias"}
         try:
             values = {k: attrs[k] for k in names}
             stages = tuple(StageRecord(**s) for s in attrs["stages"])
             history = groups["history"]
         except (KeyError, TypeError) as err:
             raise ValueError(f"path {os.fspath(path)!r} is not a complete TrainingRecord file ({err})") from err
-        return cls(stages=stages, history=history, **values)
+        bias = groups.get("fitted", {}).get("gyro_bias")
+        return cls(stages=stages, history=history, gyro_bias=None if bias is None else np.asarray(bias), **values)

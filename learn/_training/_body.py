@@ -44,8 +44,9 @@ class BodySegments(eqx.Module):
     identity without configurations), `configurations` `(S, L, size)`, `velocities`
     `(S, L, dim)`, `weights` `(dim,)` of the configuration residual, `velocity_scale`;
     `measured` which of the two are compared; `substeps`: each sub-step taken in this many
-    equal steps (1; 2 for `discretisation_ssr`); `bias`: each trajectory's start ends with a
-    gyroscope bias $\beta$ `(dim,)`, the velocity read as $\xi + \beta$."""
+    equal steps (1; 2 for `discretisation_ssr`); `group` `(S,)` the group of each trajectory
+    (`BodyObservations.group_index`); `bias`: a gyroscope bias $\beta_g$ `(dim,)` per group
+    is fitted (`Fitted.shared`, `(G, dim)`), the velocity read as $\xi + \beta_g$."""
 
     index: jax.Array
     steps: jax.Array
@@ -56,6 +57,7 @@ class BodySegments(eqx.Module):
     velocities: jax.Array
     weights: jax.Array
     velocity_scale: jax.Array
+    group: jax.Array
     substeps: int = eqx.field(static=True)
     measured: tuple[str, ...] = eqx.field(static=True)
     bias: bool = eqx.field(static=True, default=False)
@@ -63,7 +65,7 @@ class BodySegments(eqx.Module):
 
 def body_segments(data: BodyObservations, max_step: float | None, bias: bool = False) -> BodySegments:
     """Every trajectory of `data` as one segment, each interval in equal sub-steps of at most
-    `max_step` (one per interval with `None`); `bias`: a gyroscope bias per trajectory fitted."""
+    `max_step` (one per interval with `None`); `bias`: a gyroscope bias per group fitted."""
     group, dim = data.group, data.dim
     length = max(t.size for t in data.times)
     S = len(data)
@@ -91,7 +93,8 @@ def body_segments(data: BodyObservations, max_step: float | None, bias: bool = F
         weights[3:] = 1.0 / position
     return BodySegments(jnp.arange(S, dtype=jnp.int32), jnp.asarray(steps), jnp.asarray(at, dtype=jnp.int32),
                         jnp.asarray(mask), jnp.asarray(gs[:, 0]), jnp.asarray(gs), jnp.asarray(vs),
-                        jnp.asarray(weights), jnp.asarray(data.velocity_scale()), 1, data.measured, bool(bias))
+                        jnp.asarray(weights), jnp.asarray(data.velocity_scale()),
+                        jnp.asarray(data.group_index(), dtype=jnp.int32), 1, data.measured, bool(bias))
 
 
 def sub_steps(intervals: np.ndarray, max_step: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -156,8 +159,8 @@ class BodyObjective(SegmentsObjective):
             parts.append(group.difference(args.configurations, gs) * args.weights)
         if "velocities" in args.measured:
             xi = jax.vmap(jax.vmap(model.body_velocity))(mus)
-            if args.bias:  # the gyroscope reads xi + beta, beta the last dim of each start
-                xi = xi + fitted.starts[:, None, -dim:]
+            if args.bias:  # the gyroscope reads xi + beta, one beta per group of trajectories
+                xi = xi + fitted.shared[args.group][:, None, :]
             parts.append((xi - args.velocities) / args.velocity_scale)
         return jnp.concatenate(parts, axis=-1) * args.mask[..., None]
 
@@ -169,7 +172,10 @@ class BodyLoss(AbstractLoss):
     counted per interval (`sub_steps`; `None`: one step per interval); `TrajectoryLoss` takes
     the largest interval's count for every interval. No held-out trajectories: their momenta
     would be unknowns too (the information criterion chooses between families,
-    `learn.fit_splitting`)."""
+    `learn.fit_splitting`). `bias`: the gyroscope reads $\xi + \beta_g$, one unknown bias
+    $\beta_g$ per group of trajectories (`BodyObservations.groups`, e.g. a recording session;
+    each trajectory its own without groups), fitted with the map and the starts and kept on
+    the record (`learn.gyro_bias`)."""
 
     max_step: float | None = eqx.field(static=True, default=None)
     bias: bool = eqx.field(static=True, default=False)
@@ -210,9 +216,8 @@ class BodyLoss(AbstractLoss):
         description = Description(loss=self.name, h=h, n_train=int(data.n_observations), n_val=0, seed=int(seed),
                                   validation_fraction=0.0, max_step=self.max_step, substeps=substeps)
         starts = latent_starts(model, data)
-        if self.bias:
-            starts = jnp.concatenate([starts, jnp.zeros((starts.shape[0], data.dim), dtype=starts.dtype)], axis=1)
-        return FittedProblem(BodyObjective(), Fitted(model, starts), args, None, description)
+        shared = jnp.zeros((data.n_groups, data.dim), dtype=starts.dtype) if self.bias else None
+        return FittedProblem(BodyObjective(), Fitted(model, starts, shared), args, None, description)
 
 
 def substeps_for_body(data: BodyObservations, max_step: float | None) -> int:

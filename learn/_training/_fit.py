@@ -141,6 +141,7 @@ def training_record(problem: MapProblem, results: Sequence[Result]) -> TrainingR
                  for key, parts in history.items()},
         train_loss=records[-1].train_loss, val_loss=records[-1].val_loss,
         wall_time_s=float(sum(r.wall_time_s for r in records)),
+        gyro_bias=None if getattr(problem.y0, "shared", None) is None else np.asarray(problem.y0.shared),
     )
 
 

@@ -123,6 +123,10 @@ def held_out_errors(problem: Any, segment_trajectory: np.ndarray, folds: Sequenc
     (Levenberg-Marquardt from that fit, `iterations` steps at most, `rtol`), then the fold's
     trajectories' starts fitted with the refitted map held (`fit_held_out_starts`)."""
     train, objective = problem.train, problem.objective
+    if problem.y0.shared is not None:
+        raise ValueError("held-out selection cannot score a fit with unknowns shared by trajectories (a gyroscope "
+                         "bias per group, learn.BodyLoss(bias=True)): a held-out group's bias is unknown. Choose the "
+                         "family by selection='bic', or fit without bias")
     n_trajectories = int(segment_trajectory.max()) + 1
     ssr, count = np.zeros(n_trajectories), np.zeros(n_trajectories)
     width = jax.eval_shape(lambda: objective.residuals(problem.y0, train)).shape[-1]  # compared per observation

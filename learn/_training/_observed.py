@@ -223,7 +223,8 @@ class SegmentsObjective(AbstractStructuredJacobian):
     def forward_passes(self, fitted: Fitted) -> int:
         """The map's weights and one pass per state direction (not per fitted start)."""
         weights = sum(a.size for a in jax.tree_util.tree_leaves(eqx.filter(fitted.model, eqx.is_inexact_array)))
-        return int(weights + (0 if fitted.starts is None else fitted.starts.shape[-1]))
+        shared = 0 if fitted.shared is None else fitted.shared.size
+        return int(weights + shared + (0 if fitted.starts is None else fitted.starts.shape[-1]))
 
     def jacobian(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array]:
         r"""`(residuals (n,), Jacobian (n, p + S d))` with respect to the flat trainable leaves
@@ -231,19 +232,23 @@ class SegmentsObjective(AbstractStructuredJacobian):
         its blocks: segment $s$ depends on the weights and on its own start only (training
         segments: `index` is their row), so $p + d$ forward passes (the same $d$ directions
         pushed into every start at once) instead of $p + Sd$. Each start belongs to one
-        segment, as `TrajectoryLoss.problem` builds them; without fitted starts, `jax.jacfwd`."""
+        segment, as `TrajectoryLoss.problem` builds them; without fitted starts, `jax.jacfwd`.
+        Unknowns the segments share (`Fitted.shared`, $q$ of them) are the last columns,
+        pushed like the weights."""
         if fitted.starts is None:
             return AbstractLeastSquares.jacobian(self, fitted, args)
         r, by_weight, by_start, rows_of = self._blocks(fitted, args)
-        rows = r.size
+        rows, p = r.size, self._n_weights(fitted)
         blocks = by_start[:, :, :, None, :] * rows_of[:, None, None, :, None]
-        return r.reshape(-1), jnp.concatenate([by_weight.reshape(rows, -1), blocks.reshape(rows, -1)], axis=1)
+        dense = by_weight.reshape(rows, -1)
+        return r.reshape(-1), jnp.concatenate([dense[:, :p], blocks.reshape(rows, -1), dense[:, p:]], axis=1)
 
     def normal_equations(self, fitted: Fitted, args: Segments) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""`(r (n,), A, g)` of the unknowns of `jacobian` (weights $w$, then starts): with the
         weight block $J_w$ and each segment's start block $J_s$, $A_{ww} = J_w^TJ_w$,
         $A_{ws} = J_w^TJ_s$ per start, $A_{ss}$ block-diagonal ($d\times d$ per start),
-        $g = (J_w^Tr, J_s^Tr_s)$: $n(p + d)$ numbers where $J$ has $n(p + Sd)$."""
+        $g = (J_w^Tr, J_s^Tr_s)$: $n(p + d)$ numbers where $J$ has $n(p + Sd)$. Shared
+        unknowns (`Fitted.shared`) are dense like the weights, and last, as in `jacobian`."""
         if fitted.starts is None:
             r, J = AbstractLeastSquares.jacobian(self, fitted, args)
             return r, J.T @ J, J.T @ r
@@ -260,6 +265,10 @@ class SegmentsObjective(AbstractStructuredJacobian):
             n_starts * dim, n_starts * dim)
         A = jnp.block([[A_ww, A_ws], [A_ws.T, A_ss]])
         g = jnp.concatenate([jnp.einsum("smp,sm->p", Jw, rs), jnp.einsum("smd,sm,sj->jd", Js, rs, rows_of).reshape(-1)])
+        weights = self._n_weights(fitted)
+        if weights < p:  # shared unknowns after the weights in the blocks: last among the unknowns
+            order = jnp.concatenate([jnp.arange(weights), p + jnp.arange(n_starts * dim), jnp.arange(weights, p)])
+            A, g = A[order][:, order], g[order]
         return r.reshape(-1), A, g
 
     def block_entries(self, fitted: Fitted, args: Segments) -> int:
@@ -275,18 +284,24 @@ class SegmentsObjective(AbstractStructuredJacobian):
         """`(r (n,), J_w (n, p))`: the residuals and their Jacobian with respect to the map's
         weights alone (the starts held)."""
         r, by_weight, _, _ = self._blocks(fitted, args)
-        return r.reshape(-1), by_weight.reshape(r.size, -1)
+        return r.reshape(-1), by_weight.reshape(r.size, -1)[:, : self._n_weights(fitted)]
+
+    @staticmethod
+    def _n_weights(fitted: Fitted) -> int:
+        """The map's trainable numbers $p$ (the shared unknowns not counted)."""
+        return sum(a.size for a in jax.tree_util.tree_leaves(eqx.filter(fitted.model, eqx.is_inexact_array)))
 
     def _blocks(self, fitted: Fitted, args: Any) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """`(r (S, ...), by weight (S, ..., p), by start (S, ..., d), rows_of (S, S starts))`:
-        the residuals, their derivatives along each weight and along each direction of the
-        segment's own start, and which start each segment moves with (a zero row for a
-        held-out segment, `index` -1)."""
-        params, static = eqx.partition(fitted.model, eqx.is_inexact_array)
+        the residuals, their derivatives along each weight (then each shared unknown) and along
+        each direction of the segment's own start, and which start each segment moves with (a
+        zero row for a held-out segment, `index` -1)."""
+        params, static = eqx.partition((fitted.model, fitted.shared), eqx.is_inexact_array)
         flat, unravel = jax.flatten_util.ravel_pytree(params)
 
         def residuals(w, s):
-            return self.residuals(Fitted(eqx.combine(unravel(w), static), s), args)
+            model, shared = eqx.combine(unravel(w), static)
+            return self.residuals(Fitted(model, s, shared), args)
 
         def with_value(w, s):
             value = residuals(w, s)

@@ -101,10 +101,13 @@ def _warm_start(model: AbstractLearnedMap):
 
 class Fitted(eqx.Module):
     """What is trained on observations: the map and, with errors in variables, the fitted
-    start of every training segment `(S, dim)` (`None`: starts as observed)."""
+    start of every training segment `(S, dim)` (`None`: starts as observed); `shared`: unknowns
+    of the observations that several segments share, e.g. a gyroscope bias per group of
+    trajectories `(G, dim)` (`None`: none)."""
 
     model: Any
     starts: jax.Array | None
+    shared: jax.Array | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,7 +128,7 @@ class FittedProblem(MapProblem):
                          "not its fitted starts); fit without it")
 
     def reinitialised(self, key: jax.Array) -> Fitted:
-        return Fitted(self.y0.model.reinitialised(key), self.y0.starts)
+        return Fitted(self.y0.model.reinitialised(key), self.y0.starts, self.y0.shared)
 
     def warm_start(self) -> tuple[FittedProblem, Callable[[Fitted], Fitted]] | None:
         warm = _warm_start(self.y0.model)
@@ -135,5 +138,5 @@ class FittedProblem(MapProblem):
         # the map's warm start is scaled by the observed states
         present = np.asarray(self.train.mask).reshape(-1) > 0
         states = self.train.states.reshape(-1, self.train.states.shape[-1])[present]
-        return (self.with_start(Fitted(simpler, self.y0.starts)),
-                lambda y: Fitted(mapped(y.model, states), y.starts))
+        return (self.with_start(Fitted(simpler, self.y0.starts, self.y0.shared)),
+                lambda y: Fitted(mapped(y.model, states), y.starts, y.shared))
