@@ -230,9 +230,11 @@ def test_held_out_sessions_choose_the_drag_on_body_records():
     omega = np.column_stack([rng.normal(0, 0.3, 6), rng.uniform(8, 12, 6), rng.normal(0, 0.3, 6)])
     data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (6, 1)),
                            np.arange(61) * 0.01, measure="velocities", noise=2e-3, seed=1)
-    sessions = ["monday"] * 3 + ["tuesday"] * 3
+    # two sessions, labelled on the data: held out whole without groups= (the data's groups)
+    data = it.BodyObservations.concatenate([data.select([0, 1, 2]), data.select([3, 4, 5])],
+                                           groups=["monday", "tuesday"])
     _, records = learn.fit_splitting(RigidBody(I), data, families=[learn.FAMILIES[0]], dissipation=("quadratic",),
-                                     selection="held-out", groups=sessions, progress=False)
+                                     selection="held-out", progress=False)
     choice = records[-1].choice
     assert choice.selection == "held-out" and choice.groups == 2 and choice.folds == 2
     errors = {s.family: s.held_out_error for s in choice.scores}

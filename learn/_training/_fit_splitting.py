@@ -103,7 +103,8 @@ def fit_splitting(
     chosen by `selection`:
 
     - `"held-out"` (the default on observations): whole groups of trajectories (`groups`, one
-      label per trajectory, e.g. recording sessions; each trajectory its own group by default)
+      label per trajectory, e.g. recording sessions; by default the data's own `groups`, else
+      each trajectory its own group)
       are dealt by `seed` into 5 folds (as scikit-learn's `GroupKFold`; fewer groups, one per
       fold); each family is refitted without each fold (Levenberg-Marquardt from its fit on
       every trajectory) and scored by the mean squared residual of the fold's trajectories, each
@@ -169,6 +170,8 @@ def fit_splitting(
             "trajectory and held-out trajectories choose the family (selection='held-out', whole groups with "
             "groups=); a validation split would veto converged fits on the noise of its trajectories. Pass 0 or None")
     selection = check_selection(selection, data, groups)
+    if groups is None and selection == "held-out":  # the sessions the data were labelled with
+        groups = data.groups
     common = {"h": h, "validation_fraction": validation_fraction, "seed": seed, "progress": progress,
               "selection": selection, "groups": groups}
     if families is not None:
@@ -337,7 +340,7 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
         if family.nested in fitted:  # from the nested family's fit, map and initial states
             nested = fitted[family.nested]
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
-            start = start.with_start(Fitted(net, nested.starts))
+            start = start.with_start(Fitted(net, nested.starts, nested.shared))
             warm_start = False
             target = catch_up_target(start, [f[0] for f in fits])
         problem, results = solve(
@@ -549,7 +552,7 @@ def _(data: BodyObservations, system, method, loss, activation, iterations, key,
         if family.nested in fitted:  # from the nested family's fit, map and starts
             nested = fitted[family.nested]
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
-            start = start.with_start(Fitted(net, nested.starts))
+            start = start.with_start(Fitted(net, nested.starts, nested.shared))
             target = catch_up_target(start, [f[0] for f in fits])
         stages = (KeepIfBetter(LevenbergMarquardt(iterations, rtol, target=target)),)
         if steps_from_data:
