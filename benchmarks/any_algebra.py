@@ -182,7 +182,7 @@ def study(system: LiePoissonSystem, epochs: int, bfgs: int, seed: int, h: float 
 
 
 def table_line(row: dict) -> str:
-    """One row of BENCHMARKS.md's table."""
+    """One row of the printed table (BENCHMARKS.md, "Any Lie algebra", quotes from it)."""
     loss, seconds = row["train_loss"], row["train_s"]
     return (f"| {row['system']} ({row['dim']}) | {row['casimir_degrees']} | {row['order_strang']:.2f} / "
             f"{row['order_triple_jump']:.2f} | {row['model']} | {'—' if loss is None else f'{loss:.2e}'} "

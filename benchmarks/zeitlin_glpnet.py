@@ -1,6 +1,6 @@
 r"""A G-LPNet on Zeitlin's model at N = 16 or 32 (dimension 256, 1024): W5's data and test fields, a
 G-LPNet of M ridge modules against the isospectral midpoint at the same step
-(BENCHMARKS.md, "Zero starts, G-LPNets at N = 16 and 32, and semidirect products").
+(BENCHMARKS.md, "G-LPNets on Zeitlin's model").
 
     python -m benchmarks.zeitlin_glpnet [--N 16] [--modules 16] [--iterations 50] [--init zero]
     python -m benchmarks.zeitlin_glpnet --report

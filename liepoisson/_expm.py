@@ -134,7 +134,7 @@ def expm_action(A: jax.Array, v: jax.Array) -> jax.Array:
 # The common path of `matrix_exponential` under `vmap_samples`: the Taylor polynomial of
 # degree 14 for |A|_1 <= 1/2, whose remainder is at most (1/2)^15/15! e^{1/2} = 4e-17 relative
 # (below round-off; every term is bounded by e^{1/2}). What a training batch's norms are, and
-# what the path saves: BENCHMARKS.md, "LPNets on Zeitlin's model".
+# what the path saves: BENCHMARKS.md, "Learned maps on matrix algebras".
 _MATRIX_BOUND, _MATRIX_DEGREE = 0.5, 14
 
 

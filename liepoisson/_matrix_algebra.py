@@ -469,7 +469,7 @@ class MatrixLieAlgebra(AbstractLieAlgebra):
         $\partial_a\,s\,\mathrm{Re}\,\mathrm{tr}\,X^p = s\,p\,\mathrm{Re}\,\mathrm{tr}(cX^{p-1}E_a)
         = s\,p\,\langle (cX^{p-1})^\dagger, E_a\rangle/\kappa$; the Pfaffian's by its own
         derivative. (Reverse mode through the powers stores every power for every Casimir:
-        BENCHMARKS.md, "LPNets on Zeitlin's model".)"""
+        BENCHMARKS.md, "Learned maps on matrix algebras".)"""
         M = self.matrix(mu)
         c = 1j if self.complex else 1.0
         X = c * M

@@ -62,7 +62,7 @@ class LinearSkip(learn.AbstractWrappedNetwork):
 
 
 def recipe_name(args: argparse.Namespace) -> str:
-    """The name the first runs gave the recipe (BENCHMARKS.md quotes their lines)."""
+    """The name the first runs gave the recipe (their lines: `git log -p BENCHMARKS.md`)."""
     words = ["adam" if args.adam == 20_000 else f"adam{args.adam}"]
     if args.lbfgs:
         words.append("lbfgs" if args.lbfgs == 5000 else f"lbfgs{args.lbfgs}")

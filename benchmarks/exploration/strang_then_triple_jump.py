@@ -8,8 +8,8 @@ The second stage is, by default, `learn.GLPNet(system, terms=strang.terms, metho
 the same learned pieces composed by TripleJump, which with `--linear-term` is
 `learn.fit_splitting`. `--untied` builds instead the one Strang network of 3n - 2 modules equal
 to the TripleJump of the fitted Strang step, in which every copy of a module has its own weights
-from then on (what `GLPNet.composed(TripleJump)` did before commit 4efcbec; BENCHMARKS.md's
-figures of this script and of "G-LPNet TripleJump" were measured that way). Prints the losses of
+from then on (what `GLPNet.composed(TripleJump)` did before commit 4efcbec; the figures of
+this script in BENCHMARKS.md, "G-LPNet ablation", were measured that way). Prints the losses of
 both stages and the energy errors over 2000 steps from the 10 held-out ICs of the Strang stage,
 the refit, and the classical Strang and TripleJump splittings of the exact H; writes them to
 `--out` (default `benchmarks/results/exploration/strang_then_triple_jump_SYSTEM_ACTIVATION_ITERATIONS[_lt][_untied].json`).
