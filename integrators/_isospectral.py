@@ -16,14 +16,17 @@ $\tilde B$. The stage equation, $\tilde W = X W_n X^\dagger$ with
 $X = (1 - \tfrac h2\tilde B)^{-1}$, is solved by a quasi-Newton iteration (quflow's
 `isomp_quasinewton`): $\tilde B$ from the iterate, then the next iterate $X W_n X^\dagger$ with
 $\tilde B$ frozen. Each iteration forms the Cayley conjugation $Q W_n Q^\dagger$ of its
-iterate (one LU, two matrix products, one evaluation of $B$) and the next iterate from the
-same products ($X = (Q + 1)/2$); the step is the conjugation of the iterate the last
+iterate as an increment $Q W_n Q^\dagger - W_n$ (the Cayley transform's increment $Q - 1$ by
+block elimination, about one matrix product; two matrix products, in real arithmetic; one
+evaluation of $B$) and the next iterate from the same products ($X = (Q + 1)/2$); the step is the conjugation of the iterate the last
 iteration started from, accepted when that iteration moved it by at most `tol` in quflow's
 norm (the largest row sum, relative to $W_n$'s). The new state is the conjugation, not the
 stage equation, so the Casimirs do not depend on the iteration's tolerance (quflow forms it
 from the stage equation; its Casimirs drift at its tolerance). A rollout starts each step's
 iteration from a polynomial extrapolation of the past stages, close enough that one iteration
-is the rule (BENCHMARKS.md, "Zeitlin's model").
+is the rule (BENCHMARKS.md, "Zeitlin's model"). With `compensated=True` a rollout adds the
+increments by compensated summation (quflow's `compsum`): the Casimirs then keep to the
+round-off of the increments, not of $W$.
 
 For a body system $\dot M = [M, \Xi]$ with $\Xi = \partial H/\partial\mu$ as a matrix
 (conventions, matrix algebras), $B = -\Xi$.
@@ -46,8 +49,9 @@ from liepoisson.internals import dagger, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
 from ._lapack import serial_lapack
-from ._splitting._composition import TripleJump
 from ._lie_group import check_lie_poisson
+from ._products import cayley_increment, matmul
+from ._splitting._composition import TripleJump
 from ._step_map import AbstractStepMap, check_state
 
 #: The stage iteration stops when an iteration moves the stage by at most `tol` times
@@ -104,6 +108,11 @@ class IsospectralMidpoint(AbstractStepMap):
       NaN (a rollout then says so and suggests more); `iterations_needed(y0)` says what a run
       needs, but a later step may need more.
     - `max_iter` (default `DEFAULT_MAX_ITER`): the cap of the iterations to `tol`.
+    - `compensated` (default `False`): a rollout sums the steps' increments
+      $W_{n+1} = W_n + \Delta W_n$ with compensated summation (TwoSum, the rounding error of
+      each sum carried to the next), as quflow's `compsum`: the Casimirs then drift only by the
+      round-off of the increments, not of $W$ (BENCHMARKS.md, "Zeitlin's model": about 1e-16
+      relative over 10^4 steps where the plain sum reaches 1e-14). Costs a few additions a step.
 
     A rollout carries $W$ and the last `PREDICTOR_POINTS` stage increments of each substep; its
     first step starts from a history found by as many steps backwards (the method is
@@ -117,15 +126,19 @@ class IsospectralMidpoint(AbstractStepMap):
     tol: float = eqx.field(static=True)
     iterations: int | None = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
+    compensated: bool = eqx.field(static=True, default=False)
     substeps: ClassVar[tuple[float, ...]] = (1.0,)
 
     def __init__(self, system: AbstractLiePoissonSystem, h: float, *, tol: float = DEFAULT_TOL,
-                 iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER):
+                 iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER, compensated: bool = False):
         self.system = check_isospectral(system)
         self.h = positive_float(h, "h")
         self.tol = check_stage_tolerance(tol)
         self.iterations = None if iterations is None else positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
+        if not isinstance(compensated, (bool, np.bool_)):
+            raise TypeError(f"compensated must be True or False; got {compensated!r}")
+        self.compensated = bool(compensated)
 
     @property
     def exact_flows_per_step(self) -> int:
@@ -149,29 +162,39 @@ class IsospectralMidpoint(AbstractStepMap):
     def _iterate(self, W: jax.Array, h: jax.Array | float, Wt: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""One quasi-Newton iteration of the stage equation from the iterate `Wt`: with
         $B = \tfrac h2 B(\widetilde W)$ the step's candidate is the conjugation
-        $Q W Q^\dagger$ by the Cayley transform $Q = (1 - B)^{-1}(1 + B)$ (one LU), and the
-        stage the iteration moves to is the stage equation solved with $B$ frozen,
-        $X W X^\dagger$ with $X = (1 - B)^{-1} = (Q + 1)/2$, formed from the same products:
-        $X W X^\dagger = (QWQ^\dagger + QW - (QW)^\dagger + W)/4$. Returns `(candidate, next
-        iterate, moved)`, `moved` the largest entry of the iterate's change."""
+        $Q W Q^\dagger$ by the Cayley transform $Q = (1 - B)^{-1}(1 + B)$, formed as an
+        increment: with $E = Q - 1 = 2(1 - B)^{-1}B$ (`_products.cayley_increment`: block
+        elimination, about one product),
+
+        $$Q W Q^\dagger - W = EW - (EW)^\dagger + EWE^\dagger$$
+
+        ($W^\dagger = -W$), two products whose round-off is that of the increment, not of $W$
+        (what compensated summation needs: `compensated`). The stage the iteration moves to is
+        the stage equation solved with $B$ frozen, $X W X^\dagger$ with $X = (1 - B)^{-1} =
+        1 + E/2$, from the same products: $W + (EW - (EW)^\dagger)/2 + EWE^\dagger/4$.
+        Returns `(increment, next iterate, moved)`, `moved` the largest row sum of the
+        iterate's change. The products in real arithmetic (`_products.matmul`: XLA's complex
+        product is several times slower on CPU, and LAPACK's LU and triangular solves several
+        products)."""
         B = 0.5 * h * self.velocity_matrix(Wt)
-        eye = jnp.eye(W.shape[-1], dtype=W.dtype)
-        Q = jnp.linalg.solve(eye - B, eye + B)  # the Cayley transform: unitary (orthogonal)
-        QW = Q @ W
-        W1 = QW @ dagger(Q)
+        E = 2.0 * cayley_increment(B)  # Q - 1, Q the Cayley transform: unitary (orthogonal)
+        EW = matmul(E, W)
+        EWE = matmul(EW, dagger(E))
+        S = EW - dagger(EW)
+        dW = S + EWE
+        dW = 0.5 * (dW - dagger(dW))  # on the algebra (exact halving): W + dW stays on it, to the last bit
         # X W X^dagger from the same products; its round-off is far below tol (it is only where
-        # the next iteration starts), while W1 keeps the conjugation's few eps a step
-        G = 0.25 * (W1 + QW - dagger(QW) + W)
-        W1 = 0.5 * (W1 - dagger(W1))  # back onto the algebra (exact halving): no drift off it
-        return W1, G, _norm(G - Wt)
+        # the next iteration starts)
+        G = W + 0.5 * S + 0.25 * EWE
+        return dW, G, _norm(G - Wt)
 
     def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None
                   ) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""One isospectral midpoint step of size `h` from `W`, the stage $\tilde W$ sought
         from $W + D$ by `iterations` quasi-Newton iterations (None: until `tol`): returns the
-        new state (NaN if the stage has not converged), the stage's increment $\tilde W - W$
-        (the last iteration's, one iteration past the stage whose $B$ made the step) and the
-        iteration count.
+        step's increment $W_{n+1} - W$ (NaN if the stage has not converged), the stage's
+        increment $\tilde W - W$ (the last iteration's, one iteration past the stage whose $B$
+        made the step) and the iteration count.
 
         The step is the Cayley conjugation of the iterate that the last iteration started
         from, accepted when that iteration moved it by at most `tol` times max|W| (quflow's
@@ -181,24 +204,25 @@ class IsospectralMidpoint(AbstractStepMap):
 
             def body(state):
                 Wt, _, _, k = state
-                W1, G, moved = self._iterate(W, h, Wt)
-                return G, W1, moved, k + 1
+                dW, G, moved = self._iterate(W, h, Wt)
+                return G, dW, moved, k + 1
 
-            Wt, W1, moved, k = jax.lax.while_loop(
+            Wt, dW, moved, k = jax.lax.while_loop(
                 lambda state: (state[2] > scale) & (state[3] < self.max_iter), body,
                 (W + D, jnp.zeros_like(W), jnp.asarray(jnp.inf), jnp.asarray(0)))
         else:  # straight-line code: no control flow in the step
             Wt = W + D
             for _ in range(iterations):
-                W1, Wt, moved = self._iterate(W, h, Wt)
+                dW, Wt, moved = self._iterate(W, h, Wt)
             k = jnp.asarray(iterations)
-        return jnp.where(moved <= scale, W1, jnp.nan), Wt - W, k
+        return jnp.where(moved <= scale, dW, jnp.nan), Wt - W, k
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
         """One step on the matrix $W$ `(m, m)` of the state, the stage started at $W$ and
         iterated until `tol` (or `iterations` times, when set)."""
         for c in self.substeps:
-            W, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), self.iterations)
+            dW, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), self.iterations)
+            W = W + dW
         return W
 
     def step(self, y: jax.Array) -> jax.Array:
@@ -226,7 +250,8 @@ class IsospectralMidpoint(AbstractStepMap):
             Wb, histories, count = state
             found, updated = [], []
             for coefficient, history in zip(backwards, histories):
-                Wn, D, _ = self._midpoint(Wb, coefficient * self.h, _predict(history, count), None)
+                dW, D, _ = self._midpoint(Wb, coefficient * self.h, _predict(history, count), None)
+                Wn = Wb + dW
                 updated.append(_push(history, D, count))
                 found.append(Wb + D - Wn)  # the forward substep's increment, from where it starts
                 Wb = Wn
@@ -236,22 +261,26 @@ class IsospectralMidpoint(AbstractStepMap):
         # found[j, s]: backward step j (the forward step j + 1 before W), backward substep s
         # (forward substep S - 1 - s); the forward ring full, the oldest in slot 0 (count M)
         histories = tuple(found[::-1, S - 1 - index] for index in range(S))
-        return W, histories, jnp.asarray(M)
+        return W, histories, jnp.asarray(M), (jnp.zeros_like(W) if self.compensated else None)
 
-    def step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]
-                   ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array]:
+    def step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]
+                   ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]:
         return self._step_warm(c, self.iterations)[0]
 
     def _step_warm(self, c, iterations):
-        W, histories, count = c
+        W, histories, count, low = c
         updated, total = [], jnp.asarray(0)
         for coefficient, history in zip(self.substeps, histories):
-            W, D, k = self._midpoint(W, coefficient * self.h, _predict(history, count), iterations)
+            dW, D, k = self._midpoint(W, coefficient * self.h, _predict(history, count), iterations)
+            if low is None:
+                W = W + dW
+            else:  # W + low, the sum so far to twice the working precision (`compensated`)
+                W, low = _two_sum(W, dW + low)
             updated.append(_push(history, D, count))
             total = total + k
-        return (W, tuple(updated), _counted(count)), total
+        return (W, tuple(updated), _counted(count), low), total
 
-    def uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]) -> jax.Array:
+    def uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]) -> jax.Array:
         return self.system.algebra.coordinates(c[0])
 
     def iterations_needed(self, y: ArrayLike, n_steps: int = 20) -> tuple[float, int]:
@@ -267,6 +296,15 @@ class IsospectralMidpoint(AbstractStepMap):
 #: polynomial through them whose value one step ahead starts the next stage iteration.
 PREDICTOR_POINTS = 8
 PREDICTOR_DEGREE = 5
+
+
+def _two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
+    r"""`(s, e)` with $s = \mathrm{fl}(a + b)$ and $a + b = s + e$ exactly, entry by entry
+    (Knuth's TwoSum: no assumption on which is larger; complex entries part by part, their
+    sums being exact part by part)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
 
 
 def _norm(A: jax.Array) -> jax.Array:

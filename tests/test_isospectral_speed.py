@@ -1,0 +1,113 @@
+"""The isospectral midpoint's fast path (issue 64): complex products by Gauss's three real
+products, the Cayley transform's increment by block elimination, compensated summation of the
+steps, and the quflow benchmark's loader."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import integrators as it
+import liepoisson as lp
+from benchmarks.zeitlin import casimirs, initial_state, load_quflow
+from integrators._products import BLOCK_SIZE, cayley_increment, matmul
+
+EPS = np.finfo(np.float64).eps
+
+
+def _complex(rng, *shape):
+    return rng.normal(size=shape) + 1j * rng.normal(size=shape)
+
+
+def test_three_real_products_agree_with_the_complex_product():
+    rng = np.random.default_rng(0)
+    A, B = _complex(rng, 96, 80), _complex(rng, 80, 72)
+    exact = np.asarray(A, np.clongdouble) @ np.asarray(B, np.clongdouble)  # 64-bit mantissa: the reference
+    bound = (np.abs(A.real) + np.abs(A.imag)) @ (np.abs(B.real) + np.abs(B.imag))
+    got = np.asarray(matmul(jnp.asarray(A), jnp.asarray(B)))
+    ours = np.abs(got - exact) / bound
+    theirs = np.abs(np.asarray(jnp.asarray(A) @ jnp.asarray(B)) - exact) / bound
+    # Higham's bound for 3M: |error| <= c n eps (|Ar| + |Ai|)(|Br| + |Bi|) entrywise; a sum of 80
+    # random terms rounds like sqrt(80) eps, far inside the bound's n eps: a few eps of it
+    assert ours.max() < 4 * EPS
+    assert ours.max() < 4 * max(theirs.max(), EPS)  # as accurate as XLA's complex product, to a small factor
+    # real operands: the plain product; stacks of matrices
+    Ar = rng.normal(size=(5, 6))
+    assert np.array_equal(np.asarray(matmul(jnp.asarray(Ar), jnp.asarray(Ar.T))), np.asarray(jnp.asarray(Ar) @ Ar.T))
+    stack = _complex(rng, 3, 7, 7)
+    np.testing.assert_allclose(np.asarray(matmul(jnp.asarray(stack), jnp.asarray(stack))), stack @ stack,
+                               atol=16 * EPS * np.abs(stack).max() ** 2 * 7)
+
+
+def test_three_real_products_differentiate_as_the_product():
+    rng = np.random.default_rng(1)
+    A, B, dA, dB = (jnp.asarray(_complex(rng, 6, 6)) for _ in range(4))
+    _, tangent = jax.jvp(matmul, (A, B), (dA, dB))
+    np.testing.assert_allclose(np.asarray(tangent), np.asarray(dA @ B + A @ dB), atol=64 * EPS)
+    gradient = jax.grad(lambda A: jnp.sum(jnp.real(matmul(A, B))))(A)
+    np.testing.assert_allclose(np.asarray(gradient), np.asarray(jax.grad(lambda A: jnp.sum(jnp.real(A @ B)))(A)),
+                               atol=64 * EPS)
+
+
+@pytest.mark.parametrize("n", [BLOCK_SIZE // 2, 2 * BLOCK_SIZE + 7])  # LAPACK's solve; two levels of blocks, odd halves
+@pytest.mark.parametrize("real", [False, True])
+def test_cayley_increment_solves_to_round_off_relative_to_b(n, real):
+    rng = np.random.default_rng(2)
+    S = rng.normal(size=(n, n)) if real else _complex(rng, n, n)
+    B = S - S.conj().T
+    B *= 0.3 / np.linalg.norm(B, 2)  # h/2 |B(W)| of a Zeitlin step is ~0.1-0.2
+    F = np.asarray(cayley_increment(jnp.asarray(B)))
+    exact = np.linalg.solve(np.eye(n) - B, B)  # LAPACK, pivoted: within a few eps of |F| itself
+    # relative to |F| (not to |1 + F|): block elimination without pivoting is stable for 1 - B
+    # (Hermitian part 1); a few eps times log2(n) levels of blocks
+    assert np.abs(F - exact).max() < 32 * EPS * np.abs(exact).max()
+    Q = np.eye(n) + 2 * F  # the Cayley transform: unitary to round-off
+    assert np.abs(Q.conj().T @ Q - np.eye(n)).max() < 32 * n * EPS
+
+
+def test_compensated_summation_keeps_the_casimirs_at_round_off():
+    z = lp.systems.Zeitlin(8)
+    y0 = initial_state(z)
+    h = 0.25 * z.hbar
+
+    def drift(compensated):
+        method = it.IsospectralMidpoint(z, h, compensated=compensated)
+        run = jax.jit(lambda c: jax.lax.scan(lambda c, _: (jax.lax.fori_loop(0, 100, lambda _, c: method.step_carry(c), c),
+                                                           c[0]), c, None, length=30))
+        _, Ws = run(method.carry(jnp.asarray(y0)))
+        C, scale = casimirs(np.asarray(Ws))  # in extended precision: the drift, not the measurement's round-off
+        return (np.abs(C - C[0]) / scale).max()
+
+    plain, compensated = drift(False), drift(True)
+    # 2900 steps: the plain sum's rounding (eps |W| a step) walks to ~15 eps (measured 11-17 eps at
+    # N = 8 and 16); the compensated one leaves only the increments' round-off (eps |dW|, |dW|
+    # ~ 0.1 |W| at h = 0.25 hbar): measured 2-3 eps
+    assert compensated < plain
+    assert compensated < 6 * EPS
+    # one compensated step is the plain step (the compensation starts at zero)
+    method = it.IsospectralMidpoint(z, h, compensated=True)
+    c = method.carry(jnp.asarray(y0))
+    assert np.array_equal(np.asarray(method.step_carry(c)[0]), np.asarray(it.IsospectralMidpoint(z, h).step_carry(c[:3] + (None,))[0]))
+
+
+def test_compensated_must_be_a_bool():
+    with pytest.raises(TypeError, match="compensated must be True or False"):
+        it.IsospectralMidpoint(lp.systems.Zeitlin(4), 0.1, compensated="yes")
+
+
+def test_the_benchmark_skips_quflow_cleanly_without_it(tmp_path):
+    quflow, why = load_quflow(tmp_path / "nowhere")
+    assert quflow is None
+    assert "quflow not found" in why and "QUFLOW_PATH" in why and "\n" not in why
+
+
+def test_the_benchmark_starts_from_quflows_matrix():
+    z = lp.systems.Zeitlin(16)
+    W = np.asarray(z.algebra.matrix(initial_state(z)))
+    quflow, why = load_quflow()
+    if quflow is None:
+        pytest.skip(why)
+    Wq = quflow.shr2mat(quflow.random_shr(lmax=10, seed=42), N=16)
+    # the two codes build the quantized harmonics by their own eigen-solvers: they agree to
+    # round-off amplified by N (21 eps measured at N = 16); a wrong seed, damping or index would be O(1)
+    assert np.abs(W - Wq).max() < 1e-13 * np.abs(Wq).max()
