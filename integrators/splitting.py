@@ -9,6 +9,10 @@ from ._splitting._base import FlowList as FlowList
 from ._splitting._base import IndexedFlows as IndexedFlows
 from ._splitting._base import Splitting as Splitting
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
+from ._splitting._compensated import AbstractCompensableStepMap as AbstractCompensableStepMap
+from ._splitting._compensated import Compensated as Compensated
+from ._splitting._compensated import compensated_flow as compensated_flow
+from ._splitting._compensated import two_sum as two_sum
 from ._splitting._composition import (
     AbstractCompositionMethod as AbstractCompositionMethod,
 )

@@ -19,7 +19,12 @@ import jax.numpy as jnp
 from numpy.typing import ArrayLike
 
 from integrators.internals import check_state, composition_flops, splitting_method
-from integrators.splitting import AbstractSplittingMethod, IndexedFlows, LieTrotter
+from integrators.splitting import (
+    AbstractCompensableStepMap,
+    AbstractSplittingMethod,
+    IndexedFlows,
+    LieTrotter,
+)
 from liepoisson import JAX
 from liepoisson.internals import as_state, check_system, positive_float, refuse_nonholonomic
 from liepoisson.systems import AbstractPoissonSystem
@@ -38,7 +43,8 @@ def check_method(method: Any) -> AbstractSplittingMethod:
     return splitting_method(method)
 
 
-class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBodyMap):
+class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBodyMap,
+             AbstractCompensableStepMap):
     r"""Global Lie-Poisson network: the splitting `method` of the learned Hamiltonian
     $\widetilde H = w\sum_s\Phi_s(\langle\alpha_s, y\rangle)$ over its pieces, the
     `learn.RidgeTerms` $\Phi_s' = a_s\sigma(x) + b_s$
@@ -134,6 +140,14 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
 
     def step(self, y: jax.Array) -> jax.Array:
         return self.method.compose(self.flows(), check_state(y, self.system.dim), self.h)
+
+    def compensated_flows(self) -> IndexedFlows:
+        r"""`flows()` on states carried as $(y_{hi}, y_{lo})$: what
+        `integrators.splitting.Compensated(net)` composes (Casimirs kept over long runs)."""
+        def flow(s, t, pair):
+            return self.terms.compensated_flow(self.system, s, t / self._time_divisor, pair)
+
+        return IndexedFlows(flow, self.n_modules)
 
     def lifted_step(self, g: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
         r"""The step on $(g, \mu)$: each module's flow lifted, $g \mapsto

@@ -84,6 +84,9 @@ class LearnedHamiltonian(AbstractPoissonSystem):
     def _test_flow(self, alpha, t, y):
         return self.base._test_flow(alpha, t, y)
 
+    def _test_flow_increment(self, alpha, t, y):
+        return self.base._test_flow_increment(alpha, t, y)
+
     def test_flow_parameters(self, y0, y1, t, *, rtol=1e-10):
         return self.base.test_flow_parameters(y0, y1, t, rtol=rtol)
 

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from integrators.splitting import compensated_flow
 from liepoisson.internals import positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem
 
@@ -200,6 +201,13 @@ class RidgeTerms(eqx.Module):
         r"""The exact flow of $\Phi_s(\langle\alpha_s, y\rangle)$ for time `t`: the test flow
         with the rate $\Phi_s'(\langle\alpha_s, y\rangle)$ frozen (it is conserved)."""
         return system.test_flow(self.velocity(s, y), t, y)
+
+    def compensated_flow(self, system: AbstractPoissonSystem, s: int | jax.Array, t: Any,
+                         pair: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
+        r"""`flow` on a state carried as $(y_{hi}, y_{lo})$
+        (`integrators.splitting.compensated_flow`), the rate frozen at $y_{hi}$."""
+        alpha = self.velocity(s, pair[0])
+        return compensated_flow(lambda y: system.test_flow_increment(alpha, t, y), pair)
 
     def velocity(self, s: int | jax.Array, y: jax.Array) -> jax.Array:
         r"""$\nabla\Phi_s = \Phi_s'(\langle\alpha_s, y\rangle)\,\alpha_s$: the body velocity of
