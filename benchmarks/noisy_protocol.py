@@ -17,9 +17,9 @@ sigma per component; the test starts and heyoka's reference its `test_set`). Mod
   RK4 at 1/10 of the step): what a converged fit of a family holding the body reaches, less
   what its few extra parameters absorb;
 - **limit**: W2's (the true family by trajectory least squares with the initial states);
-- **SINDy**: W2's (`paper._sindy.SINDyModel`), its STLSQ threshold chosen among `THRESHOLDS` by
-  the training trajectories' rollouts from their first observation (mean squared error
-  against the observations).
+- **SINDy**: W2's (`paper._sindy.SINDyModel`), its STLSQ threshold, constant and derivative
+  chosen by every study's rule (`paper._sindy.choose_sparse_field`: the training trajectories'
+  rollouts from their first observation).
 
 The mean state error at t = 100 is the mean over the 12 starts of |y - y_heyoka|. The script
 runs on older commits too (`PYTHONPATH=<worktree> python benchmarks/noisy_protocol.py --models
@@ -40,7 +40,6 @@ from benchmarks._report import default_out, write_json
 from paper import w2_observations as w2
 
 MODELS = ("G-LPNet", "limit", "SINDy")
-THRESHOLDS = (0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45)
 
 
 def state_error(states: np.ndarray, reference: np.ndarray) -> float:
@@ -119,27 +118,17 @@ def limit(protocol: w2.Protocol, data, y0, reference) -> dict:
 
 
 def sindy(protocol: w2.Protocol, data, y0, reference) -> dict:
-    """W2's SINDy, its threshold chosen by the rollouts of the training trajectories."""
+    """W2's SINDy, its settings chosen by the rollouts of the training trajectories."""
     from paper._sindy import SINDyModel
 
     start = time.perf_counter()
-    first = np.stack([s[0] for s in data.states])
-    observed = np.stack(data.states)
-    h = float(data.times[0][1] - data.times[0][0])
-    scores = {}
-    for threshold in THRESHOLDS:
-        model = SINDyModel(threshold=threshold)
-        fitted = model.fit(protocol.system, data)
-        states = model.simulate(fitted, first, observed.shape[1] - 1, h)
-        error = float(np.mean((states - observed) ** 2))
-        scores[threshold] = error if np.isfinite(error) else float("inf")
-    best = min(scores, key=scores.get)
-    model = SINDyModel(threshold=best)
+    model = SINDyModel()
     fitted = model.fit(protocol.system, data)
     seconds = time.perf_counter() - start
     states = model.simulate(fitted, y0, reference.shape[1] - 1, w2.H_TEST)
+    field = fitted.step_map.model
     return {"model": "SINDy", "state_error": state_error(states, reference), "fit_seconds": seconds,
-            "threshold": best, "training_rollout_mse": scores}
+            "threshold": field.threshold, "chosen": field.describe()}
 
 
 def main(argv: list[str] | None = None) -> None:

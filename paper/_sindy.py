@@ -1,6 +1,14 @@
 """SINDy and weak SINDy (pysindy, extra `peers`) as models of a study: a sparse polynomial vector
 field fitted to observations (from their finite differences, or in weak form: integrals against
-test functions), integrated by LSODA."""
+test functions), integrated by LSODA.
+
+Their settings are chosen on the training data by one rule, every study's
+(`choose_sparse_field`; docs/conventions.md, "Peers"): every STLSQ threshold of `THRESHOLDS`,
+the library with and without its constant, and SINDy's derivative (finite differences, and on
+regular sampling also smoothed ones) or weak SINDy's support width (`WINDOWS`), fitted to every
+training trajectory; each field rolled out from each training trajectory's first observation
+over its times; kept, among the fields whose mean relative RMS error is within `TIE_RTOL` (or
+`TIE_ATOL`) of the lowest, the one of fewest terms (then the lowest error). Never the test."""
 
 from __future__ import annotations
 
@@ -62,74 +70,93 @@ class SINDyFlow(it.AbstractStepMap):
         return 0
 
 
-class _AbstractSINDyModel(AbstractStudyModel):
-    """A sparse polynomial vector field fitted to observations: `vector_field(data)` is the
-    fitted field (anything with pysindy's `predict`, `(n, dim) -> (n, dim)`); the rest is shared.
-    Simulated by LSODA over the whole time span at once (tolerance 1e-12, as `SINDy.simulate`),
-    stopped, and reported as diverged, once |y| exceeds 100 times its start."""
-
-    @abc.abstractmethod
-    def vector_field(self, data: Any) -> Any:
-        """The fitted vector field of `data` (an `integrators.Observations`)."""
-
-    def fit(self, system, data, *, progress=False) -> Fitted:
-        with warnings.catch_warnings():  # pysindy warns about ill-conditioned fits of noisy data
-            warnings.simplefilter("ignore")
-            model = self.vector_field(data)
-        h = float(np.median(np.concatenate([np.diff(t) for t in data.times])))
-        return Fitted(SINDyFlow(system, h, model))
-
-    def simulate(self, fitted, y0, n_steps, h) -> np.ndarray:
-        t = h * np.arange(n_steps + 1)
-        y0 = np.asarray(y0, dtype=np.float64).reshape(-1, fitted.step_map.system.dim)
-        return np.stack([_flow(fitted.step_map.model, y, t, 100.0 * max(float(np.linalg.norm(y)), 1e-3))
-                         for y in y0])
+#: The grid of `choose_sparse_field`: STLSQ's thresholds (coefficients below are set to zero;
+#: pysindy's default is 0.1), ...
+THRESHOLDS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
+#: ... weak SINDy's support widths, in median steps of a trajectory (`_half_width`), ...
+WINDOWS = (5, 9, 17, 33)
+#: ... and its number of test functions per observation of a trajectory (fixed: more only add
+#: rows drawn from the same supports).
+TEST_FUNCTIONS = 4
+#: A training rollout error within this fraction of the lowest, or `TIE_ATOL` of it (LSODA's
+#: own error at `RTOL` over a trajectory is far below), counts as a tie: the sparser field is
+#: kept.
+TIE_RTOL, TIE_ATOL = 0.1, 1e-9
+#: SINDy's derivatives: pysindy's finite differences (second order, any times) and, on regular
+#: sampling only (the smoother assumes even spacing), smoothed ones (Savitzky-Golay over
+#: `SMOOTHING_WINDOW` observations, or the shortest trajectory's odd length).
+DERIVATIVES = ("finite differences", "smoothed finite differences")
+SMOOTHING_WINDOW = 11
+#: A rollout is stopped, and scored inf, once |y| exceeds this multiple of its start.
+BLOW_UP = 100.0
 
 
-@dataclasses.dataclass(frozen=True)
-class SINDyModel(_AbstractSINDyModel):
-    """SINDy: polynomial library of degree 2, STLSQ; derivatives by smoothed finite differences
-    (regular sampling: the smoother's window of 11 points, or the shortest trajectory's odd
-    length) or finite differences (uneven: the smoother assumes even spacing); `threshold`,
-    STLSQ's (pysindy's default 0.1)."""
+def _check_grid(values: Any, name: str, kind: type, least: float) -> tuple:
+    """`values` as a tuple of `kind` (ints taken as floats), each >= `least`; else `ValueError`."""
+    values = tuple(values) if isinstance(values, (tuple, list)) else (values,)
+    kinds = (int, float) if kind is float else (int,)
+    if not values or any(isinstance(v, bool) or not isinstance(v, kinds) or not v >= least for v in values):
+        raise ValueError(f"{name} must be a non-empty sequence of {kind.__name__}s >= {least:g}; got {values!r}")
+    return tuple(kind(v) for v in values)
 
-    label: str = "SINDy"
-    threshold: float = 0.1
 
-    def vector_field(self, data):
-        import pysindy as ps
+def relative_rms(pred: np.ndarray, true: np.ndarray) -> float:
+    """The RMS of `pred - true` over the RMS of `true` (`(m, dim)` each; inf if not finite)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        error = np.sqrt(np.mean(np.sum((pred - true) ** 2, axis=-1)) / np.mean(np.sum(true**2, axis=-1)))
+    return float(error) if np.isfinite(error) else np.inf
 
-        if data.is_regular():
-            shortest = min(t.size for t in data.times)
-            window = min(11, shortest if shortest % 2 else shortest - 1)
-            derivative = ps.SmoothedFiniteDifference(smoother_kws={"window_length": window})
-        else:
-            derivative = ps.FiniteDifference()
-        model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(threshold=self.threshold),
-                         differentiation_method=derivative)
-        return model.fit(list(data.states), t=list(data.times))
+
+def rollout_error(field: Any, times: list[np.ndarray], states: list[np.ndarray], cutoff: float = np.inf) -> float:
+    """The mean over trajectories of the relative RMS error (`relative_rms`) of the field's
+    rollout (LSODA, `_flow`) from each trajectory's first observation over its times, against
+    its observations; inf once the running sum passes `cutoff` times their number (it cannot
+    be below `cutoff` then)."""
+    total = 0.0
+    for t, y in zip(times, states):
+        y = np.asarray(y, dtype=np.float64)
+        pred = _flow(field, y[0], np.asarray(t, dtype=np.float64), BLOW_UP * max(float(np.linalg.norm(y[0])), 1e-3))
+        total += relative_rms(pred, y)
+        if total > cutoff * len(times):
+            return np.inf
+    return total / len(times)
 
 
 class PolynomialField:
     r"""The polynomial vector field $\dot y = \Theta(y)\,\Xi$ of identified coefficients: the
-    monomials of a fitted `pysindy.PolynomialLibrary` (their `powers`, `(n_features, dim)`, and
-    `names`) times `coefficients` `(dim, n_features)`, with pysindy's `predict` signature. What
-    a weak-form fit identifies is integrated as this field (pysindy's weak library evaluates
-    integrals over a time grid, not the field at a state)."""
+    monomials `powers` `(n_features, dim)` (named `names`) times `coefficients`
+    `(dim, n_features)`, with pysindy's `predict` signature. What a weak-form fit identifies
+    is integrated as this field (pysindy's weak library evaluates integrals over a time grid,
+    not the field at a state)."""
 
-    def __init__(self, library: Any, coefficients: np.ndarray):
-        self.powers = np.asarray(library.powers_)
-        self.names = tuple(library.get_feature_names())
+    def __init__(self, powers: np.ndarray, names: tuple[str, ...], coefficients: np.ndarray):
+        self.powers = np.asarray(powers)
+        self.names = tuple(names)
         self.coefficients = np.asarray(coefficients, dtype=np.float64)
 
+    @property
+    def terms(self) -> int:
+        """The number of nonzero coefficients."""
+        return int(np.count_nonzero(self.coefficients))
+
     def coefficient(self, component: int, powers: tuple[int, ...]) -> float:
-        """The coefficient of the monomial `prod_i y_i^powers[i]` in `dot y[component]`."""
-        (row,) = np.flatnonzero(np.all(self.powers == np.asarray(powers), axis=1))
-        return float(self.coefficients[component, row])
+        """The coefficient of the monomial `prod_i y_i^powers[i]` in `dot y[component]` (0 for a
+        monomial not in the library)."""
+        rows = np.flatnonzero(np.all(self.powers == np.asarray(powers), axis=1))
+        return float(self.coefficients[component, rows[0]]) if rows.size else 0.0
 
     def predict(self, y: np.ndarray) -> np.ndarray:
         y = np.asarray(y, dtype=np.float64)
         return np.prod(y[:, None, :] ** self.powers, axis=2) @ self.coefficients.T
+
+
+def _monomials(dim: int) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The powers and names of pysindy's polynomial library of degree 2 in `dim` variables (the
+    constant first)."""
+    import pysindy as ps
+
+    library = ps.PolynomialLibrary(degree=2).fit(np.zeros((2, dim)))
+    return np.asarray(library.powers_), tuple(library.get_feature_names())
 
 
 #: A trajectory gives weak-form rows if a test function's support can hold two of its
@@ -151,56 +178,211 @@ def _half_width(t: np.ndarray, window: int) -> float:
     return h if np.any(lo < hi) else widest
 
 
+def derivative_rows(times: list[np.ndarray], states: list[np.ndarray], derivative: str,
+                    rates: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    r"""SINDy's least-squares rows: $\Theta(y)$ of every observation (the degree-2 library,
+    constant included) and its rate, given (`rates`) or estimated by `derivative` (one of
+    `DERIVATIVES`) on each trajectory's times."""
+    import pysindy as ps
+
+    features = ps.PolynomialLibrary(degree=2).fit_transform(np.concatenate(states))
+    if rates is not None:
+        return np.asarray(features), np.concatenate(rates)
+    if derivative == "finite differences":
+        method = ps.FiniteDifference()
+    elif derivative == "smoothed finite differences":
+        shortest = min(t.size for t in times)
+        window = min(SMOOTHING_WINDOW, shortest if shortest % 2 else shortest - 1)
+        method = ps.SmoothedFiniteDifference(smoother_kws={"window_length": window})
+    else:
+        raise ValueError(f"derivative must be one of {DERIVATIVES}; got {derivative!r}")
+    targets = np.concatenate([method(np.asarray(y), t=np.asarray(t)) for t, y in zip(times, states)])
+    return np.asarray(features), targets
+
+
+def weak_rows(times: list[np.ndarray], states: list[np.ndarray], window: int, test_functions: int = TEST_FUNCTIONS,
+              seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    r"""Weak SINDy's least-squares rows, $-\int y\,\phi_k'\,dt$ against $\int \Theta(y)\,\phi_k\,dt$
+    (the degree-2 library, constant included), for test functions $\phi_k$ (pysindy's
+    `WeakPDELibrary` on a 1-D grid of the times: $(1 - s^2)^4$ on supports drawn at random; the
+    integrals are those of the piecewise-linear interpolants of $y$ and $\Theta(y)$ between
+    observations, exact on any grid). pysindy's library has one time grid, so each trajectory
+    has its own library on its own times (`window` median steps per support, `test_functions`
+    times its number of observations of them; the draws seeded by `seed` plus the trajectory's
+    index), the rows of all stacked, unweighted. A trajectory of fewer than
+    `MIN_WEAK_OBSERVATIONS` observations gives no row."""
+    import pysindy as ps
+
+    features, targets = [], []
+    for j, (t, y) in enumerate(zip(times, states)):
+        t = np.asarray(t, dtype=np.float64)
+        if t.size < MIN_WEAK_OBSERVATIONS:
+            continue
+        state = np.random.get_state()  # the library draws its supports from numpy's global stream
+        np.random.seed(seed + j)
+        try:
+            library = ps.WeakPDELibrary(function_library=ps.PolynomialLibrary(degree=2), spatiotemporal_grid=t,
+                                        K=test_functions * t.size, H_xt=_half_width(t, window))
+        finally:
+            np.random.set_state(state)
+        features.append(np.asarray(library.fit_transform(np.asarray(y))))
+        targets.append(np.asarray(library.convert_u_dot_integral(np.asarray(y))))
+    if not features:
+        raise ValueError(f"weak SINDy needs a trajectory of at least {MIN_WEAK_OBSERVATIONS} observations; "
+                         f"the longest has {max(np.size(t) for t in times)}")
+    return np.concatenate(features), np.concatenate(targets)
+
+
+@dataclasses.dataclass(frozen=True)
+class SparseField:
+    """The field `choose_sparse_field` kept, and how: its `setting` (SINDy's derivative, or weak
+    SINDy's support width), STLSQ's `threshold`, whether the library has its `constant`, and
+    its training rollout error (`rollout_error`). Predicts as its field."""
+
+    field: PolynomialField
+    setting: str
+    threshold: float
+    constant: bool
+    train_error: float
+
+    def predict(self, y: np.ndarray) -> np.ndarray:
+        return self.field.predict(y)
+
+    def describe(self) -> str:
+        return (f"{self.setting}, threshold {self.threshold:g}, {'with' if self.constant else 'no'} constant, "
+                f"{self.field.terms} terms, training rollout error {self.train_error:.3g}")
+
+
+def choose_sparse_field(times: list[np.ndarray], states: list[np.ndarray],
+                        rows: dict[str, tuple[np.ndarray, np.ndarray]],
+                        thresholds: tuple[float, ...] = THRESHOLDS) -> SparseField:
+    """The rule of every study's SINDy and weak SINDy (docs/conventions.md, "Peers"): for each
+    setting's least-squares `rows` (`(features, targets)`, the degree-2 library with its constant
+    first), each threshold of `thresholds`, with and without the constant, STLSQ (pysindy's:
+    ridge `alpha` 0.05, then least squares on the terms kept); each field rolled out from the
+    first observation of every training trajectory (`times`, `states`) over its times
+    (`rollout_error`); kept: among the fields within `TIE_RTOL` (or `TIE_ATOL`) of the lowest
+    error, the one of fewest terms, then of lowest error (on a tie, the first tried)."""
+    import pysindy as ps
+
+    thresholds = _check_grid(thresholds, "thresholds", float, 0.0)
+    powers, names = _monomials(np.asarray(states[0]).shape[-1])
+    tried: dict[bytes, float] = {}  # fields already scored, by their coefficients
+    candidates = []
+    best = np.inf
+    with warnings.catch_warnings():  # pysindy warns about ill-conditioned fits of noisy data
+        warnings.simplefilter("ignore")
+        for setting, (features, targets) in rows.items():
+            for constant in (False, True):
+                keep = slice(None) if constant else slice(1, None)
+                for threshold in thresholds:
+                    coefficients = np.zeros((targets.shape[1], powers.shape[0]))
+                    coefficients[:, keep] = ps.STLSQ(threshold=threshold).fit(features[:, keep], targets).coef_
+                    key = coefficients.tobytes()
+                    if key not in tried:
+                        field = PolynomialField(powers, names, coefficients)
+                        tried[key] = rollout_error(field, times, states, (1.0 + TIE_RTOL) * best + TIE_ATOL)
+                        best = min(best, tried[key])
+                        candidates.append(SparseField(field, setting, threshold, constant, tried[key]))
+    eligible = [c for c in candidates if c.train_error <= (1.0 + TIE_RTOL) * best + TIE_ATOL] or candidates[:1]
+    return min(eligible, key=lambda c: (c.field.terms, c.train_error))
+
+
+def fit_sindy(times: list[np.ndarray], states: list[np.ndarray], rates: list[np.ndarray] | None = None,
+              thresholds: tuple[float, ...] = THRESHOLDS) -> SparseField:
+    """SINDy by the rule (`choose_sparse_field`): the derivatives of `DERIVATIVES` (smoothed
+    ones on regular sampling only), or the `rates` given."""
+    with warnings.catch_warnings():  # pysindy's warnings about its arrays' axes
+        warnings.simplefilter("ignore")
+        if rates is not None:
+            rows = {"rates given": derivative_rows(times, states, "", rates)}
+        else:
+            steps = np.concatenate([np.diff(t) for t in times])
+            regular = bool(np.ptp(steps) <= 1e-9 * np.max(steps))
+            rows = {d: derivative_rows(times, states, d) for d in DERIVATIVES[: 2 if regular else 1]}
+    return choose_sparse_field(times, states, rows, thresholds)
+
+
+def fit_weak_sindy(times: list[np.ndarray], states: list[np.ndarray], windows: tuple[int, ...] = WINDOWS,
+                   test_functions: int = TEST_FUNCTIONS, seed: int = 0,
+                   thresholds: tuple[float, ...] = THRESHOLDS) -> SparseField:
+    """Weak SINDy by the rule (`choose_sparse_field`): every support width of `windows`."""
+    with warnings.catch_warnings():  # pysindy's warnings about its arrays' axes
+        warnings.simplefilter("ignore")
+        rows = {f"window {w}": weak_rows(times, states, w, test_functions, seed) for w in windows}
+    return choose_sparse_field(times, states, rows, thresholds)
+
+
+class _AbstractSINDyModel(AbstractStudyModel):
+    """A sparse polynomial vector field fitted to observations: `vector_field(data)` is the
+    fitted field (a `SparseField`, chosen by the rule of `choose_sparse_field`); the rest is
+    shared. Simulated by LSODA over the whole time span at once (tolerance 1e-12, as
+    `SINDy.simulate`), stopped, and reported as diverged, once |y| exceeds `BLOW_UP` times its
+    start."""
+
+    @abc.abstractmethod
+    def vector_field(self, data: Any) -> SparseField:
+        """The fitted vector field of `data` (an `integrators.Observations`)."""
+
+    def fit(self, system, data, *, progress=False) -> Fitted:
+        model = self.vector_field(data)
+        if progress:
+            print(f"{self.label}: {model.describe()}", flush=True)
+        h = float(np.median(np.concatenate([np.diff(t) for t in data.times])))
+        return Fitted(SINDyFlow(system, h, model))
+
+    def simulate(self, fitted, y0, n_steps, h) -> np.ndarray:
+        t = h * np.arange(n_steps + 1)
+        y0 = np.asarray(y0, dtype=np.float64).reshape(-1, fitted.step_map.system.dim)
+        return np.stack([_flow(fitted.step_map.model, y, t, BLOW_UP * max(float(np.linalg.norm(y)), 1e-3))
+                         for y in y0])
+
+
+@dataclasses.dataclass(frozen=True)
+class SINDyModel(_AbstractSINDyModel):
+    """SINDy: polynomial library of degree 2 (with or without its constant), STLSQ, derivatives
+    by finite differences or (regular sampling) smoothed ones; the library, the threshold (of
+    `thresholds`) and the derivative chosen on the training trajectories' rollouts
+    (`fit_sindy`, `choose_sparse_field`)."""
+
+    label: str = "SINDy"
+    thresholds: tuple[float, ...] = THRESHOLDS
+
+    def __post_init__(self):
+        object.__setattr__(self, "thresholds", _check_grid(self.thresholds, "thresholds", float, 0.0))
+
+    def vector_field(self, data):
+        return fit_sindy(list(data.times), list(data.states), thresholds=self.thresholds)
+
+
 @dataclasses.dataclass(frozen=True)
 class WeakSINDyModel(_AbstractSINDyModel):
     r"""Weak SINDy: the coefficients $\Xi$ of $\dot y = \Theta(y)\,\Xi$ (the polynomial library
-    of degree 2, as SINDy's) fitted in weak form, $-\int y\,\phi_k'\,dt = \int \Theta(y)\,\phi_k\,dt\;\Xi$
-    for test functions $\phi_k$ (pysindy's `WeakPDELibrary` on a 1-D grid of the times: $(1 -
-    s^2)^4$ on supports drawn at random; the integrals are those of the piecewise-linear
-    interpolants of $y$ and $\Theta(y)$ between observations, exact on any grid), by STLSQ (pysindy's defaults, as SINDy's); no derivative of the data is
-    taken. Then simulated as the polynomial field with those coefficients (`PolynomialField`).
-
-    pysindy's library has one time grid, so each trajectory has its own library on its own
-    times (`window` median steps per support, `test_functions` times its number of
-    observations of them, `K`; the draws seeded by `seed` and the trajectory's index) and the rows of all trajectories are stacked
-    into one STLSQ fit, unweighted (a wider support, more observations averaged, weighs more).
-    Uneven times are therefore taken as they are, no resampling: `accepts` every sampling. A trajectory of fewer
-    than `MIN_WEAK_OBSERVATIONS` observations gives no row; data without a longer one are not
-    accepted."""
+    of degree 2, with or without its constant) fitted in weak form (`weak_rows`: pysindy's
+    `WeakPDELibrary` on each trajectory's own times, the rows stacked; no derivative of the
+    data is taken; uneven times taken as they are, so it `accepts` every sampling), by STLSQ;
+    the support width (of `windows`, median steps), the threshold (of `thresholds`) and the
+    constant chosen on the training trajectories' rollouts (`fit_weak_sindy`,
+    `choose_sparse_field`); `test_functions` per observation, drawn seeded by `seed`. Then
+    simulated as the polynomial field with those coefficients (`PolynomialField`). A
+    trajectory of fewer than `MIN_WEAK_OBSERVATIONS` observations gives no row; data without a
+    longer one are not accepted."""
 
     label: str = "weak SINDy"
-    window: int = 9
-    test_functions: int = 4
+    windows: tuple[int, ...] = WINDOWS
+    test_functions: int = TEST_FUNCTIONS
     seed: int = 0
+    thresholds: tuple[float, ...] = THRESHOLDS
 
     def __post_init__(self):
-        for name, least in (("window", 2), ("test_functions", 1)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < least:
-                raise ValueError(f"{name} must be an int >= {least}; got {value!r}")
+        object.__setattr__(self, "windows", _check_grid(self.windows, "windows", int, 2))
+        object.__setattr__(self, "thresholds", _check_grid(self.thresholds, "thresholds", float, 0.0))
+        if isinstance(self.test_functions, bool) or not isinstance(self.test_functions, int) or self.test_functions < 1:
+            raise ValueError(f"test_functions must be an int >= 1; got {self.test_functions!r}")
 
     def accepts(self, data) -> bool:
         return any(t.size >= MIN_WEAK_OBSERVATIONS for t in data.times)
 
     def vector_field(self, data):
-        import pysindy as ps
-
-        if not self.accepts(data):
-            raise ValueError(f"weak SINDy needs a trajectory of at least {MIN_WEAK_OBSERVATIONS} observations; "
-                             f"the longest has {max(t.size for t in data.times)}")
-        features, targets = [], []
-        for j, (t, y) in enumerate(zip(data.times, data.states)):
-            if t.size < MIN_WEAK_OBSERVATIONS:
-                continue
-            state = np.random.get_state()  # the library draws its supports from numpy's global stream
-            np.random.seed(self.seed + j)
-            try:
-                library = ps.WeakPDELibrary(function_library=ps.PolynomialLibrary(degree=2),
-                                            spatiotemporal_grid=t, K=self.test_functions * t.size,
-                                            H_xt=_half_width(t, self.window))
-            finally:
-                np.random.set_state(state)
-            features.append(np.asarray(library.fit_transform(y)))
-            targets.append(np.asarray(library.convert_u_dot_integral(y)))
-        optimizer = ps.STLSQ().fit(np.concatenate(features), np.concatenate(targets))
-        return PolynomialField(library.function_library, optimizer.coef_)
+        return fit_weak_sindy(list(data.times), list(data.states), self.windows, self.test_functions, self.seed,
+                              self.thresholds)

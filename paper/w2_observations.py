@@ -19,10 +19,12 @@ to the same observations:
   with its coefficients unknown, RK4 with 10 sub-steps) fitted the same way: what the data
   allow at best;
 - **SINDy** (pysindy, extra `peers`; skipped without it): polynomial library of degree 2,
-  STLSQ, derivatives by smoothed finite differences (regular sampling; BENCHMARKS.md compares
-  them with plain ones) or finite differences (uneven: the smoother assumes even spacing),
-  integrated by LSODA; **weak SINDy**: the same library and STLSQ in weak form (pysindy's
-  `WeakPDELibrary` on each trajectory's own times: no derivatives of the noisy data);
+  STLSQ, derivatives by finite differences or (regular sampling only: the smoother assumes
+  even spacing) smoothed ones, integrated by LSODA; **weak SINDy**: the same library and
+  STLSQ in weak form (pysindy's `WeakPDELibrary` on each trajectory's own times: no
+  derivatives of the noisy data); for both, the threshold, the constant and the derivative or
+  support width chosen on the training trajectories' rollouts (every study's rule,
+  `paper._sindy.choose_sparse_field`);
 - **MLP**: the unstructured residual MLP (3x16) on consecutive pairs, Adam then L-BFGS-B
   (regular sampling only: its step has no step-size input).
 

@@ -16,10 +16,13 @@ drawn from [0.05, 0.3]. The momenta are never observed. Fitted to the same obser
   included, from the truth 10% off: what the data allow at best;
 - **SINDy** and **weak SINDy** (pysindy, extra `peers`): a polynomial field of degree 2 for the
   body velocities (the observed ones; from the configurations' differences without them),
-  integrated by LSODA with the kinematics (dq/dt = q (Omega, 0)/2, dx/dt = R v);
-- **neural ODE**: `learn.NeuralODE`, an MLP field for the body velocities (two hidden layers of
-  32, tanh) fitted to their trajectories by BFGS, integrated as SINDy's: no
-  structure.
+  integrated by LSODA with the kinematics (dq/dt = q (Omega, 0)/2, dx/dt = R v); threshold,
+  constant, derivative or support width chosen on the training trajectories' rollouts (every
+  study's rule, `paper._sindy.choose_sparse_field`);
+- **neural ODE**: `learn.NeuralODE`, an MLP field for the body velocities (tanh) fitted to
+  their trajectories by BFGS, integrated as SINDy's: no structure; its hidden layers and
+  budget chosen on held-out training trajectories (every study's rule,
+  `paper._neural_ode.fit_neural_ode`).
 
 Every model predicts from 12 held-out initial conditions (attitude, position at the origin,
 body velocity; the learned maps start from `learn.latent_momenta`) to `t_end` (50 for the
@@ -74,7 +77,8 @@ from ._experiment import (
     saved_row,
     table_lines,
 )
-from ._sindy import PolynomialField, WeakSINDyModel, sindy_available
+from ._neural_ode import fit_neural_ode
+from ._sindy import fit_sindy, fit_weak_sindy, sindy_available
 from .w2_observations import (
     _quadratic_form,
     coupled_kirchhoff_matrix,
@@ -90,6 +94,8 @@ N_TEST = 12
 #: BFGS iterations of the neural ODE's fit per Levenberg-Marquardt step of the others' (a
 #: Jacobian of its ~1300 weights costs as many passes as ~500 gradients).
 NEURAL_ODE_ITERATIONS = 5
+#: The neural ODE's hidden layers tried (`paper._neural_ode.fit_neural_ode`).
+NEURAL_ODE_HIDDEN = ((32, 32), (64, 64))
 #: Adam epochs of the DeepONet (LLPNN protocol only), from 3e-3 to 1e-5 (BENCHMARKS.md, "The
 #: LLPNN protocol as W4's second part").
 DEEPONET_EPOCHS = 60_000
@@ -379,59 +385,41 @@ class AbstractVelocityFieldModel(AbstractBodyModel):
 
 @dataclasses.dataclass(frozen=True)
 class SINDyBodyModel(AbstractVelocityFieldModel):
-    """SINDy (pysindy, STLSQ) on finite differences of the velocities."""
+    """SINDy (pysindy, STLSQ) on the velocities, its threshold, library and derivative chosen on
+    the training trajectories' rollouts (`paper._sindy.fit_sindy`: every study's rule)."""
 
     label: str = "SINDy"
 
     def field(self, as_states, steps):
-        import pysindy as ps
-
-        model = ps.SINDy(feature_library=ps.PolynomialLibrary(degree=2), optimizer=ps.STLSQ(),
-                         differentiation_method=ps.FiniteDifference())
-        model.fit(list(as_states.states), t=list(as_states.times))
-        return PolynomialField(model.feature_library, model.coefficients())
+        return fit_sindy(list(as_states.times), list(as_states.states))
 
 
 @dataclasses.dataclass(frozen=True)
 class WeakSINDyBodyModel(AbstractVelocityFieldModel):
-    """Weak SINDy (W2's, one weak library per trajectory) on the velocities."""
+    """Weak SINDy (W2's, one weak library per trajectory) on the velocities, its support width,
+    threshold and library chosen on the training trajectories' rollouts
+    (`paper._sindy.fit_weak_sindy`: every study's rule)."""
 
     label: str = "weak SINDy"
 
     def field(self, as_states, steps):
-        return WeakSINDyModel("weak SINDy").vector_field(as_states)
+        return fit_weak_sindy(list(as_states.times), list(as_states.states))
 
 
 @dataclasses.dataclass(frozen=True)
 class NeuralODEBodyModel(AbstractVelocityFieldModel):
-    """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field of two hidden layers of
-    32, tanh, RK4 sub-steps), fitted by BFGS on their trajectories with fitted starts
-    (`NEURAL_ODE_ITERATIONS` per Levenberg-Marquardt step of the other fits); the kinematics
-    integrated beside it. No structure: the peer that shows what the Lie-Poisson one buys."""
+    """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field, tanh, RK4 sub-steps)
+    fitted by BFGS on their trajectories with fitted starts, its hidden layers (of
+    `NEURAL_ODE_HIDDEN`) and budget (at most `NEURAL_ODE_ITERATIONS` BFGS iterations per
+    Levenberg-Marquardt step of the other fits) chosen on held-out training trajectories
+    (`paper._neural_ode.fit_neural_ode`: every study's rule); the kinematics integrated beside
+    it. No structure: the peer that shows what the Lie-Poisson one buys."""
 
     label: str = "neural ODE"
 
     def field(self, as_states, steps):
-        # scalings from the samples: the velocities, and their rates from consecutive ones
-        xi = np.concatenate(as_states.states)
-        rates = np.concatenate([np.diff(y, axis=0) / np.diff(t)[:, None]
-                                for y, t in zip(as_states.states, as_states.times)])
-        net = learn.NeuralODE(as_states.system, hidden=(32, 32), activation="tanh", key=TRAIN_SEED,
-                              input_scaling=(tuple(xi.mean(0)), tuple(xi.std(0))),
-                              output_scaling=((0.0,) * xi.shape[1], tuple(rates.std(0))))
-        fitted, _ = learn.fit(net, as_states, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(NEURAL_ODE_ITERATIONS * steps)),
-                              validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
-        return _NetworkField(fitted)
-
-
-class _NetworkField:
-    """A fitted `NeuralODE`'s field with `PolynomialField`'s `predict` (compiled once)."""
-
-    def __init__(self, net: learn.NeuralODE):
-        self.field = jax.jit(lambda xi: net.vector_field(xi))
-
-    def predict(self, xi: np.ndarray) -> np.ndarray:
-        return np.asarray(self.field(np.asarray(xi, dtype=np.float64)))
+        return fit_neural_ode(as_states, NEURAL_ODE_ITERATIONS * steps, NEURAL_ODE_HIDDEN, key=TRAIN_SEED,
+                              seed=TRAIN_SEED)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -32,8 +32,9 @@ least twice. Models:
   linear gyroscope readout), started at the step of the weak-form quadratic, fitted on
   `learn.BodyLoss` in sub-steps: it keeps the latent Casimir |mu|, so it cannot lose |L|;
 - **SINDy** and **weak SINDy** (pysindy): a polynomial field of degree 2 for the rates (with
-  or without a constant), STLSQ with the threshold (and the constant) chosen on the rollout
-  errors of the TRAINING flights from their first samples, never the test;
+  or without a constant), STLSQ with the threshold, the constant and the derivative (SINDy) or
+  the support width (weak SINDy) chosen on the rollout errors of the TRAINING flights from
+  their first samples, never the test (every study's rule, `paper._sindy.choose_sparse_field`);
 - **limit**: the true family (the principal moments' ratios I1/I2, I3/I2, the symmetric drag
   matrix D at the scale I2 = 6, and each flight's initial rates) fitted by
   `scipy.optimize.least_squares` (Levenberg-Marquardt, Jacobian by `jax.jacfwd`) on whole
@@ -56,7 +57,6 @@ import dataclasses
 import functools
 import math
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -80,7 +80,15 @@ from ._experiment import (
     saved_row,
     table_lines,
 )
-from ._sindy import MIN_WEAK_OBSERVATIONS, PolynomialField, _flow, _half_width, sindy_available
+from ._sindy import (
+    BLOW_UP,
+    SparseField,
+    _flow,
+    fit_sindy,
+    fit_weak_sindy,
+    relative_rms,
+    sindy_available,
+)
 
 #: The body: principal moments (an elongated flat body: the two larger close) and the
 #: quadratic drag matrix D in the body frame (symmetric, positive definite, coupling axes 1
@@ -97,14 +105,11 @@ REFERENCE_SPIN = 10.0
 #: RK4 sub-steps per sampling interval of the limit's and Euler's integrations (0.03 rad per
 #: sub-step at 30 rad/s: their error is far below the gyroscope's noise).
 LIMIT_SUBSTEPS = 10
-#: STLSQ thresholds tried by SINDy and weak SINDy (the rates' equations have coefficients of
-#: order 1 for Euler's terms and 0.01-0.04 for the drag's).
 #: The learned maps predict in sub-steps of at most this rotation (rad; 7 per sampling interval at
 #: 33 rad/s): what they learned is a Hamiltonian and a drag, not a step at the training spins.
 PREDICTION_ANGLE = 0.05
 #: The LPNet's training sub-steps (s): 0.04 rad at 16 rad/s.
 LPNET_MAX_STEP = 0.0025
-THRESHOLDS = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3)
 FIT_LIMIT_S = 120.0  # every fit should take less
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
 
@@ -384,110 +389,47 @@ class EulerFlightModel(LimitFlightModel):
         return TrueFamily(np.array([INERTIA[0] / INERTIA[1], INERTIA[2] / INERTIA[1]]), np.zeros((3, 3)))
 
 
-def _rollout_error(field: Any, omega: np.ndarray, times: np.ndarray) -> float:
-    """Mean relative RMS error of the field's rollouts from each flight's first sample."""
-    errors = []
-    for w in omega:
-        pred = _flow(field, w[0], times, 100.0 * max(float(np.linalg.norm(w[0])), 1e-3))
-        errors.append(_relative_rms(pred, w))
-    return float(np.mean(errors))
-
-
-def _relative_rms(pred: np.ndarray, true: np.ndarray) -> float:
-    error = np.sqrt(np.mean(np.sum((pred - true) ** 2, axis=-1)) / np.mean(np.sum(true**2, axis=-1)))
-    return float(error) if np.isfinite(error) else np.inf
-
-
-@dataclasses.dataclass(frozen=True)
-class SelectedField:
-    """A polynomial field and how it was chosen."""
-
-    field: PolynomialField
-    threshold: float
-    constant: bool
-    train_error: float
-
-
 class AbstractSparseFlightModel(AbstractFlightModel):
-    """A sparse polynomial field of degree 2 for the rates (pysindy, STLSQ): every threshold of
-    `THRESHOLDS`, with and without a constant, fitted; the one whose rollouts from the training
-    flights' first samples follow their records best is kept. Integrated by LSODA."""
+    """A sparse polynomial field of degree 2 for the rates (pysindy, STLSQ), its threshold,
+    library and derivative or support width chosen on the rollouts of the TRAINING flights from
+    their first samples (`paper._sindy.choose_sparse_field`: every study's rule). Integrated by
+    LSODA."""
 
     @abc.abstractmethod
-    def rows(self, records: it.BodyObservations, constant: bool) -> tuple[np.ndarray, np.ndarray, Any]:
-        """`(features, targets, library)` of the least-squares problem of STLSQ."""
+    def fit_field(self, times: list[np.ndarray], rates: list[np.ndarray]) -> SparseField:
+        """The field chosen by the rule for the measured `rates` at their `times`."""
 
     def fit(self, train, steps):
-        import pysindy as ps
-
-        best = None
-        with warnings.catch_warnings():  # pysindy warns about ill-conditioned fits of noisy data
-            warnings.simplefilter("ignore")
-            for constant in (True, False):
-                features, targets, library = self.rows(train.records, constant)
-                for threshold in THRESHOLDS:
-                    coefficients = ps.STLSQ(threshold=threshold).fit(features, targets).coef_
-                    field = PolynomialField(library, coefficients)
-                    error = _rollout_error(field, train.measured, train.times)
-                    if best is None or error < best.train_error:
-                        best = SelectedField(field, threshold, constant, error)
-        return best
+        return self.fit_field(list(train.records.times), list(train.records.velocities))
 
     def predict(self, fitted, omega0, n_intervals):
         times = H * np.arange(n_intervals + 1)
-        return np.stack([_flow(fitted.field, w, times, 100.0 * max(float(np.linalg.norm(w)), 1e-3))
-                         for w in omega0])
+        return np.stack([_flow(fitted, w, times, BLOW_UP * max(float(np.linalg.norm(w)), 1e-3)) for w in omega0])
 
     def identified(self, fitted):
-        terms = int(np.count_nonzero(fitted.field.coefficients))
-        return Identified(detail=f"threshold {fitted.threshold:g}, {'with' if fitted.constant else 'no'} constant, "
-                                 f"{terms} terms")
+        return Identified(detail=f"{fitted.setting}, threshold {fitted.threshold:g}, "
+                                 f"{'with' if fitted.constant else 'no'} constant, {fitted.field.terms} terms")
 
 
 @dataclasses.dataclass(frozen=True)
 class SINDyFlightModel(AbstractSparseFlightModel):
-    """SINDy on finite differences of the rates."""
+    """SINDy on differences of the rates (`paper._sindy.fit_sindy`)."""
 
     label: str = "SINDy"
 
-    def rows(self, records, constant):
-        import pysindy as ps
-
-        library = ps.PolynomialLibrary(degree=2, include_bias=constant)
-        omega = list(records.velocities)
-        derivative = ps.FiniteDifference()
-        targets = np.concatenate([derivative(w, t=t) for w, t in zip(omega, records.times)])
-        features = np.asarray(library.fit_transform(np.concatenate(omega)))
-        return features, targets, library
+    def fit_field(self, times, rates):
+        return fit_sindy(times, rates)
 
 
 @dataclasses.dataclass(frozen=True)
 class WeakSINDyFlightModel(AbstractSparseFlightModel):
-    """Weak SINDy as W2's (`paper._sindy.WeakSINDyModel`: one weak library per flight, test
-    functions on supports of `window` samples, `test_functions` per sample), its rows stacked."""
+    """Weak SINDy as W2's (`paper._sindy.fit_weak_sindy`: one weak library per flight, the
+    rows stacked)."""
 
     label: str = "weak SINDy"
-    window: int = 9
-    test_functions: int = 4
 
-    def rows(self, records, constant):
-        import pysindy as ps
-
-        features, targets = [], []
-        for j, (t, w) in enumerate(zip(records.times, records.velocities)):
-            if t.size < MIN_WEAK_OBSERVATIONS:
-                continue
-            state = np.random.get_state()  # the library draws its supports from numpy's global stream
-            np.random.seed(TRAIN_SEED + j)
-            try:
-                library = ps.WeakPDELibrary(function_library=ps.PolynomialLibrary(degree=2, include_bias=constant),
-                                            spatiotemporal_grid=t, K=self.test_functions * t.size,
-                                            H_xt=_half_width(t, self.window))
-            finally:
-                np.random.set_state(state)
-            features.append(np.asarray(library.fit_transform(w)))
-            targets.append(np.asarray(library.convert_u_dot_integral(w)))
-        return np.concatenate(features), np.concatenate(targets), library.function_library
+    def fit_field(self, times, rates):
+        return fit_weak_sindy(times, rates, seed=TRAIN_SEED)
 
 
 def models(profile: Profile) -> list[AbstractFlightModel]:
@@ -519,7 +461,7 @@ def measure(test: Session, rates: np.ndarray) -> dict[str, Any]:
     """Rate error (mean over flights of the relative RMS error against the true rates) and flip
     period error (median over the flights that flip at least twice; a prediction that does not
     is missed)."""
-    errors = [_relative_rms(p, r) for p, r in zip(rates, test.rates)]
+    errors = [relative_rms(p, r) for p, r in zip(rates, test.rates)]
     flip_errors, missed = [], 0
     for p, r in zip(rates, test.rates):
         true = flip_period(test.times, r[:, 1])
