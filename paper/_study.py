@@ -201,8 +201,9 @@ class SplittingModel(AbstractStepMapModel, AbstractHamiltonianModel):
         return Fitted(model, tuple(records))
 
     def identify(self, fitted, system, states, diagonal) -> Identified:
-        family = fitted.records[-1].stages[-1].details.get("family")
-        bic = {r.stages[-1].details.get("family"): r.stages[-1].details.get("bic") for r in fitted.records}
+        choice = fitted.records[-1].choice  # a learn.FamilyChoice on observations; None on pairs
+        family = None if choice is None else choice.chosen
+        bic = None if choice is None else {score.family: score.bic for score in choice.scores}
         hamiltonian = fitted.step_map.hamiltonian
         learned = learn.quadratic_part(hamiltonian, system, states)
         return Identified(family=family, bic=bic, mismatch=hamiltonian_mismatch(hamiltonian, system, states),

@@ -147,7 +147,11 @@ def test_fit_dissipative_finds_a_forced_body():
     data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (n, 1)),
                            np.arange(61) * 0.01, measure="velocities", noise=1e-3, seed=1)
     model, records = learn.fit_dissipative(RigidBody(I), data, kinds=("linear", "quadratic"), progress=False)
-    assert records[-1].stages[-1].details["family"].endswith("quadratic drag")
+    choice = records[-1].choice
+    assert choice.chosen.endswith("quadratic drag") and records[0].choice is choice
+    assert [s.family for s in choice.scores] == ["quadratic, even, linear drag", "quadratic, even, quadratic drag"]
+    assert choice.score(choice.chosen).bic < choice.score("quadratic, even, linear drag").bic
+    assert all(s.substeps >= 1 for s in choice.scores)  # the step each was fitted with, from the data
     A, _ = model.quadratic_part()
     fitted = np.linalg.inv(np.asarray(A))
     # the inertia at the identifiable scale (ratios) within 2%: noise 1e-3 over 0.6 s flights

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,8 @@ class FamilyScore:
     the held-out trajectories (each refitted fold's map, the held-out trajectory's start fitted
     to its observations with the map held), with `held_out_standard_error` the standard error
     of its difference from the lowest family's over the groups (`None` without held-out
-    selection)."""
+    selection); `substeps`: the sub-steps of each observed interval its map was fitted with,
+    where they were chosen from the data (body records, drag families; `None` otherwise)."""
 
     family: str
     ssr: float
@@ -57,6 +59,16 @@ class FamilyScore:
     bic: float
     held_out_error: float | None = None
     held_out_standard_error: float | None = None
+    substeps: int | None = None
+
+
+def family_score(name: str, criterion: dict[str, Any]) -> FamilyScore:
+    """The `FamilyScore` of the family `name` from its `information_criterion` (and the
+    sub-steps, where measured)."""
+    substeps = criterion.get("substeps")
+    return FamilyScore(family=name, ssr=float(criterion["ssr"]), n=int(criterion["n"]),
+                       effective_parameters=int(criterion["effective_parameters"]), bic=float(criterion["bic"]),
+                       substeps=None if substeps is None else int(substeps))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -26,7 +26,7 @@ from .._solvers._levenberg_marquardt import LevenbergMarquardt
 from .._solvers._record import TrainingRecord
 from .._solvers._stage import Context, KeepIfBetter
 from ._body import BodyLoss, weak_form_drag
-from ._criterion import lowest
+from ._criterion import FamilyChoice, family_score, lowest
 from ._families import FAMILIES, Family
 from ._fit import training_record
 from ._observed import TrajectoryLoss, information_criterion
@@ -75,9 +75,9 @@ def fit_dissipative(
     composed by `method` (default `TripleJump`, order 4). The sub-steps are doubled while the
     fitted map's own discretisation error is above a tenth of its misfit (at most 3 times; a
     `UserWarning` if that was not enough), so that the map's step does not bias the inertia.
-    The family with the lowest Bayesian information criterion is returned; each record's last
-    stage's `details` hold its `family`, `bic`, `ssr`, `effective_parameters`, `substeps` and
-    `discretisation_ssr`.
+    The family with the lowest Bayesian information criterion is returned; every record's
+    `choice` is the `learn.FamilyChoice` (each family's `learn.FamilyScore`, its sub-steps
+    included).
     """
     if not isinstance(system, AbstractLiePoissonSystem):
         raise TypeError(f"system must be a Lie-Poisson system (e.g. liepoisson.systems.RigidBody); got "
@@ -102,23 +102,37 @@ def fit_dissipative(
     split = {"h": None, "validation_fraction": 0.0, "seed": int(seed), "normalise": False}
     fits = []
     for kind in kinds:
-        start = loss.problem(start_of(kind), data, **split)
-        problem, results, steps = solve_within_noise(
-            start, (KeepIfBetter(LevenbergMarquardt(iterations, 1e-10)),), context)
+        problem, results, steps, criterion = drag_fit(loss.problem(start_of(kind), data, **split), iterations, 1e-10,
+                                                      context)
         if not steps.within_noise:
             warnings.warn(f"the {kind} drag's fit errs by its own step more than the data's misfit (discretisation "
                           f"sum of squares {steps.discretisation_ssr:.3g} against {steps.ssr:.3g} after "
                           f"{steps.substeps} sub-steps): give a smaller max_step (loss=learn.BodyLoss(max_step=...))",
                           UserWarning, stacklevel=2)
-        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
-        criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
+        fits.append((f"{family.name}, {kind} drag", problem, results, criterion))
+    scores = tuple(family_score(name, criterion) for name, _, _, criterion in fits)
+    best = lowest([(s.bic, s.effective_parameters) for s in scores])
+    choice = FamilyChoice(scores[best].family, "bic", scores)
+    records = []
+    for name, problem, results, criterion in fits:
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": f"{family.name}, {kind} drag"}))
-        fits.append((criterion, problem.map(problem.y0), training_record(problem, results)))
-    best = lowest([(c["bic"], c["effective_parameters"]) for c, _, _ in fits])
-    records = tuple(r for k, (_, _, r) in enumerate(fits) if k != best) + (fits[best][2],)
-    return fits[best][1], records
+            last.record, details={**last.record.details, **criterion, "family": name}))
+        records.append(dataclasses.replace(training_record(problem, results), choice=choice))
+    problem = fits[best][1]
+    return problem.map(problem.y0), tuple(r for k, r in enumerate(records) if k != best) + (records[best],)
+
+
+def drag_fit(start: Any, iterations: int, rtol: float, context: Context) -> tuple[Any, list, Any, dict[str, Any]]:
+    """`(problem, results, steps, criterion)`: a drag family's problem `start` solved by
+    Levenberg-Marquardt (kept only if it lowers the loss) with its sub-steps refined until its
+    step errs below the data (`solve_within_noise`); its `information_criterion` with the
+    sub-steps and the discretisation error."""
+    problem, results, steps = solve_within_noise(start, (KeepIfBetter(LevenbergMarquardt(iterations, rtol)),),
+                                                 context)
+    criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
+    criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
+    return problem, results, steps, criterion
 
 
 def body_loss_from_data(data: BodyObservations, loss: BodyLoss | None) -> BodyLoss:

@@ -16,7 +16,7 @@ import jax
 import numpy as np
 from numpy.typing import ArrayLike
 
-from integrators import BodyObservations, Observations, Trajectories
+from integrators import AbstractObservedTrajectories, BodyObservations, Observations, Trajectories
 from integrators.splitting import LieTrotter, Strang, TripleJump
 from liepoisson.internals import refuse_nonholonomic, show_progress
 from liepoisson.systems import AbstractDissipativeSystem, AbstractPoissonSystem
@@ -31,12 +31,12 @@ from ._body import weak_form_drag, weak_form_quadratic
 from ._criterion import (
     BIC_RESOLUTION,
     FamilyChoice,
-    FamilyScore,
     SkippedFamily,
+    family_score,
     lowest,
     lowest_held_out,
 )
-from ._dissipative import body_drag_start, body_loss_from_data, observed_drag_start
+from ._dissipative import body_drag_start, body_loss_from_data, drag_fit, observed_drag_start
 from ._families import FAMILIES, Family
 from ._fit import fit, resolve_loss, solve, training_record
 from ._held_out import (
@@ -161,7 +161,7 @@ def fit_splitting(
             raise ValueError("method=LieTrotter would not continue from the Strang fit: the paper's Lie-Trotter "
                              "G-LPNet weighs its Hamiltonian by 1/n_modules; use learn.GLPNet(system) and learn.fit")
         method.check_terms(system.dim, f"a G-LPNet of {system.dim} modules (one per basis direction)")
-    observed = isinstance(data, (Observations, BodyObservations))
+    observed = isinstance(data, AbstractObservedTrajectories)
     if validation_fraction is None:  # on observations every trajectory is fitted; folds hold some out
         validation_fraction = 0.0 if observed else 0.2
     elif observed and validation_fraction != 0:
@@ -181,7 +181,7 @@ def fit_splitting(
         if not families or not all(isinstance(f, Family) for f in families):
             raise TypeError(f"families must be a non-empty sequence of learn.Family (e.g. learn.FAMILIES[:2]); "
                             f"got {families!r}")
-        if not isinstance(data, (Observations, BodyObservations)):
+        if not isinstance(data, AbstractObservedTrajectories):
             raise ValueError("families= chooses between families on observations (integrators.Observations or "
                              "BodyObservations); pairs and trajectories fit one family (activation=)")
     common["dissipation"] = check_dissipation(dissipation, data, activation, families)
@@ -222,12 +222,12 @@ def check_dissipation(dissipation: Any, data: Any, activation: str | None, famil
         return ()
     if isinstance(dissipation, str) and dissipation == "auto":
         # a fixed activation or family list is a conservative choice made by the caller
-        observed = isinstance(data, (Observations, BodyObservations))
+        observed = isinstance(data, AbstractObservedTrajectories)
         return "auto" if observed and activation is None and families is None else ()
     kinds = (dissipation,) if isinstance(dissipation, str) else tuple(dissipation)
     if not kinds or any(k not in DRAG_KINDS for k in kinds):
         raise ValueError(f"dissipation must be 'auto', None or a sequence of {DRAG_KINDS}; got {dissipation!r}")
-    if not isinstance(data, (Observations, BodyObservations)):
+    if not isinstance(data, AbstractObservedTrajectories):
         raise ValueError("dissipation= offers drag families on observations (integrators.Observations, "
                          "BodyObservations); pairs and trajectories fit one conservative family")
     return kinds
@@ -242,7 +242,7 @@ def check_selection(selection: str | None, data: Any, groups: Sequence[Hashable]
     on body observations, where held-out folds refit every family five times over sub-stepped
     rollouts: asked for, e.g. with `groups=` of recording sessions); `None` for pairs and
     trajectories, which refuse it and `groups`."""
-    if not isinstance(data, (Observations, BodyObservations)):
+    if not isinstance(data, AbstractObservedTrajectories):
         if selection is not None or groups is not None:
             raise ValueError("selection= and groups= choose between families on observations "
                              "(integrators.Observations); pairs and trajectories fit one family")
@@ -316,48 +316,165 @@ def _(data: Observations, system, method, loss, activation, iterations, key, com
     """Observations: each family (or the one of `activation`) fitted by Levenberg-Marquardt
     through `method` to every trajectory; chosen by held-out prediction or the lowest BIC."""
     warn_dissipative_data(data)
+    families = families or FAMILIES if activation is None else (
+        Family(activation, activation, linear_term=activation != "identity", bias=True),)
+    return search_families(_ObservedStates(system, data, resolve_loss(loss, data)), families, method, iterations,
+                           common)
+
+
+@dataclasses.dataclass
+class _Fit:
+    """One family fitted by `search_families`: its `problem` solved, the stages' `results`, the
+    `family` (a `Family`, or a `_DragFamily`) and its `criterion` (`information_criterion`,
+    with the discretisation error and sub-steps where measured)."""
+
+    problem: Any
+    results: list
+    family: Any
+    criterion: dict[str, Any]
+
+    @property
+    def bic(self) -> float:
+        return self.criterion["bic"]
+
+
+class _DataKind:
+    """What `search_families` needs of one kind of observations: the loss, the starting terms of
+    a family (and a reason to skip it before fitting), how a family's fit is solved, and the
+    trajectory of each segment of the loss (which held-out folds remove)."""
+
+    def __init__(self, system: AbstractPoissonSystem, data: Any, loss: Any):
+        self.system, self.data, self.loss = system, data, loss
+
+    def components(self) -> int:
+        """The observed numbers (what the criterion's resolution is divided over)."""
+        return self.data.n_observations * self.system.dim
+
+    def screen(self, family: Family) -> str | None:
+        """A reason to skip `family` before fitting it, or `None`."""
+        return None
+
+    def terms(self, family: Family) -> Any:
+        """The learned pieces `family` starts from (`learn.RidgeTerms`)."""
+        raise NotImplementedError
+
+    def warm_start(self, family: Family) -> bool:
+        """Whether a family's fit starts with the identity warm start (not from a nested fit)."""
+        return False
+
+    def solve(self, start: Any, stages: tuple, context: Context) -> tuple[Any, list, dict[str, Any]]:
+        """`(problem solved, results, what to add to its criterion)`."""
+        problem, results = solve(start, stages, context)
+        return problem, results, {}
+
+    def segment_trajectories(self) -> np.ndarray:
+        """The trajectory of each segment of the loss's problems."""
+        raise NotImplementedError
+
+
+class _ObservedStates(_DataKind):
+    """`integrators.Observations`: each family from the least-squares quadratic of the finite
+    differences, in the data's units; the family's own warm start."""
+
+    def __init__(self, system, data, loss):
+        super().__init__(system, data, loss)
+        self.size = state_size(system, data)
+
+    def terms(self, family):
+        return family.start(self.system, self.data, self.size)
+
+    def warm_start(self, family):
+        return family.warm_start
+
+    def segment_trajectories(self):
+        return segment_trajectories(self.data, self.loss.window)
+
+
+class _ObservedBodies(_DataKind):
+    """`integrators.BodyObservations`: each family from the quadratic of `weak_form_quadratic`
+    (skipped when it misfits the weak form `SCREEN_RATIO` times the best start), solved with
+    sub-steps from the data when no loss was given (`solve_within_noise`)."""
+
+    def __init__(self, system, data, loss, families):
+        super().__init__(system, data, body_loss_from_data(data, loss))
+        self.steps_from_data = loss is None  # sub-steps of STEP_ANGLE, refined until below the noise
+        self.velocities = data.velocities if data.velocities is not None else [
+            data.group_velocities(j) for j in range(len(data))]
+        self.starts = {(f.bias, f.any_axes): weak_form_quadratic(data, linear=f.bias, diagonal=not f.any_axes)
+                       for f in families}
+        self.least = min(misfit for _, _, misfit in self.starts.values())
+
+    def components(self):
+        return super().components() * len(self.data.measured)
+
+    def screen(self, family):
+        misfit = self.starts[family.bias, family.any_axes][2]
+        if misfit > SCREEN_RATIO * self.least:
+            return (f"its quadratic start misfits the weak-form equations {misfit / self.least:.3g} times more than "
+                    f"the best start (more than SCREEN_RATIO = {SCREEN_RATIO:g})")
+        return None
+
+    def terms(self, family):
+        A, b, _ = self.starts[family.bias, family.any_axes]
+        return family.terms_of(self.system, A, b, _momentum_size(A, b, self.velocities))
+
+    def solve(self, start, stages, context):
+        if not self.steps_from_data:
+            return super().solve(start, stages, context)
+        problem, results, steps = solve_within_noise(start, stages, context)
+        return problem, results, {"substeps": steps.substeps}
+
+    def segment_trajectories(self):
+        return np.arange(len(self.data))  # whole trajectories, one segment each
+
+
+def search_families(kind: _DataKind, families: Sequence[Family], method: Any, iterations: int | None,
+                    common: dict[str, Any]) -> tuple[Any, tuple[TrainingRecord, ...]]:
+    """Each family fitted by Levenberg-Marquardt through `method` (Strang by default) to every
+    trajectory of `kind`'s data, in order: skipped when `kind` screens it out or `skip_reason`
+    says its fit could not help; an extension from its nested family's fit, stopped once it
+    cannot catch up with the best criterion (`catch_up_target`); then the drag families
+    (`drag_fits`); chosen by held-out prediction (whole groups) or the lowest BIC
+    (`chosen_by`)."""
+    system, data, loss = kind.system, kind.data, kind.loss
     method = Strang() if method is None else method
     iterations = LM_ITERATIONS if iterations is None else iterations
-    loss = resolve_loss(loss, data)
     context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
     split = {"h": common["h"], "validation_fraction": common["validation_fraction"], "seed": common["seed"],
              "normalise": False}
-    families = families or FAMILIES if activation is None else (
-        Family(activation, activation, linear_term=activation != "identity", bias=True),)
     group_of = trajectory_groups(common["groups"], len(data)) if common["selection"] == "held-out" else None
-    # each family from the least-squares quadratic of the finite differences, in the data's units
-    size = state_size(system, data)
-    rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim))
-    fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
+    rtol = max(RTOL, BIC_RESOLUTION / kind.components())
+    fits: list[_Fit] = []
+    fitted, ssr, skipped, explained = {}, {}, [], []
     for k, family in enumerate(families):
-        reason = skip_reason(family, ssr, explained)
+        reason = kind.screen(family) or skip_reason(family, ssr, explained)
         if reason is not None:
             skipped.append(skip(family, reason))
             continue
-        net = GLPNet(system, terms=family.start(system, data, size), method=method)
+        net = GLPNet(system, terms=kind.terms(family), method=method)
         start = loss.problem(net, data, **split)
-        warm_start, target = family.warm_start, None
+        warm_start, target = kind.warm_start(family), None
         if family.nested in fitted:  # from the nested family's fit, map and initial states
             nested = fitted[family.nested]
             net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
             start = start.with_start(Fitted(net, nested.starts, nested.shared))
             warm_start = False
-            target = catch_up_target(start, [f[0] for f in fits])
-        problem, results = solve(
+            target = catch_up_target(start, [f.bic for f in fits])
+        problem, results, measured = kind.solve(
             start, (_lm(LevenbergMarquardt(iterations, rtol, target=target), warm_start),), context)
         fitted[family.name] = problem.y0
         criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
         criterion.update(step_accuracy(problem, family, families[k + 1 :], results[-1].linearisation))
+        criterion.update(measured)
         if explained_within_its_step(criterion):
             explained.append(family)
         ssr[family.name] = criterion["ssr"]
-        fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
+        fits.append(_Fit(problem, results, family, {**criterion, "target_loss": target}))
     fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped, loss)
-    scores = [score_of(f[4].name, f[5]) for f in fits]
-    choice = FamilyChoice(scores[0].family, common["selection"], tuple(scores), tuple(skipped))
+    scores = tuple(family_score(f.family.name, f.criterion) for f in fits)
+    choice = FamilyChoice(scores[0].family, common["selection"], scores, tuple(skipped))
     if group_of is not None and len(fits) > 1:  # one family fitted: nothing to hold out for
-        choice = held_out_choice(fits, segment_trajectories(data, loss.window), group_of, iterations, rtol, context,
-                                 choice)
+        choice = held_out_choice(fits, kind.segment_trajectories(), group_of, iterations, rtol, context, choice)
     return chosen_last(fits, *chosen_by(choice))
 
 
@@ -382,19 +499,13 @@ def held_out_choice(fits: Sequence[Any], rows: np.ndarray, group_of: Any, iterat
     folds = group_folds(group_of, context.seed)
     errors = {}
     for f in fits:
-        fold_context = dataclasses.replace(context, desc=f"{f[4].name}: held-out folds")
-        errors[f[4].name] = held_out_errors(f[2], rows, folds, iterations, rtol, fold_context)
+        fold_context = dataclasses.replace(context, desc=f"{f.family.name}: held-out folds")
+        errors[f.family.name] = held_out_errors(f.problem, rows, folds, iterations, rtol, fold_context)
     by_family = group_scores(errors, group_of)
     scores = tuple(dataclasses.replace(s, held_out_error=by_family[s.family][0],
                                        held_out_standard_error=by_family[s.family][1]) for s in choice.scores)
     return dataclasses.replace(choice, selection="held-out", scores=scores, folds=len(folds),
                                groups=int(group_of.max()) + 1)
-
-
-def score_of(name: str, criterion: dict[str, Any]) -> FamilyScore:
-    """The `FamilyScore` of a family's `information_criterion`."""
-    return FamilyScore(family=name, ssr=float(criterion["ssr"]), n=int(criterion["n"]),
-                       effective_parameters=int(criterion["effective_parameters"]), bic=float(criterion["bic"]))
 
 
 def chosen_last(fits: Sequence[Any], index: int, choice: FamilyChoice) -> tuple[Any, tuple[TrainingRecord, ...]]:
@@ -403,14 +514,14 @@ def chosen_last(fits: Sequence[Any], index: int, choice: FamilyChoice) -> tuple[
     `choice` on each."""
     records = []
     for f, score in zip(fits, choice.scores, strict=True):
-        problem, results, criterion = f[2], list(f[3]), f[5]
+        problem, results, criterion = f.problem, list(f.results), f.criterion
         last = results[-1]
         results[-1] = dataclasses.replace(last, record=dataclasses.replace(
-            last.record, details={**last.record.details, **criterion, "family": f[4].name,
+            last.record, details={**last.record.details, **criterion, "family": f.family.name,
                                   "skipped": [s.family for s in choice.skipped],
                                   "held_out_error": score.held_out_error}))
         records.append(dataclasses.replace(training_record(problem, results), choice=choice))
-    best = fits[index][2]
+    best = fits[index].problem
     return best.map(best.y0), tuple(r for k, r in enumerate(records) if k != index) + (records[index],)
 
 
@@ -516,65 +627,17 @@ SCREEN_RATIO = 10.0
 def _(data: BodyObservations, system, method, loss, activation, iterations, key, common, families=None):
     """Body observations (configurations, velocities; momenta latent): each family from the
     quadratic of `weak_form_quadratic`, fitted by Levenberg-Marquardt on `learn.BodyLoss`
-    through `method`; the lowest BIC wins."""
-    method = Strang() if method is None else method
-    iterations = LM_ITERATIONS if iterations is None else iterations
-    steps_from_data = loss is None  # sub-steps of STEP_ANGLE, refined until below the noise
-    loss = body_loss_from_data(data, loss)
+    through `method`; the lowest BIC wins (held-out sessions on request)."""
     if system.group != data.group:
         raise ValueError(f"system {system!r} moves configurations on {system.group!r}; the observations are on "
                          f"{data.group!r}")
-    context = Context(seed=int(common["seed"]), progress=show_progress(common["progress"]))
-    split = {"h": common["h"], "validation_fraction": 0.0, "seed": common["seed"], "normalise": False}
     if families is not None and any(f.select for f in families):
         raise ValueError("families with select=True ('quadratic, selected') choose their terms on the momenta's "
                          "finite differences, which body observations do not have; leave them out")
     families = (families or tuple(f for f in FAMILIES if not f.select)) if activation is None else (
         Family(activation, activation, linear_term=activation != "identity", bias=True),)
-    rtol = max(RTOL, BIC_RESOLUTION / (data.n_observations * system.dim * len(data.measured)))
-    velocities = data.velocities if data.velocities is not None else [
-        data.group_velocities(j) for j in range(len(data))]
-    starts = {(f.bias, f.any_axes): weak_form_quadratic(data, linear=f.bias, diagonal=not f.any_axes)
-              for f in families}
-    least = min(misfit for _, _, misfit in starts.values())
-    fits, fitted, ssr, skipped, explained = [], {}, {}, [], []
-    for k, family in enumerate(families):
-        A, b, misfit = starts[family.bias, family.any_axes]
-        reason = skip_reason(family, ssr, explained)
-        if misfit > SCREEN_RATIO * least:
-            reason = (f"its quadratic start misfits the weak-form equations {misfit / least:.3g} times more than the "
-                      f"best start (more than SCREEN_RATIO = {SCREEN_RATIO:g})")
-        if reason is not None:
-            skipped.append(skip(family, reason))
-            continue
-        net = GLPNet(system, terms=family.terms_of(system, A, b, _momentum_size(A, b, velocities)), method=method)
-        start, target = loss.problem(net, data, **split), None
-        if family.nested in fitted:  # from the nested family's fit, map and starts
-            nested = fitted[family.nested]
-            net = eqx.tree_at(lambda n: n.terms, net, family.from_nested(net.terms, nested.model.terms))
-            start = start.with_start(Fitted(net, nested.starts, nested.shared))
-            target = catch_up_target(start, [f[0] for f in fits])
-        stages = (KeepIfBetter(LevenbergMarquardt(iterations, rtol, target=target)),)
-        if steps_from_data:
-            problem, results, steps = solve_within_noise(start, stages, context)
-        else:
-            problem, results = solve(start, stages, context)
-        fitted[family.name] = problem.y0
-        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
-        criterion.update(step_accuracy(problem, family, families[k + 1 :], results[-1].linearisation))
-        if steps_from_data:
-            criterion["substeps"] = steps.substeps
-        if explained_within_its_step(criterion):
-            explained.append(family)
-        ssr[family.name] = criterion["ssr"]
-        fits.append((criterion["bic"], len(fits), problem, results, family, {**criterion, "target_loss": target}))
-    fits += drag_fits(system, data, method, iterations, rtol, context, common["dissipation"], fits, skipped)
-    scores = tuple(score_of(f[4].name, f[5]) for f in fits)
-    choice = FamilyChoice(scores[0].family, common["selection"], scores, tuple(skipped))
-    if common["selection"] == "held-out" and len(fits) > 1:  # whole trajectories (one segment each) held out
-        group_of = trajectory_groups(common["groups"], len(data))
-        choice = held_out_choice(fits, np.arange(len(data)), group_of, iterations, rtol, context, choice)
-    return chosen_last(fits, *chosen_by(choice))
+    common = {**common, "validation_fraction": 0.0}
+    return search_families(_ObservedBodies(system, data, loss, families), families, method, iterations, common)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -587,8 +650,8 @@ class _DragFamily:
 def drag_fits(system, data: BodyObservations | Observations, method, iterations: int, rtol: float,
               context: Context, dissipation: tuple[str, ...] | str, fits: list, skipped: list,
               loss: TrajectoryLoss | None = None) -> list:
-    """The fits of the drag families `dissipation` asks (`"auto"`: the linear and quadratic drag when
-    the data show a loss a drag explains: `drag_screen`), in the fits' tuple form."""
+    """The fits (`_Fit`) of the drag families `dissipation` asks (`"auto"`: the linear and
+    quadratic drag when the data show a loss a drag explains: `drag_screen`)."""
     if not dissipation:
         return []
     if dissipation == "auto" and isinstance(data, Observations):
@@ -612,8 +675,8 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
                 "pass dissipation=('linear', 'quadratic') to fit them anyway")))
             return []
         dissipation = ("linear", "quadratic")
-    best = min(fits, key=lambda f: f[0]) if fits else None
-    any_axes = bool(best is not None and best[4].any_axes)
+    best = min(fits, key=lambda f: f.bic) if fits else None
+    any_axes = bool(best is not None and best.family.any_axes)
     family = next(f for f in FAMILIES if f.name == ("quadratic, any axes, even" if any_axes else "quadratic, even"))
     if isinstance(data, BodyObservations):
         loss, make = body_loss_from_data(data, None), body_drag_start
@@ -622,13 +685,9 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
     split = {"h": None, "validation_fraction": 0.0, "seed": context.seed, "normalise": False}
     out = []
     for kind in dissipation:
-        start = loss.problem(make(system, data, family, method, any_axes, kind), data, **split)
-        problem, results, steps = solve_within_noise(start, (KeepIfBetter(LevenbergMarquardt(iterations, rtol)),),
-                                                     context)
-        criterion = information_criterion(problem, problem.y0, results[-1].linearisation)
-        criterion.update({"substeps": steps.substeps, "discretisation_ssr": steps.discretisation_ssr})
-        out.append((criterion["bic"], len(fits) + len(out), problem, results,
-                    _DragFamily(f"{family.name}, {kind} drag"), criterion))
+        problem, results, _, criterion = drag_fit(
+            loss.problem(make(system, data, family, method, any_axes, kind), data, **split), iterations, rtol, context)
+        out.append(_Fit(problem, results, _DragFamily(f"{family.name}, {kind} drag"), criterion))
     return out
 
 
