@@ -278,8 +278,8 @@ class DissipativeFlightModel(AbstractLearnedFlightModel):
         model, records = learn.fit_dissipative(lp.systems.RigidBody(), train.records, any_axes=True,
                                                iterations=min(steps, self.iterations), seed=TRAIN_SEED,
                                                progress=False, **kinds)
-        details = records[-1].stages[-1].details
-        return DissipativeFit(model, f"{details.get('family')}, sub-steps x{details.get('substeps')}")
+        choice = records[-1].choice
+        return DissipativeFit(model, f"{choice.chosen}, sub-steps x{choice.score(choice.chosen).substeps}")
 
     def predict(self, fitted, omega0, n_intervals):
         return super().predict(fitted.model, omega0, n_intervals)
