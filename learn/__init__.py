@@ -46,6 +46,7 @@ from ._models._reversible import Reversible as Reversible
 from ._solvers._adam import Adam as Adam
 from ._solvers._checkpoint import Checkpoint as Checkpoint
 from ._solvers._levenberg_marquardt import LevenbergMarquardt as LevenbergMarquardt
+from ._solvers._loop import AbstractSolver as AbstractSolver, Step as Step, iterate as iterate
 from ._solvers._optimistix import Optimistix as Optimistix
 from ._solvers._problem import (
     AbstractLeastSquares as AbstractLeastSquares,
@@ -60,11 +61,11 @@ from ._solvers._quasi_newton import (
 )
 from ._solvers._record import StageRecord as StageRecord, TrainingRecord as TrainingRecord
 from ._solvers._stage import (
-    AbstractResumableStage as AbstractResumableStage,
     AbstractStage as AbstractStage,
     AbstractWrappedStage as AbstractWrappedStage,
     Context as Context,
     KeepIfBetter as KeepIfBetter,
+    Linearisation as Linearisation,
     Progress as Progress,
     Restarts as Restarts,
     Result as Result,

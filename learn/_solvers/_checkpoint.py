@@ -59,5 +59,5 @@ def resumable_phase(checkpoint: Checkpoint, owner: AbstractProblem) -> dict[str,
     if int(attrs.get("phase", 1)) != 1:
         return None
     losses = np.asarray(groups["history"]["train_loss"])
-    warm = losses[: losses.size - int(attrs["epoch"])]
+    warm = losses[: losses.size - int(attrs.get("logged", attrs["epoch"]))]
     return {"epoch": np.arange(1, warm.size + 1), "train_loss": warm, "val_loss": np.full(warm.size, np.nan)}

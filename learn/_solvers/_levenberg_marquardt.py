@@ -19,8 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
-from typing import Any
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -28,24 +27,14 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 from jax.flatten_util import ravel_pytree
-from tqdm.auto import tqdm
 
 from integrators.internals import serial_lapack_block
 from liepoisson.internals import positive_int
 
-from .. import _files
-from ._checkpoint import read_resumable
 from ._compiled import AbstractAtStructure, compiled
+from ._loop import AbstractSolver, Step, iterate, losses_step
 from ._problem import AbstractLeastSquares, AbstractProblem, AbstractStructuredJacobian
-from ._stage import (
-    AbstractIterationsStage,
-    AbstractResumableStage,
-    Context,
-    Linearisation,
-    Result,
-    finished_record,
-    history,
-)
+from ._stage import Context, Linearisation, Result
 
 #: Trial steps per iteration at most (each multiplies the damping by a growing factor).
 MAX_TRIALS = 30
@@ -116,7 +105,7 @@ def _damped_step(A, g, D, lam):
 
 
 @dataclasses.dataclass(frozen=True)
-class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
+class LevenbergMarquardt(AbstractSolver):
     r"""Levenberg-Marquardt on the residuals $r$ of a least-squares objective
     (`learn.AbstractLeastSquares`: the state and alpha losses, `learn.TrajectoryLoss`). Each
     step evaluates $r$ and its Jacobian $J$ once and solves
@@ -150,6 +139,7 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
     iterations: int = 200
     rtol: float = 1e-10
     target: float | None = None
+    resumable: ClassVar[bool] = True
 
     def __post_init__(self):
         positive_int(self.iterations, "LevenbergMarquardt.iterations")
@@ -168,153 +158,109 @@ class LevenbergMarquardt(AbstractResumableStage, AbstractIterationsStage):
 
     def run(self, problem: AbstractProblem, context: Context) -> Result:
         self.check(problem, context)
-        start = time.perf_counter()
-        saved = resumed = None
-        if context.checkpoint is not None:
-            settings = {**context.file_settings, **dataclasses.asdict(self)}
-            saved = _Saved(context.checkpoint, context.owner or problem, settings, context.earlier)
-            if context.checkpoint.resumable():
-                read = saved.read()
-                resumed = read if read["phase"] == context.phase else None
         # JAX's Cholesky each step runs in SciPy's OpenBLAS, whose idle workers spin on the
         # cores the Jacobian's XLA threads need (BENCHMARKS.md, "W2 `--full`: seven systems")
         with serial_lapack_block():
-            y, values, linearisation = _minimise(self.rtol, problem.y0, problem.train, problem.objective, self.iterations,
-                                                 context.progress, context.desc or f"{problem.name} Levenberg-Marquardt",
-                                                 saved, context.phase, resumed, context.earlier, context.on_step(),
-                                                 self.target)
-        record = finished_record(problem, self, len(values), start, y)
-        return Result(y, record, history(values), linearisation)
+            return iterate(self, problem, context)
 
+    def init(self, problem: AbstractProblem, context: Context) -> _State:
+        return self._at(problem, problem.y0, context.desc or f"{problem.name} Levenberg-Marquardt")
 
-class _Saved:
-    r"""A Levenberg-Marquardt checkpoint in `learn.fit`'s checkpoint format: `weights` the
-    current weights, `best` the same after the warm start (every accepted step lowers the
-    training loss) and the owner's starting weights during it, `optimizer` the damping
-    $\lambda$, its growth factor $\nu$ and the Marquardt scaling $D$, `history` the losses;
-    `phase` 0 while fitting the warm start's simpler map, 1 after."""
+    def _at(self, problem: AbstractProblem, model: Any, desc: str) -> _State:
+        """The state at `model`: its residuals and Jacobian (or normal equations)."""
+        args, objective = problem.train, problem.objective
+        fn = residuals_of(objective, model)
+        x = ravel_pytree(eqx.filter(model, eqx.is_inexact_array))[0]
+        state = _State(fn, args, check_size(objective, model, args), float(objective.count(model, args)), desc, x)
+        state.linearise(x)
+        if not np.isfinite(state.cost):
+            raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
+        return state
 
-    def __init__(self, checkpoint, owner: AbstractProblem, settings: dict[str, Any], earlier=()):
-        self.path = str(checkpoint.path)
-        self.every = checkpoint.every
-        self.owner = owner
-        self.settings = settings
-        self.attrs = owner.file_attributes()
-
-    def read(self) -> dict:
-        attrs, groups = read_resumable(self.path, self.owner, self.settings)
+    def resume(self, problem: AbstractProblem, context: Context, state: _State, attrs: dict[str, Any],
+               groups: dict[str, Any], weights: Any) -> _State:
         lam, nu, D = groups["optimizer"]
-        losses = list(np.asarray(groups["history"]["train_loss"]))
-        phase = int(attrs.get("phase", 1))
-        done = int(attrs["epoch"])
-        return {"phase": phase, "weights": groups["weights"], "lam": float(lam), "nu": float(nu), "D": np.asarray(D),
-                "values": losses[len(losses) - done:] if phase == 1 else losses,
-                "elapsed": float(attrs["elapsed_s"])}
+        state = self._at(problem, weights, state.desc)  # from the same number: the Jacobian's call
+        state.D, state.lam, state.nu = jnp.asarray(np.asarray(D)), float(lam), float(nu)
+        return state
 
-    def write(self, phase, model, lam, nu, D, values, earlier, elapsed):
-        leaves = _files.array_leaves(model)
-        # `best` is what loading the file as a model gives: during the warm start (the simpler
-        # map's weights in `weights`) the owner's own starting weights
-        best = leaves if phase == 1 else _files.array_leaves(self.owner.y0)
-        losses = np.asarray([*earlier, *values])
-        _files.write(self.path, {**self.attrs, "epoch": len(values), "best_epoch": len(losses),
-                                 "best_loss": float(losses[-1]) if losses.size else float("nan"),
-                                 "elapsed_s": float(elapsed), "fit_settings": self.settings, "phase": phase},
-                     {"weights": leaves, "best": best,
-                      "optimizer": [np.asarray(lam), np.asarray(nu), np.asarray(D)],
-                      "history": {"epoch": np.arange(1, losses.size + 1), "train_loss": losses,
-                                  "val_loss": np.full(losses.size, np.nan)}})
+    def optimizer_leaves(self, state: _State) -> list[Any]:
+        return [np.asarray(state.lam), np.asarray(state.nu), np.asarray(state.D)]
+
+    def terminate(self, problem: AbstractProblem, state: _State, losses: list[float]) -> bool:
+        return not np.isfinite(state.cost) or _converged(losses, self.rtol) or \
+            _out_of_reach(losses, self.target, self.iterations)
+
+    def step(self, problem: AbstractProblem, state: _State) -> tuple[_State, Step]:
+        A, g = state.J if state.blockwise else _normal_equations(state.r, state.J)
+        if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
+            raise FloatingPointError(f"{state.desc}: the Jacobian after step {state.done} is not finite (the map's "
+                                     "derivatives overflow at these weights); try fewer iterations or another start")
+        diag = jnp.diag(A)
+        # a weight the residuals do not see gets a scale from the others (MINPACK's rule)
+        diag = jnp.maximum(diag, jnp.finfo(A.dtype).eps * jnp.maximum(jnp.max(diag), jnp.finfo(A.dtype).tiny))
+        state.D = diag if state.D is None else jnp.maximum(state.D, diag)
+        lam, nu = state.lam, state.nu
+        for _ in range(MAX_TRIALS):
+            delta = _damped_step(A, g, state.D, lam)
+            if bool(jnp.all(jnp.isfinite(delta))):
+                x_new = state.x + delta
+                r_new = state.fn.residuals(x_new, state.args)
+                cost_new = float(r_new @ r_new)
+                predicted = -float(2 * g @ delta + delta @ (A @ delta))  # model decrease of sum r^2
+                if np.isfinite(cost_new) and cost_new < state.cost and predicted > 0:
+                    rho = (state.cost - cost_new) / predicted
+                    state.lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), LAMBDA_RANGE[0])
+                    state.nu = 2.0
+                    state.linearise(x_new)
+                    state.done += 1
+                    return state, losses_step(state.done - 1, [state.cost / state.scale])
+            lam = min(lam * nu, LAMBDA_RANGE[1])
+            nu *= 2
+        # no damping lowers the loss: a minimum to round-off
+        state.lam, state.nu = lam, nu
+        return state, losses_step(state.done, [], stop="no damping lowers the loss")
+
+    def current(self, state: _State) -> Any:
+        return state.fn.model(state.x)
+
+    def postprocess(self, problem: AbstractProblem, state: _State, best: Any, stopped: str):
+        linearisation = None
+        if not state.blockwise and state.J.size <= DENSE_JACOBIAN:
+            linearisation = Linearisation(state.x, state.args, state.r, state.J)
+        return state.fn.model(state.x), {}, linearisation
 
 
-def _minimise(rtol, model, args, objective, iterations, progress, desc, saved=None, phase=1, resumed=None,
-              earlier=(), on_step=None, target=None):
-    """`(model, losses, linearisation)`: up to `iterations` Levenberg-Marquardt steps from `model`, stopping
-    once the loss has fallen by less than `rtol` of its value over the last `WINDOW` steps,
-    or no damping finds a lower loss; the loss after each step. With `saved`, the state is
-    written every `saved.every` steps and at the end; `resumed` continues from a read state;
-    `on_step(steps done, loss)` after every step; with `target`, also once the loss cannot
-    reach it at its recent rate (`_out_of_reach`); `linearisation` the residuals and Jacobian
-    at the model returned (`None` where only the blocks' normal equations were formed, or the
-    Jacobian has more than `DENSE_JACOBIAN` entries)."""
-    start = time.perf_counter()
-    if resumed is not None:
-        model = _files.replace_array_leaves(model, resumed["weights"], "weights")
-    fn = residuals_of(objective, model)
-    x = ravel_pytree(eqx.filter(model, eqx.is_inexact_array))[0]
-    blockwise = check_size(objective, model, args)
+@dataclasses.dataclass
+class _State:
+    r"""Where a Levenberg-Marquardt run is: `x` and its residuals `r`, Jacobian `J` (or the
+    normal equations $(J^TJ, J^Tr)$ from the blocks: `blockwise`) and sum of squares `cost`;
+    the Marquardt scaling `D`, the damping `lam` and its growth factor `nu`; `scale` the
+    residuals' count (sum of squares -> loss)."""
 
-    def linearised(x):
-        """`(r, J)` at `x`, or `(r, (J^T J, J^T r))` from the Jacobian's blocks (`blockwise`)."""
-        if blockwise:
-            r, A, g = fn.normal_equations(x, args)
-            return r, (A, g)
-        return fn.jacobian(x, args)
+    fn: _Residuals
+    args: Any
+    blockwise: bool
+    scale: float
+    desc: str
+    x: jax.Array
+    r: Any = None
+    J: Any = None
+    cost: float = float("nan")
+    D: Any = None
+    lam: float = 1e-3
+    nu: float = 2.0
+    done: int = 0
 
-    r, J = linearised(x)
-    cost = float(r @ r)  # always from the Jacobian's call: a resumed run starts from the same number
-    if not np.isfinite(cost):
-        raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
-    scale = float(objective.count(model, args))  # sum r^2 -> loss
-    D, lam, nu = None, 1e-3, 2.0
-    values: list[float] = []
-    elapsed0 = 0.0
-    if resumed is not None:
-        D, lam, nu = jnp.asarray(resumed["D"]), resumed["lam"], resumed["nu"]
-        values, elapsed0 = list(resumed["values"]), resumed["elapsed"]
-    last_saved = len(values)
-
-    def save():
-        if saved is not None:
-            saved.write(phase, fn.model(x), lam, nu, D, values, earlier, elapsed0 + time.perf_counter() - start)
-
-    bar = tqdm(total=iterations, initial=len(values), disable=not progress, desc=desc, unit="it", leave=False)
-    try:
-        while len(values) < iterations:
-            if not np.isfinite(cost) or _converged(values, rtol) or _out_of_reach(values, target, iterations):
-                break
-            A, g = J if blockwise else _normal_equations(r, J)
-            if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
-                raise FloatingPointError(f"{desc}: the Jacobian after step {len(values)} is not finite (the map's "
-                                         "derivatives overflow at these weights); try fewer iterations or another start")
-            diag = jnp.diag(A)
-            # a weight the residuals do not see gets a scale from the others (MINPACK's rule)
-            diag = jnp.maximum(diag, jnp.finfo(A.dtype).eps * jnp.maximum(jnp.max(diag), jnp.finfo(A.dtype).tiny))
-            D = diag if D is None else jnp.maximum(D, diag)
-            accepted = False
-            for _ in range(MAX_TRIALS):
-                delta = _damped_step(A, g, D, lam)
-                if bool(jnp.all(jnp.isfinite(delta))):
-                    x_new = x + delta
-                    r_new = fn.residuals(x_new, args)
-                    cost_new = float(r_new @ r_new)
-                    predicted = -float(2 * g @ delta + delta @ (A @ delta))  # model decrease of sum r^2
-                    if np.isfinite(cost_new) and cost_new < cost and predicted > 0:
-                        rho = (cost - cost_new) / predicted
-                        lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), LAMBDA_RANGE[0])
-                        nu = 2.0
-                        accepted = True
-                        break
-                lam = min(lam * nu, LAMBDA_RANGE[1])
-                nu *= 2
-            if not accepted:  # no damping lowers the loss: a minimum to round-off
-                break
-            x = x_new
-            r, J = linearised(x)
-            cost = float(r @ r)
-            values.append(cost / scale)
-            bar.update(1)
-            bar.set_postfix(loss=f"{values[-1]:.3g}")
-            if on_step is not None:
-                on_step(len(values), values[-1])
-            if saved is not None and len(values) - last_saved >= saved.every:
-                save()
-                last_saved = len(values)
-    finally:
-        bar.close()
-    if saved is not None and D is not None and len(values) != last_saved:
-        save()
-    linearisation = None if blockwise or J.size > DENSE_JACOBIAN else Linearisation(x, args, r, J)
-    return fn.model(x), values, linearisation
+    def linearise(self, x: jax.Array) -> None:
+        """Move to `x`: `(r, J)` there, or `(r, (J^T J, J^T r))` from the Jacobian's blocks."""
+        self.x = x
+        if self.blockwise:
+            r, A, g = self.fn.normal_equations(x, self.args)
+            self.r, self.J = r, (A, g)
+        else:
+            self.r, self.J = self.fn.jacobian(x, self.args)
+        self.cost = float(self.r @ self.r)  # always from the Jacobian's call
 
 
 def check_size(objective: AbstractLeastSquares, y: Any, args: Any) -> bool:

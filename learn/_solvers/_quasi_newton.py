@@ -3,31 +3,20 @@
 start and keep-if-better are the wrappers `learn.Restarts`, `learn.WarmStart` and
 `learn.KeepIfBetter`).
 
-`minimiser(method, loss)` compiles the value and gradient of `loss(x, data)` (a flat parameter
-vector `x`) once per loss and returns `minimise(x0, data, max_iter, progress, desc) -> (x,
-history)`, so that every start or stage of a fit reuses the compiled pieces.
-
-Methods:
-
-- `"bfgs"`: SciPy BFGS (dense inverse Hessian; the paper's choice for G-LPNets, a few dozen
-  parameters).
-- `"lbfgsb"`: SciPy L-BFGS-B with 50 correction pairs (thousands of parameters: the MLP of an
-  LPNet).
-- `"lbfgs"`: optax L-BFGS with zoom line search, compiled in chunks of iterations.
-
-Stopping tolerances are zero: a run stops after `max_iter` iterations or when the line search
-can make no more progress at float64 resolution.
-
-The SciPy methods run with NumPy's BLAS on one thread (`threadpoolctl`): their host updates are
-small vector operations, and a multi-threaded BLAS pool spins after each of them on the cores
-that JAX's gradient needs next (benchmarks, [BLAS threads in the SciPy
-loop][blas-threads-in-the-scipy-loop-issue-29-benchmarksblas_threadspy]).
+Each is a solver of the shared loop (`learn.AbstractSolver`): SciPy's BFGS and L-BFGS-B one
+iteration a step (SciPy's own loop in a thread of its own, handing each iteration over), optax's
+L-BFGS one compiled chunk of iterations a step. The value and gradient of the flat objective
+are compiled once per objective and structure, so that every start or stage of a fit reuses
+them. Stopping tolerances are zero: a run stops after its iterations, when the line search can
+make no more progress at float64 resolution, or by `rtol` (SciPy's).
 """
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
-import time
+import queue
+import threading
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -39,87 +28,184 @@ import optax
 import scipy.optimize
 from jax.flatten_util import ravel_pytree
 from threadpoolctl import threadpool_limits
-from tqdm.auto import tqdm
 
 from liepoisson import common_path_first
 from liepoisson.internals import positive_int
 
 from ._compiled import compiled
+from ._loop import AbstractSolver, Step, losses_step
 from ._problem import AbstractProblem
-from ._stage import AbstractIterationsStage, Context, Result, finished_record, history
+from ._stage import Context, Result
 
-_SCIPY = {"bfgs": "BFGS", "lbfgsb": "L-BFGS-B"}
-_LBFGS_CHUNK = 100
-
-#: Quasi-Newton methods: SciPy BFGS (dense), SciPy L-BFGS-B, optax L-BFGS.
-QUASI_NEWTON_METHODS = ("bfgs", "lbfgsb", "lbfgs")
-
-
-def check_method(method: Any) -> str:
-    if method not in QUASI_NEWTON_METHODS:
-        raise ValueError(f"method must be one of {list(QUASI_NEWTON_METHODS)}; got {method!r}")
-    return method
-
-
-def minimiser(method: str, loss: Callable[[jax.Array, Any], jax.Array]):
-    """`minimise(x0, data, max_iter, progress, desc, rtol=0, on_step=None) -> (x, {"epoch",
-    "train_loss"})` for `loss(x, data)`, compiled once per `(method, loss)`; `x` is the best
-    iterate seen; `on_step(iterations done, loss)` after every iteration (SciPy) or chunk of
-    iterations (optax)."""
-    check_method(method)
-    if method in _SCIPY:
-        # a non-finite value is computed again with every path of `expm_action`
-        value_and_grad = compiled(("value_and_grad", loss), lambda: common_path_first(
-            jax.value_and_grad(loss), lambda out: bool(np.isfinite(out[0]))))
-
-        def minimise(x0, data, max_iter, progress, desc, rtol=0.0, on_step=None):
-            return _scipy(_SCIPY[method], value_and_grad, x0, data, max_iter, progress, desc, rtol, on_step)
-
-        return minimise
-    return compiled(("lbfgs", loss), lambda: _optax_lbfgs(loss))
-
-
-#: `ScipyBFGS(rtol=...)` and `ScipyLBFGSB(rtol=...)` compare the loss with its value this many iterations earlier.
+#: `ScipyBFGS(rtol=...)` and `ScipyLBFGSB(rtol=...)` compare the loss with its value this many
+#: iterations earlier.
 RTOL_WINDOW = 20
 
+_LBFGS_CHUNK = 100
 
-def _scipy(method, value_and_grad, x0, data, max_iter, progress, desc, rtol=0.0, on_step=None):
-    def fun(x):
-        v, g = value_and_grad(jnp.asarray(x), data)
-        return float(v), np.asarray(g, dtype=np.float64)
 
-    losses: list[float] = []
-    bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
+def _value_and_grad(loss: Callable[[jax.Array, Any], jax.Array]):
+    """`loss`'s value and gradient, compiled once per loss (a non-finite value is computed
+    again with every path of `expm_action`)."""
+    return compiled(("value_and_grad", loss), lambda: common_path_first(
+        jax.value_and_grad(loss), lambda out: bool(np.isfinite(out[0]))))
 
-    def callback(intermediate_result):
-        losses.append(float(intermediate_result.fun))
-        bar.update(1)
-        if len(losses) % 50 == 0:
-            bar.set_postfix(loss=f"{losses[-1]:.3g}")
-        if on_step is not None:
-            on_step(len(losses), losses[-1])
-        if rtol > 0 and len(losses) > RTOL_WINDOW:
-            before = losses[-1 - RTOL_WINDOW]
-            if before - losses[-1] <= rtol * abs(before):
+
+class _ScipyRun:
+    """`scipy.optimize.minimize` turned inside out: it runs in a thread of its own (its loop is
+    SciPy's) and hands each iteration's loss to the shared loop through its callback, waiting
+    there for the next step or for the end (its callback then raises `StopIteration`, and SciPy
+    returns that iterate). The arithmetic is SciPy's, unchanged; the caller's context variables
+    are copied into the thread."""
+
+    def __init__(self, method: str, value_and_grad: Any, x0: jax.Array, data: Any, max_iter: int):
+        self._out: queue.Queue = queue.Queue()
+        self._go: queue.Queue = queue.Queue()
+        self._waiting = False
+        self.x: np.ndarray = np.asarray(x0, dtype=np.float64)
+
+        def fun(x):
+            v, g = value_and_grad(jnp.asarray(x), data)
+            return float(v), np.asarray(g, dtype=np.float64)
+
+        def callback(intermediate_result):
+            self._out.put(("iteration", float(intermediate_result.fun), np.array(intermediate_result.x)))
+            if self._go.get() == "stop":
                 raise StopIteration  # SciPy >= 1.11 ends the run and returns this iterate
 
-    if method == "BFGS":
-        options: dict[str, Any] = {"maxiter": max_iter, "gtol": 0.0}
-    else:  # the default maxfun (15000) would stop long runs early
-        options = {"maxiter": max_iter, "maxfun": 20 * max_iter, "maxcor": 50, "ftol": 0.0, "gtol": 0.0}
-    try:
+        if method == "BFGS":
+            options: dict[str, Any] = {"maxiter": max_iter, "gtol": 0.0}
+        else:  # the default maxfun (15000) would stop long runs early
+            options = {"maxiter": max_iter, "maxfun": 20 * max_iter, "maxcor": 50, "ftol": 0.0, "gtol": 0.0}
+
+        def minimise():
+            try:
+                res = scipy.optimize.minimize(fun, np.asarray(x0, dtype=np.float64), jac=True, method=method,
+                                              callback=callback, options=options)
+                self._out.put(("done", res.message, np.asarray(res.x)))
+            except BaseException as err:  # noqa: BLE001 (handed to the loop's thread, raised there)
+                self._out.put(("error", err, None))
+
+        context = contextvars.copy_context()
+        self._thread = threading.Thread(target=context.run, args=(minimise,), daemon=True)
+        self._thread.start()
+
+    def next(self) -> tuple[str, Any]:
+        """`("iteration", loss)` after SciPy's next iteration, or `("done", message)`."""
+        if self._waiting:
+            self._go.put("go")
+        kind, value, x = self._out.get()
+        if kind == "error":
+            self._waiting = False
+            raise value
+        self._waiting = kind == "iteration"
+        self.x = x
+        return kind, value
+
+    def close(self) -> None:
+        """End the run at the current iterate (its callback raises `StopIteration`)."""
+        if self._waiting:
+            self._go.put("stop")
+            self._waiting = False
+            kind, value, x = self._out.get()
+            if kind == "error":
+                raise value
+            self.x = x
+        self._thread.join()
+
+
+@dataclasses.dataclass
+class _ScipyState:
+    run: _ScipyRun
+    unravel: Any
+    done: int = 0
+
+
+class _AbstractScipy(AbstractSolver):
+    """One SciPy quasi-Newton run from the problem's start (no selection: `learn.KeepIfBetter`,
+    `learn.Restarts` do that), its method `_method`; every iteration one step of the shared
+    loop. BLAS on one thread (`threadpoolctl`, for the whole run): SciPy's host updates are small
+    vector operations, and a multi-threaded BLAS pool spins after each of them on the cores that JAX's
+    gradient needs next (benchmarks, [BLAS threads in the SciPy
+    loop][blas-threads-in-the-scipy-loop-issue-29-benchmarksblas_threadspy])."""
+
+    iterations: int
+    rtol: float
+    _method: ClassVar[str]
+
+    def __post_init__(self):
+        positive_int(self.iterations, f"{type(self).__name__}.iterations")
+        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not 0 <= self.rtol < 1:
+            raise ValueError(f"{type(self).__name__}.rtol must be a number in [0, 1); got {self.rtol!r}")
+
+    def run(self, problem: AbstractProblem, context: Context) -> Result:
+        # set from this thread: OpenBLAS takes a thread count set from another thread as that
+        # thread's alone
         with threadpool_limits(limits=1, user_api="blas"):
-            res = scipy.optimize.minimize(
-                fun, np.asarray(x0, dtype=np.float64), jac=True, method=method, callback=callback, options=options
-            )
-    finally:
-        bar.close()
-    hist = {"epoch": np.arange(1, len(losses) + 1), "train_loss": np.asarray(losses)}
-    return jnp.asarray(res.x), hist
+            return super().run(problem, context)
+
+    def init(self, problem: AbstractProblem, context: Context) -> _ScipyState:
+        flat = problem.flat()
+        x0, h = flat.ravel(problem.y0)
+        run = _ScipyRun(self._method, _value_and_grad(flat), x0, (problem.train, h), self.iterations)
+        return _ScipyState(run, _unflatten(problem))
+
+    def step(self, problem: AbstractProblem, state: _ScipyState) -> tuple[_ScipyState, Step]:
+        kind, value = state.run.next()
+        if kind == "done":
+            return state, losses_step(state.done, [], stop=str(value))
+        state.done += 1
+        return state, losses_step(state.done - 1, [value])
+
+    def terminate(self, problem: AbstractProblem, state: _ScipyState, losses: list[float]) -> bool:
+        if self.rtol <= 0 or len(losses) <= RTOL_WINDOW:
+            return False
+        before = losses[-1 - RTOL_WINDOW]
+        return before - losses[-1] <= self.rtol * abs(before)
+
+    def current(self, state: _ScipyState) -> Any:
+        return state.unravel(state.run.x)
+
+    def close(self, state: _ScipyState) -> None:
+        state.run.close()
 
 
-def _optax_lbfgs(loss):
-    """optax L-BFGS (zoom line search) compiled in chunks of iterations; returns a minimiser."""
+@dataclasses.dataclass(frozen=True)
+class ScipyBFGS(_AbstractScipy):
+    r"""SciPy's BFGS (dense inverse Hessian) on the full-batch loss with JAX gradients: for a
+    few dozen weights (the paper's choice for G-LPNets).
+
+    `iterations` at most; `rtol`: stop once the loss has fallen by less than `rtol` of its value
+    over the last 20 iterations (0, the default: run every iteration, or until the line search
+    makes no progress at float64 resolution; a fit to noisy data reaches its noise floor long
+    before, e.g. `rtol=1e-9`). The result is the last iterate: wrap it in `learn.KeepIfBetter`
+    to keep it only if it lowers the selection loss, in `learn.Restarts` for fresh starts and
+    in `learn.WarmStart` for a simpler problem first (the paper's G-LPNet training:
+    `learn.KeepIfBetter(learn.Restarts(learn.WarmStart(learn.ScipyBFGS(3500)), 4))`). SciPy's
+    loop runs in a thread of its own, handing each iteration to the shared loop."""
+
+    iterations: int = 3500
+    rtol: float = 0.0
+    _method: ClassVar[str] = "BFGS"
+
+
+@dataclasses.dataclass(frozen=True)
+class ScipyLBFGSB(_AbstractScipy):
+    r"""SciPy's L-BFGS-B with 50 correction pairs on the full-batch loss with JAX gradients: for
+    thousands of weights (the MLP of an LPNet; Adam refined by it,
+    `(learn.Adam(30_000), learn.KeepIfBetter(learn.ScipyLBFGSB(5000)))`).
+
+    `iterations` and `rtol` as `learn.ScipyBFGS`'s; the result is the last iterate (wrappers:
+    `learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`)."""
+
+    iterations: int = 3500
+    rtol: float = 0.0
+    _method: ClassVar[str] = "L-BFGS-B"
+
+
+def _optax_lbfgs(loss: Callable[[jax.Array, Any], jax.Array]):
+    """`(init, run, evaluate)` of optax's L-BFGS (zoom line search) on `loss(x, data)`: `run` one
+    compiled chunk of `_LBFGS_CHUNK` iterations, compiled once per loss."""
     opt = optax.lbfgs()
     evaluate = jax.jit(loss)  # once per chunk; eagerly it would dispatch op by op
 
@@ -138,101 +224,61 @@ def _optax_lbfgs(loss):
 
         return jax.lax.scan(body, (x, state), None, length=_LBFGS_CHUNK)
 
-    def minimise(x0, data, max_iter, progress, desc, rtol=0.0, on_step=None):  # rtol: SciPy methods only
-        x, state = x0, opt.init(x0)
-        losses: list[np.ndarray] = []
-        bar = tqdm(total=max_iter, disable=not progress, desc=desc, unit="it", leave=False)
-        done = 0
-        best_x, best = x0, np.inf
-        try:
-            while done < max_iter:
-                (x_new, state), values = run(x, state, data)
-                values = np.asarray(values)[: max_iter - done]
-                losses.append(values)
-                done += len(values)
-                bar.update(len(values))
-                bar.set_postfix(loss=f"{values[-1]:.3g}")
-                if on_step is not None:
-                    on_step(done, float(values[-1]))
-                if not np.all(np.isfinite(values)):
-                    break
-                x = x_new
-                current = float(evaluate(x, data))
-                if current < best:
-                    best_x, best = x, current
-        finally:
-            bar.close()
-        train = np.concatenate(losses) if losses else np.zeros(0)
-        hist = {"epoch": np.arange(1, len(train) + 1), "train_loss": train}
-        return best_x, hist
-
-    return minimise
+    return opt.init, run, evaluate
 
 
-class _AbstractQuasiNewton(AbstractIterationsStage):
-    """One quasi-Newton run from the problem's start, its method `_method` (no selection:
-    `learn.KeepIfBetter`, `learn.Restarts` do that)."""
+@dataclasses.dataclass
+class _OptaxState:
+    x: jax.Array
+    opt_state: Any
+    data: Any
+    #: The `y` of a flat `x` (the problem's fixed part, its step size included).
+    y: Callable[[jax.Array], Any]
+    done: int = 0
 
-    iterations: int
-    _method: ClassVar[str]
+
+def _unflatten(problem: AbstractProblem) -> Callable[[Any], Any]:
+    """The `y` whose flat trainable leaves are `x`, the rest the start's."""
+    params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
+    unravel = ravel_pytree(params)[1]
+    return lambda x: eqx.combine(unravel(jnp.asarray(x)), static)
+
+
+@dataclasses.dataclass(frozen=True)
+class OptaxLBFGS(AbstractSolver):
+    r"""optax's L-BFGS with its zoom line search, compiled in chunks of 100 iterations (the loop
+    on the device; one chunk a step of the shared loop): `iterations` at most; the result is
+    the iterate of lowest training loss at the end of a chunk (wrappers: `learn.KeepIfBetter`,
+    `learn.Restarts`, `learn.WarmStart`)."""
+
+    iterations: int = 3500
+    keeps_best: ClassVar[bool] = True
 
     def __post_init__(self):
-        positive_int(self.iterations, f"{type(self).__name__}.iterations")
-        rtol = getattr(self, "rtol", 0.0)
-        if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 <= rtol < 1:
-            raise ValueError(f"{type(self).__name__}.rtol must be a number in [0, 1); got {rtol!r}")
+        positive_int(self.iterations, "OptaxLBFGS.iterations")
 
-    def run(self, problem: AbstractProblem, context: Context) -> Result:
+    def _compiled(self, problem: AbstractProblem):
         flat = problem.flat()
+        return flat, compiled(("lbfgs", flat), lambda: _optax_lbfgs(flat))
+
+    def init(self, problem: AbstractProblem, context: Context) -> _OptaxState:
+        flat, (opt_init, _, _) = self._compiled(problem)
         x0, h = flat.ravel(problem.y0)
-        minimise = minimiser(self._method, flat)
-        start = time.perf_counter()
-        x, hist = minimise(x0, (problem.train, h), self.iterations, context.progress,
-                           context.desc or f"{problem.name} {self.name}", getattr(self, "rtol", 0.0),
-                           context.on_step())
-        params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
-        y = eqx.combine(ravel_pytree(params)[1](jnp.asarray(x)), static)
-        record = finished_record(problem, self, len(hist["train_loss"]), start, y)
-        return Result(y, record, history(hist["train_loss"], hist["epoch"]))
+        return _OptaxState(x0, opt_init(x0), (problem.train, h), _unflatten(problem))
 
+    def initial_best(self, problem: AbstractProblem) -> tuple[Any, float, int]:
+        return problem.y0, np.inf, 0
 
-@dataclasses.dataclass(frozen=True)
-class ScipyBFGS(_AbstractQuasiNewton):
-    r"""SciPy's BFGS (dense inverse Hessian) on the full-batch loss with JAX gradients: for a
-    few dozen weights (the paper's choice for G-LPNets).
+    def step(self, problem: AbstractProblem, state: _OptaxState) -> tuple[_OptaxState, Step]:
+        _, (_, run, evaluate) = self._compiled(problem)
+        (x_new, opt_state), values = run(state.x, state.opt_state, state.data)
+        values = np.asarray(values)[: self.iterations - state.done]
+        before, state.done = state.done, state.done + len(values)
+        if not np.all(np.isfinite(values)):
+            return state, losses_step(before, values, stop="a non-finite loss; kept the best iterate before it")
+        state.x, state.opt_state = x_new, opt_state
+        current = float(evaluate(state.x, state.data))
+        return state, losses_step(before, values, candidate=(state.y(state.x), current, state.done))
 
-    `iterations` at most; `rtol`: stop once the loss has fallen by less than `rtol` of its value
-    over the last 20 iterations (0, the default: run every iteration, or until the line search
-    makes no progress at float64 resolution; a fit to noisy data reaches its noise floor long
-    before, e.g. `rtol=1e-9`). The result is the last iterate: wrap it in `learn.KeepIfBetter`
-    to keep it only if it lowers the selection loss, in `learn.Restarts` for fresh starts and
-    in `learn.WarmStart` for a simpler problem first (the paper's G-LPNet training:
-    `learn.KeepIfBetter(learn.Restarts(learn.WarmStart(learn.ScipyBFGS(3500)), 4))`)."""
-
-    iterations: int = 3500
-    rtol: float = 0.0
-    _method: ClassVar[str] = "bfgs"
-
-
-@dataclasses.dataclass(frozen=True)
-class ScipyLBFGSB(_AbstractQuasiNewton):
-    r"""SciPy's L-BFGS-B with 50 correction pairs on the full-batch loss with JAX gradients: for
-    thousands of weights (the MLP of an LPNet; Adam refined by it,
-    `(learn.Adam(30_000), learn.KeepIfBetter(learn.ScipyLBFGSB(5000)))`).
-
-    `iterations` and `rtol` as `learn.ScipyBFGS`'s; the result is the last iterate (wrappers:
-    `learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`)."""
-
-    iterations: int = 3500
-    rtol: float = 0.0
-    _method: ClassVar[str] = "lbfgsb"
-
-
-@dataclasses.dataclass(frozen=True)
-class OptaxLBFGS(_AbstractQuasiNewton):
-    r"""optax's L-BFGS with its zoom line search, compiled in chunks of 100 iterations (the loop
-    on the device): `iterations` at most; the result is the iterate of lowest training loss at
-    the end of a chunk (wrappers: `learn.KeepIfBetter`, `learn.Restarts`, `learn.WarmStart`)."""
-
-    iterations: int = 3500
-    _method: ClassVar[str] = "lbfgs"
+    def current(self, state: _OptaxState) -> Any:
+        return state.y(state.x)

@@ -1,7 +1,8 @@
-r"""A solver stage of `learn.fit`: one abstract class with one `run(problem, context)`, and the
-behaviours added to any stage by wrapping it (as optimistix's `BestSoFarMinimiser`): fresh
-restarts (`Restarts`), the warm start a problem offers (`WarmStart`) and keeping the result
-only if it beats the start (`KeepIfBetter`)."""
+r"""A solver stage of `learn.fit`: one abstract class with one `run(problem, context)` (a
+solver's is the shared loop, `learn.AbstractSolver`), and the behaviours added to any stage
+by wrapping it (as optimistix's `BestSoFarMinimiser`), never by its options: fresh restarts
+(`Restarts`), the warm start a problem offers (`WarmStart`) and keeping the result only if it
+beats the start (`KeepIfBetter`)."""
 
 from __future__ import annotations
 
@@ -65,12 +66,6 @@ class Context:
     #: The losses of earlier parts of the stage (a warm start's), written before this part's
     #: in a checkpoint's history.
     earlier: tuple[float, ...] = ()
-
-    def on_step(self) -> Callable[[int, float], None] | None:
-        """`on_step(done, loss)` for a solver's inner loop (`None` without a callback)."""
-        if self.report is None:
-            return None
-        return lambda done, value: self.report(self.offset + done, self.total, value, float("nan"))
 
     def shifted(self, offset: int, **changes: Any) -> Context:
         return dataclasses.replace(self, offset=self.offset + offset, **changes)
@@ -174,16 +169,6 @@ def finished_record(problem: AbstractProblem, stage: AbstractStage, iterations: 
     return StageRecord(optimiser=stage.name, settings=settings, iterations=iterations, train_loss=losses.train,
                        val_loss=losses.validation, kept=True, wall_time_s=time.perf_counter() - started,
                        details=details or {})
-
-
-class AbstractResumableStage(AbstractStage):
-    """A stage that writes its state to the fit's `learn.Checkpoint` and resumes from it."""
-
-    resumable = True
-
-    def check(self, problem: AbstractProblem, context: Context) -> None:
-        if context.checkpoint is not None:
-            problem.file_attributes()  # a problem that cannot be written says so now
 
 
 class AbstractWrappedStage(AbstractStage):
