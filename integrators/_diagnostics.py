@@ -195,6 +195,26 @@ def _as_path(trajectory: Any, name: str, dim: int) -> tuple[np.ndarray, np.ndarr
     return arr, None
 
 
+#: `per_state` evaluates on at least this many states, padded to a power of two.
+MIN_BUCKET = 256
+
+
+def per_state(fn: Callable[[Any], ArrayLike], y: np.ndarray) -> np.ndarray:
+    """`fn(y)` for a function of states `(..., dim)` with one value (or vector) per state,
+    evaluated on the states flattened and padded (with the first state) to a power of two of
+    at least `MIN_BUCKET`: JAX compiles its operations once per padded length, not once per
+    trajectory length (scoring flights of 50 lengths compiled 50 times). Each state's value is
+    the unpadded one to the bit (the operations act state by state)."""
+    dim = y.shape[-1]
+    flat = y.reshape(-1, dim)
+    n = flat.shape[0]
+    padded = max(MIN_BUCKET, 1 << max(n - 1, 0).bit_length())
+    if padded > n:
+        flat = np.concatenate([flat, np.repeat(flat[:1], padded - n, axis=0)])
+    out = np.asarray(fn(flat))[:n]
+    return out.reshape(y.shape[:-1] + out.shape[1:])
+
+
 def diagnostics(
     trajectory: ArrayLike | Trajectories,
     system: AbstractPoissonSystem,
@@ -261,8 +281,8 @@ def diagnostics(
     # A finite state far out can overflow its energy, a Casimir or an integral (a rollout on its
     # way out): the series then end before the first step where one of those is not finite.
     with np.errstate(over="ignore", invalid="ignore"):
-        C = np.asarray(system.casimirs(y))  # (..., T, k)
-        E = np.asarray(system.hamiltonian(y))  # (..., T)
+        C = per_state(system.casimirs, y)  # (..., T, k)
+        E = per_state(system.hamiltonian, y)  # (..., T)
         values = {name: np.asarray(f(y), dtype=np.float64) for name, f in (integrals or {}).items()}
     for name, I in values.items():
         if I.shape != E.shape:

@@ -26,6 +26,7 @@ from liepoisson.internals import as_state, positive_float, positive_int, states
 from liepoisson.internals import check_fits_in_memory as fits_in_memory
 from liepoisson.systems import AbstractPoissonSystem
 
+from ._diagnostics import per_state
 from ._nonfinite import AbstractNonfinitePolicy, RaiseIfNonfinite, nonfinite_policy
 
 
@@ -148,7 +149,9 @@ class AbstractStepMap(eqx.Module):
         check_h(self)
         dim = self.system.dim
         y = states(y, "y", dim)
-        return _defect_compiled(traced_h(self), jnp.asarray(y.reshape(-1, dim))).reshape(y.shape[:-1])
+        # padded to a bucket of points (`per_state`): one compiled program for any number of them
+        step_map = traced_h(self)
+        return jax.device_put(per_state(lambda points: _defect_compiled(step_map, jnp.asarray(points)), np.asarray(y)))
 
     @property
     def divergence_hint(self) -> str:

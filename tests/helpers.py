@@ -3,6 +3,7 @@ not share code with `liepoisson` (numpy/scipy only)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 from typing import Any
@@ -220,3 +221,20 @@ class ToyProblem(learn.AbstractProblem):
 
     def read_checkpoint(self, path):
         raise ValueError("a toy problem has no checkpoints")
+
+
+@contextlib.contextmanager
+def compilations():
+    """`{"traces": n}`: the programs JAX traced in the block (jitted functions and the small
+    programs of eager operations alike; a compilation-cache hit is traced too)."""
+    seen = {"traces": 0}
+
+    def listener(event, *args, **kwargs):
+        if event == "/jax/core/compile/jaxpr_trace_duration":
+            seen["traces"] += 1
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield seen
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)

@@ -273,3 +273,28 @@ def test_error_growth_rate():
     assert it.error_growth_rate(t, jumped, (1.0, 10.0)) == pytest.approx(0.25, abs=1e-12)
     with pytest.raises(ValueError, match="with a reference"):
         it.diagnostics(ys, BODY).error_growth_rate((1.0, 10.0))
+
+
+def test_per_state_values_are_the_unpadded_ones_to_the_bit():
+    from integrators._diagnostics import MIN_BUCKET, per_state
+
+    rng = np.random.default_rng(5)
+    for system in (lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0)), lp.systems.Kirchhoff()):
+        for shape in ((1, system.dim), (7, system.dim), (3, 301, system.dim), (MIN_BUCKET, system.dim)):
+            y = rng.normal(size=shape)
+            np.testing.assert_array_equal(per_state(system.casimirs, y), np.asarray(system.casimirs(y)))
+            np.testing.assert_array_equal(per_state(system.hamiltonian, y), np.asarray(system.hamiltonian(y)))
+
+
+def test_figures_of_rollouts_of_many_lengths_compile_once_per_bucket():
+    from helpers import compilations
+
+    body = lp.systems.RigidBody(inertia=(1.0, 2.0, 3.0))
+    m = it.splitting.Strang(body, h=0.1)
+    y0 = np.array([[1.0, 0.2, -0.3]])
+    reference = it.ground_truth(body, y0, h=0.1, n_steps=120)
+    it.rollout_figures(m, m.rollout(y0, 120), reference)
+    with compilations() as seen:  # every length within the first bucket (256 states): nothing new
+        for n in (17, 40, 77, 101, 119):
+            it.rollout_figures(m, m.rollout(y0, n), reference.states[:, : n + 1])
+    assert seen["traces"] == 0

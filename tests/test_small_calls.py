@@ -2,14 +2,13 @@
 any length from one compiled program (`AbstractStepMap.rollout`, `lifted_rollout`), each
 against the implementation it replaced (copied here as the reference)."""
 
-import contextlib
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import slow_except
+from helpers import compilations, slow_except
 
 import integrators as it
 import learn
@@ -55,23 +54,6 @@ class Counted(it.AbstractReconstructingStepMap):
     def lifted_step(self, g, y):
         TRACES["step"] += 1
         return self.inner.lifted_step(g, y)
-
-
-@contextlib.contextmanager
-def compilations():
-    """`{"traces": n}`: the programs JAX traced in the block (jitted functions and the small
-    programs of eager operations alike; a compilation-cache hit is traced too)."""
-    seen = {"traces": 0}
-
-    def listener(event, *args, **kwargs):
-        if event == "/jax/core/compile/jaxpr_trace_duration":
-            seen["traces"] += 1
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield seen
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 def starts(n_traj, seed=0):
