@@ -99,7 +99,7 @@ class Adam(AbstractSolver):
     def file_settings(self) -> dict[str, Any]:
         return {**dataclasses.asdict(self), "log_every": self._log_every}
 
-    def init(self, problem: AbstractProblem, context: Context) -> _State:
+    def init(self, problem: AbstractProblem, context: Context) -> Any:
         objective, epochs = problem.objective, self.epochs
         train = jax.tree_util.tree_map(jnp.asarray, problem.train)
         val = jax.tree_util.tree_map(jnp.asarray, problem.validation) if problem.has_validation else train
@@ -163,8 +163,8 @@ class Adam(AbstractSolver):
         carry = (params, opt.init(params), params, jnp.asarray(jnp.inf, dtype=float), jnp.asarray(-1, dtype=int))
         return _State(carry, 0, run, train, val, static)
 
-    def resume(self, problem: AbstractProblem, context: Context, state: _State, attrs: dict[str, Any],
-               groups: dict[str, Any], weights: Any) -> _State:
+    def resume(self, problem: AbstractProblem, context: Context, state: Any, attrs: dict[str, Any],
+               groups: dict[str, Any], weights: Any) -> Any:
         _, opt_state, *_ = state.carry
         params = eqx.filter(weights, eqx.is_inexact_array)
         best = eqx.filter(_files.replace_array_leaves(problem.y0, groups["best"], "best"), eqx.is_inexact_array)
@@ -174,10 +174,10 @@ class Adam(AbstractSolver):
         state.epoch = int(attrs["epoch"])
         return state
 
-    def optimizer_leaves(self, state: _State) -> list[Any]:
+    def optimizer_leaves(self, state: Any) -> list[Any]:
         return _files.array_leaves(state.carry[1])
 
-    def step(self, problem: AbstractProblem, state: _State) -> tuple[_State, Step]:
+    def step(self, problem: AbstractProblem, state: Any) -> tuple[Any, Step]:
         epoch, epochs = state.epoch, self.epochs
         chunk = min(CHUNK, epochs)
         state.carry, (lt, lv) = state.run(state.carry, jnp.arange(epoch, epoch + chunk), state.train, state.val)
@@ -194,16 +194,16 @@ class Adam(AbstractSolver):
         return state, Step(k, e[keep], lt[keep], lv[keep], (eqx.combine(bp, state.static), float(bl), int(be)), stop,
                            (float(lt[-1]), float(lv[-1])))
 
-    def current(self, state: _State) -> Any:
+    def current(self, state: Any) -> Any:
         return eqx.combine(state.carry[0], state.static)
 
-    def final_candidate(self, problem: AbstractProblem, state: _State, done: int) -> tuple[Any, float, int]:
+    def final_candidate(self, problem: AbstractProblem, state: Any, done: int) -> tuple[Any, float, int]:
         # The weights after the last update were never scored inside the scan. The losses are
         # those compiled once per structure (`AbstractProblem.losses`), shared with the stages.
         y = self.current(state)
         return y, problem.losses(y).selection, state.epoch
 
-    def postprocess(self, problem: AbstractProblem, state: _State, best: Any, stopped: str):
+    def postprocess(self, problem: AbstractProblem, state: Any, best: Any, stopped: str):
         if best is None or not np.isfinite(best[1]):
             raise FloatingPointError(f"training diverged: no finite loss ({stopped or 'all epochs'})")
         return best[0], {"best_epoch": int(best[2]), "stopped": stopped}, None

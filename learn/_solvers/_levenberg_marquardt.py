@@ -163,10 +163,10 @@ class LevenbergMarquardt(AbstractSolver):
         with serial_lapack_block():
             return iterate(self, problem, context)
 
-    def init(self, problem: AbstractProblem, context: Context) -> _State:
+    def init(self, problem: AbstractProblem, context: Context) -> Any:
         return self._at(problem, problem.y0, context.desc or f"{problem.name} Levenberg-Marquardt")
 
-    def _at(self, problem: AbstractProblem, model: Any, desc: str) -> _State:
+    def _at(self, problem: AbstractProblem, model: Any, desc: str) -> Any:
         """The state at `model`: its residuals and Jacobian (or normal equations)."""
         args, objective = problem.train, problem.objective
         fn = residuals_of(objective, model)
@@ -177,21 +177,21 @@ class LevenbergMarquardt(AbstractSolver):
             raise FloatingPointError(f"{desc}: the loss at the start is not finite; check the weights and the data")
         return state
 
-    def resume(self, problem: AbstractProblem, context: Context, state: _State, attrs: dict[str, Any],
-               groups: dict[str, Any], weights: Any) -> _State:
+    def resume(self, problem: AbstractProblem, context: Context, state: Any, attrs: dict[str, Any],
+               groups: dict[str, Any], weights: Any) -> Any:
         lam, nu, D = groups["optimizer"]
         state = self._at(problem, weights, state.desc)  # from the same number: the Jacobian's call
         state.D, state.lam, state.nu = jnp.asarray(np.asarray(D)), float(lam), float(nu)
         return state
 
-    def optimizer_leaves(self, state: _State) -> list[Any]:
+    def optimizer_leaves(self, state: Any) -> list[Any]:
         return [np.asarray(state.lam), np.asarray(state.nu), np.asarray(state.D)]
 
-    def terminate(self, problem: AbstractProblem, state: _State, losses: list[float]) -> bool:
+    def terminate(self, problem: AbstractProblem, state: Any, losses: list[float]) -> bool:
         return not np.isfinite(state.cost) or _converged(losses, self.rtol) or \
             _out_of_reach(losses, self.target, self.iterations)
 
-    def step(self, problem: AbstractProblem, state: _State) -> tuple[_State, Step]:
+    def step(self, problem: AbstractProblem, state: Any) -> tuple[Any, Step]:
         A, g = state.J if state.blockwise else _normal_equations(state.r, state.J)
         if not bool(jnp.all(jnp.isfinite(A)) and jnp.all(jnp.isfinite(g))):
             raise FloatingPointError(f"{state.desc}: the Jacobian after step {state.done} is not finite (the map's "
@@ -221,10 +221,10 @@ class LevenbergMarquardt(AbstractSolver):
         state.lam, state.nu = lam, nu
         return state, losses_step(state.done, [], stop="no damping lowers the loss")
 
-    def current(self, state: _State) -> Any:
+    def current(self, state: Any) -> Any:
         return state.fn.model(state.x)
 
-    def postprocess(self, problem: AbstractProblem, state: _State, best: Any, stopped: str):
+    def postprocess(self, problem: AbstractProblem, state: Any, best: Any, stopped: str):
         linearisation = None
         if not state.blockwise and state.J.size <= DENSE_JACOBIAN:
             linearisation = Linearisation(state.x, state.args, state.r, state.J)

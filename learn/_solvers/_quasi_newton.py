@@ -144,29 +144,29 @@ class _AbstractScipy(AbstractSolver):
         with threadpool_limits(limits=1, user_api="blas"):
             return super().run(problem, context)
 
-    def init(self, problem: AbstractProblem, context: Context) -> _ScipyState:
+    def init(self, problem: AbstractProblem, context: Context) -> Any:
         flat = problem.flat()
         x0, h = flat.ravel(problem.y0)
         run = _ScipyRun(self._method, _value_and_grad(flat), x0, (problem.train, h), self.iterations)
         return _ScipyState(run, _unflatten(problem))
 
-    def step(self, problem: AbstractProblem, state: _ScipyState) -> tuple[_ScipyState, Step]:
+    def step(self, problem: AbstractProblem, state: Any) -> tuple[Any, Step]:
         kind, value = state.run.next()
         if kind == "done":
             return state, losses_step(state.done, [], stop=str(value))
         state.done += 1
         return state, losses_step(state.done - 1, [value])
 
-    def terminate(self, problem: AbstractProblem, state: _ScipyState, losses: list[float]) -> bool:
+    def terminate(self, problem: AbstractProblem, state: Any, losses: list[float]) -> bool:
         if self.rtol <= 0 or len(losses) <= RTOL_WINDOW:
             return False
         before = losses[-1 - RTOL_WINDOW]
         return before - losses[-1] <= self.rtol * abs(before)
 
-    def current(self, state: _ScipyState) -> Any:
+    def current(self, state: Any) -> Any:
         return state.unravel(state.run.x)
 
-    def close(self, state: _ScipyState) -> None:
+    def close(self, state: Any) -> None:
         state.run.close()
 
 
@@ -261,7 +261,7 @@ class OptaxLBFGS(AbstractSolver):
         flat = problem.flat()
         return flat, compiled(("lbfgs", flat), lambda: _optax_lbfgs(flat))
 
-    def init(self, problem: AbstractProblem, context: Context) -> _OptaxState:
+    def init(self, problem: AbstractProblem, context: Context) -> Any:
         flat, (opt_init, _, _) = self._compiled(problem)
         x0, h = flat.ravel(problem.y0)
         return _OptaxState(x0, opt_init(x0), (problem.train, h), _unflatten(problem))
@@ -269,7 +269,7 @@ class OptaxLBFGS(AbstractSolver):
     def initial_best(self, problem: AbstractProblem) -> tuple[Any, float, int]:
         return problem.y0, np.inf, 0
 
-    def step(self, problem: AbstractProblem, state: _OptaxState) -> tuple[_OptaxState, Step]:
+    def step(self, problem: AbstractProblem, state: Any) -> tuple[Any, Step]:
         _, (_, run, evaluate) = self._compiled(problem)
         (x_new, opt_state), values = run(state.x, state.opt_state, state.data)
         values = np.asarray(values)[: self.iterations - state.done]
@@ -280,5 +280,5 @@ class OptaxLBFGS(AbstractSolver):
         current = float(evaluate(state.x, state.data))
         return state, losses_step(before, values, candidate=(state.y(state.x), current, state.done))
 
-    def current(self, state: _OptaxState) -> Any:
+    def current(self, state: Any) -> Any:
         return state.y(state.x)
