@@ -50,6 +50,15 @@ def read_resumable(path: str, owner: AbstractProblem, settings: dict[str, Any]) 
     return attrs, groups
 
 
+def logged_entries(attrs: dict[str, Any], size: int) -> int:
+    """How many of a checkpoint's `size` history entries its last run logged (`logged`; in
+    files written before it, a Levenberg-Marquardt run's steps `epoch`, an Adam run's (no
+    `phase`) the whole history)."""
+    if "logged" in attrs:
+        return int(attrs["logged"])
+    return int(attrs["epoch"]) if "phase" in attrs else size
+
+
 def resumable_phase(checkpoint: Checkpoint, owner: AbstractProblem) -> dict[str, np.ndarray] | None:
     """The loss history of a warm start that the checkpoint says is done (written in phase 1,
     after it), or `None` (no file to resume, or written during the warm start)."""
@@ -59,5 +68,5 @@ def resumable_phase(checkpoint: Checkpoint, owner: AbstractProblem) -> dict[str,
     if int(attrs.get("phase", 1)) != 1:
         return None
     losses = np.asarray(groups["history"]["train_loss"])
-    warm = losses[: losses.size - int(attrs.get("logged", attrs["epoch"]))]
+    warm = losses[: losses.size - logged_entries(attrs, losses.size)]
     return {"epoch": np.arange(1, warm.size + 1), "train_loss": warm, "val_loss": np.full(warm.size, np.nan)}

@@ -18,7 +18,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .. import _files
-from ._checkpoint import read_resumable
+from ._checkpoint import logged_entries, read_resumable
 from ._problem import AbstractProblem
 from ._stage import AbstractIterationsStage, Context, Linearisation, Result, finished_record
 
@@ -210,8 +210,8 @@ class _CheckpointFile:
         attrs, groups = read_resumable(self.path, self.owner, self.settings)
         if int(attrs.get("phase", 1)) != self.phase:
             return None
-        logged = int(attrs.get("logged", attrs["epoch"]))
         size = len(groups["history"]["train_loss"])
+        logged = logged_entries(attrs, size)
         part = {key: np.asarray(value)[size - logged:] for key, value in groups["history"].items()}
         part["epoch"] = part["epoch"] - (size - logged)
         return attrs, groups, part, _files.replace_array_leaves(problem.y0, groups["weights"], "weights")
