@@ -107,15 +107,16 @@ def relative_rms(pred: np.ndarray, true: np.ndarray) -> float:
     return float(error) if np.isfinite(error) else np.inf
 
 
-def rollout_error(field: Any, times: list[np.ndarray], states: list[np.ndarray], cutoff: float = np.inf) -> float:
+def rollout_error(field: Any, times: list[np.ndarray], states: list[np.ndarray], cutoff: float = np.inf,
+                  flow: Any = _flow) -> float:
     """The mean over trajectories of the relative RMS error (`relative_rms`) of the field's
-    rollout (LSODA, `_flow`) from each trajectory's first observation over its times, against
-    its observations; inf once the running sum passes `cutoff` times their number (it cannot
-    be below `cutoff` then)."""
+    rollout (`flow(field, y0, t, blow_up)`, LSODA by default) from each trajectory's first
+    observation over its times, against its observations; inf once the running sum passes
+    `cutoff` times their number (it cannot be below `cutoff` then)."""
     total = 0.0
     for t, y in zip(times, states):
         y = np.asarray(y, dtype=np.float64)
-        pred = _flow(field, y[0], np.asarray(t, dtype=np.float64), BLOW_UP * max(float(np.linalg.norm(y[0])), 1e-3))
+        pred = flow(field, y[0], np.asarray(t, dtype=np.float64), BLOW_UP * max(float(np.linalg.norm(y[0])), 1e-3))
         total += relative_rms(pred, y)
         if total > cutoff * len(times):
             return np.inf
