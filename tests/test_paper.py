@@ -586,6 +586,10 @@ def test_e5_profiles_build_their_stages():
 
 
 @pytest.mark.slow  # the G-LPNet's families and the limit fitted on body observations: ~90 s
+# fit_splitting announces a family its screen skips by a UserWarning (on W4's smoke data
+# "quadratic, even" misfits the weak form 1.7e3 times more than the best start); the skip is by
+# design (test_body_observations.py checks it) and not what this test is about
+@pytest.mark.filterwarnings("ignore:fit_splitting. family .* not fitted:UserWarning")
 def test_w4_smoke_predicts_attitudes_from_attitudes_and_rates(tmp_path):
     from paper.__main__ import main
 

@@ -1,6 +1,8 @@
 """W2's protocols: each true family at its true parameters is the system's Hamiltonian, so the
 parametric limit fits the right family; the rotated body is the rigid body in other axes."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,10 +38,15 @@ def test_the_rotated_body_has_the_principal_axes_it_is_built_with():
 
 
 @pytest.mark.slow  # two W2 fits of a 6-D body: ~1 min
-def test_the_heavy_top_keeps_its_four_terms_and_is_within_its_limit():
-    """Issue 41's heavy top (noise 1e-3, regular): the criterion picks the selected quadratic
-    with exactly the top's terms (1/I_k on Pi, gravity on Gamma_3), and the G-LPNet's state
-    error at t = 100 is within 1.5x of the parametric limit's (measured 0.37x)."""
+def test_the_heavy_top_keeps_its_four_terms_and_is_within_its_limit(monkeypatch):
+    """Issue 41's heavy top (noise 1e-3, regular): the information criterion picks the selected
+    quadratic with exactly the top's terms (1/I_k on Pi, gravity on Gamma_3), and the G-LPNet's
+    state error at t = 100 is within 1.5x of the parametric limit's (measured 0.37x)."""
+    # The criterion of issue 41 and of W2's reference table (paper/reference/W2) is BIC; on
+    # observed states fit_splitting now defaults to held-out selection, which refits every family
+    # on each of 5 folds (>15 min here instead of ~1 min), a criterion tested in
+    # test_family_choice.py. The study's models otherwise as W2 builds them.
+    monkeypatch.setattr(learn, "fit_splitting", functools.partial(learn.fit_splitting, selection="bic"))
     protocol = PROTOCOLS["heavy top"]
     data = w2.observations(protocol, 1e-3, "regular")
     y0, reference = w2.test_set(protocol)
