@@ -336,6 +336,9 @@ def test_a_damped_body_is_not_reconstructed_and_says_so():
 
 
 @pytest.mark.slow  # three small fits: 15 s
+# the screen's skip of "quadratic, even" on the satellite (axes not the body's) is announced by
+# a UserWarning by design, checked above; here the bootstrap is tested
+@pytest.mark.filterwarnings("ignore:fit_splitting. family .* not fitted:UserWarning")
 def test_the_bootstrap_of_the_inertia_refits_the_chosen_family_on_resampled_trajectories():
     from paper import w4_bodies as w4
 
