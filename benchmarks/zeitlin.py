@@ -268,7 +268,9 @@ def codes(N: int, quflow, h_over_hbar: float = 0.25) -> tuple[dict, np.ndarray, 
     if quflow is not None:
         Wq = quflow.shr2mat(quflow.random_shr(lmax=10, seed=42), N=N)
         gap = np.abs(Wq - W0).max() / np.abs(Wq).max()
-        if not gap < 1e-13:
+        # each code builds the quantized harmonics by its own eigen-solver: 5e-15 at N = 16,
+        # 5e-13 at N = 512 (round-off growing with N); a wrong seed, damping or index is O(1)
+        if not gap < 1e-10:
             raise RuntimeError(f"the initial matrix differs from quflow's by {gap:.1e} (relative) at N = {N}")
         out["quflow"] = Quflow(quflow, Wq, h, compsum=False)
         out["quflow compsum"] = Quflow(quflow, Wq, h, compsum=True)
