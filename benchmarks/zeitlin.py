@@ -225,7 +225,7 @@ def zgemm_seconds(N: int, repeats: int = 3) -> float:
     rng = np.random.default_rng(0)
     A = np.asfortranarray(rng.normal(size=(N, N)) + 1j * rng.normal(size=(N, N)))
     B = np.asfortranarray(rng.normal(size=(N, N)) + 1j * rng.normal(size=(N, N)))
-    k = max(1, int(2e8 / (8 * N**3)))
+    k = max(3, int(2e8 / (8 * N**3)))
     zgemm(1.0, A, B)
     best = np.inf
     for _ in range(repeats):
@@ -289,7 +289,7 @@ def measure_size(N: int, quflow, repeats: int, min_seconds: float = 0.5) -> dict
     for _ in range(repeats):
         for name, runner in runners.items():
             best[name] = min(best[name], _timed(lambda r=runner: r.run(n)) / n)
-        best["zgemm"] = min(best["zgemm"], zgemm_seconds(N, repeats=1))
+        best["zgemm"] = min(best["zgemm"], zgemm_seconds(N))
     iterations = {name: runner.iterations(min(n, 50) if name.startswith("library") else n)
                   for name, runner in runners.items()}
     return {"N": N, "h": h, "steps_timed": n, "zgemm_ms": best["zgemm"] * 1e3,

@@ -20,14 +20,21 @@ import jax
 import jax.numpy as jnp
 
 
-def matmul(A: jax.Array, B: jax.Array) -> jax.Array:
+def matmul(A: jax.Array, B: jax.Array, *, real_products: int = 3) -> jax.Array:
     r"""`A @ B` (matrices, or stacks of them `(..., m, k)`, `(..., k, n)`); a complex
-    product by Gauss's three real products (module docstring), a real one as it is."""
+    product by Gauss's three real products (module docstring), or by the four of the
+    definition (`real_products=4`: each part's error that of a real product, $\varepsilon
+    (|A_r||B_r| + |A_i||B_i|)$, where 3M's imaginary part has $(|A_r| + |A_i|)(|B_r| + |B_i|)$:
+    what compensated summation of small increments needs), a real one as it is."""
+    if real_products not in (3, 4):
+        raise ValueError(f"real_products must be 3 (Gauss) or 4; got {real_products!r}")
     if not (jnp.iscomplexobj(A) or jnp.iscomplexobj(B)):
         return A @ B
     dtype = jnp.result_type(A, B)
     A, B = jnp.asarray(A, dtype), jnp.asarray(B, dtype)
     Ar, Ai, Br, Bi = jnp.real(A), jnp.imag(A), jnp.real(B), jnp.imag(B)
+    if real_products == 4:
+        return jax.lax.complex(Ar @ Br - Ai @ Bi, Ar @ Bi + Ai @ Br)
     T1 = Ar @ Br
     T2 = Ai @ Bi
     T3 = (Ar + Ai) @ (Br + Bi)

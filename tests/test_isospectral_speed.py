@@ -31,6 +31,14 @@ def test_three_real_products_agree_with_the_complex_product():
     # random terms rounds like sqrt(80) eps, far inside the bound's n eps: a few eps of it
     assert ours.max() < 4 * EPS
     assert ours.max() < 4 * max(theirs.max(), EPS)  # as accurate as XLA's complex product, to a small factor
+    # four real products: each part's error relative to its own |Ar||Br| + |Ai||Bi| (real part) and
+    # |Ar||Bi| + |Ai||Br| (imaginary part), a few eps (sqrt(80)-like rounding of the sums)
+    four = np.asarray(matmul(jnp.asarray(A), jnp.asarray(B), real_products=4)) - exact
+    aa, bb = np.abs(A.real), np.abs(A.imag)
+    assert (np.abs(four.real) / (aa @ np.abs(B.real) + bb @ np.abs(B.imag))).max() < 4 * EPS
+    assert (np.abs(four.imag) / (aa @ np.abs(B.imag) + bb @ np.abs(B.real))).max() < 4 * EPS
+    with pytest.raises(ValueError, match="real_products must be 3"):
+        matmul(jnp.asarray(A), jnp.asarray(B), real_products=2)
     # real operands: the plain product; stacks of matrices
     Ar = rng.normal(size=(5, 6))
     assert np.array_equal(np.asarray(matmul(jnp.asarray(Ar), jnp.asarray(Ar.T))), np.asarray(jnp.asarray(Ar) @ Ar.T))
@@ -84,13 +92,17 @@ def test_compensated_summation_keeps_the_casimirs_at_round_off():
     plain, compensated = drift(False), drift(True)
     # 2900 steps: the plain sum's rounding (eps |W| a step) walks to ~15 eps (measured 11-17 eps at
     # N = 8 and 16); the compensated one leaves only the increments' round-off (eps |dW|, |dW|
-    # ~ 0.1 |W| at h = 0.25 hbar): measured 2-3 eps
+    # ~ 0.1 |W| at h = 0.25 hbar): measured 2-3 eps (with 3M products in the increment)
     assert compensated < plain
     assert compensated < 6 * EPS
-    # one compensated step is the plain step (the compensation starts at zero)
+    # one compensated step is the plain step (the compensation starts at zero; its increment's
+    # products by four real products, not three: the same to a few eps of |W|)
     method = it.IsospectralMidpoint(z, h, compensated=True)
     c = method.carry(jnp.asarray(y0))
-    assert np.array_equal(np.asarray(method.step_carry(c)[0]), np.asarray(it.IsospectralMidpoint(z, h).step_carry(c[:3] + (None,))[0]))
+    W = np.asarray(c[0])
+    np.testing.assert_allclose(np.asarray(method.step_carry(c)[0]),
+                               np.asarray(it.IsospectralMidpoint(z, h).step_carry(c[:3] + (None,))[0]),
+                               rtol=0, atol=8 * EPS * np.abs(W).max())
 
 
 def test_compensated_must_be_a_bool():
