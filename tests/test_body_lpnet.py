@@ -67,8 +67,8 @@ def test_bad_input():
 def test_fit_on_gyroscope_records_lowers_the_loss():
     model = _start(hidden=(8,))
     _, record = learn.fit(model, _records(), loss=learn.BodyLoss(max_step=0.005),
-                               optimiser=learn.LevenbergMarquardt(40), progress=False)
-    before = record.stages[-1].details["train_loss_before"]
+                               optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(40)), progress=False)
+    before = record.stages[-1].details["train_loss_before"]  # the start's loss: KeepIfBetter records it
     after = float(np.asarray(record.history["train_loss"])[-1])
     # from the quadratic's Lie-Euler step (first order at h|xi| ~ 0.1) to the noise's floor
     assert after < 0.1 * before
