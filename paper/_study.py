@@ -156,7 +156,7 @@ class MLPModel(AbstractTrainedModel):
 @dataclasses.dataclass(frozen=True)
 class Identified:
     """What a model identified of the true Hamiltonian $H$: the family of its learned
-    $\\widetilde H$ chosen by BIC and the criterion of each family (`learn.fit_splitting`), its
+    $\\widetilde H$ that `learn.fit_splitting` chose and each family's BIC, its
     fitted coefficients `theta` (a parametric model), `hamiltonian_mismatch` against $H$, and the
     differences of the diagonal of its quadratic part (for the rigid body the identified
     $1/I_i - 1/I_j$); for a quadratic $H$, the relative (Frobenius) error of the identifiable
@@ -183,7 +183,7 @@ class AbstractHamiltonianModel(AbstractStudyModel):
 @dataclasses.dataclass(frozen=True)
 class SplittingModel(AbstractStepMapModel, AbstractHamiltonianModel):
     """A G-LPNet fitted by `learn.fit_splitting` (the family of its learned Hamiltonian chosen by
-    the Bayesian information criterion), with that function's arguments."""
+    its default: held-out prediction on observations), with that function's arguments."""
 
     label: str
     iterations: int | None = None

@@ -448,7 +448,7 @@ class W2(AbstractExperiment):
             "figures": _plots(rows, out_dir),
             "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
             "sindy": "pysindy " + _version("pysindy") if sindy_available() else "not installed (extra peers)",
-            "model": "G-LPNet (TripleJump, family by BIC)",
+            "model": "G-LPNet (TripleJump, family by held-out prediction)",
             "test_steps": P.test_steps,
         }
 
