@@ -111,8 +111,8 @@ class IsospectralMidpoint(AbstractStepMap):
     - `compensated` (default `False`): a rollout sums the steps' increments
       $W_{n+1} = W_n + \Delta W_n$ with compensated summation (TwoSum, the rounding error of
       each sum carried to the next), as quflow's `compsum`: the Casimirs then drift only by the
-      round-off of the increments, not of $W$ (BENCHMARKS.md, "Zeitlin's model", relative to
-      $\sum_i|\lambda_i|^k$: 1.9e-16 against 1.9e-15 over 10^4 steps at N = 64). Costs a few
+      round-off of the increments, not of $W$ (the figures: BENCHMARKS.md, "Zeitlin's
+      model"). Costs a few
       additions a step and, for complex $W$, the increment's two products by four real
       products instead of three.
 
@@ -181,8 +181,8 @@ class IsospectralMidpoint(AbstractStepMap):
         B = 0.5 * h * self.velocity_matrix(Wt)
         E = 2.0 * cayley_increment(B)  # Q - 1, Q the Cayley transform: unitary (orthogonal)
         # compensated: the increment's round-off is all that is left; four real products a
-        # complex one keep it at eps |E||W| (3M's is up to twice that: 8.0e-16 against 1.9e-16
-        # over 1e4 steps at N = 64, BENCHMARKS.md, "Zeitlin's model")
+        # complex one keep it at eps |E||W| (3M's is up to twice that; measured in
+        # BENCHMARKS.md, "Zeitlin's model")
         real_products = 4 if self.compensated else 3
         EW = matmul(E, W, real_products=real_products)
         EWE = matmul(EW, dagger(E), real_products=real_products)
