@@ -46,6 +46,12 @@ _CACHES = _ThreadCaches()
 #: Above this many state variables of the system (its variational equations not counted) heyoka
 #: compiles in compact mode.
 COMPACT_MODE_STATES = 32
+#: ... and above this many characters of the printed right-hand sides (variational equations
+#: included): the default mode's compile time grows much faster than the expression (fresh
+#: heyoka cache: Zeitlin N = 3 / 4 / 5, 8k / 16k / 25k characters, 5 / 40 / 160 s against
+#: 0.2 / 0.8 / 0.9 s compact; Kirchhoff's variational equations, 18k, 38 s against 0.9 s),
+#: while compact mode integrates these sizes about 2x slower (milliseconds to t = 1000).
+COMPACT_MODE_CHARACTERS = 6000
 
 
 def _caches() -> tuple[dict[tuple[Any, ...], Any], weakref.WeakKeyDictionary]:
@@ -84,7 +90,9 @@ def taylor_integrator(
         # Large systems compile in compact mode (functions per Taylor-coefficient formula instead of
         # one unrolled program): the default mode's compile time explodes with the expression's
         # size (BENCHMARKS.md, "heyoka ground truth of Zeitlin's model").
-        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=n_state > COMPACT_MODE_STATES)
+        rhs = ode.sys if variational else ode
+        compact = n_state > COMPACT_MODE_STATES or sum(len(str(f)) for _, f in rhs) > COMPACT_MODE_CHARACTERS
+        cache[key] = hy.taylor_adaptive(ode, [0.0] * n_state, tol=tol, compact_mode=compact)
     return cache[key]
 
 

@@ -105,7 +105,7 @@ class Zeitlin(AbstractLiePoissonSystem, AbstractDefinedByParams):
     def heyoka_system(self) -> list[tuple[Any, Any]]:
         r"""$\dot\mu$ = coordinates of $[P, W]/\hbar$ as heyoka expressions in the $N^2$
         components: the products written entry by entry (the expression grows like $N^3$).
-        `integrators.ground_truth` compiles it in heyoka's compact mode (more than 32 states);
+        `integrators.ground_truth` compiles it in heyoka's compact mode (its size, from N = 3);
         how long that takes for each N: BENCHMARKS.md, "heyoka ground truth of Zeitlin's
         model"."""
         import heyoka as hy
