@@ -8,6 +8,7 @@ is lost between host synchronisations, and offered to the loop's best so far aft
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -20,6 +21,7 @@ from liepoisson import common_path_first
 from liepoisson.internals import positive_float, positive_int
 
 from .. import _files
+from ._compiled import AbstractAtStructure, compiled
 from ._loop import AbstractSolver, Step
 from ._problem import AbstractProblem
 from ._stage import Context
@@ -29,6 +31,10 @@ CHUNK = 1000
 
 def _where(cond, new, old):
     return jax.tree_util.tree_map(lambda a, b: jnp.where(cond, a, b), new, old)
+
+
+def _with_key(run: Any, base_key: jax.Array, carry: Any, epoch_ids: jax.Array, train: Any, val: Any) -> Any:
+    return run(carry, epoch_ids, train, val, base_key)
 
 
 def _samples(args: Any) -> int:
@@ -116,52 +122,56 @@ class Adam(AbstractSolver):
         opt = optax.adam(schedule)
         params, static = eqx.partition(problem.y0, eqx.is_inexact_array)
 
-        def loss(p, args):
-            return objective(eqx.combine(p, static), args)
+        def build():
+            def loss(p, args):
+                return objective(eqx.combine(p, static), args)
 
+            def run(carry, epoch_ids, train, val, base_key):
+                def body(carry, epoch):
+                    p, s, bp, bl, be = carry
+                    active = epoch < epochs
+                    if full:
+                        lt, g = jax.value_and_grad(loss)(p, train)
+                        upd, s2 = opt.update(g, s, p)
+                        p2 = optax.apply_updates(p, upd)
+                    else:
+                        lt = loss(p, train)
+                        perm = jax.random.permutation(jax.random.fold_in(base_key, epoch), n)
+                        batches = perm[: nb * bs].reshape(nb, bs)
+
+                        def inner(c, idx):
+                            pp, ss = c
+                            g = jax.grad(loss)(pp, _take(train, idx))
+                            u, ss = opt.update(g, ss, pp)
+                            return (optax.apply_updates(pp, u), ss), None
+
+                        (p2, s2), _ = jax.lax.scan(inner, (p, s), batches)
+                    lv = loss(p, val) if has_val else jnp.asarray(jnp.nan)
+                    crit = lv if has_val else lt
+                    better = active & (crit < bl)
+                    bp = _where(better, p, bp)
+                    bl = jnp.where(better, crit, bl)
+                    be = jnp.where(better, epoch, be)
+                    p = _where(active, p2, p)
+                    s = _where(active, s2, s)
+                    return (p, s, bp, bl, be), (lt, lv)
+
+                return jax.lax.scan(body, carry, epoch_ids)
+
+            # A chunk whose losses are not all finite is run again from the same state with every
+            # path of `expm_action` (exact either way); if it is still not finite, the loop stops.
+            return common_path_first(
+                run, lambda out: bool(np.all(np.isfinite(out[1][0])) and (not has_val or np.all(np.isfinite(out[1][1]))))
+            )
+
+        # Compiled once per structure, objective, settings and data size, not once per fit (a
+        # sweep over seeds compiles its chunk once); the seed's key is an input.
+        run = compiled(("adam", AbstractAtStructure(objective, problem.y0), self, n, has_val), build)
         base_key = jax.random.PRNGKey(context.seed)
-
-        def run(carry, epoch_ids, train, val):
-            def body(carry, epoch):
-                p, s, bp, bl, be = carry
-                active = epoch < epochs
-                if full:
-                    lt, g = jax.value_and_grad(loss)(p, train)
-                    upd, s2 = opt.update(g, s, p)
-                    p2 = optax.apply_updates(p, upd)
-                else:
-                    lt = loss(p, train)
-                    perm = jax.random.permutation(jax.random.fold_in(base_key, epoch), n)
-                    batches = perm[: nb * bs].reshape(nb, bs)
-
-                    def inner(c, idx):
-                        pp, ss = c
-                        g = jax.grad(loss)(pp, _take(train, idx))
-                        u, ss = opt.update(g, ss, pp)
-                        return (optax.apply_updates(pp, u), ss), None
-
-                    (p2, s2), _ = jax.lax.scan(inner, (p, s), batches)
-                lv = loss(p, val) if has_val else jnp.asarray(jnp.nan)
-                crit = lv if has_val else lt
-                better = active & (crit < bl)
-                bp = _where(better, p, bp)
-                bl = jnp.where(better, crit, bl)
-                be = jnp.where(better, epoch, be)
-                p = _where(active, p2, p)
-                s = _where(active, s2, s)
-                return (p, s, bp, bl, be), (lt, lv)
-
-            return jax.lax.scan(body, carry, epoch_ids)
-
-        # A chunk whose losses are not all finite is run again from the same state with every path
-        # of `expm_action` (exact either way); if it is still not finite, the loop stops.
-        run = common_path_first(
-            run, lambda out: bool(np.all(np.isfinite(out[1][0])) and (not has_val or np.all(np.isfinite(out[1][1]))))
-        )
         # Strongly typed (not weak Python scalars): the carry's types are those the scan returns,
         # so every chunk reuses the first chunk's compilation.
         carry = (params, opt.init(params), params, jnp.asarray(jnp.inf, dtype=float), jnp.asarray(-1, dtype=int))
-        return _State(carry, 0, run, train, val, static)
+        return _State(carry, 0, functools.partial(_with_key, run, base_key), train, val, static)
 
     def resume(self, problem: AbstractProblem, context: Context, state: Any, attrs: dict[str, Any],
                groups: dict[str, Any], weights: Any) -> Any:
