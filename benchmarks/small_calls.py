@@ -23,7 +23,6 @@ Wall-clock times; the machine may be shared (say so when quoting them).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import time
 
 import equinox as eqx
@@ -34,7 +33,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import traced_h
+from integrators.internals import counted_compilations, traced_h
 from liepoisson import vmap_samples
 
 from ._report import add_output_arguments, saved_results, write_json
@@ -110,23 +109,6 @@ def former_lifted_rollout(m, g0, y0, n_steps, save_every=1):
 
 
 # -- measuring -------------------------------------------------------------------------------------
-@contextlib.contextmanager
-def counted_compilations():
-    """`{"compilations": n}`: XLA compilations in the block (jitted functions and the small
-    programs of eager operations alike)."""
-    seen = {"compilations": 0}
-
-    def listener(event, *args, **kwargs):
-        if event == "/jax/core/compile/backend_compile_duration":
-            seen["compilations"] += 1
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield seen
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
-
-
 def per_call(fn, repeats: int) -> float:
     """Median wall time of `fn()` after one warm-up call [s]."""
     jax.block_until_ready(fn())

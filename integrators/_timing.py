@@ -2,9 +2,11 @@ r"""Wall time per step of a step map, measured so that maps of equal work measur
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
+from collections.abc import Iterator
 
 import jax
 import numpy as np
@@ -82,3 +84,29 @@ def step_timing(
         n_trajectories=len(y0s),
         run_seconds=tuple(float(t) for t in runs),
     )
+
+
+#: The JAX monitoring events `counted_compilations` counts, by the name it reports them under.
+_COMPILE_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "traces",
+    "/jax/core/compile/backend_compile_duration": "compilations",
+}
+
+
+@contextlib.contextmanager
+def counted_compilations() -> Iterator[dict[str, int]]:
+    """`{"traces": n, "compilations": m}` within the block: the programs JAX traced (a hit of
+    the compilation cache is traced too) and those XLA compiled, jitted functions and the small
+    programs of eager operations alike (JAX's monitoring events)."""
+    seen = dict.fromkeys(_COMPILE_EVENTS.values(), 0)
+
+    def listener(event: str, *args, **kwargs) -> None:
+        name = _COMPILE_EVENTS.get(event)
+        if name is not None:
+            seen[name] += 1
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield seen
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)

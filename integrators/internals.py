@@ -27,6 +27,8 @@ these names may change with the library.
 - `check_isospectral(system)`, `check_stage_tolerance(tol)`, `ISOSPECTRAL_TOL`,
   `ISOSPECTRAL_MAX_ITER`: what the isospectral methods accept and their defaults (a learned map
   on the same step uses them).
+- `counted_compilations()`: a `with` block counting the programs JAX traced and XLA compiled
+  in it (tests and benchmarks of compilation reuse).
 - `serial_lapack()`, `serial_lapack_block()`: JAX's CPU LAPACK (SciPy's OpenBLAS) on one
   thread, for the process or for a `with` block.
 """
@@ -62,4 +64,5 @@ from ._step_map import check_h as check_h
 from ._step_map import check_state as check_state
 from ._step_map import traced_h as traced_h
 from ._step_map import xla_flops as xla_flops
+from ._timing import counted_compilations as counted_compilations
 from ._validation_split import validation_split as validation_split

@@ -3,7 +3,6 @@ not share code with `liepoisson` (numpy/scipy only)."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 from typing import Any
@@ -18,6 +17,7 @@ from hypothesis import strategies as st
 
 import learn
 import liepoisson as lp
+from integrators.internals import counted_compilations
 
 EPS = np.finfo(np.float64).eps
 
@@ -223,18 +223,5 @@ class ToyProblem(learn.AbstractProblem):
         raise ValueError("a toy problem has no checkpoints")
 
 
-@contextlib.contextmanager
-def compilations():
-    """`{"traces": n}`: the programs JAX traced in the block (jitted functions and the small
-    programs of eager operations alike; a compilation-cache hit is traced too)."""
-    seen = {"traces": 0}
-
-    def listener(event, *args, **kwargs):
-        if event == "/jax/core/compile/jaxpr_trace_duration":
-            seen["traces"] += 1
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield seen
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
+#: `with compilations() as seen`: `seen["traces"]` programs traced in the block (the library's counter).
+compilations = counted_compilations
