@@ -2,7 +2,7 @@ r"""The isospectral midpoint method on Zeitlin's model beside quflow's (BENCHMAR
 model"): milliseconds a step, the fixed-point iterations a step, the Casimirs' drift over a long
 run and the state's difference from a run at a quarter of the step, for quflow's `isomp` (its
 default and with compensated summation, `compsum=True`) and the library's
-`integrators.IsospectralMidpoint` (its default and `compensated=True`); the unit of time one
+`integrators.IsospectralMidpoint` (its default and `integrators.Compensated` of it); the unit of time one
 OpenBLAS ZGEMM of the same size, measured in the same run.
 
     taskset -c 0 python -m benchmarks.zeitlin [--sizes 64 128 256 512] [--casimir-N 64] [--casimir-steps 10000]
@@ -153,17 +153,19 @@ def busy_threads(fn, share: float = 0.1) -> tuple[int, float, float]:
 
 # -- the codes -------------------------------------------------------------------------------------
 @eqx.filter_jit
-def advance(method: it.IsospectralMidpoint, c, n_steps: jax.Array):
+def advance(method: it.AbstractStepMap, c, n_steps: jax.Array):
     """`n_steps` (traced: one program for every count) steps of `method` on its carried state."""
     return jax.lax.fori_loop(0, n_steps, lambda _, c: method.step_carry(c), c)
 
 
 class Library:
-    """`integrators.IsospectralMidpoint` run on its carried state (the matrix itself)."""
+    """`integrators.IsospectralMidpoint`, or `integrators.Compensated` of it, run on its carried
+    state (the matrix itself first)."""
 
     def __init__(self, z: lp.systems.Zeitlin, y0: np.ndarray, h: float, compensated: bool, tol: float | None = None):
         kwargs = {} if tol is None else {"tol": tol}
-        self.method = it.IsospectralMidpoint(z, h, compensated=compensated, **kwargs)
+        self.plain = it.IsospectralMidpoint(z, h, **kwargs)
+        self.method = it.Compensated(self.plain) if compensated else self.plain
         self.c0 = self.method.carry(jnp.asarray(y0))
         self.warm = jax.block_until_ready(advance(self.method, self.c0, jnp.asarray(10)))  # compiles
 
@@ -171,7 +173,8 @@ class Library:
         return jax.block_until_ready(advance(self.method, self.warm if c is None else c, jnp.asarray(n)))
 
     def iterations(self, n: int) -> float:
-        return self.method.iterations_needed(np.asarray(self.method.uncarry(self.warm)), n_steps=n)[0]
+        # the plain map's count (the compensated one's differs only by its products' round-off)
+        return self.plain.iterations_needed(np.asarray(self.method.uncarry(self.warm)), n_steps=n)[0]
 
     def matrices(self, n_steps: int, every: int) -> np.ndarray:
         """`W` at steps 0, every, 2 every, ... n_steps (the carried matrix, not rounded through

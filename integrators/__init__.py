@@ -5,6 +5,11 @@ import liepoisson as _liepoisson  # noqa: F401  (first: it switches JAX to float
 
 from . import splitting as splitting
 from ._comparison import Comparison as Comparison, ComparisonRow as ComparisonRow, compare as compare
+from ._compensated import (
+    AbstractCompensable as AbstractCompensable,
+    Compensated as Compensated,
+    two_sum as two_sum,
+)
 from ._convergence import Convergence as Convergence, convergence as convergence
 from ._rollout_figures import RolloutFigures as RolloutFigures, rollout_figures as rollout_figures
 from ._diagnostics import (

@@ -24,7 +24,7 @@ norm (the largest row sum, relative to $W_n$'s). The new state is the conjugatio
 stage equation, so the Casimirs do not depend on the iteration's tolerance (quflow forms it
 from the stage equation; its Casimirs drift at its tolerance). A rollout starts each step's
 iteration from a polynomial extrapolation of the past stages, close enough that one iteration
-is the rule (BENCHMARKS.md, "Zeitlin's model"). With `compensated=True` a rollout adds the
+is the rule (BENCHMARKS.md, "Zeitlin's model"). `integrators.Compensated(method)` adds the
 increments by compensated summation (quflow's `compsum`): the Casimirs then keep to the
 round-off of the increments, not of $W$.
 
@@ -48,11 +48,12 @@ from liepoisson import MatrixLieAlgebra
 from liepoisson.internals import dagger, positive_float, positive_int
 from liepoisson.systems import AbstractLiePoissonSystem
 
+from ._compensated import AbstractCompensable, two_sum
 from ._lapack import serial_lapack
 from ._lie_group import check_lie_poisson
 from ._products import cayley_increment, matmul
 from ._splitting._composition import TripleJump
-from ._step_map import AbstractStepMap, check_state
+from ._step_map import check_state
 
 #: The stage iteration stops when an iteration moves the stage by at most `tol` times
 #: ||W||_inf (the largest row sum of |W_ij|, quflow's norm). 1e-10: the stage's error enters the step's accuracy (energy, state), not
@@ -91,7 +92,7 @@ def check_stage_tolerance(tol: Any, name: str = "tol") -> float:
     return tol
 
 
-class IsospectralMidpoint(AbstractStepMap):
+class IsospectralMidpoint(AbstractCompensable):
     r"""The isospectral midpoint method (module docstring): order 2, symmetric, a Lie-Poisson
     integrator for $\dot W = [B(W), W]$ (Modin & Viviani 2020) that keeps the spectrum of $W$
     to round-off.
@@ -108,13 +109,13 @@ class IsospectralMidpoint(AbstractStepMap):
       NaN (a rollout then says so and suggests more); `iterations_needed(y0)` says what a run
       needs, but a later step may need more.
     - `max_iter` (default `DEFAULT_MAX_ITER`): the cap of the iterations to `tol`.
-    - `compensated` (default `False`): a rollout sums the steps' increments
-      $W_{n+1} = W_n + \Delta W_n$ with compensated summation (TwoSum, the rounding error of
-      each sum carried to the next), as quflow's `compsum`: the Casimirs then drift only by the
-      round-off of the increments, not of $W$ (the figures: BENCHMARKS.md, "Zeitlin's
-      model"). Costs a few
-      additions a step and, for complex $W$, the increment's two products by four real
-      products instead of three.
+
+    `integrators.Compensated(IsospectralMidpoint(...))` sums the steps' increments
+    $W_{n+1} = W_n + \Delta W_n$ with compensated summation (TwoSum, the rounding error of
+    each sum carried to the next), as quflow's `compsum`: the Casimirs then drift only by the
+    round-off of the increments, not of $W$ (the figures: BENCHMARKS.md, "Zeitlin's model").
+    It costs a few additions a step and, for complex $W$, the increment's two products by four
+    real products instead of three.
 
     A rollout carries $W$ and the last `PREDICTOR_POINTS` stage increments of each substep; its
     first step starts from a history found by as many steps backwards (the method is
@@ -128,19 +129,15 @@ class IsospectralMidpoint(AbstractStepMap):
     tol: float = eqx.field(static=True)
     iterations: int | None = eqx.field(static=True)
     max_iter: int = eqx.field(static=True)
-    compensated: bool = eqx.field(static=True, default=False)
     substeps: ClassVar[tuple[float, ...]] = (1.0,)
 
     def __init__(self, system: AbstractLiePoissonSystem, h: float, *, tol: float = DEFAULT_TOL,
-                 iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER, compensated: bool = False):
+                 iterations: int | None = None, max_iter: int = DEFAULT_MAX_ITER):
         self.system = check_isospectral(system)
         self.h = positive_float(h, "h")
         self.tol = check_stage_tolerance(tol)
         self.iterations = None if iterations is None else positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
-        if not isinstance(compensated, (bool, np.bool_)):
-            raise TypeError(f"compensated must be True or False; got {compensated!r}")
-        self.compensated = bool(compensated)
 
     @property
     def exact_flows_per_step(self) -> int:
@@ -161,7 +158,8 @@ class IsospectralMidpoint(AbstractStepMap):
         (`system.velocity_matrix`); a learned map on this step overrides it."""
         return self.system.velocity_matrix(W)
 
-    def _iterate(self, W: jax.Array, h: jax.Array | float, Wt: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    def _iterate(self, W: jax.Array, h: jax.Array | float, Wt: jax.Array, real_products: int = 3
+                 ) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""One quasi-Newton iteration of the stage equation from the iterate `Wt`: with
         $B = \tfrac h2 B(\widetilde W)$ the step's candidate is the conjugation
         $Q W Q^\dagger$ by the Cayley transform $Q = (1 - B)^{-1}(1 + B)$, formed as an
@@ -171,19 +169,19 @@ class IsospectralMidpoint(AbstractStepMap):
         $$Q W Q^\dagger - W = EW - (EW)^\dagger + EWE^\dagger$$
 
         ($W^\dagger = -W$), two products whose round-off is that of the increment, not of $W$
-        (what compensated summation needs: `compensated`). The stage the iteration moves to is
-        the stage equation solved with $B$ frozen, $X W X^\dagger$ with $X = (1 - B)^{-1} =
-        1 + E/2$, from the same products: $W + (EW - (EW)^\dagger)/2 + EWE^\dagger/4$.
+        (what compensated summation needs: `integrators.Compensated`). The stage the iteration
+        moves to is the stage equation solved with $B$ frozen, $X W X^\dagger$ with
+        $X = (1 - B)^{-1} = 1 + E/2$, from the same products: $W + (EW - (EW)^\dagger)/2 +
+        EWE^\dagger/4$.
         Returns `(increment, next iterate, moved)`, `moved` the largest row sum of the
         iterate's change. The products in real arithmetic (`_products.matmul`: XLA's complex
         product is several times slower on CPU, and LAPACK's LU and triangular solves several
-        products)."""
+        products), by `real_products` real products a complex one (3, or 4 when compensated)."""
         B = 0.5 * h * self.velocity_matrix(Wt)
         E = 2.0 * cayley_increment(B)  # Q - 1, Q the Cayley transform: unitary (orthogonal)
         # compensated: the increment's round-off is all that is left; four real products a
         # complex one keep it at eps |E||W| (3M's is up to twice that; measured in
         # BENCHMARKS.md, "Zeitlin's model")
-        real_products = 4 if self.compensated else 3
         EW = matmul(E, W, real_products=real_products)
         EWE = matmul(EW, dagger(E), real_products=real_products)
         S = EW - dagger(EW)
@@ -194,13 +192,13 @@ class IsospectralMidpoint(AbstractStepMap):
         G = W + 0.5 * S + 0.25 * EWE
         return dW, G, _norm(G - Wt)
 
-    def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None
-                  ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    def _midpoint(self, W: jax.Array, h: jax.Array | float, D: jax.Array, iterations: int | None,
+                  real_products: int = 3) -> tuple[jax.Array, jax.Array, jax.Array]:
         r"""One isospectral midpoint step of size `h` from `W`, the stage $\tilde W$ sought
         from $W + D$ by `iterations` quasi-Newton iterations (None: until `tol`): returns the
         step's increment $W_{n+1} - W$ (NaN if the stage has not converged), the stage's
         increment $\tilde W - W$ (the last iteration's, one iteration past the stage whose $B$
-        made the step) and the iteration count.
+        made the step) and the iteration count. `real_products` as `_iterate`.
 
         The step is the Cayley conjugation of the iterate that the last iteration started
         from, accepted when that iteration moved it by at most `tol` times max|W| (quflow's
@@ -210,7 +208,7 @@ class IsospectralMidpoint(AbstractStepMap):
 
             def body(state):
                 Wt, _, _, k = state
-                dW, G, moved = self._iterate(W, h, Wt)
+                dW, G, moved = self._iterate(W, h, Wt, real_products)
                 return G, dW, moved, k + 1
 
             Wt, dW, moved, k = jax.lax.while_loop(
@@ -219,21 +217,33 @@ class IsospectralMidpoint(AbstractStepMap):
         else:  # straight-line code: no control flow in the step
             Wt = W + D
             for _ in range(iterations):
-                dW, Wt, moved = self._iterate(W, h, Wt)
+                dW, Wt, moved = self._iterate(W, h, Wt, real_products)
             k = jnp.asarray(iterations)
         return jnp.where(moved <= scale, dW, jnp.nan), Wt - W, k
 
     def step_matrix(self, W: jax.Array) -> jax.Array:
         """One step on the matrix $W$ `(m, m)` of the state, the stage started at $W$ and
         iterated until `tol` (or `iterations` times, when set)."""
+        return self._step_cold(W, None)[0]
+
+    def _step_cold(self, W: jax.Array, low: jax.Array | None) -> tuple[jax.Array, jax.Array | None]:
+        # `low` None: the plain sum; an array: the compensated one (`_accumulate`)
+        real_products = 3 if low is None else 4
         for c in self.substeps:
-            dW, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), self.iterations)
-            W = W + dW
-        return W
+            dW, _, _ = self._midpoint(W, c * self.h, jnp.zeros_like(W), self.iterations, real_products)
+            W, low = _accumulate(W, low, dW)
+        return W, low
 
     def step(self, y: jax.Array) -> jax.Array:
         algebra = self.system.algebra
         return algebra.coordinates(self.step_matrix(algebra.matrix(check_state(y, self.system.dim))))
+
+    def compensated_step(self, y: jax.Array) -> jax.Array:
+        """`step` with the substeps' increments added by `two_sum` (the stage started at $W$,
+        as `step`)."""
+        algebra = self.system.algebra
+        W = algebra.matrix(check_state(y, self.system.dim))
+        return algebra.coordinates(self._step_cold(W, jnp.zeros_like(W))[0])
 
     # A rollout carries W itself, each substep's last `PREDICTOR_POINTS` stage increments (a
     # ring buffer) and how many of them are filled: the next step's iteration starts from
@@ -243,6 +253,9 @@ class IsospectralMidpoint(AbstractStepMap):
     # Casimirs.
     def carry(self, y: jax.Array) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array]:
         W = self.system.algebra.matrix(check_state(y, self.system.dim))
+        return W, self._histories(W, 3), jnp.asarray(PREDICTOR_POINTS)
+
+    def _histories(self, W: jax.Array, real_products: int) -> tuple[jax.Array, ...]:
         M, S = PREDICTOR_POINTS, len(self.substeps)
         # The history is found by M steps backwards, each substep undoing one forward substep
         # (in reverse order; the method is symmetric: a step back shares its stage with the step
@@ -256,7 +269,8 @@ class IsospectralMidpoint(AbstractStepMap):
             Wb, histories, count = state
             found, updated = [], []
             for coefficient, history in zip(backwards, histories):
-                dW, D, _ = self._midpoint(Wb, coefficient * self.h, _predict(history, count), None)
+                dW, D, _ = self._midpoint(Wb, coefficient * self.h, _predict(history, count), None,
+                                          real_products)
                 Wn = Wb + dW
                 updated.append(_push(history, D, count))
                 found.append(Wb + D - Wn)  # the forward substep's increment, from where it starts
@@ -266,28 +280,42 @@ class IsospectralMidpoint(AbstractStepMap):
         _, found = jax.lax.scan(back, (jax.lax.stop_gradient(W), (empty,) * S, jnp.asarray(0)), None, length=M)
         # found[j, s]: backward step j (the forward step j + 1 before W), backward substep s
         # (forward substep S - 1 - s); the forward ring full, the oldest in slot 0 (count M)
-        histories = tuple(found[::-1, S - 1 - index] for index in range(S))
-        return W, histories, jnp.asarray(M), (jnp.zeros_like(W) if self.compensated else None)
+        return tuple(found[::-1, S - 1 - index] for index in range(S))
 
-    def step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]
-                   ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]:
+    def step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]
+                   ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array]:
         return self._step_warm(c, self.iterations)[0]
 
-    def _step_warm(self, c, iterations):
-        W, histories, count, low = c
+    def _step_warm(self, c, iterations, low=None):
+        W, histories, count = c
+        real_products = 3 if low is None else 4
         updated, total = [], jnp.asarray(0)
         for coefficient, history in zip(self.substeps, histories):
-            dW, D, k = self._midpoint(W, coefficient * self.h, _predict(history, count), iterations)
-            if low is None:
-                W = W + dW
-            else:  # W + low, the sum so far to twice the working precision (`compensated`)
-                W, low = _two_sum(W, dW + low)
+            dW, D, k = self._midpoint(W, coefficient * self.h, _predict(history, count), iterations, real_products)
+            W, low = _accumulate(W, low, dW)
             updated.append(_push(history, D, count))
             total = total + k
-        return (W, tuple(updated), _counted(count), low), total
+        return (W, tuple(updated), _counted(count)), low, total
 
-    def uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array | None]) -> jax.Array:
+    def uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array]) -> jax.Array:
         return self.system.algebra.coordinates(c[0])
+
+    # Compensated (integrators.Compensated): the carried state and the low part of W beside it;
+    # the history is found, and every step's increment formed, by four real products a complex
+    # one (`_iterate`).
+    def compensated_carry(self, y: jax.Array) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array]:
+        W = self.system.algebra.matrix(check_state(y, self.system.dim))
+        return W, self._histories(W, 4), jnp.asarray(PREDICTOR_POINTS), jnp.zeros_like(W)
+
+    def compensated_step_carry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array]
+                               ) -> tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array]:
+        c, low, _ = self._step_warm(c[:3], self.iterations, c[3])
+        return (*c, low)
+
+    def compensated_uncarry(self, c: tuple[jax.Array, tuple[jax.Array, ...], jax.Array, jax.Array]) -> jax.Array:
+        """The coordinates of $W_{hi}$ (the low part, at most half an ulp of each entry,
+        dropped)."""
+        return self.uncarry(c[:3])
 
     def iterations_needed(self, y: ArrayLike, n_steps: int = 20) -> tuple[float, int]:
         """`(mean, max)` of the quasi-Newton iterations (summed over substeps) that the steps
@@ -304,13 +332,12 @@ PREDICTOR_POINTS = 8
 PREDICTOR_DEGREE = 5
 
 
-def _two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
-    r"""`(s, e)` with $s = \mathrm{fl}(a + b)$ and $a + b = s + e$ exactly, entry by entry
-    (Knuth's TwoSum: no assumption on which is larger; complex entries part by part, their
-    sums being exact part by part)."""
-    s = a + b
-    bb = s - a
-    return s, (a - (s - bb)) + (b - bb)
+def _accumulate(W: jax.Array, low: jax.Array | None, dW: jax.Array) -> tuple[jax.Array, jax.Array | None]:
+    """`W + dW`, or with `low` the sum so far to twice the working precision: `two_sum` of
+    `W` and `dW + low` (quflow's `compsum`)."""
+    if low is None:
+        return W + dW, None
+    return two_sum(W, dW + low)
 
 
 def _norm(A: jax.Array) -> jax.Array:
@@ -367,7 +394,7 @@ def _counted(count: jax.Array) -> jax.Array:
 @eqx.filter_jit
 def _count_iterations(method: IsospectralMidpoint, c: Any, n_steps: int) -> jax.Array:
     def body(c, _):
-        c, k = method._step_warm(c, None)
+        c, _, k = method._step_warm(c, None)
         return c, k
 
     _, counts = jax.lax.scan(body, c, None, length=n_steps)

@@ -3,6 +3,8 @@
 `Strang(ordering=(2, 0, 1))`), bound to a system and a step size by `Splitting`
 (`Splitting(system, 0.1, Strang()).rollout(y0, n_steps)`, or `Strang(system, h=0.1)`)."""
 
+from ._compensated import Compensated as Compensated  # the same object as integrators.Compensated
+from ._compensated import two_sum as two_sum
 from ._splitting._base import AbstractFlows as AbstractFlows
 from ._splitting._base import AbstractSplittingMethod as AbstractSplittingMethod
 from ._splitting._base import FlowList as FlowList
@@ -10,9 +12,7 @@ from ._splitting._base import IndexedFlows as IndexedFlows
 from ._splitting._base import Splitting as Splitting
 from ._splitting._blanes_moan import BlanesMoan4 as BlanesMoan4
 from ._splitting._compensated import AbstractCompensableStepMap as AbstractCompensableStepMap
-from ._splitting._compensated import Compensated as Compensated
 from ._splitting._compensated import compensated_flow as compensated_flow
-from ._splitting._compensated import two_sum as two_sum
 from ._splitting._composition import (
     AbstractCompositionMethod as AbstractCompositionMethod,
 )

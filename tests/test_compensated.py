@@ -1,4 +1,4 @@
-"""Compensated composition (integrators.splitting.Compensated): TwoSum is error-free, a
+"""Compensated composition (integrators.Compensated of a G-LPNet): TwoSum is error-free, a
 compensated step is the plain step up to round-off, long runs keep the Casimirs closer than
 the plain map, and the plain map is untouched."""
 
@@ -110,10 +110,19 @@ def test_compensated_long_run_keeps_the_casimirs_closer(name):
 
 
 def test_compensated_wraps_only_maps_of_compensable_flows():
-    with pytest.raises(TypeError, match="step_map must be a step map composed of flows with compensated forms"):
+    expected = r"step_map must be a step map that can run compensated \(an integrators.AbstractCompensable"
+    with pytest.raises(TypeError, match=expected + r".*; got Splitting\("):
         Compensated(Splitting(system("RigidBody"), 0.1, Strang()))
-    with pytest.raises(TypeError, match="step_map must be an integrators.splitting.AbstractCompensableStepMap"):
+    with pytest.raises(TypeError, match=expected + ".*; got a Strang"):
         Compensated(Strang())
+
+
+def test_one_wrapper_for_every_compensable_map():
+    # integrators.splitting's names are integrators', not copies
+    assert Compensated is it.Compensated and two_sum is it.two_sum
+    assert issubclass(learn.GLPNet, it.AbstractCompensable)
+    assert issubclass(it.IsospectralMidpoint, it.AbstractCompensable)
+    assert issubclass(learn.IsospectralPolynomial, it.AbstractCompensable)  # a learned isospectral map too
 
 
 def test_compensated_is_a_step_map_of_the_wrapped_one():

@@ -9,7 +9,7 @@ most of it is the rounding of the sum $y + \delta$ ($\epsilon|y|$ a flow, a rand
 the flows). Carried in two parts, the state loses only the rounding of the increment itself,
 of order $\epsilon|\delta|$ where the flow gives $\delta$ in closed form
 (`liepoisson.systems.AbstractPoissonSystem.test_flow_increment`), a factor of the rotation angle
-of a flow smaller. `Compensated(step_map)` is the variant; the plain map is unchanged.
+of a flow smaller. `integrators.Compensated(step_map)` is the variant; the plain map is unchanged.
 """
 
 from __future__ import annotations
@@ -21,21 +21,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from liepoisson.systems import AbstractPoissonSystem
-
-from .._step_map import AbstractStepMap, check_state, traced_h, xla_flops
+from .._compensated import AbstractCompensable, two_sum
+from .._step_map import traced_h, xla_flops
 from ._base import AbstractFlows, AbstractSplittingMethod
 
 #: A state carried in two parts, $y = y_{hi} + y_{lo}$ ($|y_{lo}|$ of the order of an ulp of $y_{hi}$).
 Pair = tuple[jax.Array, jax.Array]
-
-
-def two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
-    r"""$(s, e)$ with $s = \mathrm{fl}(a + b)$ and $s + e = a + b$ exactly, elementwise, for
-    any finite $a, b$ (Knuth's TwoSum: six operations, no branch, no ordering of $|a|, |b|$)."""
-    s = a + b
-    b_virtual = s - a
-    return s, (a - (s - b_virtual)) + (b - b_virtual)
 
 
 def compensated_flow(increment: Callable[[jax.Array], jax.Array], pair: Pair) -> Pair:
@@ -47,7 +38,7 @@ def compensated_flow(increment: Callable[[jax.Array], jax.Array], pair: Pair) ->
     $y_{lo} + \delta'(y_{hi})\,y_{lo}$ (forward mode; exact for a coadjoint flow, which is
     linear), plus the rounding error of the high sum. The low part is not renormalised here:
     it grows by at most half an ulp of $y_{hi}$ a flow, its own rounding is of order
-    $\epsilon^2|y|$, and `Compensated` renormalises it once a step.
+    $\epsilon^2|y|$, and `AbstractCompensableStepMap` renormalises it once a step.
     """
     # Renormalising every flow gives the same figures, but inside a G-LPNet's scan over its
     # modules the larger loop body left XLA's CPU path for small loops, at several times the
@@ -64,9 +55,11 @@ def _renormalised(pair: Pair) -> Pair:
     return two_sum(*pair)
 
 
-class AbstractCompensableStepMap(AbstractStepMap):
+class AbstractCompensableStepMap(AbstractCompensable):
     r"""A step map composed by a splitting `method` of flows that can run on a state carried in
-    two parts (`compensated_flows`): what `Compensated` wraps. A `learn.GLPNet` is one."""
+    two parts (`compensated_flows`), each by `compensated_flow`: `Compensated(step_map)`
+    carries $(y_{hi}, y_{lo})$ between the flows and between steps, renormalised once a
+    step. A `learn.GLPNet` is one."""
 
     method: eqx.AbstractVar[AbstractSplittingMethod]
 
@@ -75,75 +68,25 @@ class AbstractCompensableStepMap(AbstractStepMap):
         r"""The map's flows as `flow(t, (y_hi, y_lo))`, each by `compensated_flow`, in the
         order of its `flows()` (the method applies its `ordering`)."""
 
-
-class Compensated(AbstractStepMap):
-    r"""`step_map` with compensated accumulation: the state carried between its flows, and
-    between steps of a `rollout`, as $y_{hi} + y_{lo}$ (`compensated_flow`).
-
-    The same map in exact arithmetic; in floating point each flow loses the rounding of its
-    increment, $\epsilon|\delta|$, instead of that of the sum $y + \delta$, $\epsilon|y|$: the
-    Casimirs random-walk a factor of about the flows' rotation angle slower. The flows'
-    parameters (a G-LPNet's rates $\Phi_s'(\langle\alpha_s, y\rangle)$) are evaluated at
-    $y_{hi}$, so the motion along an orbit is as accurate as the plain map's; what is
-    compensated is the orbit. Each flow evaluates its increment on both parts and adds it by
-    TwoSum (its cost beside the plain map's: `benchmarks/casimir_drift.py`).
-
-    **Arguments:** `step_map`, an `AbstractCompensableStepMap` (a `learn.GLPNet`). Its `h`,
-    `system` and `exact_flows_per_step` are this map's; `with_h` changes the wrapped map's step.
-    """
-
-    step_map: AbstractCompensableStepMap
-
-    def __init__(self, step_map: AbstractCompensableStepMap):
-        if not isinstance(step_map, AbstractCompensableStepMap):
-            raise TypeError(
-                "step_map must be a step map composed of flows with compensated forms "
-                f"(an integrators.splitting.AbstractCompensableStepMap, e.g. a learn.GLPNet); got {step_map!r}"
-                if isinstance(step_map, AbstractStepMap) else
-                "step_map must be an integrators.splitting.AbstractCompensableStepMap (e.g. a learn.GLPNet); "
-                f"got {type(step_map).__name__}"
-            )
-        self.step_map = step_map
-
-    @property
-    def system(self) -> AbstractPoissonSystem:  # type: ignore[override]
-        return self.step_map.system
-
-    @property
-    def h(self) -> float | None:  # type: ignore[override]
-        return self.step_map.h
-
-    @property
-    def label(self) -> str:
-        return f"Compensated({self.step_map.label})"
-
-    @property
-    def exact_flows_per_step(self) -> int:
-        return self.step_map.exact_flows_per_step
-
-    def carry(self, y: jax.Array) -> Pair:
+    def compensated_carry(self, y: jax.Array) -> Pair:
         """`(y, 0)`."""
         return y, jnp.zeros_like(y)
 
-    def step_carry(self, c: Pair) -> Pair:
-        inner = self.step_map
-        return _renormalised(inner.method.compose(inner.compensated_flows(), c, inner.h))
+    def compensated_step_carry(self, c: Pair) -> Pair:
+        return _renormalised(self.method.compose(self.compensated_flows(), c, self.h))
 
-    def uncarry(self, c: Pair) -> jax.Array:
+    def compensated_uncarry(self, c: Pair) -> jax.Array:
         """$\\mathrm{fl}(y_{hi} + y_{lo})$ ($y_{hi}$ itself after a step, which renormalises)."""
         return c[0] + c[1]
 
-    def step(self, y: jax.Array) -> jax.Array:
-        y = check_state(y, self.system.dim)
-        return self.uncarry(self.step_carry(self.carry(y)))
-
-    def step_flops(self) -> float:
+    def compensated_step_flops(self) -> float:
         # As `composition_flops`: XLA counts a loop body once, so the inner composition of the
         # method's stages is counted over a list of its flows and multiplied.
-        inner, count = self.step_map.method.stages()
+        inner, count = self.method.stages()
         return count * xla_flops(_inner_composition, traced_h(self), jnp.zeros(self.system.dim), inner)
 
 
-def _inner_composition(step_map: Compensated, y: jax.Array, inner: AbstractSplittingMethod) -> jax.Array:
-    flows = list(step_map.step_map.compensated_flows())
-    return step_map.uncarry(_renormalised(inner.compose(flows, step_map.carry(y), step_map.h)))
+def _inner_composition(step_map: AbstractCompensableStepMap, y: jax.Array, inner: AbstractSplittingMethod
+                       ) -> jax.Array:
+    flows = list(step_map.compensated_flows())
+    return step_map.compensated_uncarry(_renormalised(inner.compose(flows, step_map.compensated_carry(y), step_map.h)))

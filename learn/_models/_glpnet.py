@@ -143,7 +143,7 @@ class GLPNet(AbstractCasimirConservingMap, AbstractWarmStartableMap, AbstractBod
 
     def compensated_flows(self) -> IndexedFlows:
         r"""`flows()` on states carried as $(y_{hi}, y_{lo})$: what
-        `integrators.splitting.Compensated(net)` composes (Casimirs kept over long runs)."""
+        `integrators.Compensated(net)` composes (Casimirs kept over long runs)."""
         def flow(s, t, pair):
             return self.terms.compensated_flow(self.system, s, t / self._time_divisor, pair)
 
