@@ -310,8 +310,12 @@ def test_families_that_cannot_hold_the_rotated_body_are_skipped():
 
 def test_body_observations_refuse_a_map_without_a_body_velocity():
     obs = observations(BODY, n=2, m=5)
-    with pytest.raises(TypeError, match="carries the configuration and reads a body velocity.*learn.BodyLPNet"):
+    with pytest.raises(TypeError, match="carries the configuration and reads a body velocity.*an LPNet reads no body "
+                       r"velocity: wrap it, learn.BodyLPNet\(lpnet\)"):
         learn.fit(learn.LPNet(BODY, hidden=(4,), key=0), obs, loss=learn.BodyLoss(), progress=False)
+    with pytest.raises(TypeError, match="reads a body velocity") as refused:  # the LPNet's hint for LPNets only
+        learn.fit(learn.MLPBaseline(BODY, hidden=(4,), key=0), obs, loss=learn.BodyLoss(), progress=False)
+    assert "LPNet reads no body velocity" not in str(refused.value)
     with pytest.raises(TypeError, match="learn.BodyLoss compares a map with integrators.BodyObservations"):
         learn.fit(learn.GLPNet(BODY, n_modules=2), it.ground_truth(BODY, unit_rows(2, 3, 0), 0.1, 3),
                   loss=learn.BodyLoss(), progress=False)

@@ -258,3 +258,17 @@ def test_fit_splitting_offers_drag_families_on_observed_states_leaving_their_orb
     choice = records[-1].choice
     # |Pi| decays along every trajectory: the drag families are offered, and one is chosen
     assert choice.chosen.endswith("drag") and isinstance(model, learn.Dissipative)
+
+
+def test_the_drag_screen_skips_the_drag_families_on_conservative_states_and_says_how_to_fit_them():
+    from learn._training._fit_splitting import DRAG_SCREEN_RATIO, drag_fits
+
+    rng = np.random.default_rng(0)
+    data = it.observe(BODY, rng.normal(size=(4, 3)), np.linspace(0.0, 2.0, 21), noise=1e-3, seed=0)
+    skipped = []
+    # the screen decides before any fit: no method, iterations or context is needed
+    assert drag_fits(BODY, data, None, 0, 0.0, None, "auto", [], skipped) == []
+    assert [s.family for s in skipped] == ["drag families"]
+    assert f"DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}" in skipped[0].reason
+    assert "nothing the data show leaves the orbit" in skipped[0].reason
+    assert "pass dissipation=('linear', 'quadratic') to fit them anyway" in skipped[0].reason

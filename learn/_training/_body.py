@@ -30,6 +30,7 @@ from liepoisson import vmap_samples
 from liepoisson.internals import positive_float, positive_int
 
 from .._models._base import AbstractBodyMap
+from .._models._lpnet import LPNet
 from ._losses import AbstractLoss
 from ._observed import SegmentsObjective
 from ._problem import Description, Fitted, FittedProblem
@@ -197,7 +198,7 @@ class BodyLoss(AbstractLoss):
         if not isinstance(model, AbstractBodyMap):
             hint = (" (an LPNet reads no body velocity: wrap it, learn.BodyLPNet(lpnet), or start one with "
                     "learn.BodyLPNet.at_quadratic(system, *learn.weak_form_quadratic(data)[:2]))"
-                    if type(model).__name__ == "LPNet" else "")
+                    if isinstance(model, LPNet) else "")
             raise TypeError(f"learning from body observations needs a map that carries the configuration and reads "
                             f"a body velocity (learn.GLPNet, learn.Dissipative, learn.BodyLPNet); got "
                             f"{type(model).__name__}{hint}")

@@ -141,7 +141,7 @@ def fit_splitting(
     (`learn.DRAG_KINDS`; `dissipation` a sequence of them), on the axes of the best conservative
     family so far; `"auto"` (the default) offers the linear and quadratic drags when the weak form
     with a drag (`learn.weak_form_drag`) fits the rates `DRAG_SCREEN_RATIO` (3) times better than
-    without (a body that loses energy to the air; in vacuum 1.01), and names the
+    without (a body that loses energy to the air), and names the
     ratio in `choice.skipped` otherwise; `None` offers none. The criterion chooses among all.
     On observed states (`integrators.Observations`) the same drag families are offered when the
     observed Casimirs follow a trend in time `DRAG_SCREEN_RATIO` times better than a constant
@@ -190,8 +190,8 @@ def fit_splitting(
 
 #: With `dissipation="auto"`, drag families are offered on body observations when the weak form
 #: with a drag misfits the rates this many times less than the fullest quadratic without
-#: (`learn.weak_form_drag`, any axes and linear terms; measured 15-26 for a tossed body losing 15%
-#: of |L| a second, 1.01-1.02 for the same in vacuum, 1.00-1.01 on W4's satellite and vehicle).
+#: (`learn.weak_form_drag`, any axes and linear terms; the ratios measured in air, in vacuum and on
+#: W4's bodies: BENCHMARKS.md, "W7: bodies in air").
 DRAG_SCREEN_RATIO = 3.0
 
 
@@ -647,6 +647,14 @@ class _DragFamily:
     name: str
 
 
+def _drag_screened(measured: str, meaning: str) -> SkippedFamily:
+    """The drag families skipped by the screen of `dissipation="auto"`: what was `measured`
+    (a ratio below `DRAG_SCREEN_RATIO`), what that means, and how to fit them anyway."""
+    return SkippedFamily("drag families", (
+        f"{measured} (less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): {meaning}; "
+        "pass dissipation=('linear', 'quadratic') to fit them anyway"))
+
+
 def drag_fits(system, data: BodyObservations | Observations, method, iterations: int, rtol: float,
               context: Context, dissipation: tuple[str, ...] | str, fits: list, skipped: list,
               loss: TrajectoryLoss | None = None) -> list:
@@ -657,10 +665,9 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
     if dissipation == "auto" and isinstance(data, Observations):
         ratio = casimir_trend_ratio(system, data)
         if ratio < DRAG_SCREEN_RATIO:
-            skipped.append(SkippedFamily("drag families", (
-                f"the observed Casimirs follow a trend in time only {ratio:.3g} times better than a constant "
-                f"(less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): nothing the data show leaves the orbit; "
-                "pass dissipation=('linear', 'quadratic') to fit them anyway")))
+            skipped.append(_drag_screened(
+                f"the observed Casimirs follow a trend in time only {ratio:.3g} times better than a constant",
+                "nothing the data show leaves the orbit"))
             return []
         dissipation = ("linear", "quadratic")
     if dissipation == "auto":
@@ -669,10 +676,9 @@ def drag_fits(system, data: BodyObservations | Observations, method, iterations:
         ratios = {k: conservative / max(weak_form_drag(data, k, linear=True, diagonal=False)[3], 1e-300)
                   for k in ("linear", "quadratic")}
         if max(ratios.values()) < DRAG_SCREEN_RATIO:
-            skipped.append(SkippedFamily("drag families", (
-                f"the weak form with a drag fits the rates only {max(ratios.values()):.3g} times better than without "
-                f"(less than DRAG_SCREEN_RATIO = {DRAG_SCREEN_RATIO:g}): nothing the data show is lost to a drag; "
-                "pass dissipation=('linear', 'quadratic') to fit them anyway")))
+            skipped.append(_drag_screened(
+                f"the weak form with a drag fits the rates only {max(ratios.values()):.3g} times better than without",
+                "nothing the data show is lost to a drag"))
             return []
         dissipation = ("linear", "quadratic")
     best = min(fits, key=lambda f: f.bic) if fits else None
