@@ -349,9 +349,11 @@ def test_expm_action_gradients_agree_across_paths():
     np.testing.assert_allclose(float(g_small[0][1, 2]), fd, rtol=1e-8)
 
 
-# common path (with -m slow: every Adam and quasi-Newton fit of the default run takes it); beyond it
-# (matrix path)
-@pytest.mark.parametrize("scale", (pytest.param(1.0, marks=pytest.mark.slow), 300.0))
+# common path (every Adam and quasi-Newton fit of the default run takes it) and beyond it (matrix
+# path), both with -m slow: by default the first attempt beyond the bound is rejected and repeated
+# on the matrix path in test_common_path_first_on_a_matrix_flow_beyond_the_taylor_bound
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", (1.0, 300.0))
 def test_common_path_first_equals_value_and_grad_of_every_path(scale):
     # The fast attempt must either be exact or be rejected (NaN) and repeated: the result is
     # that of jax.value_and_grad through the full expm_action, on either side of the bound.
