@@ -590,9 +590,14 @@ def test_e5_profiles_build_their_stages():
 # "quadratic, even" misfits the weak form 1.7e3 times more than the best start); the skip is by
 # design (test_body_observations.py checks it) and not what this test is about
 @pytest.mark.filterwarnings("ignore:fit_splitting. family .* not fitted:UserWarning")
-def test_w4_smoke_predicts_attitudes_from_attitudes_and_rates(tmp_path):
+def test_w4_smoke_predicts_attitudes_from_attitudes_and_rates(tmp_path, monkeypatch):
+    from paper import w4_bodies as w4
     from paper.__main__ import main
 
+    # the neural ODE peer at its smoke minimum: one hidden shape, fitted once (with two shapes the
+    # rule fits each on the held-out split and refits the best: three fits); the rule's choice
+    # among shapes is tested in tests/test_neural_ode_peer.py
+    monkeypatch.setattr(w4, "NEURAL_ODE_HIDDEN", w4.NEURAL_ODE_HIDDEN[:1])
     assert main(["run", "W4", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
     metrics = json.loads((tmp_path / "W4" / "metrics.json").read_text())
     rows = {r["model"]: r for r in metrics["rows"]}
