@@ -17,9 +17,9 @@ sigma per component; the test starts and heyoka's reference its `test_set`). Mod
   RK4 at 1/10 of the step): what a converged fit of a family holding the body reaches, less
   what its few extra parameters absorb;
 - **limit**: W2's (the true family by trajectory least squares with the initial states);
-- **SINDy**: W2's (`paper._sindy.SINDyModel`), its STLSQ threshold, constant and derivative
-  chosen by every study's rule (`paper._sindy.choose_sparse_field`: the training trajectories'
-  rollouts from their first observation).
+- **SINDy** and **weak SINDy**: W2's (`paper._sindy.SINDyModel`, `WeakSINDyModel`), the STLSQ
+  threshold, constant and derivative or support width chosen by every study's rule
+  (`paper._sindy.choose_sparse_field`, on the training trajectories only).
 
 The mean state error at t = 100 is the mean over the 12 starts of |y - y_heyoka|. The script
 runs on older commits too (`PYTHONPATH=<worktree> python benchmarks/noisy_protocol.py --models
@@ -39,7 +39,7 @@ import learn
 from benchmarks._report import default_out, write_json
 from paper import w2_observations as w2
 
-MODELS = ("G-LPNet", "limit", "SINDy")
+MODELS = ("G-LPNet", "limit", "SINDy", "weak SINDy")
 
 
 def state_error(states: np.ndarray, reference: np.ndarray) -> float:
@@ -117,17 +117,17 @@ def limit(protocol: w2.Protocol, data, y0, reference) -> dict:
             "ssr": record.train_loss * data.n_observations * data.dim, "theta": np.asarray(fitted.step_map.theta)}
 
 
-def sindy(protocol: w2.Protocol, data, y0, reference) -> dict:
-    """W2's SINDy, its settings chosen by the rollouts of the training trajectories."""
-    from paper._sindy import SINDyModel
+def sindy(protocol: w2.Protocol, data, y0, reference, name: str = "SINDy") -> dict:
+    """W2's SINDy or weak SINDy (`name`), its settings chosen on the training trajectories."""
+    from paper._sindy import SINDyModel, WeakSINDyModel
 
     start = time.perf_counter()
-    model = SINDyModel()
+    model = SINDyModel() if name == "SINDy" else WeakSINDyModel()
     fitted = model.fit(protocol.system, data)
     seconds = time.perf_counter() - start
     states = model.simulate(fitted, y0, reference.shape[1] - 1, w2.H_TEST)
     field = fitted.step_map.model
-    return {"model": "SINDy", "state_error": state_error(states, reference), "fit_seconds": seconds,
+    return {"model": name, "state_error": state_error(states, reference), "fit_seconds": seconds,
             "threshold": field.threshold, "chosen": field.describe()}
 
 
@@ -159,13 +159,13 @@ def main(argv: list[str] | None = None) -> None:
                 elif name == "limit":
                     row = limit(protocol, data, y0, reference)
                 else:
-                    row = sindy(protocol, data, y0, reference)
+                    row = sindy(protocol, data, y0, reference, name)
                 row = {"data_seed": seed, "noise": noise, **row, "selection": selection, "true_ssr": truth}
                 rows.append(row)
                 print(f"  {name}{'' if selection is None else f' ({selection})'}: state error at t = 100 {row['state_error']:.4g}, fit {row['fit_seconds']:.1f} s"
                       + (f", chose {row['family']!r}" if "family" in row else "")
                       + (f", SSR {row['ssr']:.5g}" if "ssr" in row else "")
-                      + (f", threshold {row['threshold']}" if "threshold" in row else ""), flush=True)
+                      + (f"; chosen: {row['chosen']}" if "chosen" in row else ""), flush=True)
                 for f in row.get("families", []):
                     print(f"    {f['family']}: SSR {f['ssr']}, BIC {f['bic']}, k {f['effective_parameters']}, "
                           f"held-out {f['held_out_error']}, {f['steps']} steps, {f['seconds']:.1f} s", flush=True)
