@@ -1,16 +1,17 @@
 """SINDy and weak SINDy (pysindy, extra `peers`) as models of a study: a sparse polynomial vector
-field fitted to observations (from their finite differences, or in weak form: integrals against
-test functions), integrated by LSODA.
+field fitted to observations (from their estimated derivatives, or in weak form: integrals
+against test functions), integrated by LSODA.
 
 Their settings are chosen on the training data by one rule, every study's
 (`choose_sparse_field`; docs/conventions.md, "Peers"): every STLSQ threshold of `THRESHOLDS`,
-the library with and without its constant, and SINDy's derivative (finite differences, and on
-regular sampling also smoothed ones) or weak SINDy's support width (`WINDOWS`), fitted to every
-training trajectory; each field rolled out over every training trajectory's times from a start
-fitted to that trajectory (least squares from its first observation, `START_ITERATIONS`
-Gauss-Newton steps: `fitted_start_error`), so that a noisy first observation does not set the
-score; kept, among the fields whose mean relative RMS error is within `TIE_RTOL` (or
-`TIE_ATOL`) of the lowest, the one of fewest terms (then the lowest error). Never the test."""
+the library with and without its constant, and SINDy's derivative (`DERIVATIVES`: finite
+differences, on regular sampling also smoothed ones, and a smoothing spline's) or weak SINDy's
+support width (`WINDOWS`), fitted to every training trajectory; each field rolled out over
+every training trajectory's times from a start fitted to that trajectory (least squares from
+its first observation, `START_ITERATIONS` Gauss-Newton steps: `fitted_start_error`), so that a
+noisy first observation does not set the score; kept, among the fields whose mean relative RMS
+error is within `TIE_RTOL` (or `TIE_ATOL`) of the lowest, the one of fewest terms (then the
+lowest error). Never the test."""
 
 from __future__ import annotations
 
@@ -84,11 +85,15 @@ TEST_FUNCTIONS = 4
 #: own error at `RTOL` over a trajectory is far below), counts as a tie: the sparser field is
 #: kept.
 TIE_RTOL, TIE_ATOL = 0.1, 1e-9
-#: SINDy's derivatives: pysindy's finite differences (second order, any times) and, on regular
+#: SINDy's derivatives: pysindy's finite differences (second order, any times); on regular
 #: sampling only (the smoother assumes even spacing), smoothed ones (Savitzky-Golay over
-#: `SMOOTHING_WINDOW` observations, or the shortest trajectory's odd length).
-DERIVATIVES = ("finite differences", "smoothed finite differences")
+#: `SMOOTHING_WINDOW` observations, or the shortest trajectory's odd length); and, when every
+#: trajectory has at least `SPLINE_OBSERVATIONS` observations (any times), the derivative of a
+#: cubic smoothing spline of each component (`scipy.interpolate.make_smoothing_spline`, its
+#: smoothing chosen by generalised cross-validation on that component's observations).
+DERIVATIVES = ("finite differences", "smoothed finite differences", "smoothing spline")
 SMOOTHING_WINDOW = 11
+SPLINE_OBSERVATIONS = 5
 #: A rollout is stopped, and scored inf, once |y| exceeds this multiple of its start.
 BLOW_UP = 100.0
 
@@ -275,9 +280,15 @@ def derivative_rows(times: list[np.ndarray], states: list[np.ndarray], derivativ
         shortest = min(t.size for t in times)
         window = min(SMOOTHING_WINDOW, shortest if shortest % 2 else shortest - 1)
         method = ps.SmoothedFiniteDifference(smoother_kws={"window_length": window})
+    elif derivative == "smoothing spline":
+        from scipy.interpolate import make_smoothing_spline
+
+        def method(y, t):
+            return np.stack([make_smoothing_spline(t, y[:, k]).derivative()(t) for k in range(y.shape[1])], axis=1)
     else:
         raise ValueError(f"derivative must be one of {DERIVATIVES}; got {derivative!r}")
-    targets = np.concatenate([method(np.asarray(y), t=np.asarray(t)) for t, y in zip(times, states)])
+    targets = np.concatenate([method(np.asarray(y, dtype=np.float64), t=np.asarray(t, dtype=np.float64))
+                              for t, y in zip(times, states)])
     return np.asarray(features), targets
 
 
@@ -375,7 +386,8 @@ def choose_sparse_field(times: list[np.ndarray], states: list[np.ndarray],
 def fit_sindy(times: list[np.ndarray], states: list[np.ndarray], rates: list[np.ndarray] | None = None,
               thresholds: tuple[float, ...] = THRESHOLDS) -> SparseField:
     """SINDy by the rule (`choose_sparse_field`): the derivatives of `DERIVATIVES` (smoothed
-    ones on regular sampling only), or the `rates` given."""
+    finite differences on regular sampling only, the smoothing spline on trajectories of at
+    least `SPLINE_OBSERVATIONS` observations only), or the `rates` given."""
     with warnings.catch_warnings():  # pysindy's warnings about its arrays' axes
         warnings.simplefilter("ignore")
         if rates is not None:
@@ -383,7 +395,9 @@ def fit_sindy(times: list[np.ndarray], states: list[np.ndarray], rates: list[np.
         else:
             steps = np.concatenate([np.diff(t) for t in times])
             regular = bool(np.ptp(steps) <= 1e-9 * np.max(steps))
-            rows = {d: derivative_rows(times, states, d) for d in DERIVATIVES[: 2 if regular else 1]}
+            spline = min(np.size(t) for t in times) >= SPLINE_OBSERVATIONS
+            derivatives = [DERIVATIVES[0]] + [DERIVATIVES[1]] * regular + [DERIVATIVES[2]] * spline
+            rows = {d: derivative_rows(times, states, d) for d in derivatives}
     return choose_sparse_field(times, states, rows, thresholds)
 
 
@@ -425,7 +439,8 @@ class _AbstractSINDyModel(AbstractStudyModel):
 @dataclasses.dataclass(frozen=True)
 class SINDyModel(_AbstractSINDyModel):
     """SINDy: polynomial library of degree 2 (with or without its constant), STLSQ, derivatives
-    by finite differences or (regular sampling) smoothed ones; the library, the threshold (of
+    by finite differences, (regular sampling) smoothed ones or a smoothing spline's
+    (`DERIVATIVES`); the library, the threshold (of
     `thresholds`) and the derivative chosen on the training trajectories' rollouts
     (`fit_sindy`, `choose_sparse_field`)."""
 
