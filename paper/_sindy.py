@@ -166,9 +166,10 @@ def fitted_start_error(field: Any, times: list[np.ndarray], states: list[np.ndar
                        iterations: int = START_ITERATIONS) -> float:
     """The mean over trajectories of the relative RMS error (`relative_rms`) of the field's
     rollout (LSODA) over each trajectory's times against its observations, from a start FITTED
-    to them: least squares over the start (3 unknowns in 3 dimensions), from the first
+    to them: least squares over the start (its `dim` components), from the first
     observation, by `iterations` Gauss-Newton steps (the Jacobian by forward differences,
-    `START_DELTA`), each trajectory keeping its start of lowest residual. As the G-LPNet and the
+    `START_DELTA`; a step that does not lower the residual is taken back half-way instead),
+    each trajectory keeping its start of lowest residual. As the G-LPNet and the
     limit fit their starts: a noisy first observation no longer sets the score. All
     trajectories (and their differenced copies) in one LSODA run (`_stacked_flow`); inf if a
     rollout from the first observations passes `BLOW_UP` times its start."""
