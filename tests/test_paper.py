@@ -180,7 +180,7 @@ def e5_run_by_the_cli_without_its_baseline(tmp_path_factory):
     before = _tree(package)
     work = tmp_path_factory.mktemp("cli")
     with pytest.MonkeyPatch.context() as patch:
-        smoke = dataclasses.replace(e5_kirchhoff.PROFILES["smoke"], baseline=False)
+        smoke = e5_kirchhoff.PROFILES["smoke"].replace(baseline=False)
         patch.setitem(e5_kirchhoff.PROFILES, "smoke", smoke)
         patch.chdir(work)  # the default --out is relative to the working directory
         assert main(["run", "E5", "--profile", "smoke", "--no-progress"]) == 0
