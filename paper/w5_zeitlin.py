@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
+from typing import Any
 
 import numpy as np
 
@@ -190,6 +191,10 @@ class AbstractZeitlinModel(AbstractStudyModel):
         """The training pairs (`None`: nothing to fit)."""
         return None
 
+    def theta(self, fitted: Any) -> list[float] | None:
+        """The fitted coefficients the row reports (`None`: none)."""
+        return None
+
 
 @dataclasses.dataclass(frozen=True)
 class IsospectralPolynomialModel(AbstractZeitlinModel):
@@ -205,6 +210,9 @@ class IsospectralPolynomialModel(AbstractZeitlinModel):
 
     def pairs(self, condition):
         return condition.pairs(condition.P.n_train)
+
+    def theta(self, fitted):
+        return [float(t) for t in np.asarray(fitted.theta)]
 
     def fit(self, condition, data, *, progress=False):
         return learn.fit(learn.IsospectralPolynomial(condition.system, degree=self.degree, h=condition.H, tol=TOL),
@@ -321,9 +329,8 @@ class W5(AbstractStudy):
         begin = time.perf_counter()
         fitted, record = model.fit(condition, data, progress=progress)
         fit_seconds = time.perf_counter() - begin
-        theta = getattr(fitted, "theta", None) if isinstance(model, IsospectralPolynomialModel) else None
         return measure(condition.system, model.label, fitted, condition.H / model.divisor, condition.reference,
-                       model.divisor, theta=None if theta is None else [float(t) for t in np.asarray(theta)],
+                       model.divisor, theta=model.theta(fitted),
                        fit_seconds=None if record is None else fit_seconds,
                        train_loss=None if record is None else float(record.train_loss))
 
