@@ -38,7 +38,7 @@ import learn
 import liepoisson as lp
 from benchmarks._report import default_out, write_json
 from liepoisson.systems import LiePoissonSystem, RigidBody, reversing_symmetries, sign_symmetries
-from paper.w2_observations import diamond
+from paper._systems import diamond
 
 H_STEP = 0.1
 

@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n-test", type=int, default=w4.N_TEST, help="held-out initial conditions")
     parser.add_argument("--out", default=default_out("body_observations"))
     args = parser.parse_args(argv)
-    models = [m for m in w4.models(operator_baselines=True) if m.label in args.models]
+    models = [m for m in w4.models(operator_baselines=True, steps=args.steps) if m.label in args.models]
     if args.time_unit != 1.0:  # the learned maps; SINDy's fits are not covariant in time (its thresholds)
         models = [dataclasses.replace(m, unit=args.time_unit) for m in models if isinstance(m, w4.LearnedBodyModel)]
     rows = []
@@ -64,11 +64,10 @@ def main(argv: list[str] | None = None) -> None:
                                        n_observations=args.observations)
                 for model in models:
                     start = time.perf_counter()
-                    row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling,
-                                      steps=args.steps)
-                    print(w4.line(row), f"({time.perf_counter() - start:.0f} s with the evaluation)", flush=True)
+                    row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling)
+                    print(w4.EXPERIMENT.line(row), f"({time.perf_counter() - start:.0f} s with the evaluation)", flush=True)
                     rows.append(row)
-    for v in w4.verdict(rows):
+    for v in w4.EXPERIMENT.verdict(rows):
         print("-", v)
     spread = {}
     if args.bootstrap:
@@ -92,7 +91,7 @@ def main(argv: list[str] | None = None) -> None:
                                    "axes_angle_deg_mean": angles.mean(0).tolist(),
                                    "axes_angle_deg_std": angles.std(0, ddof=1).tolist()}
                     print(key, f"bootstrap of the inertia (trace {truth.shape[0]}):", json.dumps(spread[key]))
-    write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.verdict(rows),
+    write_json(args.out, args, {"rows": [row_to_json(r) for r in rows], "verdict": w4.EXPERIMENT.verdict(rows),
                                 "bootstrap": spread})
 
 

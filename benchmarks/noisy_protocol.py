@@ -107,7 +107,7 @@ def glpnet(protocol: w2.Protocol, data, y0, reference, selection: str | None) ->
 
 def limit(protocol: w2.Protocol, data, y0, reference) -> dict:
     """W2's limit: the true family fitted by trajectory least squares with the initial states."""
-    model = next(m for m in w2.models(protocol, w2.Profile((), (), (), iterations=1000)) if m.label == "limit")
+    model = next(m for m in w2.models(protocol, w2.PROFILES["full"].replace(iterations=1000, steps=200)) if m.label == "limit")
     start = time.perf_counter()
     fitted = model.fit(protocol.system, data)
     seconds = time.perf_counter() - start

@@ -33,7 +33,7 @@ def _models(protocol: w2.Protocol, args: argparse.Namespace) -> dict:
     """W2's models by label, with this run's settings (iterations, the G-LPNet's family and loss)."""
     steps = 200 if args.iterations is None else args.iterations
     mlp_iterations = 1000 if args.iterations is None else args.iterations
-    profile = w2.Profile((), (), (), iterations=mlp_iterations, steps=steps)
+    profile = w2.PROFILES["full"].replace(iterations=mlp_iterations, steps=steps)
     models = {model.label: model for model in w2.models(protocol, profile)}
     loss = None
     if args.window or args.observed_starts or args.max_step:
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> None:
                     row = w2.evaluate(protocol, model, data, y0, reference, system=system, noise=noise,
                                       sampling=sampling)
                     rows.append({**row_to_json(row), "data_seed": args.data_seed})
-                    print(w2.line(row), flush=True)
+                    print(w2.EXPERIMENT.line(row), flush=True)
                 if args.bootstrap and system == "rotated rigid body":
                     b = w2.bootstrap_axes(protocol, data, args.bootstrap, iterations=args.iterations)
                     rows.append({"system": system, "noise": noise, "sampling": sampling, "model": "G-LPNet bootstrap",

@@ -26,8 +26,8 @@ class _Chosen:
     def __init__(self, model: w4.AbstractBodyModel):
         self.model, self.label, self.chosen = model, model.label, None
 
-    def fit(self, protocol, data, steps):
-        fitted = self.model.fit(protocol, data, steps)
+    def fit(self, protocol, data, *, progress=False):
+        fitted = self.model.fit(protocol, data)
         self.chosen = fitted.describe()
         return fitted
 
@@ -55,10 +55,9 @@ def main(argv: list[str] | None = None) -> None:
             for noise in args.noise:
                 data = w4.observations(protocol, noise, sampling)
                 for name in args.models:
-                    model = _Chosen(MODELS[name]())
+                    model = _Chosen(MODELS[name](steps=args.steps))
                     start = time.perf_counter()
-                    row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling,
-                                      steps=args.steps)
+                    row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling)
                     rows.append({"system": system, "sampling": sampling, "noise": noise, "model": name,
                                  "attitude_error": row.attitude_error, "velocity_error": row.velocity_error,
                                  "position_error": row.position_error, "fit_seconds": row.fit_seconds,

@@ -11,6 +11,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from integrators.internals import atomic_write_text, json_values
@@ -47,6 +48,70 @@ ADAM_ROWS = (
     ("adam_only.energy_rel_err_max", "before L-BFGS-B (Adam only): max |rel. energy error|"),
     ("adam_only.traj_err_final", "before L-BFGS-B (Adam only): trajectory error at the end"),
 )
+
+
+class Profile:
+    """An experiment's budget at one of `python -m paper`'s profiles (smoke, quick, full): its
+    settings by name, read as attributes (`P.epochs`), fixed once made. One type for every
+    experiment and study; each makes its three with `profiles`, which checks that they set the
+    same names."""
+
+    __slots__ = ("_settings",)
+
+    def __init__(self, **settings: Any):
+        object.__setattr__(self, "_settings", MappingProxyType(dict(settings)))
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):  # `_settings` itself before it is set (unpickling), dunders
+            raise AttributeError(name)
+        try:
+            return self._settings[name]
+        except KeyError:
+            raise AttributeError(f"the profile has no setting {name!r}; it has {', '.join(self._settings)}") from None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise dataclasses.FrozenInstanceError(f"a Profile is fixed once made: use P.replace({name}=...)")
+
+    def __reduce__(self):
+        return _profile, (dict(self._settings),)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Profile) and dict(self._settings) == dict(other._settings)
+
+    __hash__ = None  # type: ignore[assignment]  (settings may be dicts)
+
+    def __repr__(self) -> str:
+        return f"Profile({', '.join(f'{k}={v!r}' for k, v in self._settings.items())})"
+
+    def replace(self, **changes: Any) -> Profile:
+        """This profile with `changes` (names it has only: `ValueError` otherwise)."""
+        unknown = sorted(set(changes) - set(self._settings))
+        if unknown:
+            raise ValueError(f"Profile.replace: no setting(s) {unknown}; the profile has {', '.join(self._settings)}")
+        return Profile(**{**self._settings, **changes})
+
+    def as_dict(self) -> dict[str, Any]:
+        """The settings as a dict (what metrics.json records as `profile_settings`)."""
+        return dict(self._settings)
+
+
+def _profile(settings: dict[str, Any]) -> Profile:
+    return Profile(**settings)
+
+
+def profiles(defaults: Profile | None = None, **by_name: Profile) -> dict[str, Profile]:
+    """`{name: profile}` for each `name=profile` (smoke, quick, full), each with the settings of
+    `defaults` it does not give: `ValueError` naming the profile and the settings if one lacks a
+    name another sets (a misspelt setting)."""
+    base = {} if defaults is None else defaults.as_dict()
+    made = {name: Profile(**{**base, **P.as_dict()}) for name, P in by_name.items()}
+    names = set().union(*(set(P.as_dict()) for P in made.values()))
+    for name, P in made.items():
+        missing = sorted(names - set(P.as_dict()))
+        if missing:
+            raise ValueError(f"profiles: the {name!r} profile lacks {missing}, which another profile sets; give them "
+                             "in every profile or in defaults")
+    return made
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 import integrators as it
 import liepoisson as lp
 
-from ._study import AbstractStudyModel, Fitted
+from ._study import AbstractStateModel, Fitted
 
 RTOL = 1e-12  # LSODA's tolerances, as `pysindy.SINDy.simulate`'s
 
@@ -412,7 +412,7 @@ def fit_weak_sindy(times: list[np.ndarray], states: list[np.ndarray], windows: t
     return choose_sparse_field(times, states, rows, thresholds)
 
 
-class _AbstractSINDyModel(AbstractStudyModel):
+class _AbstractSINDyModel(AbstractStateModel):
     """A sparse polynomial vector field fitted to observations: `vector_field(data)` is the
     fitted field (a `SparseField`, chosen by the rule of `choose_sparse_field`); the rest is
     shared. Simulated by LSODA over the whole time span at once (tolerance 1e-12, as

@@ -1,6 +1,7 @@
-"""The models of the studies beyond the paper (W1-W3) behind one interface: `fit` to data, then
-`simulate` from held-out initial conditions. One final class per kind of model; what differs
-per system is data on the study's own protocol object, never a branch on its name."""
+"""The models of the studies beyond the paper behind one interface, `AbstractStudyModel` (every
+study's); those of W1-W3 `fit` to data, then `simulate` from held-out initial conditions. One
+final class per kind of model; what differs per system is data on the study's own protocol
+object, never a branch on its name."""
 
 from __future__ import annotations
 
@@ -37,11 +38,28 @@ class Fitted:
 
 
 class AbstractStudyModel(abc.ABC):
-    """A model of a study: `fit(system, data)` returns a `Fitted`, `simulate(fitted, y0,
-    n_steps, h)` its states from `y0` `(n, dim)` every step $h$, `(n, n_steps + 1, dim)`, with
-    their non-finite tail if it diverged. `label` names it in the study's rows."""
+    """A model of a study (W1-W7), learned or peer alike, as `paper._runner.AbstractStudy`
+    runs it: `fit(problem, data)` returns what it fitted to `data` of `problem` (the study's
+    system or protocol); the study measures it by the prediction its rows need, declared by the
+    study's own subclass of this one (`AbstractStateModel.simulate`, W4's `predict` of attitudes,
+    ...). `label` names its rows; a new row of a study is a new instance in its `models`."""
 
     label: str
+
+    @abc.abstractmethod
+    def fit(self, problem: Any, data: Any, *, progress: bool = False) -> Any:
+        """What the model fitted to `data` of `problem`."""
+
+    def accepts(self, data: Any) -> bool:
+        """Whether the model can be fitted to `data` (all models but those whose step has no
+        step-size input take any sampling)."""
+        return True
+
+
+class AbstractStateModel(AbstractStudyModel):
+    """A model of the states of a Poisson system (W1-W3): `fit(system, data)` returns a
+    `Fitted`, `simulate(fitted, y0, n_steps, h)` its states from `y0` `(n, dim)` every step $h$,
+    `(n, n_steps + 1, dim)`, with their non-finite tail if it diverged."""
 
     @abc.abstractmethod
     def fit(self, system: lp.systems.AbstractPoissonSystem, data: Any, *, progress: bool = False) -> Fitted:
@@ -51,13 +69,8 @@ class AbstractStudyModel(abc.ABC):
     def simulate(self, fitted: Fitted, y0: np.ndarray, n_steps: int, h: float) -> np.ndarray:
         """`n_steps` steps of `h` from `y0`."""
 
-    def accepts(self, data: Any) -> bool:
-        """Whether the model can be fitted to `data` (all models but those whose step has no
-        step-size input take any sampling)."""
-        return True
 
-
-class AbstractStepMapModel(AbstractStudyModel):
+class AbstractStepMapModel(AbstractStateModel):
     """A model whose fitted form is a step map: it simulates by the map's rollout at `h`."""
 
     def simulate(self, fitted: Fitted, y0: np.ndarray, n_steps: int, h: float) -> np.ndarray:
@@ -172,7 +185,7 @@ class Identified:
     axes_error_degrees: float | None = None
 
 
-class AbstractHamiltonianModel(AbstractStudyModel):
+class AbstractHamiltonianModel(AbstractStateModel):
     """A model that learns a Hamiltonian: `identify` says what of the true one it recovered."""
 
     @abc.abstractmethod
@@ -290,7 +303,7 @@ def hamiltonian_mismatch(learned_hamiltonian, system, y) -> dict[str, float]:
     }
 
 
-def fit_all(models: Sequence[AbstractStudyModel], system, data, progress: bool = False) -> list[Fitted]:
+def fit_all(models: Sequence[AbstractStateModel], system, data, progress: bool = False) -> list[Fitted]:
     """`model.fit(system, data)` for each model (one task of `paper._cluster.map_trainings`)."""
     return [model.fit(system, data, progress=progress) for model in models]
 

@@ -12,7 +12,6 @@ Prediction: 10,000 steps from the last training point against heyoka.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -28,27 +27,18 @@ from ._evaluate import (
     start_lpnet_seeds,
     start_training,
 )
-from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    epochs: int
-    seeds: int
-    prediction_steps: int
-    final_learning_rate: float
-    refine_iterations: int
-    glpnet_iterations: int
-    glpnet_starts: int
-
-
-PROFILES = {
+PROFILES = profiles(
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(300, 2, 300, 1e-4, refine_iterations=20, glpnet_iterations=20, glpnet_starts=1),
-    "quick": Profile(30_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_starts=2),
+    smoke=Profile(epochs=300, seeds=2, prediction_steps=300, final_learning_rate=1e-4, refine_iterations=20,
+               glpnet_iterations=20, glpnet_starts=1),
+    quick=Profile(epochs=30_000, seeds=5, prediction_steps=10_000, final_learning_rate=1e-5, refine_iterations=10_000,
+               glpnet_iterations=3500, glpnet_starts=2),
     # full: the paper's 1e5 Adam epochs, then 10k L-BFGS-B (30k until issue 29: BENCHMARKS.md)
-    "full": Profile(100_000, 5, 10_000, 1e-5, refine_iterations=10_000, glpnet_iterations=3500, glpnet_starts=4),
-}
+    full=Profile(epochs=100_000, seeds=5, prediction_steps=10_000, final_learning_rate=1e-5, refine_iterations=10_000,
+              glpnet_iterations=3500, glpnet_starts=4),
+)
 
 
 class E1(AbstractExperiment):

@@ -13,7 +13,6 @@ drifts by 0.8% (seed 0); L-BFGS-B takes the MSE to ~1e-12 and the drift below th
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -29,28 +28,17 @@ from ._evaluate import (
     start_lpnet_seeds,
     start_training,
 )
-from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import SEEDED_LPNET_ROWS, AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    epochs: int
-    prediction_steps: int
-    refine_iterations: int
-    seeds: int = 1
-    glpnet_iterations: int = 3500
-    glpnet_starts: int = 2
-
-
-PROFILES = {
+PROFILES = profiles(
+    Profile(seeds=1, glpnet_iterations=3500, glpnet_starts=2),
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20,
-                     glpnet_starts=1),
+    smoke=Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=20, glpnet_starts=1),
     # quick: Adam 10k + L-BFGS-B 5k; full: 30k + 10k over 3 seeds (100k + 30k until issue 29;
     # what each reaches: BENCHMARKS.md, "Quick-profile budgets" and "--full in 45 minutes").
-    "quick": Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
-    "full": Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000, seeds=3),
-}
+    quick=Profile(epochs=10_000, prediction_steps=10_000, refine_iterations=5000),
+    full=Profile(epochs=30_000, prediction_steps=10_000, refine_iterations=10_000, seeds=3),
+)
 DATA_SEED = 2
 
 

@@ -25,7 +25,6 @@ output differ.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -41,30 +40,21 @@ from ._evaluate import (
     start_lpnet_seeds,
     start_training,
 )
-from ._experiment import ADAM_ROWS, GLPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import ADAM_ROWS, GLPNET_ROWS, AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    epochs: int
-    prediction_steps: int
-    refine_iterations: int
-    glpnet_iterations: int
-    glpnet_starts: int
-    glpnet_modules: int = 18
-    seeds: int = 1
-
-
-PROFILES = {
+PROFILES = profiles(
+    Profile(glpnet_modules=18, seeds=1),
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless. It skips
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
-    "smoke": Profile(300, 300, 20, glpnet_iterations=0, glpnet_starts=1),
-    "quick": Profile(20_000, 1000, 5000, glpnet_iterations=500, glpnet_starts=1, glpnet_modules=12),
+    smoke=Profile(epochs=300, prediction_steps=300, refine_iterations=20, glpnet_iterations=0, glpnet_starts=1),
+    quick=Profile(epochs=20_000, prediction_steps=1000, refine_iterations=5000, glpnet_iterations=500, glpnet_starts=1,
+               glpnet_modules=12),
     # full: 5 network seeds (1 until issue 29). One seed's energy error lands on either side of
     # the paper's 1% (it even moves with the number of XLA threads); the median over seeds is
     # the robust figure (the seeds: BENCHMARKS.md, "--full in 45 minutes").
-    "full": Profile(50_000, 1000, 20_000, glpnet_iterations=3500, glpnet_starts=1, seeds=5),
-}
+    full=Profile(epochs=50_000, prediction_steps=1000, refine_iterations=20_000, glpnet_iterations=3500, glpnet_starts=1,
+              seeds=5),
+)
 INITIAL_CONDITIONS = np.array([[0.0, 1.0, 1.0], [0.0, 1.5, 2.35], [0.0, 2.0, 4.2]])
 HIDDEN = (16, 16, 16)
 

@@ -27,7 +27,6 @@ identity; only the coordinates of the network's output differ.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -37,32 +36,22 @@ import learn
 import liepoisson as lp
 
 from ._evaluate import compare, glpnet_on_same_data, start_training
-from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    n_points: int
-    epochs: int
-    batch_size: int | None
-    prediction_steps: int
-    glpnet_iterations: int
-    glpnet_starts: int
-    glpnet_modules: int = 12
-    glpnet_symmetric: bool = True
-
-
-PROFILES = {
+PROFILES = profiles(
+    Profile(glpnet_modules=12, glpnet_symmetric=True),
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless. It skips
     # the G-LPNet (glpnet_iterations=0): compiling its test flows alone takes 5-20 s here.
-    "smoke": Profile(2000, 20, 1000, 300, glpnet_iterations=0, glpnet_starts=1),
+    smoke=Profile(n_points=2000, epochs=20, batch_size=1000, prediction_steps=300, glpnet_iterations=0, glpnet_starts=1),
     # quick skips the G-LPNet too: its compilation and a few hundred iterations take ~40 s.
-    "quick": Profile(20_000, 900, 1000, 2000, glpnet_iterations=0, glpnet_starts=1),
+    quick=Profile(n_points=20_000, epochs=900, batch_size=1000, prediction_steps=2000, glpnet_iterations=0,
+               glpnet_starts=1),
     # full: 3000 epochs (45,000 Adam steps; 6000 until issue 29, which changed no claim: the
     # losses are reached, the energy and integral at neither; the paper's budget: reference/E4/sweep.md);
     # the G-LPNet (no paper claim) 1000 BFGS iterations (2000 until issue 29).
-    "full": Profile(20_000, 3000, 1000, 2000, glpnet_iterations=1000, glpnet_starts=1),
-}
+    full=Profile(n_points=20_000, epochs=3000, batch_size=1000, prediction_steps=2000, glpnet_iterations=1000,
+              glpnet_starts=1),
+)
 Y0 = np.array([1.0, 0.5, 0.5, 1.0])  # (p1, p2, x1, x2)
 HIDDEN = (32, 32, 32)
 

@@ -16,7 +16,6 @@ largest Lyapunov exponent of that trajectory and the fitted growth rate of the t
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -26,37 +25,28 @@ import learn
 import liepoisson as lp
 
 from ._evaluate import compare, glpnet_on_same_data, start_training
-from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue
+from ._experiment import GLPNET_ROWS, AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    n_trajectories: int
-    epochs: int
-    batch_size: int
-    glpnet_iterations: int  # 0: no G-LPNet (its compilation alone takes ~20 s)
-    lyapunov_long_time: float = 1000.0
-    refine_iterations: int = 0  # L-BFGS-B after Adam (epochs=0: instead of Adam)
-    normalise: bool = False
-    baseline: bool = True  # the MLP baseline beside the LPNet, same network and training
-
-
-PROFILES = {
+PROFILES = profiles(
+    # glpnet_iterations 0: no G-LPNet (its compilation alone takes ~20 s); refine_iterations:
+    # L-BFGS-B after Adam (epochs=0: instead of Adam); baseline: the MLP beside the LPNet, same
+    # network and training
+    Profile(lyapunov_long_time=1000.0, refine_iterations=0, normalise=False, baseline=True),
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(n_trajectories=20, epochs=5, batch_size=200, glpnet_iterations=0),
+    smoke=Profile(n_trajectories=20, epochs=5, batch_size=200, glpnet_iterations=0),
     # quick: the full recipe on half the trajectories, without the baseline (a side row, no
     # paper claim), so that the LPNet's 2000 iterations fit in the 10 minutes of the quick run
     # (BENCHMARKS.md, "Quick-profile budgets").
-    "quick": Profile(n_trajectories=250, epochs=0, batch_size=1000, glpnet_iterations=0, refine_iterations=2000,
-                     normalise=True, baseline=False),
+    quick=Profile(n_trajectories=250, epochs=0, batch_size=1000, glpnet_iterations=0, refine_iterations=2000,
+               normalise=True, baseline=False),
     # The paper's 5e5 full-batch epochs on 40,000 pairs would take ~14 h on 2 cores. Full-batch
     # L-BFGS-B from the random start with normalised inputs and outputs and the outputs' affine
     # part fixed from the data (`learn.PlusAffine`): 2000 iterations (5000 without the affine
     # part until issue 29; both: BENCHMARKS.md, "E5: the affine part fixed"). The G-LPNet (no
     # paper claim) gets 500 BFGS iterations (1000 until issue 29).
-    "full": Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=500,
-                    refine_iterations=2000, normalise=True),
-}
+    full=Profile(n_trajectories=500, epochs=0, batch_size=1000, glpnet_iterations=500, refine_iterations=2000,
+              normalise=True),
+)
 DATA_SEED = 5
 HIDDEN = (64,) * 6
 PREDICTION_STEPS = 100

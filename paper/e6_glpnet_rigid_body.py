@@ -9,7 +9,6 @@ Prediction: 10 trajectories of 10,000 steps from initial conditions in |Pi_a| <=
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -19,23 +18,14 @@ import learn
 import liepoisson as lp
 
 from ._evaluate import compare
-from ._experiment import AbstractExperiment, PaperValue
+from ._experiment import AbstractExperiment, PaperValue, Profile, profiles
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    max_iter: int
-    starts: int
-    baseline_epochs: int
-    prediction_steps: int
-
-
-PROFILES = {
+PROFILES = profiles(
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(max_iter=30, starts=1, baseline_epochs=300, prediction_steps=300),
-    "quick": Profile(max_iter=3500, starts=2, baseline_epochs=20_000, prediction_steps=10_000),
-    "full": Profile(max_iter=3500, starts=8, baseline_epochs=100_000, prediction_steps=10_000),
-}
+    smoke=Profile(max_iter=30, starts=1, baseline_epochs=300, prediction_steps=300),
+    quick=Profile(max_iter=3500, starts=2, baseline_epochs=20_000, prediction_steps=10_000),
+    full=Profile(max_iter=3500, starts=8, baseline_epochs=100_000, prediction_steps=10_000),
+)
 DATA_SEED = 6
 TEST_SEED = 60
 

@@ -27,7 +27,8 @@ import liepoisson as lp
 from integrators.internals import figure, series_styles, span_decades
 
 from ._cluster import map_trainings, on_cluster
-from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
+from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
+from ._runner import AbstractStudy
 from ._study import (
     AbstractStudyModel,
     ClassicalMap,
@@ -36,35 +37,25 @@ from ._study import (
     LPNetModel,
     Training,
     fit_all,
+)
+from ._study import (
     hamiltonian_mismatch as hamiltonian_mismatch,
 )
 
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    hs: tuple[float, ...]
-    n_test: int
-    long_steps: int
-    save_every: int
-    lpnet_epochs: int
-    glpnet_iterations: int
-    glpnet_starts: int
-    systems: tuple[str, ...] = ("rigid body", "Kirchhoff")
-    all_baselines: bool = True
-    all_orderings: bool = True  # every Strang ordering, or the default and its reverse
-
-
-PROFILES = {
+PROFILES = profiles(
+    # all_baselines: every classical map (else Strang and RK4); all_orderings: every Strang
+    # ordering (else the default and its reverse)
+    Profile(systems=("rigid body", "Kirchhoff"), all_baselines=True, all_orderings=True),
     # "quick" (< 10 min on 2 cores) spans the range with 3 of the 5 step sizes; "full" has all
     # 5 step sizes. Both time every Strang ordering: maps of equal work must measure equal.
     # "smoke" exercises the pipeline in seconds (tests): one system, one h, three baselines.
-    "smoke": Profile((0.1,), n_test=4, long_steps=200, save_every=10, lpnet_epochs=30,
-                     glpnet_iterations=20, glpnet_starts=1, systems=("rigid body",), all_baselines=False),
-    "quick": Profile((0.025, 0.1, 0.4), n_test=100, long_steps=10_000, save_every=10,
-                     lpnet_epochs=3_000, glpnet_iterations=400, glpnet_starts=1),
-    "full": Profile((0.025, 0.05, 0.1, 0.2, 0.4), n_test=100, long_steps=100_000, save_every=10,
-                    lpnet_epochs=30_000, glpnet_iterations=3_000, glpnet_starts=2),
-}
+    smoke=Profile(hs=(0.1,), n_test=4, long_steps=200, save_every=10, lpnet_epochs=30, glpnet_iterations=20,
+                  glpnet_starts=1, systems=("rigid body",), all_baselines=False),
+    quick=Profile(hs=(0.025, 0.1, 0.4), n_test=100, long_steps=10_000, save_every=10, lpnet_epochs=3_000,
+                  glpnet_iterations=400, glpnet_starts=1),
+    full=Profile(hs=(0.025, 0.05, 0.1, 0.2, 0.4), n_test=100, long_steps=100_000, save_every=10,
+                 lpnet_epochs=30_000, glpnet_iterations=3_000, glpnet_starts=2),
+)
 T_ERROR = 100.0  # global error measured at t = 100
 N_OUTPUTS = 25  # outputs every 4.0 time units: every h in the list divides 4.0
 DATA_SEED, TEST_SEED = 11, 110
@@ -178,87 +169,130 @@ def _long_run(m: it.AbstractStepMap, y0s: np.ndarray, P: Profile) -> it.RolloutF
     return it.rollout_figures(m, y, save_every=P.save_every, defect_points=0)
 
 
-class W1(AbstractExperiment):
+class SystemBlock:
+    """A system of W1 at a profile: its held-out initial conditions and heyoka's reference from
+    them, its training data at each step size, and the learned models fitted to each (`fitted`:
+    the trainings at the step sizes are independent, so on a cluster, `--scheduler`, they run
+    at once)."""
+
+    def __init__(self, name: str, setting: Setting, P: Profile):
+        self.name, self.setting, self.P = name, setting, P
+        system, centre, width = setting.system, setting.centre, setting.half_width
+        rng = np.random.default_rng(DATA_SEED)
+        data_y0 = centre + rng.uniform(-width, width, size=(50, system.dim))
+        self.test_y0 = centre + np.random.default_rng(TEST_SEED).uniform(-width, width, size=(P.n_test, system.dim))
+        self.reference = it.ground_truth(system, self.test_y0, h=T_ERROR / N_OUTPUTS, n_steps=N_OUTPUTS,
+                                         seed=TEST_SEED)
+        self.datasets = [it.ground_truth(system, data_y0, h=h, n_steps=20, seed=DATA_SEED) for h in P.hs]
+        self.learned = _learned_models(P)
+        self._fitted: list[list[Fitted]] | None = None
+
+    def fitted(self, progress: bool) -> list[list[Fitted]]:
+        """The learned models fitted at each step size (fitted on first call)."""
+        if self._fitted is None:
+            self._fitted = map_trainings(fit_all, [(self.learned, self.setting.system, data,
+                                                    progress and not on_cluster()) for data in self.datasets])
+        return self._fitted
+
+
+@dataclasses.dataclass
+class Condition:
+    """A system and a step size of W1 (the `index`-th of the profile's); `transfer`: the
+    step-size transfer measured there (at `TRANSFER_H` only)."""
+
+    block: SystemBlock
+    index: int
+    h: float
+    transfer: dict[str, Any] | None = None
+
+
+class W1(AbstractStudy):
     id = "W1"
     title = "learned vs classical splitting: rigid body and Kirchhoff, h = 0.025 .. 0.4"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W1Row
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
-        rows: list[W1Row] = []
-        transfer: dict[str, Any] = {}
-        learned = _learned_models(P)
+    def conditions(self, P):
         for name, setting in settings().items():
             if name not in P.systems:
                 continue
-            system, centre, width = setting.system, setting.centre, setting.half_width
-            rng = np.random.default_rng(DATA_SEED)
-            data_y0 = centre + rng.uniform(-width, width, size=(50, system.dim))
-            test_y0 = centre + np.random.default_rng(TEST_SEED).uniform(-width, width, size=(P.n_test, system.dim))
-            reference = it.ground_truth(system, test_y0, h=T_ERROR / N_OUTPUTS, n_steps=N_OUTPUTS, seed=TEST_SEED)
-            datasets = [it.ground_truth(system, data_y0, h=h, n_steps=20, seed=DATA_SEED) for h in P.hs]
-            # The trainings at the step sizes are independent: on a cluster (--scheduler) they run at once.
-            trainings = map_trainings(fit_all, [(learned, system, data, progress and not on_cluster())
-                                                for data in datasets])
-            for h, fitted in zip(P.hs, trainings):
-                fits: dict[str, Fitted] = {m.label: m.fit(system) for m in
-                                           _classical_maps(setting, h, P.all_baselines, P.all_orderings)}
-                fits.update({m.label: f for m, f in zip(learned, fitted)})
-                maps = {label: f.step_map for label, f in fits.items()}
-                comparison = it.compare(maps, system, test_y0, t_final=T_ERROR, n_outputs=N_OUTPUTS, reference=reference)
-                strang = next(r for r in comparison.rows if r.label == "Strang")
-                for r in comparison.rows:
-                    long = _long_run(maps[r.label], test_y0, P)
-                    rows.append(W1Row(
-                        system=name, h=h, method=r.label,
-                        error_t100=r.error_final,
-                        energy_error_t100=r.energy_error_max,
-                        poisson_defect=r.poisson_defect_max,
-                        cost_vs_strang=r.seconds_per_step / strang.seconds_per_step,
-                        flops_per_step=r.flops_per_step,
-                        diverged_at_step_t100=r.diverged_at_step,
-                        energy_error_long=long.energy_error_max,
-                        casimir_drift_long=long.casimir_drift_max,
-                        diverged_at_step_long=long.diverged_at_step,
-                        train_loss=fits[r.label].train_loss,
-                        wall_time_s=fits[r.label].wall_time_s,
-                    ))
-                gnet = fits["G-LPNet (sym.)"].step_map
-                if math.isclose(h, TRANSFER_H):
-                    transfer[name] = {
-                        f"{hh:g}": _long_run(gnet.with_h(hh), test_y0, P).energy_error_max
-                        for hh in (h, h / 2, h / 4)
-                    }
-                    transfer[name].update(hamiltonian_mismatch(gnet.hamiltonian, system, test_y0))
-                    gnet.save(out_dir / f"glpnet-{name.replace(' ', '_')}-h{h:g}.h5")
+            block = SystemBlock(name, setting, P)
+            for index, h in enumerate(P.hs):
+                yield Condition(block, index, h)
             # The classical maps' rollouts are compiled once per system (h is traced) and reused
             # across its step sizes; free them before the next system, or XLA's code memory grows
             # until LLVM cannot map more (seen at the fourth block when every block compiled anew).
             jax.clear_caches()
-        figures = _plots(rows, out_dir)
+
+    def models(self, P, condition):
+        block = condition.block
+        return [*_classical_maps(block.setting, condition.h, P.all_baselines, P.all_orderings), *block.learned]
+
+    def evaluate(self, condition, model, progress):
+        raise NotImplementedError("W1 measures a condition's models together (condition_rows)")
+
+    def condition_rows(self, profile, condition, models, out_dir, progress):
+        """Every model at one step size, measured together: `integrators.compare` times each
+        against Strang in the same run."""
+        block, h = condition.block, condition.h
+        system, test_y0, P = block.setting.system, block.test_y0, block.P
+        learned = dict(zip((m.label for m in block.learned), block.fitted(progress)[condition.index]))
+        fits: dict[str, Fitted] = {m.label: learned[m.label] if m.label in learned else m.fit(system) for m in models}
+        maps = {label: f.step_map for label, f in fits.items()}
+        comparison = it.compare(maps, system, test_y0, t_final=T_ERROR, n_outputs=N_OUTPUTS, reference=block.reference)
+        strang = next(r for r in comparison.rows if r.label == "Strang")
+        rows = []
+        for r in comparison.rows:
+            long = _long_run(maps[r.label], test_y0, P)
+            rows.append(W1Row(
+                system=block.name, h=h, method=r.label,
+                error_t100=r.error_final,
+                energy_error_t100=r.energy_error_max,
+                poisson_defect=r.poisson_defect_max,
+                cost_vs_strang=r.seconds_per_step / strang.seconds_per_step,
+                flops_per_step=r.flops_per_step,
+                diverged_at_step_t100=r.diverged_at_step,
+                energy_error_long=long.energy_error_max,
+                casimir_drift_long=long.casimir_drift_max,
+                diverged_at_step_long=long.diverged_at_step,
+                train_loss=fits[r.label].train_loss,
+                wall_time_s=fits[r.label].wall_time_s,
+            ))
+        gnet = fits["G-LPNet (sym.)"].step_map
+        if math.isclose(h, TRANSFER_H):
+            condition.transfer = {f"{hh:g}": _long_run(gnet.with_h(hh), test_y0, P).energy_error_max
+                                  for hh in (h, h / 2, h / 4)}
+            condition.transfer.update(hamiltonian_mismatch(gnet.hamiltonian, system, test_y0))
+            gnet.save(out_dir / f"glpnet-{block.name.replace(' ', '_')}-h{h:g}.h5")
+        return rows
+
+    def verdict(self, rows, conditions):
+        return _verdict(rows)
+
+    def figures(self, rows, conditions, out_dir):
+        return _plots(rows, out_dir)
+
+    def summary(self, P, rows, conditions):
         return {
-            "figures": figures,
-            "rows": [row_to_json(r) for r in rows],
-            "transfer": transfer,
-            "verdict": _verdict(rows),
+            "transfer": {c.block.name: c.transfer for c in conditions if c.transfer is not None},
             "model": "LPNet 3x16 and symmetric G-LPNet (2 dim modules)",
             "long_steps": P.long_steps,
             "test_initial_conditions": P.n_test,
         }
 
-    def rows(self, metrics):  # the summary table: one line per system and h for the learned maps
-        rows = _rows(metrics)
+    def summary_rows(self, rows):  # the summary table: one line per system and h for the learned maps
         return [(f"{r.system} h={r.h:g} {r.method} error(t=100)", "—", fmt(r.error_t100),
                  fmt(_strang(rows, r).error_t100)) for r in rows if r.learned]
 
-    def markdown_table(self, metrics):
-        rows = _rows(metrics)
-        description = (
+    def description(self, metrics):
+        return (
             f"{metrics.get('test_initial_conditions')} held-out initial conditions; error at "
             f"t = 100 against heyoka (max over trajectories of |y - y_ref|); energy error and Casimir "
             f"drift: max relative over {metrics.get('long_steps')} steps (sampled every 10), infinite for a "
             "map that diverged; cost: wall time per step / Strang's, same run (the fastest of 5 compiled "
             "rollouts of >= 50 ms each, `integrators.step_timing`); flops: XLA's count per step / Strang's.")
+
+    def sections(self, metrics, rows):
         transfer = [
             ("Energy error: max relative over the long run at each step size. H~ - H on the test states "
              "(relative to max abs(H)): raw up to a constant; modulo Casimirs (after a least-squares fit "
@@ -267,9 +301,8 @@ class W1(AbstractExperiment):
             "",
             *table_lines(TRANSFER_COLUMNS, metrics.get("transfer", {}).items()),
         ]
-        return self.study_markdown(metrics, description, [
-            ("Step-size transfer (symmetric G-LPNet trained at h = 0.1)", transfer),
-            ("Every method", table_lines(_method_columns(rows), rows))])
+        return [("Step-size transfer (symmetric G-LPNet trained at h = 0.1)", transfer),
+                ("Every method", table_lines(_method_columns(rows), rows))]
 
 
 TRANSFER_COLUMNS = (
@@ -295,10 +328,6 @@ def _method_columns(rows: list[W1Row]) -> tuple[Column, ...]:
         Column("cost / Strang", lambda r: f"{r.cost_vs_strang:.2f}"),
         Column("flops / Strang", lambda r: f"{r.flops_per_step / _strang(rows, r).flops_per_step:.2f}"),
     )
-
-
-def _rows(metrics) -> list[W1Row]:
-    return [row_from_json(W1Row, r) for r in metrics.get("rows", [])]
 
 
 def _diverged(value, step) -> str:

@@ -42,7 +42,6 @@ reads the saved rows and fits only the missing ones, so an interrupted `--full` 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import time
 from collections.abc import Callable
@@ -51,7 +50,6 @@ from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 import integrators as it
 import learn
@@ -59,16 +57,8 @@ import liepoisson as lp
 from integrators.internals import figure, series_styles, span_decades
 from liepoisson.internals import casimir_scale
 
-from ._experiment import (
-    AbstractExperiment,
-    Column,
-    fmt,
-    optional,
-    row_from_json,
-    row_to_json,
-    saved_row,
-    table_lines,
-)
+from ._experiment import Column, Profile, fmt, optional, profiles
+from ._runner import GRID_COLUMNS, AbstractStudy, peer
 from ._sindy import SINDyModel, WeakSINDyModel, sindy_available
 from ._study import (
     AbstractHamiltonianModel,
@@ -83,47 +73,26 @@ from ._study import (
 from ._study import (
     differences as differences,
 )
+from ._systems import (
+    KAPPA,
+    V,
+    coupled_kirchhoff_matrix,
+    cube,
+    diamond,
+    logarithmic_body,
+    quadratic_body,
+    quadratic_form,
+    rotated_inverse_inertia,
+    sphere,
+)
 
 H_TEST, STEPS_TEST, N_TEST = 0.1, 1000, 12
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
 UNEVEN = (0.05, 0.3)
 
 
-def diamond() -> lp.systems.LiePoissonSystem:
-    """A body on the 4-dimensional solvable "diamond" algebra: [p, q] = z, [n, p] = p,
-    [n, q] = -q, z central; Casimirs z and pq + zn; H = (p^2 + q^2 + n^2)/2 + 0.1 exp(-z^2),
-    bounded motion on the orbits with z != 0. Built from structure constants, as a user would."""
-    C = np.zeros((4, 4, 4))
-    for a, b, d, v in ((0, 1, 2, 1.0), (3, 0, 0, 1.0), (3, 1, 1, -1.0)):
-        C[a, b, d], C[b, a, d] = v, -v
-    g = lp.LieAlgebra(C, "diamond", ("p", "q", "z", "n"))
-    return lp.systems.LiePoissonSystem(
-        g, lambda m, xp: 0.5 * (m[0] ** 2 + m[1] ** 2 + m[3] ** 2) + 0.1 * xp.exp(-(m[2] ** 2)), name="diamond"
-    )
-
-
-def _sphere(n: int, rng: np.random.Generator) -> np.ndarray:
-    y = rng.normal(size=(n, 3))
-    return y / np.linalg.norm(y, axis=1, keepdims=True)
-
-
-def _cube(dim: int) -> Callable[[int, np.random.Generator], np.ndarray]:
-    return lambda n, rng: rng.uniform(-1.0, 1.0, size=(n, dim))
-
-
 def _diagonal(y, theta):
     return 0.5 * jnp.sum(theta * y**2)
-
-
-def _symmetric(theta, n: int):
-    """The symmetric matrix whose upper triangle (row-major) is `theta`."""
-    upper = jnp.zeros((n, n)).at[jnp.triu_indices(n)].set(theta)
-    return upper + upper.T - jnp.diag(jnp.diag(upper))
-
-
-def _quadratic_form(n: int) -> Callable[[Any, Any], Any]:
-    r"""$\tfrac12 y^TAy$ with the upper triangle of $A$ unknown: a quadratic in any axes."""
-    return lambda y, theta: 0.5 * y @ _symmetric(theta, n) @ y
 
 
 def _heavy_top_family(y, theta):
@@ -134,57 +103,9 @@ def _logarithmic_family(y, theta):
     return 0.5 * jnp.sum(theta[:3] * y[:3] ** 2) + theta[3] * jnp.log1p(jnp.dot(theta[4:], y) ** 2)
 
 
-#: The rotated rigid body: I = (2, 1, 2/3) with its principal axes turned by this rotation
-#: vector (0.95 rad) from the sensor axes.
-ROTATION = (0.4, -0.7, 0.5)
-
-
-def quadratic_body(algebra: lp.LieAlgebra, A: np.ndarray, name: str) -> lp.systems.LiePoissonSystem:
-    r"""The Lie-Poisson system of $H = \tfrac12 y^TAy$ on `algebra`, written as a user would."""
-    A = np.asarray(A, dtype=np.float64)
-    n = A.shape[0]
-    return lp.systems.LiePoissonSystem(
-        algebra, lambda m, xp: 0.5 * sum(float(A[i, j]) * m[i] * m[j] for i in range(n) for j in range(n)), name=name)
-
-
-def rotated_inverse_inertia() -> np.ndarray:
-    r"""$R\,\mathrm{diag}(1/I)\,R^T$: the rigid body's inverse inertia in sensor axes."""
-    R = Rotation.from_rotvec(ROTATION).as_matrix()
-    return R @ np.diag([0.5, 1.0, 1.5]) @ R.T
-
-
-def coupled_kirchhoff_matrix() -> np.ndarray:
-    r"""Kirchhoff's body with an added-mass matrix coupling rotation and translation: the
-    generalised mass $\begin{pmatrix}\mathbb I & C\\ C^T & \mathbb M\end{pmatrix}$ with
-    $\mathbb I = \mathbb M = \mathrm{diag}(1, 2, 1)$ and
-    $C = \begin{pmatrix}0 & 0.3 & 0\\ 0.2 & 0 & 0\\ 0 & 0 & 0.25\end{pmatrix}$; $H$ is half the
-    momenta against its inverse."""
-    mass = np.zeros((6, 6))
-    mass[:3, :3] = mass[3:, 3:] = np.diag([1.0, 2.0, 1.0])
-    mass[:3, 3:] = [[0.0, 0.3, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.25]]
-    mass[3:, :3] = mass[:3, 3:].T
-    return np.linalg.inv(mass)
-
-
-#: The non-polynomial rigid body: H = sum Pi_i^2 / (2 I_i) + KAPPA log(1 + (V . Pi)^2).
-KAPPA, V = 0.2, (0.6, 0.0, 0.8)
-
-
-def logarithmic_body() -> lp.systems.LiePoissonSystem:
-    """A rigid body I = (2, 1, 2/3) with the energy term `KAPPA log(1 + (V . Pi)^2)`, outside
-    every polynomial library."""
-    v = [float(c) for c in V]
-
-    def hamiltonian(m, xp):
-        along = v[0] * m[0] + v[1] * m[1] + v[2] * m[2]
-        return 0.25 * m[0] ** 2 + 0.5 * m[1] ** 2 + 0.75 * m[2] ** 2 + KAPPA * xp.log(1.0 + along * along)
-
-    return lp.systems.LiePoissonSystem(lp.so3(), hamiltonian, name="logarithmic rigid body")
-
-
 def _heavy_top_initial(n: int, rng: np.random.Generator) -> np.ndarray:
     """Angular momenta in the cube [-1, 1]^3, the vertical a unit vector."""
-    return np.concatenate([rng.uniform(-1.0, 1.0, size=(n, 3)), _sphere(n, rng)], axis=1)
+    return np.concatenate([rng.uniform(-1.0, 1.0, size=(n, 3)), sphere(n, rng)], axis=1)
 
 
 def _diamond_family(y, theta):
@@ -211,26 +132,26 @@ class Protocol:
 
 def protocols() -> dict[str, Protocol]:
     return {
-        "rigid body": Protocol(lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0)), 30, 21, _sphere, _diagonal,
+        "rigid body": Protocol(lp.systems.RigidBody(inertia=(2.0, 1.0, 2.0 / 3.0)), 30, 21, sphere, _diagonal,
                                (0.5, 1.0, 1.5), diagonal_differences=True),
-        "Kirchhoff": Protocol(lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)), 40, 21, _cube(6),
+        "Kirchhoff": Protocol(lp.systems.Kirchhoff(inertia=(1.0, 2.0, 1.0), mass=(1.0, 2.0, 1.0)), 40, 21, cube(6),
                               _diagonal, (1.0, 0.5, 1.0, 1.0, 0.5, 1.0)),
-        "diamond": Protocol(diamond(), 40, 21, _cube(4), _diamond_family, (1.0, 1.0, 1.0, 0.1)),
+        "diamond": Protocol(diamond(), 40, 21, cube(4), _diamond_family, (1.0, 1.0, 1.0, 0.1)),
         # Hamiltonians real bodies have: principal axes off the sensor axes, coupled added mass,
         # a linear term, a non-polynomial energy (the limits start from the identity or 10% off)
         "rotated rigid body": Protocol(
-            quadratic_body(lp.so3(), rotated_inverse_inertia(), "rotated rigid body"), 30, 21, _sphere,
-            _quadratic_form(3), tuple(rotated_inverse_inertia()[np.triu_indices(3)]),
+            quadratic_body(lp.so3(), rotated_inverse_inertia(), "rotated rigid body"), 30, 21, sphere,
+            quadratic_form(3), tuple(rotated_inverse_inertia()[np.triu_indices(3)]),
             theta0=tuple(np.eye(3)[np.triu_indices(3)])),
         "coupled Kirchhoff": Protocol(
-            quadratic_body(lp.se3(), coupled_kirchhoff_matrix(), "coupled Kirchhoff"), 40, 21, _cube(6),
-            _quadratic_form(6), tuple(coupled_kirchhoff_matrix()[np.triu_indices(6)]),
+            quadratic_body(lp.se3(), coupled_kirchhoff_matrix(), "coupled Kirchhoff"), 40, 21, cube(6),
+            quadratic_form(6), tuple(coupled_kirchhoff_matrix()[np.triu_indices(6)]),
             theta0=tuple(np.eye(6)[np.triu_indices(6)])),
         "heavy top": Protocol(
             lp.systems.HeavyTop(inertia=(2.0, 2.0, 1.0), mgl=0.5, center_of_mass=(0.0, 0.0, 1.0)), 30, 21,
             _heavy_top_initial, _heavy_top_family, HEAVY_TOP_THETA, theta0=tuple(1.1 * np.asarray(HEAVY_TOP_THETA))),
         "logarithmic rigid body": Protocol(
-            logarithmic_body(), 30, 21, _sphere, _logarithmic_family, (0.5, 1.0, 1.5, KAPPA, *V),
+            logarithmic_body(), 30, 21, sphere, _logarithmic_family, (0.5, 1.0, 1.5, KAPPA, *V),
             theta0=tuple(1.1 * np.asarray((0.5, 1.0, 1.5, KAPPA, *V))), leaf_circle=(V, (0.8, 0.0, -0.6))),
     }
 
@@ -396,81 +317,8 @@ def evaluate(protocol: Protocol, model: AbstractStudyModel, data: it.Observation
     )
 
 
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    systems: tuple[str, ...]
-    noises: tuple[float, ...]
-    samplings: tuple[str, ...]
-    iterations: int  # the MLP's L-BFGS-B iterations (after 10x as many Adam epochs)
-    steps: int = 200  # Levenberg-Marquardt steps per stage: the G-LPNet and the limit
-    n_trajectories: int | None = None  # the protocol's when None
-    n_observations: int | None = None
-    test_steps: int = STEPS_TEST
-
-
-PROFILES = {
-    # "smoke" exercises the pipeline in seconds (tests): one system, small data, few iterations.
-    "smoke": Profile(("rigid body",), (1e-3,), ("regular",), iterations=30, steps=20, n_trajectories=6,
-                     n_observations=6, test_steps=50),
-    "quick": Profile(("rigid body",), (0.0, 1e-3, 1e-2), ("regular", "uneven"), iterations=1000),
-    "full": Profile(("rigid body", "Kirchhoff", "diamond", "rotated rigid body", "coupled Kirchhoff", "heavy top",
-                     "logarithmic rigid body"), (0.0, 1e-3, 1e-2), ("regular", "uneven"), iterations=1000),
-}
-
-
-class W2(AbstractExperiment):
-    id = "W2"
-    title = "learning from observations: noisy, unevenly sampled trajectories, against SINDy and the parametric limit"
-    paper_values = ()
-
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
-        rows: list[W2Row] = []
-        all_protocols = protocols()
-        for system in P.systems:
-            protocol = all_protocols[system]
-            y0, reference = test_set(protocol, steps=P.test_steps)
-            for sampling, noise in itertools.product(P.samplings, P.noises):
-                data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
-                                    n_observations=P.n_observations)
-                for model in models(protocol, P):
-                    if not model.accepts(data):
-                        continue
-                    path = out_dir / "rows" / f"{profile}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(" ", "_")
-                    row = saved_row(W2Row, path, functools.partial(
-                        evaluate, protocol, model, data, y0, reference, system=system, noise=noise, sampling=sampling))
-                    rows.append(row)
-                    if progress:
-                        print(line(row), flush=True)
-        return {
-            "rows": [row_to_json(r) for r in rows],
-            "verdict": verdict(rows),
-            "figures": _plots(rows, out_dir),
-            "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
-            "sindy": "pysindy " + _version("pysindy") if sindy_available() else "not installed (extra peers)",
-            "model": "G-LPNet (TripleJump, family by held-out prediction)",
-            "test_steps": P.test_steps,
-        }
-
-    def rows(self, metrics):
-        rows = _rows(metrics)
-        return [(f"{r.system} {r.sampling} noise {r.noise:g} G-LPNet state error(t=100)", "—",
-                 fmt(r.state_error), fmt(getattr(_peer(rows, r, "limit"), "state_error", None)))
-                for r in rows if r.model == "G-LPNet"]
-
-    def markdown_table(self, metrics):
-        description = (
-            f"Seeds: {metrics.get('seeds')}. SINDy: {metrics.get('sindy')}. Figures: means over "
-            f"{N_TEST} held-out initial conditions, rolled out {metrics.get('test_steps')} steps of 0.1 against heyoka; "
-            "energy: max relative error of the true H; Casimir drift: max |C(t) - C(0)| / (|grad C| |y|).")
-        return self.study_markdown(metrics, description, [("Every fit", table_lines(COLUMNS, _rows(metrics)))])
-
-
 COLUMNS = (
-    Column("system", lambda r: r.system),
-    Column("sampling", lambda r: r.sampling),
-    Column("noise", lambda r: f"{r.noise:g}"),
-    Column("model", lambda r: r.model),
+    *GRID_COLUMNS,
     Column("state error t=100", lambda r: r.state_error),
     Column("max energy error", lambda r: r.energy_error),
     Column("Casimir drift", lambda r: r.casimir_drift),
@@ -483,8 +331,149 @@ COLUMNS = (
 )
 
 
-def _rows(metrics) -> list[W2Row]:
-    return [row_from_json(W2Row, r) for r in metrics.get("rows", [])]
+PROFILES = profiles(
+    # steps: Levenberg-Marquardt steps per stage (the G-LPNet and the limit); iterations: the
+    # MLP's L-BFGS-B iterations (after 10x as many Adam epochs); n_trajectories and
+    # n_observations: the protocol's when None
+    Profile(steps=200, n_trajectories=None, n_observations=None, test_steps=STEPS_TEST),
+    # "smoke" exercises the pipeline in seconds (tests): one system, small data, few iterations.
+    smoke=Profile(systems=("rigid body",), noises=(1e-3,), samplings=("regular",), iterations=30, steps=20,
+                  n_trajectories=6, n_observations=6, test_steps=50),
+    quick=Profile(systems=("rigid body",), noises=(0.0, 1e-3, 1e-2), samplings=("regular", "uneven"),
+                  iterations=1000),
+    full=Profile(systems=("rigid body", "Kirchhoff", "diamond", "rotated rigid body", "coupled Kirchhoff",
+                          "heavy top", "logarithmic rigid body"), noises=(0.0, 1e-3, 1e-2),
+                 samplings=("regular", "uneven"), iterations=1000),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Condition:
+    """A cell of W2's grid: a protocol's observations at one sampling and noise, and its
+    held-out initial conditions `y0` with heyoka's `reference` from them."""
+
+    system: str
+    sampling: str
+    noise: float
+    protocol: Protocol
+    data: it.Observations
+    y0: np.ndarray
+    reference: np.ndarray
+
+
+class W2(AbstractStudy):
+    id = "W2"
+    title = "learning from observations: noisy, unevenly sampled trajectories, against SINDy and the parametric limit"
+    profiles = PROFILES
+    row_type = W2Row
+    columns = COLUMNS
+
+    def conditions(self, P):
+        all_protocols = protocols()
+        for system in P.systems:
+            protocol = all_protocols[system]
+            y0, reference = test_set(protocol, steps=P.test_steps)
+            for sampling, noise in itertools.product(P.samplings, P.noises):
+                data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
+                                    n_observations=P.n_observations)
+                yield Condition(system, sampling, noise, protocol, data, y0, reference)
+
+    def models(self, P, condition):
+        return models(condition.protocol, P)
+
+    def evaluate(self, condition, model, progress):
+        c = condition
+        return evaluate(c.protocol, model, c.data, c.y0, c.reference, system=c.system, noise=c.noise,
+                        sampling=c.sampling)
+
+    def row_name(self, profile, condition, model):
+        c = condition
+        return f"{profile}-{c.system}-{c.sampling}-{c.noise:g}-{model.label}.json".replace(" ", "_")
+
+    @staticmethod
+    def line(row: W2Row) -> str:
+        extra = ""
+        if row.difference_error is not None:
+            extra = f", max |error of 1/I_i - 1/I_j| {np.max(row.difference_error):.1e}"
+        if row.identifiable_error is not None:
+            extra += f", identifiable A within {fmt(row.identifiable_error)}"
+        if row.axes_error_degrees is not None:
+            extra += f", principal axes within {row.axes_error_degrees:.2g} deg"
+        if row.family:
+            extra += f", H~ {row.family}"
+        if row.learned_hamiltonian_vs_H_mod_casimirs is not None:
+            extra += f", H~ - H mod Casimirs {fmt(row.learned_hamiltonian_vs_H_mod_casimirs)}"
+        return (f"{row.system}, {row.sampling}, noise {row.noise:g}, {row.model}: state error (t=100) "
+                f"{fmt(row.state_error)}, energy {fmt(row.energy_error)}, Casimir {fmt(row.casimir_drift)}, "
+                f"fit {row.fit_seconds:.1f} s{extra}")
+
+    def verdict(self, rows: list[W2Row], conditions: Any = ()) -> list[str]:
+        """Per system, sampling and noise: the G-LPNet against SINDy and the parametric limit."""
+        out = []
+        for r in rows:
+            if r.model != "G-LPNet":
+                continue
+            limit, sindy = peer(rows, r, "limit"), peer(rows, r, "SINDy")
+            parts = [f"{r.system}, {r.sampling}, noise {r.noise:g}: G-LPNet state error {fmt(r.state_error)}"]
+            if limit and r.noise == 0:
+                parts.append(f"the limit {fmt(limit.state_error)} (exact data: the true family is exact up to its "
+                             "RK4; the G-LPNet's error is that of its splitting)")
+            elif limit:
+                parts.append(f"{r.state_error / limit.state_error:.2f}x the limit's ({fmt(limit.state_error)}), "
+                             f"energy error {r.energy_error / limit.energy_error:.2f}x")
+            for other in (sindy, peer(rows, r, "weak SINDy")):
+                if other:
+                    below = r.state_error < other.state_error
+                    parts.append(f"{'below' if below else 'ABOVE'} {other.model}'s {fmt(other.state_error)}")
+            parts.append(f"Casimir drift {fmt(r.casimir_drift)}")
+            out.append("; ".join(parts))
+        return out
+
+    def figures(self, rows: list[W2Row], conditions: Any, out_dir: Path) -> list[str]:
+        """Per system and sampling: state error at t = 100 against the noise, one line per model."""
+        names = []
+        for system in dict.fromkeys(r.system for r in rows):
+            samplings = list(dict.fromkeys(r.sampling for r in rows if r.system == system))
+            fig = figure(figsize=(5.5 * len(samplings), 4.5))
+            axes = np.atleast_1d(fig.subplots(1, len(samplings)))
+            for ax, sampling in zip(axes, samplings):
+                sub = [r for r in rows if r.system == system and r.sampling == sampling]
+                labels = list(dict.fromkeys(r.model for r in sub))
+                for label, style in zip(labels, series_styles(len(labels))):
+                    pts = sorted((r for r in sub if r.model == label), key=lambda r: r.noise)
+                    noise = np.array([max(r.noise, 1e-4) for r in pts])  # noise 0 drawn at 1e-4
+                    ax.loglog(noise, [r.state_error for r in pts], label=label, **style)
+                ax.set_xlabel("noise (relative; 0 drawn at 1e-4)")
+                ax.set_ylabel("mean state error at t = 100")
+                ax.set_title(f"{system}, {sampling} sampling")
+                span_decades(ax, "y")
+                ax.legend()
+            name = f"state_error_{system.replace(' ', '_')}.png"
+            fig.savefig(out_dir / name, dpi=120)
+            names.append(name)
+        names.extend(_profile_plots(rows, out_dir))
+        return names
+
+    def summary(self, P, rows, conditions):
+        return {
+            "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
+            "sindy": "pysindy " + _version("pysindy") if sindy_available() else "not installed (extra peers)",
+            "model": "G-LPNet (TripleJump, family by held-out prediction)",
+            "test_steps": P.test_steps,
+        }
+
+    def summary_rows(self, rows):
+        return [(f"{r.system} {r.sampling} noise {r.noise:g} G-LPNet state error(t=100)", "—",
+                 fmt(r.state_error), fmt(getattr(peer(rows, r, "limit"), "state_error", None)))
+                for r in rows if r.model == "G-LPNet"]
+
+    def description(self, metrics):
+        return (
+            f"Seeds: {metrics.get('seeds')}. SINDy: {metrics.get('sindy')}. Figures: means over "
+            f"{N_TEST} held-out initial conditions, rolled out {metrics.get('test_steps')} steps of 0.1 against heyoka; "
+            "energy: max relative error of the true H; Casimir drift: max |C(t) - C(0)| / (|grad C| |y|).")
+
+
 
 
 def _version(name: str) -> str:
@@ -492,75 +481,6 @@ def _version(name: str) -> str:
 
     return version(name)
 
-
-def _peer(rows: list[W2Row], row: W2Row, model: str) -> W2Row | None:
-    return next((r for r in rows if r.condition == row.condition and r.model == model), None)
-
-
-def line(row: W2Row) -> str:
-    extra = ""
-    if row.difference_error is not None:
-        extra = f", max |error of 1/I_i - 1/I_j| {np.max(row.difference_error):.1e}"
-    if row.identifiable_error is not None:
-        extra += f", identifiable A within {fmt(row.identifiable_error)}"
-    if row.axes_error_degrees is not None:
-        extra += f", principal axes within {row.axes_error_degrees:.2g} deg"
-    if row.family:
-        extra += f", H~ {row.family}"
-    if row.learned_hamiltonian_vs_H_mod_casimirs is not None:
-        extra += f", H~ - H mod Casimirs {fmt(row.learned_hamiltonian_vs_H_mod_casimirs)}"
-    return (f"{row.system}, {row.sampling}, noise {row.noise:g}, {row.model}: state error (t=100) "
-            f"{fmt(row.state_error)}, energy {fmt(row.energy_error)}, Casimir {fmt(row.casimir_drift)}, "
-            f"fit {row.fit_seconds:.1f} s{extra}")
-
-
-def verdict(rows: list[W2Row]) -> list[str]:
-    """Per system, sampling and noise: the G-LPNet against SINDy and the parametric limit."""
-    out = []
-    for r in rows:
-        if r.model != "G-LPNet":
-            continue
-        limit, sindy = _peer(rows, r, "limit"), _peer(rows, r, "SINDy")
-        parts = [f"{r.system}, {r.sampling}, noise {r.noise:g}: G-LPNet state error {fmt(r.state_error)}"]
-        if limit and r.noise == 0:
-            parts.append(f"the limit {fmt(limit.state_error)} (exact data: the true family is exact up to its "
-                         "RK4; the G-LPNet's error is that of its splitting)")
-        elif limit:
-            parts.append(f"{r.state_error / limit.state_error:.2f}x the limit's ({fmt(limit.state_error)}), "
-                         f"energy error {r.energy_error / limit.energy_error:.2f}x")
-        for peer in (sindy, _peer(rows, r, "weak SINDy")):
-            if peer:
-                below = r.state_error < peer.state_error
-                parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(peer.state_error)}")
-        parts.append(f"Casimir drift {fmt(r.casimir_drift)}")
-        out.append("; ".join(parts))
-    return out
-
-
-def _plots(rows: list[W2Row], out_dir: Path) -> list[str]:
-    """Per system and sampling: state error at t = 100 against the noise, one line per model."""
-    names = []
-    for system in dict.fromkeys(r.system for r in rows):
-        samplings = list(dict.fromkeys(r.sampling for r in rows if r.system == system))
-        fig = figure(figsize=(5.5 * len(samplings), 4.5))
-        axes = np.atleast_1d(fig.subplots(1, len(samplings)))
-        for ax, sampling in zip(axes, samplings):
-            sub = [r for r in rows if r.system == system and r.sampling == sampling]
-            labels = list(dict.fromkeys(r.model for r in sub))
-            for label, style in zip(labels, series_styles(len(labels))):
-                pts = sorted((r for r in sub if r.model == label), key=lambda r: r.noise)
-                noise = np.array([max(r.noise, 1e-4) for r in pts])  # noise 0 drawn at 1e-4
-                ax.loglog(noise, [r.state_error for r in pts], label=label, **style)
-            ax.set_xlabel("noise (relative; 0 drawn at 1e-4)")
-            ax.set_ylabel("mean state error at t = 100")
-            ax.set_title(f"{system}, {sampling} sampling")
-            span_decades(ax, "y")
-            ax.legend()
-        name = f"state_error_{system.replace(' ', '_')}.png"
-        fig.savefig(out_dir / name, dpi=120)
-        names.append(name)
-    names.extend(_profile_plots(rows, out_dir))
-    return names
 
 
 def non_quadratic_part(profile: Any) -> np.ndarray:

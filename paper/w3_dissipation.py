@@ -41,6 +41,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import jax
 import numpy as np
@@ -51,8 +52,16 @@ import liepoisson as lp
 from integrators import splitting as sp
 from integrators.internals import figure, series_styles
 
-from ._experiment import AbstractExperiment, Column, fmt, optional, row_from_json, row_to_json, table_lines
-from ._study import AbstractStudyModel, ClassicalMap, ConservativePartModel, Fitted, LPNetModel, Training
+from ._experiment import Column, Profile, fmt, optional, profiles, row_from_json, table_lines
+from ._runner import AbstractStudy
+from ._study import (
+    AbstractStudyModel,
+    ClassicalMap,
+    ConservativePartModel,
+    Fitted,
+    LPNetModel,
+    Training,
+)
 
 H, STEPS, LONG_STEPS = 0.1, 1200, 10_000
 ORDER_T, ORDER_H = 4.0, (0.025, 0.0125)
@@ -96,11 +105,10 @@ def scenarios() -> dict[str, Scenario]:
 
 
 @dataclasses.dataclass(frozen=True)
-class Classical:
+class Classical(ClassicalMap):
     """A classical integrator of the study and the order it has in theory."""
 
-    model: ClassicalMap
-    nominal_order: int
+    nominal_order: int = 0
 
 
 def _damped(method, dissipation):
@@ -111,12 +119,12 @@ def _damped(method, dissipation):
 def classical() -> tuple[Classical, ...]:
     """The Lie-group methods on the whole generator, the damped splittings and RK4, at step `H`."""
     return (
-        Classical(ClassicalMap("Lie-Euler", it.LieEuler, H), 1),
-        Classical(ClassicalMap("CF2", it.CommutatorFree2, H), 2),
-        Classical(ClassicalMap("CF4", it.CommutatorFree4, H), 4),
-        Classical(ClassicalMap("Strang + CF2", _damped(sp.Strang(), it.CommutatorFree2), H), 2),
-        Classical(ClassicalMap("TripleJump + CF4", _damped(sp.TripleJump(), it.CommutatorFree4), H), 4),
-        Classical(ClassicalMap("RK4", it.RK4, H), 4),
+        Classical("Lie-Euler", it.LieEuler, H, 1),
+        Classical("CF2", it.CommutatorFree2, H, 2),
+        Classical("CF4", it.CommutatorFree4, H, 4),
+        Classical("Strang + CF2", _damped(sp.Strang(), it.CommutatorFree2), H, 2),
+        Classical("TripleJump + CF4", _damped(sp.TripleJump(), it.CommutatorFree4), H, 4),
+        Classical("RK4", it.RK4, H, 4),
     )
 
 
@@ -204,10 +212,10 @@ def measure(scenario: Scenario, key: str, kind: str, model: AbstractStudyModel, 
     return row, energy
 
 
-def measure_classical(scenario: Scenario, key: str, entry: Classical, reference: np.ndarray) -> tuple[W3Row, np.ndarray]:
+def measure_classical(scenario: Scenario, key: str, model: Classical, reference: np.ndarray) -> tuple[W3Row, np.ndarray]:
     """`measure`, and the classical figures: Casimir drift over `LONG_STEPS` steps, the cost per
     step, the observed order at `ORDER_T` for the step sizes `ORDER_H`."""
-    system, model = scenario.system, entry.model
+    system = scenario.system
     fitted = model.fit(system)
     row, energy = measure(scenario, key, "classical", model, fitted, reference)
     far = np.asarray(fitted.step_map.rollout(scenario.y0, LONG_STEPS, nonfinite="return"))
@@ -216,29 +224,22 @@ def measure_classical(scenario: Scenario, key: str, entry: Classical, reference:
         row,
         seconds_per_step=it.step_timing(fitted.step_map, scenario.y0).seconds_per_step,
         casimir_drift_1e4=it.rollout_figures(fitted.step_map, far, defect_points=0).report.max_casimir_drift,
-        order=order, nominal_order=entry.nominal_order,
+        order=order, nominal_order=model.nominal_order,
     )
     return row, energy
 
 
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    systems: tuple[str, ...]
-    n_train: dict[str, int]
-    train_steps: int
-    adam: int
-    lbfgs: int
-    glpnet_iterations: int | None = None
-    noises: tuple[float, ...] = (1e-3, 1e-2)  # the noisy observations of the scenarios that have them
-    lm_steps: int = 30  # Levenberg-Marquardt on whole noisy trajectories, after the one-step fit
-
-
-PROFILES = {
-    "smoke": Profile(("rigid body",), {"rigid body": 20}, 10, adam=200, lbfgs=50, glpnet_iterations=30,
-                     noises=(1e-3,), lm_steps=3),
-    "quick": Profile(("rigid body", "heavy top"), {"rigid body": 100, "heavy top": 200}, 20, adam=3000, lbfgs=1000),
-    "full": Profile(("rigid body", "heavy top"), {"rigid body": 200, "heavy top": 400}, 20, adam=10_000, lbfgs=5000),
-}
+PROFILES = profiles(
+    # noises: the noisy observations of the scenarios that have them; lm_steps:
+    # Levenberg-Marquardt on whole noisy trajectories, after the one-step fit
+    Profile(glpnet_iterations=None, noises=(1e-3, 1e-2), lm_steps=30),
+    smoke=Profile(systems=("rigid body",), n_train={"rigid body": 20}, train_steps=10, adam=200, lbfgs=50,
+                  glpnet_iterations=30, noises=(1e-3,), lm_steps=3),
+    quick=Profile(systems=("rigid body", "heavy top"), n_train={"rigid body": 100, "heavy top": 200}, train_steps=20,
+                  adam=3000, lbfgs=1000),
+    full=Profile(systems=("rigid body", "heavy top"), n_train={"rigid body": 200, "heavy top": 400}, train_steps=20,
+                 adam=10_000, lbfgs=5000),
+)
 
 
 def lpnet(P: Profile) -> LPNetModel:
@@ -263,77 +264,92 @@ def glpnet(P: Profile) -> ConservativePartModel:
     return ConservativePartModel("G-LPNet", iterations=P.glpnet_iterations)
 
 
-class W3(AbstractExperiment):
+class Condition:
+    """A system of W3: its scenario, heyoka's relaxation (`reference` and its `truth`), the
+    learned models with the data each is fitted to (exact trajectories, or noisy observations
+    at `noise`), and the energy series of every row (for the figure)."""
+
+    def __init__(self, key: str, scenario: Scenario, P: Profile):
+        self.key, self.scenario = key, scenario
+        system = scenario.system
+        self.reference = np.asarray(it.ground_truth(system, scenario.y0, h=H, n_steps=STEPS).states[0])
+        energy_ref = np.asarray(system.hamiltonian(self.reference))
+        self.energies: dict[str, np.ndarray] = {"heyoka": energy_ref}
+        self.truth = W3Truth(
+            casimir_drift=it.diagnostics(self.reference, system).max_casimir_drift,
+            max_energy_increase=float(np.max(np.diff(energy_ref))),
+            flip_time=flip_time(energy_ref, scenario.threshold(energy_ref)),
+            energy_start=float(energy_ref[0]), energy_end=float(energy_ref[-1]),
+            gamma=system.gamma,
+            gamma_hat=dissipation_rate(system, self.reference[:-1], self.reference[1:]),
+        )
+        starts = scenario.sample(np.random.default_rng(DATA_SEED), P.n_train[key])
+        data = it.ground_truth(system, starts, h=H, n_steps=P.train_steps)
+        self.learned: list[tuple[AbstractStudyModel, Any, float | None]] = [(lpnet(P), data, None)]
+        if scenario.noises:
+            times = np.arange(P.train_steps + 1) * H
+            self.learned += [(noisy_lpnet(P, noise), it.observe(system, starts, times, noise=noise, seed=DATA_SEED + 1),
+                              noise) for noise in P.noises]
+        self.learned.append((glpnet(P), data, None))
+
+
+class W3(AbstractStudy):
     id = "W3"
     title = "double-bracket dissipation: Casimir-keeping integrators and LPNets where Poisson maps cannot follow"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W3Row
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
+    def conditions(self, P):
         all_scenarios = scenarios()
-        rows: list[W3Row] = []
-        truth: dict[str, W3Truth] = {}
-        energies: dict[tuple[str, str], np.ndarray] = {}
-
-        def keep(row: W3Row, energy: np.ndarray) -> None:
-            rows.append(row)
-            energies[row.system, row.model] = energy
-            if progress:
-                print(line(row), flush=True)
-
         for key in P.systems:
-            sc = all_scenarios[key]
-            system = sc.system
-            reference = np.asarray(it.ground_truth(system, sc.y0, h=H, n_steps=STEPS).states[0])
-            energy_ref = np.asarray(system.hamiltonian(reference))
-            energies[key, "heyoka"] = energy_ref
-            truth[key] = W3Truth(
-                casimir_drift=it.diagnostics(reference, system).max_casimir_drift,
-                max_energy_increase=float(np.max(np.diff(energy_ref))),
-                flip_time=flip_time(energy_ref, sc.threshold(energy_ref)),
-                energy_start=float(energy_ref[0]), energy_end=float(energy_ref[-1]),
-                gamma=system.gamma,
-                gamma_hat=dissipation_rate(system, reference[:-1], reference[1:]),
-            )
-            if progress:
-                t = truth[key]
-                print(f"{key}: heyoka flip at t = {t.flip_time:.3f}, Casimir drift {fmt(t.casimir_drift)}, "
-                      f"max energy increase {fmt(t.max_energy_increase)}", flush=True)
-            for entry in classical():
-                keep(*measure_classical(sc, key, entry, reference))
-            starts = sc.sample(np.random.default_rng(DATA_SEED), P.n_train[key])
-            data = it.ground_truth(system, starts, h=H, n_steps=P.train_steps)
-            learned: list[tuple[AbstractStudyModel, object, float | None]] = [(lpnet(P), data, None)]
-            if sc.noises:
-                times = np.arange(P.train_steps + 1) * H
-                learned += [(noisy_lpnet(P, noise), it.observe(system, starts, times, noise=noise, seed=DATA_SEED + 1),
-                             noise) for noise in P.noises]
-            learned.append((glpnet(P), data, None))
-            for model, observed, noise in learned:
-                begin = time.perf_counter()
-                fitted = model.fit(system, observed, progress=progress and noise is None)
-                fit_seconds = time.perf_counter() - begin
-                row, energy = measure(sc, key, "learned", model, fitted, reference)
-                keep(dataclasses.replace(row, noise=noise, fit_seconds=fit_seconds), energy)
-        return {
-            "truth": {k: dataclasses.asdict(t) for k, t in truth.items()},
-            "rows": [row_to_json(r) for r in rows],
-            "verdict": verdict(rows, truth),
-            "figures": [_plot(energies, list(truth), out_dir)],
-            "h": H, "steps": STEPS,
-            "training": {k: {"trajectories": P.n_train[k], "steps": P.train_steps} for k in P.systems},
-        }
+            yield Condition(key, all_scenarios[key], P)
 
-    def rows(self, metrics):
+    def announce(self, condition):
+        t = condition.truth
+        return (f"{condition.key}: heyoka flip at t = {t.flip_time:.3f}, Casimir drift {fmt(t.casimir_drift)}, "
+                f"max energy increase {fmt(t.max_energy_increase)}")
+
+    def models(self, P, condition):
+        return [*classical(), *(model for model, _, _ in condition.learned)]
+
+    def evaluate(self, condition, model, progress):
+        sc, key = condition.scenario, condition.key
+        if isinstance(model, Classical):
+            row, energy = measure_classical(sc, key, model, condition.reference)
+        else:
+            data, noise = next((d, n) for m, d, n in condition.learned if m is model)
+            begin = time.perf_counter()
+            fitted = model.fit(sc.system, data, progress=progress and noise is None)
+            fit_seconds = time.perf_counter() - begin
+            row, energy = measure(sc, key, "learned", model, fitted, condition.reference)
+            row = dataclasses.replace(row, noise=noise, fit_seconds=fit_seconds)
+        condition.energies[row.model] = energy
+        return row
+
+    def line(self, row):
+        return line(row)
+
+    def verdict(self, rows, conditions):
+        return verdict(rows, {c.key: c.truth for c in conditions})
+
+    def figures(self, rows, conditions, out_dir):
+        energies = {(c.key, model): energy for c in conditions for model, energy in c.energies.items()}
+        return [_plot(energies, [c.key for c in conditions], out_dir)]
+
+    def summary(self, P, rows, conditions):
+        return {"truth": {c.key: dataclasses.asdict(c.truth) for c in conditions}, "h": H, "steps": STEPS,
+                "training": {k: {"trajectories": P.n_train[k], "steps": P.train_steps} for k in P.systems}}
+
+    def summary_rows(self, rows):
         return [(f"{r.system} {r.model} max energy error / H(t)", "—", fmt(r.energy_error_rel), "—")
-                for r in _rows(metrics) if r.kind == "learned"]
+                for r in rows if r.kind == "learned"]
 
-    def markdown_table(self, metrics):
+    def description(self, metrics):
+        return f"Every model steps h = {metrics.get('h')} for {metrics.get('steps')} steps against heyoka (tol = eps)."
+
+    def sections(self, metrics, rows):
         truth = {k: row_from_json(W3Truth, t) for k, t in metrics.get("truth", {}).items()}
-        description = f"Every model steps h = {metrics.get('h')} for {metrics.get('steps')} steps against heyoka (tol = eps)."
-        return self.study_markdown(metrics, description, [
-            ("heyoka", table_lines(TRUTH_COLUMNS, truth.items())),
-            ("Every model", table_lines(COLUMNS, _rows(metrics)))])
+        return [("heyoka", table_lines(TRUTH_COLUMNS, truth.items())), ("Every model", table_lines(COLUMNS, rows))]
 
 
 TRUTH_COLUMNS = (
@@ -358,10 +374,6 @@ COLUMNS = (
     Column("gamma-hat", lambda r: _number(r.gamma_hat)),
     Column("fit [s]", lambda r: r.fit_seconds),
 )
-
-
-def _rows(metrics) -> list[W3Row]:
-    return [row_from_json(W3Row, r) for r in metrics.get("rows", [])]
 
 
 def _time(x) -> str:

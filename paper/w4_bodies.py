@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-import functools
 import itertools
 import time
 import warnings
@@ -67,23 +66,17 @@ import learn
 import liepoisson as lp
 from integrators.internals import figure, series_styles
 
-from ._experiment import (
-    AbstractExperiment,
-    Column,
-    fmt,
-    optional,
-    row_from_json,
-    row_to_json,
-    saved_row,
-    table_lines,
-)
+from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
 from ._neural_ode import fit_neural_ode
+from ._runner import GRID_COLUMNS, AbstractStudy, peer
 from ._sindy import fit_sindy, fit_weak_sindy, sindy_available
-from .w2_observations import (
-    _quadratic_form,
+from ._study import AbstractStudyModel
+from ._systems import (
     coupled_kirchhoff_matrix,
     quadratic_body,
+    quadratic_form,
     rotated_inverse_inertia,
+    sphere,
 )
 
 H_REGULAR, UNEVEN = 0.1, (0.05, 0.3)
@@ -102,11 +95,6 @@ DEEPONET_EPOCHS = 60_000
 #: L-BFGS-B iterations of the LPNet on reconstructed momenta (E5's quick profile).
 LPNET_ITERATIONS = 2000
 DATA_SEED, TEST_SEED, TRAIN_SEED = 1, 100, 0
-
-
-def _sphere(n: int, rng: np.random.Generator) -> np.ndarray:
-    y = rng.normal(size=(n, 3))
-    return y / np.linalg.norm(y, axis=1, keepdims=True)
 
 
 def _vehicle(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -139,7 +127,7 @@ class BodyProtocol:
 def protocols() -> dict[str, BodyProtocol]:
     return {
         "satellite": BodyProtocol(quadratic_body(lp.so3(), rotated_inverse_inertia(), "rotated rigid body"), 30, 41,
-                                  _sphere, rotated_inverse_inertia(), 50.0),
+                                  sphere, rotated_inverse_inertia(), 50.0),
         "vehicle": BodyProtocol(quadratic_body(lp.se3(), coupled_kirchhoff_matrix(), "coupled Kirchhoff"), 40, 41,
                                 _vehicle, coupled_kirchhoff_matrix(), 20.0),
     }
@@ -185,15 +173,13 @@ class Prediction:
     momenta: np.ndarray | None = None
 
 
-class AbstractBodyModel(abc.ABC):
+class AbstractBodyModel(AbstractStudyModel):
     """A model of W4: fitted to body observations, then predicting the test set's attitudes
     (poses) and velocities from their first values."""
 
-    label: str
-
     @abc.abstractmethod
-    def fit(self, protocol: BodyProtocol, data: it.BodyObservations, steps: int) -> Any:
-        """The fitted model (`steps`: Levenberg-Marquardt steps, where it takes them)."""
+    def fit(self, protocol: BodyProtocol, data: it.BodyObservations, *, progress: bool = False) -> Any:
+        """The fitted model."""
 
     @abc.abstractmethod
     def predict(self, fitted: Any, protocol: BodyProtocol, test: TestSet) -> Prediction:
@@ -211,15 +197,17 @@ class LearnedBodyModel(AbstractBodyModel):
     `BodyObservations.in_units`), its predictions converted back."""
 
     unit: float = 1.0
+    #: Levenberg-Marquardt steps of the fit.
+    steps: int = 200
 
     @abc.abstractmethod
-    def fit_in_units(self, protocol: BodyProtocol, data: it.BodyObservations, loss: learn.BodyLoss,
-                     steps: int) -> learn.AbstractBodyMap:
+    def fit_in_units(self, protocol: BodyProtocol, data: it.BodyObservations, loss: learn.BodyLoss
+                     ) -> learn.AbstractBodyMap:
         """The map fitted to `data` (already in `unit`) on `loss`."""
 
-    def fit(self, protocol, data, steps):
+    def fit(self, protocol, data, *, progress=False):
         data = data if self.unit == 1.0 else data.in_units(self.unit)
-        return self.fit_in_units(protocol, data, learn.BodyLoss(max_step=MAX_STEP / self.unit), steps)
+        return self.fit_in_units(protocol, data, learn.BodyLoss(max_step=MAX_STEP / self.unit))
 
     def predict(self, fitted, protocol, test):
         mu0 = np.asarray(learn.latent_momenta(fitted, test.xi0 * self.unit))
@@ -241,8 +229,8 @@ class GLPNetBodyModel(LearnedBodyModel):
 
     label: str = "G-LPNet"
 
-    def fit_in_units(self, protocol, data, loss, steps):
-        net, _ = learn.fit_splitting(protocol.system, data, loss=loss, iterations=steps, seed=TRAIN_SEED,
+    def fit_in_units(self, protocol, data, loss):
+        net, _ = learn.fit_splitting(protocol.system, data, loss=loss, iterations=self.steps, seed=TRAIN_SEED,
                                      key=TRAIN_SEED, progress=False)
         return net
 
@@ -257,11 +245,11 @@ class LimitBodyModel(LearnedBodyModel):
 
     label: str = "limit"
 
-    def fit_in_units(self, protocol, data, loss, steps):
+    def fit_in_units(self, protocol, data, loss):
         n = protocol.A.shape[0]
         theta0 = 1.1 * protocol.A[np.triu_indices(n)]
-        model = learn.ParametricHamiltonian(protocol.system, _quadratic_form(n), theta0, substeps=10)
-        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(steps, rtol=1e-12)),
+        model = learn.ParametricHamiltonian(protocol.system, quadratic_form(n), theta0, substeps=10)
+        fitted, _ = learn.fit(model, data, loss=loss, optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(self.steps, rtol=1e-12)),
                               validation_fraction=0.0, seed=TRAIN_SEED, progress=False)
         return fitted
 
@@ -289,7 +277,7 @@ class LPNetBodyModel(AbstractBodyModel):
 
     label: str = "LPNet on reconstructed momenta"
 
-    def fit(self, protocol, data, steps):
+    def fit(self, protocol, data, *, progress=False):
         if not data.is_regular() or len({tuple(t - t[0]) for t in data.times}) > 1:
             raise ValueError("the LPNet on reconstructed momenta is fitted to pairs at one step on one time grid: "
                              "regular sampling, every trajectory at the same times, only")
@@ -325,7 +313,7 @@ class DeepONetBodyModel(AbstractBodyModel):
 
     label: str = "DeepONet"
 
-    def fit(self, protocol, data, steps):
+    def fit(self, protocol, data, *, progress=False):
         net, _ = learn.fit_deeponet(data, epochs=DEEPONET_EPOCHS, key=TRAIN_SEED, progress=False)
         return net
 
@@ -340,18 +328,20 @@ class AbstractVelocityFieldModel(AbstractBodyModel):
     r"""A field $\dot\xi = f(\xi)$ for the body velocities without structure, identified from
     their samples (observed, or from the configurations), integrated with the kinematics."""
 
-    @abc.abstractmethod
-    def field(self, as_states: it.Observations, steps: int) -> Any:
-        """The identified field (`predict(xi)` `(k, dim)` -> `(k, dim)`) of velocity samples
-        (`steps`: the fit's iterations, where it iterates)."""
+    #: The fit's iterations, where it iterates (in units of the others' Levenberg-Marquardt steps).
+    steps: int = 200
 
-    def fit(self, protocol, data, steps):
+    @abc.abstractmethod
+    def field(self, as_states: it.Observations) -> Any:
+        """The identified field (`predict(xi)` `(k, dim)` -> `(k, dim)`) of velocity samples."""
+
+    def fit(self, protocol, data, *, progress=False):
         velocities = data.velocities if data.velocities is not None else [
             data.group_velocities(j) for j in range(len(data))]
         times = data.times if data.velocities is not None else [0.5 * (t[1:] + t[:-1]) for t in data.times]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return self.field(it.Observations(protocol.system, list(times), list(velocities)), steps)
+            return self.field(it.Observations(protocol.system, list(times), list(velocities)))
 
     def predict(self, fitted, protocol, test):
         group = protocol.system.group
@@ -390,7 +380,7 @@ class SINDyBodyModel(AbstractVelocityFieldModel):
 
     label: str = "SINDy"
 
-    def field(self, as_states, steps):
+    def field(self, as_states):
         return fit_sindy(list(as_states.times), list(as_states.states))
 
 
@@ -402,7 +392,7 @@ class WeakSINDyBodyModel(AbstractVelocityFieldModel):
 
     label: str = "weak SINDy"
 
-    def field(self, as_states, steps):
+    def field(self, as_states):
         return fit_weak_sindy(list(as_states.times), list(as_states.states))
 
 
@@ -417,8 +407,8 @@ class NeuralODEBodyModel(AbstractVelocityFieldModel):
 
     label: str = "neural ODE"
 
-    def field(self, as_states, steps):
-        return fit_neural_ode(as_states, NEURAL_ODE_ITERATIONS * steps, NEURAL_ODE_HIDDEN, key=TRAIN_SEED,
+    def field(self, as_states):
+        return fit_neural_ode(as_states, NEURAL_ODE_ITERATIONS * self.steps, NEURAL_ODE_HIDDEN, key=TRAIN_SEED,
                               seed=TRAIN_SEED)
 
 
@@ -475,21 +465,23 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
     return out
 
 
-def models(operator_baselines: bool = False) -> list[AbstractBodyModel]:
-    """W4's models; with `operator_baselines`, the LLPNN protocol's others too (a DeepONet and
-    an LPNet on reconstructed momenta)."""
-    out: list[AbstractBodyModel] = [GLPNetBodyModel(), LimitBodyModel(), NeuralODEBodyModel()]
+def models(operator_baselines: bool = False, steps: int = 200) -> list[AbstractBodyModel]:
+    """W4's models, fitted in `steps` Levenberg-Marquardt steps (or as many units of their own
+    iterations); with `operator_baselines`, the LLPNN protocol's others too (a DeepONet and an
+    LPNet on reconstructed momenta)."""
+    out: list[AbstractBodyModel] = [GLPNetBodyModel(steps=steps), LimitBodyModel(steps=steps),
+                                    NeuralODEBodyModel(steps=steps)]
     if sindy_available():
-        out += [SINDyBodyModel(), WeakSINDyBodyModel()]
+        out += [SINDyBodyModel(steps=steps), WeakSINDyBodyModel(steps=steps)]
     if operator_baselines:
         out += [DeepONetBodyModel(), LPNetBodyModel()]
     return out
 
 
 def evaluate(protocol: BodyProtocol, model: AbstractBodyModel, data: it.BodyObservations, test: TestSet, *,
-             system: str, noise: float, sampling: str, steps: int, part: str | None = None) -> W4Row:
+             system: str, noise: float, sampling: str, part: str | None = None) -> W4Row:
     start = time.perf_counter()
-    fitted = model.fit(protocol, data, steps)
+    fitted = model.fit(protocol, data)
     fit_seconds = time.perf_counter() - start
     figures = measure(protocol, test, model.predict(fitted, protocol, test))
     return W4Row(system=system, noise=noise, sampling=sampling, model=model.label, fit_seconds=fit_seconds,
@@ -516,7 +508,7 @@ def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int,
     """The G-LPNet's inertia (`learned_inertia`) over `n` fits to the trajectories of `data`
     resampled with replacement (seeded), `(n, dim, dim)`; the family the full data chose is
     refitted (`families=`), not chosen again."""
-    net = GLPNetBodyModel().fit(protocol, data, steps)
+    net = GLPNetBodyModel(steps=steps).fit(protocol, data)
     family = next(f for f in learn.FAMILIES if not f.select and f.any_axes == net.terms.full_vectors
                   and f.bias == net.terms.bias and f.activation == net.terms.activation)
     rng = np.random.default_rng(seed)
@@ -529,40 +521,32 @@ def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int,
     return np.stack(out)
 
 
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    systems: tuple[str, ...]
-    noises: tuple[float, ...]
-    samplings: tuple[str, ...]
-    steps: int = 200  # Levenberg-Marquardt steps per fit
-    n_trajectories: int | None = None
-    n_observations: int | None = None
-    t_end: float | None = None  # the protocol's when None
-    n_test: int = N_TEST
-    #: A part of the study with its own protocol (rows marked with it), run after this one.
-    part: str | None = None
-    then: Profile | None = None
-    #: The LLPNN protocol's baselines besides W4's models.
-    operator_baselines: bool = False
+#: W4's settings: `steps`, Levenberg-Marquardt steps per fit; `n_trajectories`,
+#: `n_observations`, `t_end`: the protocol's when None; `part`: a part of the study with its own
+#: protocol (rows marked with it), run after the profile `then` names it; `operator_baselines`:
+#: the LLPNN protocol's baselines besides W4's models.
+DEFAULTS = Profile(systems=(), noises=(), samplings=(), steps=200, n_trajectories=None, n_observations=None,
+                   t_end=None, n_test=N_TEST, part=None, then=None, operator_baselines=False)
 
-    @property
-    def slug(self) -> str:
-        """The part's short name in file names ('' for the main part)."""
-        return "" if self.part is None else self.part.split()[0].lower()
 
-    @property
-    def title(self) -> str:
-        """The part's heading: its protocol."""
-        return (f"{self.part}: {self.n_trajectories} x {self.n_observations} observations at h = {H_REGULAR:g}, "
-                f"{self.n_test} test trajectories to t = {self.t_end:g}")
+def slug(P: Profile) -> str:
+    """A part's short name in file names ('' for the main part)."""
+    return "" if P.part is None else P.part.split()[0].lower()
+
+
+def part_title(P: Profile) -> str:
+    """A part's heading: its protocol."""
+    return (f"{P.part}: {P.n_trajectories} x {P.n_observations} observations at h = {H_REGULAR:g}, "
+            f"{P.n_test} test trajectories to t = {P.t_end:g}")
 
 
 #: The protocol of Latent Lie-Poisson Neural Networks (Putkaradze 2026, as described in issue
 #: 42: 200 trajectories x 101 observations at h = 0.1, noise 0.005 on configurations and
 #: velocities, 50 test trajectories to t = 200), with its baselines: a neural ODE, a DeepONet
 #: and an LPNet on reconstructed momenta.
-LLPNN = Profile(("satellite", "vehicle"), (0.005,), ("regular",), n_trajectories=200, n_observations=101,
-                t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True)
+LLPNN = DEFAULTS.replace(systems=("satellite", "vehicle"), noises=(0.005,), samplings=("regular",), n_trajectories=200,
+                         n_observations=101, t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True)
+
 
 def _parts() -> list[Profile]:
     """Every part any profile runs after its own."""
@@ -575,18 +559,32 @@ def _parts() -> list[Profile]:
     return out
 
 
-PROFILES = {
-    "smoke": Profile(("satellite",), (1e-3,), ("uneven",), steps=10, n_trajectories=4, n_observations=8, t_end=5.0),
-    "quick": Profile(("satellite",), (0.0, 1e-3, 1e-2), ("uneven",)),
-    "full": Profile(("satellite", "vehicle"), (0.0, 1e-3, 1e-2), ("regular", "uneven"), then=LLPNN),
-}
+PROFILES = profiles(
+    DEFAULTS,
+    smoke=Profile(systems=("satellite",), noises=(1e-3,), samplings=("uneven",), steps=10, n_trajectories=4,
+                  n_observations=8, t_end=5.0),
+    quick=Profile(systems=("satellite",), noises=(0.0, 1e-3, 1e-2), samplings=("uneven",)),
+    full=Profile(systems=("satellite", "vehicle"), noises=(0.0, 1e-3, 1e-2), samplings=("regular", "uneven"),
+                 then=LLPNN),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class Condition:
+    """A cell of W4's grid: a part of the study (its profile `P`), a protocol's observations at
+    one sampling and noise, and its test set."""
+
+    P: Profile
+    system: str
+    sampling: str
+    noise: float
+    protocol: BodyProtocol
+    data: it.BodyObservations
+    test: TestSet
 
 
 COLUMNS = (
-    Column("system", lambda r: r.system),
-    Column("sampling", lambda r: r.sampling),
-    Column("noise", lambda r: f"{r.noise:g}"),
-    Column("model", lambda r: r.model),
+    *GRID_COLUMNS,
     Column("attitude error [rad]", lambda r: r.attitude_error),
     Column("velocity error", lambda r: r.velocity_error),
     Column("position error", lambda r: r.position_error),
@@ -598,115 +596,120 @@ COLUMNS = (
 )
 
 
-def _peer(rows: list[W4Row], row: W4Row, model: str) -> W4Row | None:
-    return next((r for r in rows if r.condition == row.condition and r.model == model), None)
-
-
 def _where(row: W4Row) -> str:
     return f"{'' if row.part is None else row.part + ', '}{row.system}, {row.sampling}, noise {row.noise:g}"
 
 
-def line(row: W4Row) -> str:
-    position = "" if row.position_error is None else f", position {fmt(row.position_error)}"
-    ratios = "" if row.inertia_ratio_error is None else f", inertia ratios within {fmt(row.inertia_ratio_error)}"
-    return (f"{_where(row)}, {row.model}: attitude error {fmt(row.attitude_error)} "
-            f"rad, velocity {fmt(row.velocity_error)}{position}{ratios}, fit {row.fit_seconds:.1f} s")
 
-
-def verdict(rows: list[W4Row]) -> list[str]:
-    out = []
-    for r in rows:
-        if r.model != "G-LPNet":
-            continue
-        key = "position_error" if r.position_error is not None else "attitude_error"
-        what = "position" if key == "position_error" else "attitude"
-        parts = [f"{_where(r)}: G-LPNet {what} error {fmt(getattr(r, key))}"]
-        limit = _peer(rows, r, "limit")
-        if limit:
-            parts.append(f"{getattr(r, key) / getattr(limit, key):.2f}x the limit's ({fmt(getattr(limit, key))})")
-        peers = ("neural ODE", "SINDy", "weak SINDy", DeepONetBodyModel.label, LPNetBodyModel.label)
-        for peer in (_peer(rows, r, m) for m in peers):
-            if peer:
-                below = getattr(r, key) < getattr(peer, key)
-                parts.append(f"{'below' if below else 'ABOVE'} {peer.model}'s {fmt(getattr(peer, key))}")
-        parts.append(f"inertia ratios within {fmt(r.inertia_ratio_error)}, Casimir drift {fmt(r.casimir_drift)}, "
-                     f"spatial momentum drift {fmt(r.spatial_momentum_drift)}")
-        out.append("; ".join(parts))
-    return out
-
-
-def _plots(rows: list[W4Row], out_dir: Path) -> list[str]:
-    """Per system, sampling and noise: the mean attitude error against time, one line per model."""
-    names = []
-    for part, system in dict.fromkeys((r.part, r.system) for r in rows):
-        conditions = list(dict.fromkeys((r.sampling, r.noise) for r in rows if (r.part, r.system) == (part, system)))
-        fig = figure(figsize=(4.5 * len(conditions), 4.0))
-        for k, (sampling, noise) in enumerate(conditions):
-            ax = fig.add_subplot(1, len(conditions), k + 1)
-            chosen = [r for r in rows if r.condition == (part, system, sampling, noise)]
-            for r, style in zip(chosen, series_styles(len(chosen))):
-                curve = np.asarray(r.attitude_error_curve, dtype=np.float64)
-                t = H_SAVE * np.arange(curve.size)
-                ax.semilogy(t[1:], np.maximum(curve[1:], 1e-16), label=r.model, **style)
-            ax.set_title(f"{'' if part is None else part + ': '}{system}, {sampling}, noise {noise:g}")
-            ax.set_xlabel("t")
-            ax.set_ylabel("attitude error [rad]")
-            ax.legend(fontsize=8)
-        slug = next((P.slug + "_" for P in _parts() if P.part == part and part is not None), "")
-        name = f"attitude_error_{slug}{system}.png"
-        fig.tight_layout()
-        fig.savefig(out_dir / name, dpi=110)
-        names.append(name)
-    return names
-
-
-class W4(AbstractExperiment):
+class W4(AbstractStudy):
     id = "W4"
     title = "from attitude, pose and velocities to where the body points and goes, momenta latent"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W4Row
+    columns = COLUMNS
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        rows: list[W4Row] = []
+    def conditions(self, P):
         all_protocols = protocols()
-        P: Profile | None = PROFILES[profile]
-        while P is not None:
-            prefix = profile if P.part is None else f"{profile}-{P.slug}"
-            for system in P.systems:
+        part: Profile | None = P
+        while part is not None:
+            for system in part.systems:
                 protocol = all_protocols[system]
-                test = test_set(protocol, P.t_end, P.n_test)
-                for sampling, noise in itertools.product(P.samplings, P.noises):
-                    data = observations(protocol, noise, sampling, n_trajectories=P.n_trajectories,
-                                        n_observations=P.n_observations)
-                    for model in models(P.operator_baselines):
-                        name = f"{prefix}-{system}-{sampling}-{noise:g}-{model.label}.json".replace(" ", "_")
-                        row = saved_row(W4Row, out_dir / "rows" / name, functools.partial(
-                            evaluate, protocol, model, data, test, system=system, noise=noise, sampling=sampling,
-                            steps=P.steps, part=P.part))
-                        rows.append(row)
-                        if progress:
-                            print(line(row), flush=True)
-            P = P.then
-        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows), "figures": _plots(rows, out_dir),
-                "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
+                test = test_set(protocol, part.t_end, part.n_test)
+                for sampling, noise in itertools.product(part.samplings, part.noises):
+                    data = observations(protocol, noise, sampling, n_trajectories=part.n_trajectories,
+                                        n_observations=part.n_observations)
+                    yield Condition(part, system, sampling, noise, protocol, data, test)
+            part = part.then
+
+    def models(self, P, condition):
+        return models(condition.P.operator_baselines, condition.P.steps)
+
+    def admits(self, condition, model):
+        return True  # a model that cannot take the data says so
+
+    def evaluate(self, condition, model, progress):
+        c = condition
+        return evaluate(c.protocol, model, c.data, c.test, system=c.system, noise=c.noise, sampling=c.sampling,
+                        part=c.P.part)
+
+    def row_name(self, profile, condition, model):
+        c = condition
+        prefix = profile if c.P.part is None else f"{profile}-{slug(c.P)}"
+        return f"{prefix}-{c.system}-{c.sampling}-{c.noise:g}-{model.label}.json".replace(" ", "_")
+
+    @staticmethod
+    def line(row: W4Row) -> str:
+        position = "" if row.position_error is None else f", position {fmt(row.position_error)}"
+        ratios = "" if row.inertia_ratio_error is None else f", inertia ratios within {fmt(row.inertia_ratio_error)}"
+        return (f"{_where(row)}, {row.model}: attitude error {fmt(row.attitude_error)} "
+                f"rad, velocity {fmt(row.velocity_error)}{position}{ratios}, fit {row.fit_seconds:.1f} s")
+
+    def verdict(self, rows: list[W4Row], conditions: Any = ()) -> list[str]:
+        out = []
+        for r in rows:
+            if r.model != "G-LPNet":
+                continue
+            key = "position_error" if r.position_error is not None else "attitude_error"
+            what = "position" if key == "position_error" else "attitude"
+            parts = [f"{_where(r)}: G-LPNet {what} error {fmt(getattr(r, key))}"]
+            limit = peer(rows, r, "limit")
+            if limit:
+                parts.append(f"{getattr(r, key) / getattr(limit, key):.2f}x the limit's ({fmt(getattr(limit, key))})")
+            peers = ("neural ODE", "SINDy", "weak SINDy", DeepONetBodyModel.label, LPNetBodyModel.label)
+            for other in (peer(rows, r, m) for m in peers):
+                if other:
+                    below = getattr(r, key) < getattr(other, key)
+                    parts.append(f"{'below' if below else 'ABOVE'} {other.model}'s {fmt(getattr(other, key))}")
+            parts.append(f"inertia ratios within {fmt(r.inertia_ratio_error)}, Casimir drift {fmt(r.casimir_drift)}, "
+                         f"spatial momentum drift {fmt(r.spatial_momentum_drift)}")
+            out.append("; ".join(parts))
+        return out
+
+    def figures(self, rows: list[W4Row], conditions: Any, out_dir: Path) -> list[str]:
+        """Per system, sampling and noise: the mean attitude error against time, one line per model."""
+        names = []
+        for part, system in dict.fromkeys((r.part, r.system) for r in rows):
+            conditions = list(dict.fromkeys((r.sampling, r.noise) for r in rows if (r.part, r.system) == (part, system)))
+            fig = figure(figsize=(4.5 * len(conditions), 4.0))
+            for k, (sampling, noise) in enumerate(conditions):
+                ax = fig.add_subplot(1, len(conditions), k + 1)
+                chosen = [r for r in rows if r.condition == (part, system, sampling, noise)]
+                for r, style in zip(chosen, series_styles(len(chosen))):
+                    curve = np.asarray(r.attitude_error_curve, dtype=np.float64)
+                    t = H_SAVE * np.arange(curve.size)
+                    ax.semilogy(t[1:], np.maximum(curve[1:], 1e-16), label=r.model, **style)
+                ax.set_title(f"{'' if part is None else part + ': '}{system}, {sampling}, noise {noise:g}")
+                ax.set_xlabel("t")
+                ax.set_ylabel("attitude error [rad]")
+                ax.legend(fontsize=8)
+            prefix = next((slug(P) + "_" for P in _parts() if P.part == part and part is not None), "")
+            name = f"attitude_error_{prefix}{system}.png"
+            fig.tight_layout()
+            fig.savefig(out_dir / name, dpi=110)
+            names.append(name)
+        return names
+
+    def summary(self, P, rows, conditions):
+        return {"seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
                 "model": "G-LPNet (TripleJump, momenta latent, family by BIC)"}
 
-    def rows(self, metrics):
-        rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
+    def summary_rows(self, rows):
         return [(f"{_where(r).replace(',', '')} G-LPNet attitude error", "—", fmt(r.attitude_error),
-                 fmt(getattr(_peer(rows, r, "limit"), "attitude_error", None))) for r in rows if r.model == "G-LPNet"]
+                 fmt(getattr(peer(rows, r, "limit"), "attitude_error", None))) for r in rows if r.model == "G-LPNet"]
 
-    def markdown_table(self, metrics):
-        rows = [row_from_json(W4Row, r) for r in metrics.get("rows", [])]
-        description = (
+    def description(self, metrics):
+        return (
             f"Seeds: {metrics.get('seeds')}. Errors at the end of the predictions (t = 50 for the satellite, "
             f"20 for the vehicle), means over {N_TEST} held-out initial conditions against heyoka; velocity error "
             "relative to the velocities' RMS, position error to the distance travelled; drifts of the learned maps' "
             "rollouts relative to the largest value.")
+
+    def sections(self, metrics, rows):
         sections = [("Every fit", table_lines(COLUMNS, [r for r in rows if r.part is None]))]
         for part in dict.fromkeys(r.part for r in rows if r.part is not None):
-            title = next((P.title for P in _parts() if P.part == part), part)
+            title = next((part_title(P) for P in _parts() if P.part == part), part)
             sections.append((title, table_lines(COLUMNS, [r for r in rows if r.part == part])))
-        return self.study_markdown(metrics, description, sections)
+        return sections
 
 
 EXPERIMENT = W4()

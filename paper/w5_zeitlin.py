@@ -29,8 +29,9 @@ fields) for the learned map and the midpoint at $H$.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,14 +40,17 @@ import learn
 import liepoisson as lp
 
 from ._experiment import (
-    AbstractExperiment,
     Column,
+    Profile,
     fmt,
+    profiles,
     row_from_json,
     row_to_json,
     saved_row,
     table_lines,
 )
+from ._runner import AbstractStudy
+from ._study import AbstractStudyModel
 
 FINE = 16  # the small step of the data and of the reference: H / FINE
 TOL = 1e-14  # stage tolerance of the data, the reference and the learned map
@@ -55,27 +59,17 @@ EARLY = 10  # the early state error: after this many steps of H (before the chao
 STEP_SEED, TRAIN_SEED, TEST_SEED = 0, 100, 200
 
 
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    sizes: tuple[int, ...]
-    n_train: int
-    train_steps: int
-    n_test: int
-    test_steps: int
-    lm_steps: int
-    lpnet_fields: int  # the LPNet's training fields (the first n_train of them are the others')
-    lpnet_iterations: int  # L-BFGS-B iterations of the LPNet
-
-
-PROFILES = {
+PROFILES = profiles(
+    # lpnet_fields: the LPNet's training fields (the first n_train of them are the others');
+    # lpnet_iterations: its L-BFGS-B iterations.
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(sizes=(6,), n_train=3, train_steps=5, n_test=2, test_steps=10, lm_steps=3, lpnet_fields=4,
-                     lpnet_iterations=5),
-    "quick": Profile(sizes=(16, 32), n_train=8, train_steps=40, n_test=4, test_steps=100, lm_steps=30,
-                     lpnet_fields=24, lpnet_iterations=100),
-    "full": Profile(sizes=(16, 32), n_train=12, train_steps=40, n_test=8, test_steps=400, lm_steps=50,
-                    lpnet_fields=48, lpnet_iterations=250),
-}
+    smoke=Profile(sizes=(6,), n_train=3, train_steps=5, n_test=2, test_steps=10, lm_steps=3, lpnet_fields=4,
+                  lpnet_iterations=5),
+    quick=Profile(sizes=(16, 32), n_train=8, train_steps=40, n_test=4, test_steps=100, lm_steps=30,
+                  lpnet_fields=24, lpnet_iterations=100),
+    full=Profile(sizes=(16, 32), n_train=12, train_steps=40, n_test=8, test_steps=400, lm_steps=50,
+                 lpnet_fields=48, lpnet_iterations=250),
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -159,45 +153,115 @@ def test_reference(system: lp.systems.Zeitlin, H: float, fields: int, steps: int
                                                                                    save_every=FINE))
 
 
-def run_size(N: int, P: Profile, progress: bool) -> list[W5Row]:
-    system = lp.systems.Zeitlin(N)
-    H = quflow_step(system)
-    trajectories = training_trajectories(system, H, max(P.n_train, P.lpnet_fields), P.train_steps)
-    y0 = trajectories[:P.n_train, :-1].reshape(-1, system.dim)
-    y1 = trajectories[:P.n_train, 1:].reshape(-1, system.dim)
-    reference = test_reference(system, H, P.n_test, P.test_steps)
+class Condition:
+    """A size N of W5 at a profile: the system, quflow's step `H`, the training trajectories and
+    the test reference (computed when a row first needs them: a rerun that reads the rows
+    integrates nothing)."""
 
-    rows = []
-    for degree in DEGREES:
-        begin = time.perf_counter()
-        fitted, record = learn.fit(learn.IsospectralPolynomial(system, degree=degree, h=H, tol=TOL), (y0, y1), h=H,
-                                   optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps)), validation_fraction=0.2,
-                                   progress=progress)
-        fit_seconds = time.perf_counter() - begin
-        rows.append(measure(system, f"learned, degree {degree}", fitted, H, reference, 1,
-                            theta=[float(t) for t in np.asarray(fitted.theta)], fit_seconds=fit_seconds,
-                            train_loss=float(record.train_loss)))
-    # The LPNet: alpha(W) affine in W (a network without hidden layers, dim^2 + dim weights: the
-    # stream function is linear in W), its step the conjugation by exp(H alpha); L-BFGS-B on
-    # the state loss from normalised scalings and zero weights, so that directions the data do
-    # not reach keep no random weights (from the default random ones, at N = 32 the fit reached
-    # its training loss and was off the test fields at once: error 1.4 after 10 steps). More
-    # fields than the isospectral polynomial's three coefficients need (with 12 fields at
-    # N = 16 it fitted the training pairs and not the test fields: 65,792 weights, 98,304
-    # residuals).
-    begin = time.perf_counter()
-    fitted, record = learn.fit(
-        lpnet_start(system, H),
-        (trajectories[:P.lpnet_fields, :-1].reshape(-1, system.dim), trajectories[:P.lpnet_fields, 1:].reshape(-1, system.dim)),
-        h=H, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(P.lpnet_iterations)), validation_fraction=0.2, normalise=True,
-        progress=progress)
-    rows.append(measure(system, "learned LPNet, alpha affine in W", fitted, H, reference, 1, theta=None,
-                        fit_seconds=time.perf_counter() - begin, train_loss=float(record.train_loss)))
-    for divisor in (1, 2):
-        rows.append(measure(system, f"isospectral midpoint, h = H/{divisor}" if divisor > 1 else "isospectral midpoint",
-                            it.IsospectralMidpoint(system, H / divisor, tol=TOL), H / divisor, reference, divisor,
-                            theta=None, fit_seconds=None, train_loss=None))
-    return rows
+    def __init__(self, N: int, P: Profile):
+        self.N, self.P = N, P
+        self.system = lp.systems.Zeitlin(N)
+
+    @functools.cached_property
+    def H(self) -> float:
+        return quflow_step(self.system)
+
+    @functools.cached_property
+    def trajectories(self) -> np.ndarray:
+        return training_trajectories(self.system, self.H, max(self.P.n_train, self.P.lpnet_fields), self.P.train_steps)
+
+    @functools.cached_property
+    def reference(self) -> np.ndarray:
+        return test_reference(self.system, self.H, self.P.n_test, self.P.test_steps)
+
+    def pairs(self, fields: int) -> tuple[np.ndarray, np.ndarray]:
+        """Consecutive samples of the first `fields` training trajectories."""
+        dim = self.system.dim
+        return (self.trajectories[:fields, :-1].reshape(-1, dim), self.trajectories[:fields, 1:].reshape(-1, dim))
+
+
+class AbstractZeitlinModel(AbstractStudyModel):
+    """A model of W5: `fit(condition, pairs)` returns its map at the condition's step (or a
+    fraction of it) and the training record (`None`: nothing fitted)."""
+
+    #: The map's step is H / `divisor`; its rollout saves every `divisor`-th step.
+    divisor: int = 1
+
+    def pairs(self, condition: Condition) -> tuple[np.ndarray, np.ndarray] | None:
+        """The training pairs (`None`: nothing to fit)."""
+        return None
+
+    def theta(self, fitted: Any) -> list[float] | None:
+        """The fitted coefficients the row reports (`None`: none)."""
+        return None
+
+
+@dataclasses.dataclass(frozen=True)
+class IsospectralPolynomialModel(AbstractZeitlinModel):
+    """`learn.IsospectralPolynomial` of `degree`, from the classical method, fitted by
+    Levenberg-Marquardt (`lm_steps`) on the state loss."""
+
+    degree: int
+    lm_steps: int
+
+    @property
+    def label(self) -> str:
+        return f"learned, degree {self.degree}"
+
+    def pairs(self, condition):
+        return condition.pairs(condition.P.n_train)
+
+    def theta(self, fitted):
+        return [float(t) for t in np.asarray(fitted.theta)]
+
+    def fit(self, condition, data, *, progress=False):
+        return learn.fit(learn.IsospectralPolynomial(condition.system, degree=self.degree, h=condition.H, tol=TOL),
+                         data, h=condition.H, optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(self.lm_steps)),
+                         validation_fraction=0.2, progress=progress)
+
+
+@dataclasses.dataclass(frozen=True)
+class ZeitlinLPNetModel(AbstractZeitlinModel):
+    r"""The LPNet: $\alpha(W)$ affine in $W$ (a network without hidden layers, dim^2 + dim
+    weights: the stream function is linear in W), its step the conjugation by $\exp(H\alpha)$;
+    L-BFGS-B (`iterations`) on the state loss from normalised scalings and zero weights, so that
+    directions the data do not reach keep no random weights (from the default random ones, at
+    N = 32 the fit reached its training loss and was off the test fields at once: error 1.4
+    after 10 steps), on the pairs of `fields` fields, more than the isospectral polynomial's
+    three coefficients need (with 12 fields at N = 16 it fitted the training pairs and not the
+    test fields: 65,792 weights, 98,304 residuals)."""
+
+    fields: int
+    iterations: int
+    label: str = "learned LPNet, alpha affine in W"
+
+    def pairs(self, condition):
+        return condition.pairs(self.fields)
+
+    def fit(self, condition, data, *, progress=False):
+        return learn.fit(lpnet_start(condition.system, condition.H), data, h=condition.H,
+                         optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(self.iterations)), validation_fraction=0.2,
+                         normalise=True, progress=progress)
+
+
+@dataclasses.dataclass(frozen=True)
+class MidpointModel(AbstractZeitlinModel):
+    """The isospectral midpoint at H / `divisor` (nothing fitted)."""
+
+    divisor: int = 1
+
+    @property
+    def label(self) -> str:
+        return f"isospectral midpoint, h = H/{self.divisor}" if self.divisor > 1 else "isospectral midpoint"
+
+    def fit(self, condition, data, *, progress=False):
+        return it.IsospectralMidpoint(condition.system, condition.H / self.divisor, tol=TOL), None
+
+
+def models(P: Profile) -> list[AbstractZeitlinModel]:
+    """W5's models at each N, in the order of its rows."""
+    return [*(IsospectralPolynomialModel(degree, P.lm_steps) for degree in DEGREES),
+            ZeitlinLPNetModel(P.lpnet_fields, P.lpnet_iterations), MidpointModel(1), MidpointModel(2)]
 
 
 COLUMNS = (
@@ -245,34 +309,56 @@ def verdict(rows: list[W5Row]) -> list[str]:
     return out
 
 
-class W5(AbstractExperiment):
+class W5(AbstractStudy):
     id = "W5"
     title = "Zeitlin's model at N = 16 and 32: learned maps (isospectral, LPNet) vs the isospectral midpoint"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W5Row
+    columns = COLUMNS
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
-        rows_dir = out_dir / "rows"
-        rows_dir.mkdir(parents=True, exist_ok=True)
-        rows: list[W5Row] = []
+    def conditions(self, P):
         for N in P.sizes:
             print(f"W5: Zeitlin N = {N}", flush=True)
-            path = rows_dir / f"N{N}.json"
-            saved = saved_row(_Rows, path, lambda N=N: _Rows([row_to_json(r) for r in run_size(N, P, progress)], True))
-            rows += [row_from_json(W5Row, r) for r in saved.rows]
-        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows),
-                "profile_settings": dataclasses.asdict(P), "fine": FINE, "tol": TOL, "degrees": list(DEGREES), "early": EARLY}
+            yield Condition(N, P)
 
-    def rows(self, metrics):
-        return [(f"N = {r.N} {r.model}: state error at the end", "—", fmt(r.state_error_final), "—")
-                for r in _rows(metrics)]
+    def models(self, P, condition):
+        return models(P)
 
-    def markdown_table(self, metrics):
+    def evaluate(self, condition, model, progress):
+        data = model.pairs(condition)
+        begin = time.perf_counter()
+        fitted, record = model.fit(condition, data, progress=progress)
+        fit_seconds = time.perf_counter() - begin
+        return measure(condition.system, model.label, fitted, condition.H / model.divisor, condition.reference,
+                       model.divisor, theta=model.theta(fitted),
+                       fit_seconds=None if record is None else fit_seconds,
+                       train_loss=None if record is None else float(record.train_loss))
+
+    def condition_rows(self, profile, condition, models, out_dir, progress):
+        """The rows of one N, saved together as `rows/N<N>.json` (the format of earlier runs)."""
+        def compute():
+            return _Rows([row_to_json(self.evaluate(condition, m, progress)) for m in models], True)
+
+        saved = saved_row(_Rows, out_dir / "rows" / f"N{condition.N}.json", compute)
+        return [row_from_json(W5Row, r) for r in saved.rows]
+
+    def verdict(self, rows, conditions):
+        return verdict(rows)
+
+    def summary(self, P, rows, conditions):
+        return {"profile_settings": P.as_dict(), "fine": FINE, "tol": TOL, "degrees": list(DEGREES), "early": EARLY}
+
+    def summary_rows(self, rows):
+        return [(f"N = {r.N} {r.model}: state error at the end", "—", fmt(r.state_error_final), "—") for r in rows]
+
+    def description(self, metrics):
         P = metrics.get("profile_settings", {})
-        description = (f"Zeitlin's model at quflow's step H; data: the isospectral midpoint at H/{metrics.get('fine')} "
-                       f"({P.get('n_train')} fields x {P.get('train_steps')} steps); reference: the isospectral triple "
-                       f"jump at H/{metrics.get('fine')}; {P.get('n_test')} test fields x {P.get('test_steps')} steps.")
-        return self.study_markdown(metrics, description, [("Every model", table_lines(COLUMNS, _rows(metrics)))])
+        return (f"Zeitlin's model at quflow's step H; data: the isospectral midpoint at H/{metrics.get('fine')} "
+                f"({P.get('n_train')} fields x {P.get('train_steps')} steps); reference: the isospectral triple "
+                f"jump at H/{metrics.get('fine')}; {P.get('n_test')} test fields x {P.get('test_steps')} steps.")
+
+    def sections(self, metrics, rows):
+        return [("Every model", table_lines(COLUMNS, rows))]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -283,10 +369,6 @@ class _Rows:
 
     rows: list
     with_lpnet: bool
-
-
-def _rows(metrics) -> list[W5Row]:
-    return [row_from_json(W5Row, r) for r in metrics.get("rows", [])]
 
 
 EXPERIMENT = W5()

@@ -39,9 +39,12 @@ the distance to the asymptotic state against time.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
+import functools
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,16 +53,10 @@ import learn
 import liepoisson as lp
 from integrators.internals import figure, series_styles
 
-from ._experiment import (
-    AbstractExperiment,
-    Column,
-    fmt,
-    row_from_json,
-    row_to_json,
-    saved_row,
-    table_lines,
-)
+from ._experiment import Column, Profile, fmt, profiles, table_lines
 from ._neural_ode import fit_neural_ode
+from ._runner import AbstractStudy
+from ._study import AbstractStudyModel
 
 H = 0.1
 SETTLED = 0.01  # the settling time: the state stays within this relative distance of its final value
@@ -71,25 +68,14 @@ MIRRORS = {"Chaplygin sleigh": 0}
 CLASSICAL = {"RK4": it.RK4, "implicit midpoint": it.ImplicitMidpoint, "GaussLegendre4": it.GaussLegendre4}
 
 
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    n_train: int
-    train_steps: int
-    n_test: int
-    t_end: float
-    noises: tuple[float, ...]
-    lm_steps: int
-    bfgs_steps: int
-
-
-PROFILES = {
+PROFILES = profiles(
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    "smoke": Profile(n_train=6, train_steps=5, n_test=2, t_end=2.0, noises=(0.0, 1e-3), lm_steps=2, bfgs_steps=2),
-    "quick": Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=50,
-                     bfgs_steps=100),
-    "full": Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=200,
-                    bfgs_steps=500),
-}
+    smoke=Profile(n_train=6, train_steps=5, n_test=2, t_end=2.0, noises=(0.0, 1e-3), lm_steps=2, bfgs_steps=2),
+    quick=Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=50,
+                  bfgs_steps=100),
+    full=Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=200,
+                 bfgs_steps=500),
+)
 
 
 def systems() -> dict[str, lp.systems.LiePoissonDAlembert]:
@@ -258,83 +244,202 @@ def ground_truth(system, P: Profile) -> Truth:
     return Truth(velocities, heading, seconds)
 
 
-def run_system(name: str, P: Profile, rows_dir: Path, progress: bool) -> list[W6Row]:
-    """Every row of one system, each saved as it is done (an interrupted run resumes)."""
-    system = systems()[name]
-    n_steps = round(P.t_end / H)
-    truth_cache: list[Truth] = []
+class Condition:
+    """A system of W6 at a profile: heyoka's test trajectories (`truth`, computed when a row
+    first needs them: a rerun that reads every row integrates nothing) and the test starts."""
 
-    def truth() -> Truth:
-        if not truth_cache:
-            truth_cache.append(ground_truth(system, P))
-        return truth_cache[0]
+    def __init__(self, name: str, system: lp.systems.LiePoissonDAlembert, P: Profile):
+        self.name, self.system, self.P = name, system, P
+        self.n_steps = round(P.t_end / H)
 
-    slug = name.lower().replace(" ", "_")
-    rows = []
+    @functools.cached_property
+    def truth(self) -> Truth:
+        return ground_truth(self.system, self.P)
 
-    def keep(key: str, compute) -> None:
-        row = saved_row(W6Row, rows_dir / f"{slug}_{key}.json", compute)
-        rows.append(row)
-        if progress:
-            print(line(row), flush=True)
+    @functools.cached_property
+    def momenta0(self) -> np.ndarray:
+        return starts(self.system, self.P.n_test, TEST_SEED)
 
-    keep("heyoka", lambda: measure(name, system, "heyoka", "heyoka", truth().velocities, truth(),
-                                   us_per_step=1e6 * truth().seconds / (n_steps * P.n_test),
-                                   heading=truth().headings))
-    momenta0 = starts(system, P.n_test, TEST_SEED)
-    for label, make in CLASSICAL.items():
-        def classical(make=make, label=label):
-            mu, us = timed_rollout(make(system, H), momenta0, n_steps)
-            return measure(name, system, label, "classical", np.asarray(system.body_velocity(mu)), truth(),
-                           us_per_step=us)
-        keep(label.lower().replace(" ", "_"), classical)
 
-    def discrete_lagrange_dalembert():
-        method = it.DiscreteLagrangeDAlembert(system, H)
-        p, us = timed_rollout(method, momenta0, n_steps)
-        xi = np.asarray(method.velocity(p))  # its discrete velocities, the ones it keeps admissible
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """A model's velocities on a condition's test starts: `(n, steps + 1, dim)`, the
+    microseconds a step, and the sleigh's heading if the model has its own (else `None`)."""
+
+    velocities: np.ndarray
+    us_per_step: float
+    heading: np.ndarray | None = None
+
+
+class AbstractNonholonomicModel(AbstractStudyModel):
+    """A model of W6: `fit(system, data)` (the training velocities, for the models that learn),
+    then `run` from the condition's test starts. `kind` is the rows' ("heyoka", "classical",
+    "learned" or "baseline"); `noise` the training data's (`None`: nothing learned)."""
+
+    kind: str = "classical"
+    noise: float | None = None
+
+    def fit(self, system, data, *, progress=False):
+        return None
+
+    @abc.abstractmethod
+    def run(self, fitted: Any, condition: Condition) -> Run:
+        """The velocities of `fitted` from the test starts, timed."""
+
+    @property
+    def key(self) -> str:
+        """The row's file name (without system and suffix)."""
+        return self.label.lower().replace(" ", "_")
+
+
+@dataclasses.dataclass(frozen=True)
+class Heyoka(AbstractNonholonomicModel):
+    """heyoka itself (tolerance eps): the truth's row, its integration timed."""
+
+    label: str = "heyoka"
+    kind: str = "heyoka"
+
+    def run(self, fitted, condition):
+        truth = condition.truth
+        return Run(truth.velocities, 1e6 * truth.seconds / (condition.n_steps * condition.P.n_test), truth.headings)
+
+
+@dataclasses.dataclass(frozen=True)
+class ClassicalModel(AbstractNonholonomicModel):
+    """A classical integrator `make(system, H)` on the momenta; its velocities from them."""
+
+    label: str
+    make: Any = None
+
+    def fit(self, system, data, *, progress=False):
+        return self.make(system, H)
+
+    def run(self, fitted, condition):
+        mu, us = timed_rollout(fitted, condition.momenta0, condition.n_steps)
+        return Run(np.asarray(condition.system.body_velocity(mu)), us)
+
+
+@dataclasses.dataclass(frozen=True)
+class DiscreteLagrangeDAlembertModel(ClassicalModel):
+    """`integrators.DiscreteLagrangeDAlembert`, measured on its discrete velocities (the ones it
+    keeps admissible); its heading its own reconstruction, $\theta_{k+1} = \theta_k + h\\omega_k$."""
+
+    label: str = "discrete Lagrange-d'Alembert"
+    make: Any = it.DiscreteLagrangeDAlembert
+
+    @property
+    def key(self):
+        return "discrete_lagrange_dalembert"
+
+    def run(self, fitted, condition):
+        p, us = timed_rollout(fitted, condition.momenta0, condition.n_steps)
+        xi = np.asarray(fitted.velocity(p))
         heading = None
-        if truth().headings is not None:  # g_{k+1} = g_k exp(h xi_k): theta_{k+1} = theta_k + h omega_k
+        if condition.truth.headings is not None:  # g_{k+1} = g_k exp(h xi_k): theta_{k+1} = theta_k + h omega_k
             heading = np.concatenate([np.zeros_like(xi[:, :1, 0]), np.cumsum(H * xi[:, :-1, 0], axis=1)], axis=1)
-        return measure(name, system, "discrete Lagrange-d'Alembert", "classical", xi, truth(), us_per_step=us,
-                       heading=heading)
-    keep("discrete_lagrange_dalembert", discrete_lagrange_dalembert)
+        return Run(xi, us, heading)
 
-    def composed_lagrange_dalembert():  # no heading: its sub-steps' poses are not kept
-        mu, us = timed_rollout(it.ComposedLagrangeDAlembert(system, H), momenta0, n_steps)
-        return measure(name, system, "DLA, TripleJump", "classical", np.asarray(system.body_velocity(mu)), truth(),
-                       us_per_step=us)
-    keep("dla_triplejump", composed_lagrange_dalembert)
 
-    def exact_flow():
-        xi, us = timed_rollout(learn.QuadraticDAlembertMap.from_system(system, H), truth().velocities[:, 0], n_steps)
-        return measure(name, system, "exact flow", "classical", xi, truth(), us_per_step=us)
-    keep("exact_flow", exact_flow)
+@dataclasses.dataclass(frozen=True)
+class ComposedLagrangeDAlembertModel(ClassicalModel):
+    """`integrators.ComposedLagrangeDAlembert` (TripleJump in the velocities); no heading: its
+    sub-steps' poses are not kept."""
+
+    label: str = "DLA, TripleJump"
+    make: Any = it.ComposedLagrangeDAlembert
+
+    @property
+    def key(self):
+        return "dla_triplejump"
+
+
+@dataclasses.dataclass(frozen=True)
+class ExactFlowModel(AbstractNonholonomicModel):
+    """The exact flow in closed form (`learn.QuadraticDAlembertMap.from_system`), on the velocities."""
+
+    label: str = "exact flow"
+
+    def fit(self, system, data, *, progress=False):
+        return learn.QuadraticDAlembertMap.from_system(system, H)
+
+    def run(self, fitted, condition):
+        return Run(*timed_rollout(fitted, condition.truth.velocities[:, 0], condition.n_steps))
+
+
+class AbstractLearnedVelocityModel(AbstractNonholonomicModel):
+    """A map fitted to the training velocities at `noise`, stepping the velocities."""
+
+    kind = "learned"
+
+    def run(self, fitted, condition):
+        return Run(*timed_rollout(fitted, condition.truth.velocities[:, 0], condition.n_steps))
+
+    @property
+    def key(self):
+        return f"{self.label.lower().replace(',', '').replace(' ', '_')}_noise{self.noise:g}"
+
+
+@dataclasses.dataclass(frozen=True)
+class DAlembertMapModel(AbstractLearnedVelocityModel):
+    """`learn.DAlembertMap` (its constraint and learned energy kept for any weights), `lm_steps`
+    Levenberg-Marquardt steps on the trajectory loss."""
+
+    noise: float = 0.0
+    lm_steps: int = 200
+    label: str = "DAlembertMap"
+
+    def fit(self, system, data, *, progress=False):
+        fitted, _ = learn.fit(learn.DAlembertMap(system, key=DATA_SEED, h=H), data,
+                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(self.lm_steps)),
+                              validation_fraction=0.0, progress=progress)
+        return fitted
+
+
+@dataclasses.dataclass(frozen=True)
+class QuadraticDAlembertMapModel(AbstractLearnedVelocityModel):
+    """`learn.QuadraticDAlembertMap` (every quadratic energy, stepped by its exact flow), with the
+    mirror symmetry `reflection` if given, fitted as `DAlembertMapModel`."""
+
+    noise: float = 0.0
+    lm_steps: int = 200
+    reflection: int | None = None
+    label: str = "QuadraticDAlembertMap"
+
+    def fit(self, system, data, *, progress=False):
+        mirror = {} if self.reflection is None else {"reflection": self.reflection}
+        fitted, _ = learn.fit(learn.QuadraticDAlembertMap(system, h=H, **mirror), data,
+                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(self.lm_steps)),
+                              validation_fraction=0.0, progress=progress)
+        return fitted
+
+
+@dataclasses.dataclass(frozen=True)
+class NeuralODEModel(AbstractLearnedVelocityModel):
+    """`learn.NeuralODE` on the velocities, its size and budget (at most `bfgs_steps` BFGS
+    iterations) chosen by `paper._neural_ode.fit_neural_ode`."""
+
+    noise: float = 0.0
+    bfgs_steps: int = 500
+    label: str = "neural ODE"
+    kind: str = "baseline"
+
+    def fit(self, system, data, *, progress=False):
+        return fit_neural_ode(data, self.bfgs_steps, key=DATA_SEED, seed=DATA_SEED).net
+
+
+def models(name: str, P: Profile) -> list[AbstractNonholonomicModel]:
+    """W6's models of the system `name`, in the order of its rows: heyoka, the classical
+    integrators, the exact flow, then per noise the learned maps and the neural ODE."""
+    out: list[AbstractNonholonomicModel] = [Heyoka()]
+    out += [ClassicalModel(label, make) for label, make in CLASSICAL.items()]
+    out += [DiscreteLagrangeDAlembertModel(), ComposedLagrangeDAlembertModel(), ExactFlowModel()]
     for noise in P.noises:
-        models = [
-            ("DAlembertMap", "learned", lambda: learn.DAlembertMap(system, key=DATA_SEED, h=H),
-             learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))),
-            ("QuadraticDAlembertMap", "learned", lambda: learn.QuadraticDAlembertMap(system, h=H),
-             learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))),
-            ("neural ODE", "baseline", None, None)]  # its size and budget chosen by fit_neural_ode
+        out += [DAlembertMapModel(noise, P.lm_steps), QuadraticDAlembertMapModel(noise, P.lm_steps)]
         if name in MIRRORS:  # the family with the body's mirror symmetry
-            models.insert(2, ("QuadraticDAlembertMap, mirror", "learned",
-                              lambda: learn.QuadraticDAlembertMap(system, h=H, reflection=MIRRORS[name]),
-                              learn.KeepIfBetter(learn.LevenbergMarquardt(P.lm_steps))))
-        for label, kind, make, optimiser in models:
-            def learned(label=label, kind=kind, make=make, optimiser=optimiser, noise=noise):
-                data = observations(system, P, noise)
-                begin = time.perf_counter()
-                if make is None:
-                    fitted = fit_neural_ode(data, P.bfgs_steps, key=DATA_SEED, seed=DATA_SEED).net
-                else:
-                    fitted, _ = learn.fit(make(), data, optimiser=optimiser, validation_fraction=0.0,
-                                          progress=progress)
-                seconds = time.perf_counter() - begin
-                xi, us = timed_rollout(fitted, truth().velocities[:, 0], n_steps)
-                return measure(name, system, label, kind, xi, truth(), noise=noise, us_per_step=us, fit_seconds=seconds)
-            keep(f"{label.lower().replace(',', '').replace(' ', '_')}_noise{noise:g}", learned)
-    return rows
+            out.append(QuadraticDAlembertMapModel(noise, P.lm_steps, reflection=MIRRORS[name],
+                                                  label="QuadraticDAlembertMap, mirror"))
+        out.append(NeuralODEModel(noise, P.bfgs_steps))
+    return out
 
 
 def line(r: W6Row) -> str:
@@ -373,34 +478,59 @@ def verdict(rows: list[W6Row]) -> list[str]:
     return out
 
 
-class W6(AbstractExperiment):
+class W6(AbstractStudy):
     id = "W6"
     title = "Nonholonomic systems: the Suslov problem and the Chaplygin sleigh"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W6Row
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
-        rows_dir = out_dir / "rows"
-        rows_dir.mkdir(parents=True, exist_ok=True)
-        rows: list[W6Row] = []
-        for name in systems():
+    def conditions(self, P):
+        for name, system in systems().items():
             print(f"W6: {name}", flush=True)
-            rows += run_system(name, P, rows_dir, progress)
-        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows),
-                "figures": [plot(rows, out_dir)], "profile_settings": dataclasses.asdict(P), "h": H,
-                "settled": SETTLED}
+            yield Condition(name, system, P)
 
-    def rows(self, metrics):
+    def models(self, P, condition):
+        return models(condition.name, P)
+
+    def evaluate(self, condition, model, progress):
+        system = condition.system
+        data = None if model.noise is None else observations(system, condition.P, model.noise)
+        begin = time.perf_counter()
+        fitted = model.fit(system, data, progress=progress)
+        seconds = time.perf_counter() - begin
+        run = model.run(fitted, condition)
+        return measure(condition.name, system, model.label, model.kind, run.velocities, condition.truth,
+                       noise=model.noise, us_per_step=run.us_per_step, heading=run.heading,
+                       fit_seconds=None if model.noise is None else seconds)
+
+    def row_name(self, profile, condition, model):
+        return f"{condition.name.lower().replace(' ', '_')}_{model.key}.json"
+
+    def line(self, row):
+        return line(row)
+
+    def verdict(self, rows, conditions):
+        return verdict(rows)
+
+    def figures(self, rows, conditions, out_dir):
+        return [plot(rows, out_dir)]
+
+    def summary(self, P, rows, conditions):
+        return {"profile_settings": P.as_dict(), "h": H, "settled": SETTLED}
+
+    def summary_rows(self, rows):
         return [(f"{r.system} {r.model}" + (f" (noise {r.noise:g})" if r.noise is not None else "")
-                 + ": state error at the end", "—", fmt(r.final_state_max), "—") for r in _rows(metrics)]
+                 + ": state error at the end", "—", fmt(r.final_state_max), "—") for r in rows]
 
-    def markdown_table(self, metrics):
+    def description(self, metrics):
         P = metrics.get("profile_settings", {})
-        description = (f"Every model steps h = {metrics.get('h')} to t = {P.get('t_end')} from {P.get('n_test')} "
-                       f"starts against heyoka (tol = eps); learned maps from {P.get('n_train')} trajectories x "
-                       f"{P.get('train_steps')} steps of body velocities. Figures: the largest over the starts. "
-                       f"Figure: `nonholonomic.png`.")
-        return self.study_markdown(metrics, description, [("Every model", table_lines(COLUMNS, _rows(metrics)))])
+        return (f"Every model steps h = {metrics.get('h')} to t = {P.get('t_end')} from {P.get('n_test')} "
+                f"starts against heyoka (tol = eps); learned maps from {P.get('n_train')} trajectories x "
+                f"{P.get('train_steps')} steps of body velocities. Figures: the largest over the starts. "
+                f"Figure: `nonholonomic.png`.")
+
+    def sections(self, metrics, rows):
+        return [("Every model", table_lines(COLUMNS, rows))]
 
 
 COLUMNS = (
@@ -420,10 +550,6 @@ COLUMNS = (
 
 def _time(x: float) -> str:
     return "never" if not np.isfinite(x) else f"{x:.1f}"
-
-
-def _rows(metrics) -> list[W6Row]:
-    return [row_from_json(W6Row, r) for r in metrics.get("rows", [])]
 
 
 def plot(rows: list[W6Row], out_dir: Path) -> str:

@@ -70,16 +70,8 @@ import learn
 import liepoisson as lp
 from integrators.internals import figure, series_styles
 
-from ._experiment import (
-    AbstractExperiment,
-    Column,
-    fmt,
-    optional,
-    row_from_json,
-    row_to_json,
-    saved_row,
-    table_lines,
-)
+from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
+from ._runner import AbstractStudy
 from ._sindy import (
     BLOW_UP,
     SparseField,
@@ -89,6 +81,7 @@ from ._sindy import (
     relative_rms,
     sindy_available,
 )
+from ._study import AbstractStudyModel
 
 #: The body: principal moments (an elongated flat body: the two larger close) and the
 #: quadratic drag matrix D in the body frame (symmetric, positive definite, coupling axes 1
@@ -229,15 +222,13 @@ def true_drag_rate() -> np.ndarray:
     return REFERENCE_SPIN * np.diag(1.0 / np.asarray(INERTIA)) @ DRAG
 
 
-class AbstractFlightModel(abc.ABC):
-    """A model of W7: fitted to the training session's gyro records, then predicting each test
-    flight's rates from its first gyro sample."""
-
-    label: str
+class AbstractFlightModel(AbstractStudyModel):
+    """A model of W7: fitted to the training session's gyro records of a rigid body (`body`, its
+    inertia unknown), then predicting each test flight's rates from its first gyro sample."""
 
     @abc.abstractmethod
-    def fit(self, train: Session, steps: int) -> Any:
-        """The fitted model (`steps`: Levenberg-Marquardt steps, where it takes them)."""
+    def fit(self, body: lp.systems.RigidBody, train: Session, *, progress: bool = False) -> Any:
+        """The fitted model."""
 
     @abc.abstractmethod
     def predict(self, fitted: Any, omega0: np.ndarray, n_intervals: int) -> np.ndarray:
@@ -272,11 +263,13 @@ class DissipativeFlightModel(AbstractLearnedFlightModel):
     #: Levenberg-Marquardt steps per drag family (and per refinement of the sub-steps): on
     #: W7's flights the loss is flat from the 5th (BENCHMARKS.md, "W7: bodies in air").
     iterations: int = 20
+    #: The profile's Levenberg-Marquardt steps (the fit takes at most `iterations` of them).
+    steps: int = 200
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         kinds = {} if self.kinds is None else {"kinds": self.kinds}
-        model, records = learn.fit_dissipative(lp.systems.RigidBody(), train.records, any_axes=True,
-                                               iterations=min(steps, self.iterations), seed=TRAIN_SEED,
+        model, records = learn.fit_dissipative(body, train.records, any_axes=True,
+                                               iterations=min(self.steps, self.iterations), seed=TRAIN_SEED,
                                                progress=False, **kinds)
         choice = records[-1].choice
         return DissipativeFit(model, f"{choice.chosen}, sub-steps x{choice.score(choice.chosen).substeps}")
@@ -308,13 +301,15 @@ class ConservativeFlightModel(AbstractLearnedFlightModel):
     label: str = "conservative G-LPNet"
     #: The names of the families of H~ tried (`None`: `learn.fit_splitting`'s, all of them).
     families: tuple[str, ...] | None = None
+    #: Levenberg-Marquardt steps per family.
+    steps: int = 200
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         # the families given explicitly (a conservative choice: without them fit_splitting may
         # offer drag families on body records), all but those that select terms on momenta
         families = [f for f in learn.FAMILIES if not f.select and (self.families is None or f.name in self.families)]
-        net, _ = learn.fit_splitting(lp.systems.RigidBody(), train.records, loss=learn.BodyLoss(),
-                                     iterations=steps, seed=TRAIN_SEED, key=TRAIN_SEED, progress=False,
+        net, _ = learn.fit_splitting(body, train.records, loss=learn.BodyLoss(),
+                                     iterations=self.steps, seed=TRAIN_SEED, key=TRAIN_SEED, progress=False,
                                      families=families)
         return net
 
@@ -334,12 +329,14 @@ class LPNetFlightModel(AbstractLearnedFlightModel):
     |mu|, so it cannot lose angular momentum to the air."""
 
     label: str = "LPNet"
+    #: Levenberg-Marquardt steps.
+    steps: int = 200
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         A, b, _ = learn.weak_form_quadratic(train.records, linear=True, diagonal=False)
-        model = learn.BodyLPNet.at_quadratic(lp.systems.RigidBody(), A, b, hidden=(16,), key=TRAIN_SEED)
+        model = learn.BodyLPNet.at_quadratic(body, A, b, hidden=(16,), key=TRAIN_SEED)
         fitted, _ = learn.fit(model, train.records, loss=learn.BodyLoss(max_step=LPNET_MAX_STEP),
-                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(steps)), progress=False)
+                              optimiser=learn.KeepIfBetter(learn.LevenbergMarquardt(self.steps)), progress=False)
         return fitted
 
     def identified(self, fitted):
@@ -353,8 +350,10 @@ class LimitFlightModel(AbstractFlightModel):
     the truth 10% off (ratios and D) and the first gyro samples (initial rates)."""
 
     label: str = "limit"
+    #: Levenberg-Marquardt steps (at least 10: `least_squares` counts evaluations, twice as many).
+    steps: int = 200
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         measured = train.measured
         n, m = measured.shape[:2]
         truth = np.concatenate([[INERTIA[0] / INERTIA[1], INERTIA[2] / INERTIA[1]], _upper(DRAG)])
@@ -367,7 +366,7 @@ class LimitFlightModel(AbstractFlightModel):
         residuals = jax.jit(residuals)
         jacobian = jax.jit(jax.jacfwd(residuals))
         result = least_squares(lambda x: np.asarray(residuals(x)), x0, jac=lambda x: np.asarray(jacobian(x)),
-                               method="lm", x_scale="jac", max_nfev=max(2 * steps, 20))
+                               method="lm", x_scale="jac", max_nfev=max(2 * self.steps, 20))
         return TrueFamily(result.x[:2], np.asarray(_symmetric(result.x[2:8])))
 
     def predict(self, fitted, omega0, n_intervals):
@@ -385,7 +384,7 @@ class EulerFlightModel(LimitFlightModel):
 
     label: str = "Euler, no drag"
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         return TrueFamily(np.array([INERTIA[0] / INERTIA[1], INERTIA[2] / INERTIA[1]]), np.zeros((3, 3)))
 
 
@@ -399,7 +398,7 @@ class AbstractSparseFlightModel(AbstractFlightModel):
     def fit_field(self, times: list[np.ndarray], rates: list[np.ndarray]) -> SparseField:
         """The field chosen by the rule for the measured `rates` at their `times`."""
 
-    def fit(self, train, steps):
+    def fit(self, body, train, *, progress=False):
         return self.fit_field(list(train.records.times), list(train.records.velocities))
 
     def predict(self, fitted, omega0, n_intervals):
@@ -434,9 +433,10 @@ class WeakSINDyFlightModel(AbstractSparseFlightModel):
 
 def models(profile: Profile) -> list[AbstractFlightModel]:
     """W7's models, the G-LPNets' families as `profile` restricts them."""
-    out: list[AbstractFlightModel] = [DissipativeFlightModel(kinds=profile.drag_kinds),
-                                      ConservativeFlightModel(families=profile.families), LPNetFlightModel(),
-                                      LimitFlightModel(), EulerFlightModel()]
+    steps = profile.steps
+    out: list[AbstractFlightModel] = [DissipativeFlightModel(kinds=profile.drag_kinds, steps=steps),
+                                      ConservativeFlightModel(families=profile.families, steps=steps),
+                                      LPNetFlightModel(steps=steps), LimitFlightModel(steps=steps), EulerFlightModel()]
     if sindy_available():
         out += [SINDyFlightModel(), WeakSINDyFlightModel()]
     return out
@@ -494,9 +494,9 @@ class W7Row:
     detail: str | None = optional()
 
 
-def evaluate(model: AbstractFlightModel, train: Session, test: Session, *, noise: float, steps: int) -> W7Row:
+def evaluate(model: AbstractFlightModel, train: Session, test: Session, *, noise: float) -> W7Row:
     start = time.perf_counter()
-    fitted = model.fit(train, steps)
+    fitted = model.fit(lp.systems.RigidBody(), train)
     fit_seconds = time.perf_counter() - start
     rates = model.predict(fitted, test.measured[:, 0], test.times.size - 1)
     found = model.identified(fitted)
@@ -510,25 +510,25 @@ def evaluate(model: AbstractFlightModel, train: Session, test: Session, *, noise
                  detail=found.detail)
 
 
+PROFILES = profiles(
+    # steps: Levenberg-Marquardt steps; drag_kinds, families: the dissipative G-LPNet's drag
+    # families and the conservative one's families of H~ (None: all; the smoke profile tries one
+    # each, to compile fewer maps)
+    Profile(n_train=12, n_test=12, duration=FLIGHT, steps=200, drag_kinds=None, families=None),
+    smoke=Profile(noises=(0.02,), n_train=3, n_test=2, duration=0.3, steps=10, drag_kinds=("quadratic",),
+                  families=("quadratic, any axes, even",)),
+    quick=Profile(noises=(0.02,)),
+    full=Profile(noises=(0.01, 0.02, 0.05)),
+)
+
+
 @dataclasses.dataclass(frozen=True)
-class Profile:
-    noises: tuple[float, ...]
-    n_train: int = 12
-    n_test: int = 12
-    duration: float = FLIGHT
-    steps: int = 200
-    #: The dissipative G-LPNet's drag families and the conservative one's families of H~
-    #: (`None`: all; the smoke profile tries one each, to compile fewer maps).
-    drag_kinds: tuple[str, ...] | None = None
-    families: tuple[str, ...] | None = None
+class Condition:
+    """A noise level of W7: the training session and the test session at that noise."""
 
-
-PROFILES = {
-    "smoke": Profile((0.02,), n_train=3, n_test=2, duration=0.3, steps=10, drag_kinds=("quadratic",),
-                     families=("quadratic, any axes, even",)),
-    "quick": Profile((0.02,)),
-    "full": Profile((0.01, 0.02, 0.05)),
-}
+    noise: float
+    train: Session
+    test: Session
 
 
 def _ratios_cell(r: W7Row) -> str:
@@ -630,44 +630,52 @@ def _plot(rows: list[W7Row], test: Session, noise: float, out_dir: Path) -> str:
     return name
 
 
-class W7(AbstractExperiment):
+class W7(AbstractStudy):
     id = "W7"
     title = "bodies in air: a tossed body under quadratic drag seen by a gyroscope, flips predicted"
-    paper_values = ()
+    profiles = PROFILES
+    row_type = W7Row
+    columns = COLUMNS
 
-    def run(self, profile: str, out_dir: Path, progress: bool):
-        P = PROFILES[profile]
-        rows: list[W7Row] = []
-        figures = []
+    def conditions(self, P):
         for noise in P.noises:
-            train = session(P.n_train, TRAIN_SPINS, noise, DATA_SEED, P.duration)
-            test = session(P.n_test, TEST_SPINS, noise, TEST_SEED, P.duration)
-            for model in models(P):
-                name = f"{profile}-{noise:g}-{model.label}.json".replace(" ", "_").replace(",", "")
-                row = saved_row(W7Row, out_dir / "rows" / name, functools.partial(
-                    evaluate, model, train, test, noise=noise, steps=P.steps))
-                rows.append(row)
-                if progress:
-                    print(line(row), flush=True)
-            figures.append(_plot(rows, test, noise, out_dir))
-        return {"rows": [row_to_json(r) for r in rows], "verdict": verdict(rows), "figures": figures,
-                "seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
+            yield Condition(noise, session(P.n_train, TRAIN_SPINS, noise, DATA_SEED, P.duration),
+                            session(P.n_test, TEST_SPINS, noise, TEST_SEED, P.duration))
+
+    def models(self, P, condition):
+        return models(P)
+
+    def evaluate(self, condition, model, progress):
+        return evaluate(model, condition.train, condition.test, noise=condition.noise)
+
+    def row_name(self, profile, condition, model):
+        return f"{profile}-{condition.noise:g}-{model.label}.json".replace(" ", "_").replace(",", "")
+
+    def line(self, row):
+        return line(row)
+
+    def verdict(self, rows, conditions):
+        return verdict(rows)
+
+    def figures(self, rows, conditions, out_dir):
+        return [_plot(rows, c.test, c.noise, out_dir) for c in conditions]
+
+    def summary(self, P, rows, conditions):
+        return {"seeds": {"data": DATA_SEED, "test": TEST_SEED, "training": TRAIN_SEED},
                 "protocol": {"train_flights": P.n_train, "test_flights": P.n_test, "duration_s": P.duration,
                              "levenberg_marquardt_steps": P.steps},
                 "body": {"inertia": list(INERTIA), "drag": DRAG.tolist(), "true_drag_rate": true_drag_rate().tolist()},
                 "model": "dissipative G-LPNet (quadratic H~, learned quadratic drag, momenta latent)"}
 
-    def rows(self, metrics):
-        rows = [row_from_json(W7Row, r) for r in metrics.get("rows", [])]
+    def summary_rows(self, rows):
         return [(f"noise {r.noise:g} dissipative G-LPNet rate error", "—", fmt(r.rate_error),
                  fmt(getattr(_peer(rows, r, LimitFlightModel.label), "rate_error", None)))
                 for r in rows if r.model == DissipativeFlightModel.label]
 
-    def markdown_table(self, metrics):
-        rows = [row_from_json(W7Row, r) for r in metrics.get("rows", [])]
+    def description(self, metrics):
         true = np.diag(np.asarray(metrics.get("body", {}).get("true_drag_rate", true_drag_rate())))
         protocol = metrics.get("protocol", {})
-        description = (
+        return (
             f"Seeds: {metrics.get('seeds')}. The body I = {INERTIA} under quadratic drag; fitted on a session of "
             f"{protocol.get('train_flights')} flights of {protocol.get('duration_s')} s at {TRAIN_SPINS[0]:g}-{TRAIN_SPINS[1]:g} rad/s, tested on another of {protocol.get('test_flights')} at "
             f"{TEST_SPINS[0]:g}-{TEST_SPINS[1]:g} rad/s, each flight predicted from its first gyro sample. Rate "
@@ -676,7 +684,9 @@ class W7(AbstractExperiment):
             f"at least twice. Truth: I1/I2, I3/I2 = {INERTIA[0] / INERTIA[1]:.4f}, {INERTIA[2] / INERTIA[1]:.4f}; "
             f"drag rate diagonal ({', '.join(f'{d:.3f}' for d in true)}) 1/s; drag error: relative (Frobenius) "
             "error of the whole matrix.")
-        return self.study_markdown(metrics, description, [("Every model", table_lines(COLUMNS, rows))])
+
+    def sections(self, metrics, rows):
+        return [("Every model", table_lines(COLUMNS, rows))]
 
 
 EXPERIMENT = W7()

@@ -180,7 +180,7 @@ def e5_run_by_the_cli_without_its_baseline(tmp_path_factory):
     before = _tree(package)
     work = tmp_path_factory.mktemp("cli")
     with pytest.MonkeyPatch.context() as patch:
-        smoke = dataclasses.replace(e5_kirchhoff.PROFILES["smoke"], baseline=False)
+        smoke = e5_kirchhoff.PROFILES["smoke"].replace(baseline=False)
         patch.setitem(e5_kirchhoff.PROFILES, "smoke", smoke)
         patch.chdir(work)  # the default --out is relative to the working directory
         assert main(["run", "E5", "--profile", "smoke", "--no-progress"]) == 0
@@ -705,7 +705,7 @@ def test_w4s_llpnn_baselines_predict_and_the_lpnets_rollout_keeps_its_invariants
     data = w4.observations(protocol, 0.005, "regular", n_trajectories=12, n_observations=21)
     test = w4.test_set(protocol, 5.0, 3)
     lpnet = w4.LPNetBodyModel()
-    fitted = lpnet.fit(protocol, data, 10)
+    fitted = lpnet.fit(protocol, data)
     prediction = lpnet.predict(fitted, protocol, test)
     figures = w4.measure(protocol, test, prediction)
     # a lifted LPNet step is a coadjoint step and a turn along the stabiliser: the latent

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 import learn
 from paper import w2_observations as w2
+from paper._systems import ROTATION
 
 EPS = np.finfo(float).eps
 PROTOCOLS = w2.protocols()
@@ -32,7 +33,7 @@ def test_the_rotated_body_has_the_principal_axes_it_is_built_with():
     protocol = PROTOCOLS["rotated rigid body"]
     y = protocol.initial(30, np.random.default_rng(1))
     axes = learn.quadratic_part(protocol.system.hamiltonian, protocol.system, y).principal_axes()
-    R = Rotation.from_rotvec(w2.ROTATION).as_matrix()  # its columns: the axes of 1/I = 0.5, 1, 1.5
+    R = Rotation.from_rotvec(ROTATION).as_matrix()  # its columns: the axes of 1/I = 0.5, 1, 1.5
     np.testing.assert_allclose(axes.angles_to(R), 0.0, atol=1e-6)  # arccos near 1: sqrt of ~1e-13
     np.testing.assert_allclose(np.diff(axes.values), [0.5, 0.5], atol=300 * EPS)
 

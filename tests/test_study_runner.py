@@ -1,0 +1,153 @@
+"""What a newcomer adds is one class each: a row of a study (`paper._study.AbstractStudyModel`),
+a loss (`learn.AbstractPairsLoss`), a solver wrapper (`learn.AbstractWrappedStage`) and a family
+of learned Hamiltonians (`learn.Family`), all four defined here and run end to end through W2's
+study runner on a tiny case; and the one `Profile` type every experiment's budgets share."""
+
+import dataclasses
+import json
+import pickle
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import learn
+from paper._experiment import Profile, fmt, profiles
+from paper._study import AbstractHamiltonianModel, AbstractStepMapModel, Fitted, Identified
+
+
+class UnitStartFamily(learn.Family):
+    """The quadratic family on the basis axes, started from the unit form $|y|^2/2$ instead of
+    the least-squares estimate of the observations."""
+
+    def start(self, system, data, size):
+        return self.terms_of(system, np.eye(system.dim), np.zeros(system.dim), size)
+
+
+class RelativeStateLoss(learn.AbstractPairsLoss):
+    r"""The state loss of one step relative to the size of its target: $(\Phi(y_0) - y_1)/|y_1|$."""
+
+    def pair_residuals(self, model, y0, targets):
+        return (jax.vmap(model.step)(y0) - targets) / jnp.linalg.norm(targets, axis=-1, keepdims=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class Twice(learn.AbstractWrappedStage):
+    """`stage` run twice, the second run from the first's result."""
+
+    stage: learn.AbstractStage
+
+    @property
+    def budget(self):
+        return 2 * self.stage.budget
+
+    def with_budget(self, budget):
+        return Twice(self.stage.with_budget(max(1, budget // 2)))
+
+    def run(self, problem, context):
+        first = self.stage.run(problem, context)
+        second = self.stage.run(problem.with_start(first.y), context.shifted(first.record.iterations))
+        shift = first.history["epoch"][-1] if first.history["epoch"].size else 0
+        history = {key: np.concatenate([first.history[key], second.history[key] + (shift if key == "epoch" else 0)])
+                   for key in ("epoch", "train_loss", "val_loss")}
+        record = dataclasses.replace(second.record, iterations=first.record.iterations + second.record.iterations,
+                                     details={**second.record.details, "runs": 2})
+        return learn.Result(second.y, record, history, second.linearisation)
+
+
+FAMILY = UnitStartFamily("quadratic, from the unit form", "identity", linear_term=False, bias=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class RefinedGLPNet(AbstractStepMapModel, AbstractHamiltonianModel):
+    """A row of W2: a G-LPNet of `FAMILY` (`learn.fit_splitting`), then refined on consecutive
+    observations by `RelativeStateLoss` with `Twice(LevenbergMarquardt)`."""
+
+    label: str = "G-LPNet, unit start, refined"
+
+    def fit(self, system, data, *, progress=False):
+        net, records = learn.fit_splitting(system, data, families=[FAMILY], iterations=3, progress=False)
+        y0, y1, dt = data.pairs()
+        net, record = learn.fit(net, (y0, y1), h=float(dt[0]), loss=RelativeStateLoss(), validation_fraction=0.0,
+                                optimiser=Twice(learn.LevenbergMarquardt(2)), progress=False)
+        return Fitted(net, (*records, record))
+
+    def identify(self, fitted, system, states, diagonal):
+        choice = fitted.records[0].choice
+        return Identified(family=choice.chosen, bic={s.family: s.bic for s in choice.scores})
+
+
+def test_a_new_row_loss_wrapper_and_family_run_through_the_study_runner(tmp_path, monkeypatch):
+    from paper import w2_observations as w2
+
+    # exact observations: the refinement on pairs needs pairs a Poisson map joins (equal Casimirs)
+    tiny = w2.PROFILES["smoke"].replace(noises=(0.0,), n_trajectories=4, n_observations=6, test_steps=20)
+    monkeypatch.setitem(w2.PROFILES, "smoke", tiny)
+    monkeypatch.setattr(w2, "models", lambda protocol, profile: [RefinedGLPNet()])  # the study's row list
+    fits = []  # what the row's fit returned, kept to look into its records
+    fit = RefinedGLPNet.fit
+    monkeypatch.setattr(RefinedGLPNet, "fit", lambda self, *args, **kw: fits.append(fit(self, *args, **kw)) or fits[-1])
+    metrics = w2.EXPERIMENT.execute(profile="smoke", progress=False, out_dir=tmp_path)
+    (row,) = metrics["rows"]
+    assert row["model"] == "G-LPNet, unit start, refined" and row["family"] == FAMILY.name
+    # the family was offered (fit_splitting fitted it and scored it) and chosen, alone
+    assert list(row["bic"]) == [FAMILY.name]
+    # the row in the study's table, with the figure the model produced and its family
+    table = (tmp_path / "table.md").read_text()
+    line = next(li for li in table.splitlines() if "| G-LPNet, unit start, refined |" in li)
+    assert f"| {fmt(row['state_error'])} |" in line and f"| {FAMILY.name} |" in line
+    # saved as it was measured, under the runner's name for it: a rerun reads it, fits nothing
+    saved = tmp_path / "rows" / "smoke-rigid_body-regular-0-G-LPNet,_unit_start,_refined.json"
+    assert json.loads(saved.read_text())["state_error"] == row["state_error"]
+    monkeypatch.setattr(w2, "models", lambda protocol, profile: [_Unfittable()])
+    assert w2.EXPERIMENT.execute(profile="smoke", progress=False, out_dir=tmp_path)["rows"] == []  # not admitted
+    monkeypatch.setattr(w2, "models", lambda protocol, profile: [RefinedGLPNet()])
+    again = w2.EXPERIMENT.execute(profile="smoke", progress=False, out_dir=tmp_path)
+    assert again["rows"] == metrics["rows"] and again["resumed_rows"] == 1
+
+    # the loss and the wrapper, seen in the record of the refinement: the loss by its name, the
+    # wrapper's two runs of 2 Levenberg-Marquardt steps each (a step that does not lower the loss
+    # still counts); the row's training loss is the refinement's
+    (fitted,) = fits
+    refinement = fitted.records[-1]
+    assert refinement.loss == "RelativeStateLoss"
+    (stage,) = refinement.stages
+    assert stage.details["runs"] == 2 and stage.iterations == 4
+    assert fitted.records[0].choice.chosen == FAMILY.name
+    assert refinement.train_loss == row["train_loss"]
+
+
+class _Unfittable(RefinedGLPNet):
+    """A row the study does not admit: it refuses the data (the runner skips it, as W2 skips
+    the MLP on uneven sampling)."""
+
+    def accepts(self, data):
+        return False
+
+
+def test_one_profile_type_for_every_experiment():
+    from paper._registry import EXPERIMENTS
+    from paper.w4_bodies import PROFILES as W4
+
+    P = Profile(epochs=3, seeds=(1, 2))
+    assert P.epochs == 3 and P.replace(epochs=4).epochs == 4 and P.epochs == 3
+    assert pickle.loads(pickle.dumps(P)) == P  # to worker processes (`--scheduler processes`)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        P.epochs = 4
+    with pytest.raises(ValueError, match="epoch"):
+        P.replace(epoch=4)  # a misspelt setting
+    with pytest.raises(AttributeError, match="no setting 'epoch'"):
+        _ = P.epoch
+    with pytest.raises(ValueError, match="'full' profile lacks \\['seeds'\\]"):
+        profiles(smoke=Profile(epochs=1, seeds=1), full=Profile(epochs=2))
+    made = profiles(Profile(seeds=1), smoke=Profile(epochs=1), full=Profile(epochs=2, seeds=3))
+    assert (made["smoke"].seeds, made["full"].seeds) == (1, 3)
+    # every experiment's and study's budgets are Profiles with the same settings in each profile
+    for exp_id, exp in EXPERIMENTS.items():
+        module = __import__(type(exp).__module__, fromlist=["PROFILES"])
+        budgets = module.PROFILES
+        assert set(budgets) == {"smoke", "quick", "full"}, exp_id
+        assert all(type(P) is Profile for P in budgets.values()), exp_id
+        assert len({frozenset(P.as_dict()) for P in budgets.values()}) == 1, exp_id
+    assert W4["full"].then.part == "LLPNN protocol"  # a study's second part: a Profile too
