@@ -34,7 +34,7 @@ least twice. Models:
 - **SINDy** and **weak SINDy** (pysindy): a polynomial field of degree 2 for the rates (with
   or without a constant), STLSQ with the threshold, the constant and the derivative (SINDy) or
   the support width (weak SINDy) chosen on the rollout errors of the TRAINING flights from
-  their first samples, never the test (every study's rule, `paper._sindy.choose_sparse_field`);
+  starts fitted to each flight, never the test (every study's rule, `paper._sindy.choose_sparse_field`);
 - **limit**: the true family (the principal moments' ratios I1/I2, I3/I2, the symmetric drag
   matrix D at the scale I2 = 6, and each flight's initial rates) fitted by
   `scipy.optimize.least_squares` (Levenberg-Marquardt, Jacobian by `jax.jacfwd`) on whole
@@ -391,7 +391,7 @@ class EulerFlightModel(LimitFlightModel):
 class AbstractSparseFlightModel(AbstractFlightModel):
     """A sparse polynomial field of degree 2 for the rates (pysindy, STLSQ), its threshold,
     library and derivative or support width chosen on the rollouts of the TRAINING flights from
-    their first samples (`paper._sindy.choose_sparse_field`: every study's rule). Integrated by
+    starts fitted to each flight (`paper._sindy.choose_sparse_field`: every study's rule). Integrated by
     LSODA."""
 
     @abc.abstractmethod
