@@ -40,6 +40,8 @@ def write_vorticity_snapshots(path: str | os.PathLike, times: ArrayLike, fields:
 
     t = check_times(np.asarray(times, dtype=np.float64), "times")
     fields = np.asarray(fields)
+    if fields.dtype.kind in "iufc" and not np.all(np.isfinite(fields)):
+        raise ValueError("fields must be finite")
     if fields.ndim == 3 and fields.shape[1] == fields.shape[2]:
         key, data = "vorticity", fields.astype(np.complex128)
         N = fields.shape[1]
@@ -56,8 +58,6 @@ def write_vorticity_snapshots(path: str | os.PathLike, times: ArrayLike, fields:
     if data.shape[0] != t.shape[0]:
         raise ValueError(f"times has {t.shape[0]} entries and fields {data.shape[0]} snapshots; give one time per "
                          "snapshot")
-    if not np.all(np.isfinite(data)):
-        raise ValueError("fields must be finite")
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         f.create_dataset("t", data=t)
         f.create_dataset(key, data=data)
