@@ -137,3 +137,15 @@ def test_hamiltonian_is_zeitlins_at_the_laplacian():
     y = system.random_state(5)
     # at the Laplacian's spectrum the energy is Zeitlin's (the pairing's normalisation)
     assert abs(float(model.hamiltonian(y)) - float(system.hamiltonian(y))) <= 64 * EPS * float(system.hamiltonian(y))
+
+
+def test_save_and_load(tmp_path):
+    N = 6
+    values = -np.arange(1, N) * (np.arange(1, N) + 1.0) - 3.0
+    model = learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values, reference_degree=2), rotation=0.3,
+                                 h=0.05, iterations=7)
+    model.save(tmp_path / "m.h5")
+    loaded = learn.StreamOperator.load(tmp_path / "m.h5")
+    assert np.array_equal(loaded.spectrum.values(), model.spectrum.values())
+    assert loaded.spectrum.reference == 1 and float(loaded.rotation) == 0.3
+    assert loaded.iterations == 7 and loaded.h == 0.05

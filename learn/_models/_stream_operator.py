@@ -28,7 +28,7 @@ from liepoisson.systems import AbstractPoissonSystem, Zeitlin
 
 from .._solvers._stage import AbstractStage
 from ._base import AbstractCasimirConservingMap
-from ._spectrum import AbstractSpectrum, spectrum_of
+from ._spectrum import AbstractGaugedSpectrum, AbstractSpectrum, spectrum_of
 
 #: Quasi-Newton iterations of the stage equation per step (a fixed count: straight-line steps,
 #: which reverse-mode differentiation needs); a step that has not met `tol` after them is NaN.
@@ -272,15 +272,20 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
 
     # -- a learned map --------------------------------------------------------------------------
     def hyperparameters(self) -> dict[str, Any]:
-        return {"spectrum": self.spectrum.kind, "rotation": self.rotation is not None, "tol": self.tol,
-                "iterations": self.iterations, "max_iter": self.max_iter}
+        reference = self.spectrum.reference if isinstance(self.spectrum, AbstractGaugedSpectrum) else None
+        return {"spectrum": self.spectrum.kind, "reference": reference, "rotation": self.rotation is not None,
+                "tol": self.tol, "iterations": self.iterations, "max_iter": self.max_iter}
 
     @classmethod
     def from_hyperparameters(cls, system: AbstractPoissonSystem, hyperparameters: dict[str, Any], *,
                              key: Any = 0, h: float | None = None) -> StreamOperator:
         hp = dict(hyperparameters)
         rotation = 0.0 if hp.pop("rotation", False) else None
-        return cls(system, hp.pop("spectrum", "degree"), rotation=rotation, h=h, **hp)
+        spectrum = spectrum_of(hp.pop("spectrum", "degree"), system.N)
+        reference = hp.pop("reference", None)
+        if reference is not None:  # the gauge's position; its value is a weight, read with the others
+            spectrum = type(spectrum)(spectrum.values(), reference + (1 if spectrum.kind == "degree" else 0))
+        return cls(system, spectrum, rotation=rotation, h=h, **hp)
 
     def reinitialised(self, key: int | jax.Array) -> StreamOperator:
         """The map itself: its parameters have no random start."""
