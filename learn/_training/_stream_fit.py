@@ -131,8 +131,8 @@ def check_stream_data(model: Any, data: Any) -> None:
 
 
 def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: float | None = None,
-                        iterations: int = 50, rtol: float = 1e-10, cg_rtol: float = 1e-10,
-                        cg_max_steps: int = 500, standard_errors: bool = True,
+                        iterations: int = 50, rtol: float = 1e-10, cg_rtol: float = 1e-8,
+                        cg_max_steps: int = 200, standard_errors: bool = True, starts: Any = None,
                         progress: bool = False) -> StreamOperatorFit:
     r"""Fit `model`'s stream operator and one initial field per trajectory to `data` by
     trajectory least squares (module docstring: Levenberg-Marquardt with the starts eliminated
@@ -149,9 +149,13 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       interval).
     - `iterations`: Levenberg-Marquardt iterations at most; `rtol`: stop once an iteration
       lowers the loss by less than `rtol` of it.
-    - `cg_rtol`, `cg_max_steps`: the conjugate gradients' relative tolerance and step cap.
+    - `cg_rtol`, `cg_max_steps`: the conjugate gradients' relative tolerance and step cap (a
+      step whose solve stops at the cap is still tried: the loss decides; a standard error
+      whose solve does not converge is NaN).
     - `standard_errors`: compute the parameters' covariance at the solution ($p$ conjugate
       gradient solves per trajectory; `False`: NaN).
+    - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
+      trajectory's first observation), e.g. a previous fit's `starts`.
     - `progress`: print each iteration's loss.
 
     **Returns:** a `learn.StreamOperatorFit`.
@@ -168,7 +172,16 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     else:
         substeps = max(1, math.ceil(float(all_intervals.max()) / positive_float(max_step, "max_step") - 1e-12))
     padded = _padded(data)
-    starts = jnp.asarray(np.stack([y[0] for y in data.states]))
+    if starts is None:
+        starts = np.stack([y[0] for y in data.states])
+    else:
+        starts = np.asarray(starts, dtype=np.float64)
+        expected = (data.n_trajectories, data.system.dim)
+        if starts.shape != expected:
+            raise ValueError(f"starts must have shape {expected} (one field per trajectory); got {starts.shape}")
+        if not np.all(np.isfinite(starts)):
+            raise ValueError("starts must be finite")
+    starts = jnp.asarray(starts)
     model = _with_converging_iterations(model, starts, padded, substeps)
     model = eqx.tree_at(lambda m: m.h, model, None, is_leaf=lambda v: v is None)  # one compilation for every h
     x, rebuild = _flat(model)
@@ -223,7 +236,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     dof = n_residuals - p - starts.size
     sigma2 = float(state.cost) / dof if dof > 0 else float("nan")
     if standard_errors:
-        covariance = sigma2 * np.linalg.inv(np.asarray(_profiled(fitted, starts, padded, state, substeps, cg_rtol,
+        covariance = sigma2 * np.linalg.inv(np.asarray(_profiled(fitted, starts, padded, state, counts, substeps, cg_rtol,
                                                                   cg_max_steps)))
     else:
         covariance = np.full((p, p), np.nan)
@@ -362,20 +375,25 @@ def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_
     rhs = -(lin.c - jnp.einsum("jnp,p->jn", lin.B, jnp.linalg.solve(A_lam, lin.g_theta)))
     sol = lx.linear_solve(operator, rhs, lx.CG(rtol=cg_rtol, atol=0.0, max_steps=cg_max_steps),
                           options={"preconditioner": preconditioner}, throw=False)
-    dS = jnp.where(sol.result == lx.RESULTS.successful, sol.value, jnp.nan)
+    dS = sol.value  # an inexact step (CG stopped at max_steps) is still a step: the loss judges it
     dx = -jnp.linalg.solve(A_lam, lin.g_theta + jnp.einsum("jnp,jn->p", lin.B, dS))
     return dx, dS
 
 
 @eqx.filter_jit
-def _profiled(model, S, data, lin, substeps, cg_rtol, cg_max_steps):
+def _profiled(model, S, data, lin, counts, substeps, cg_rtol, cg_max_steps):
     r"""$A - \sum_j B_j^\top G_j^{-1}B_j$: the parameters' Gauss-Newton matrix with the starts
     profiled out ($G_j^{-1}B_j$ by conjugate gradients, one per column)."""
     gram = _gram(model, S, data, substeps)
 
+    structure = jax.eval_shape(lambda: S)
+    operator = lx.FunctionLinearOperator(gram, structure, tags=lx.positive_semidefinite_tag)
+    preconditioner = lx.FunctionLinearOperator(lambda V: V / counts[:, None], structure,
+                                               tags=lx.positive_semidefinite_tag)
+
     def solve_column(column):  # column (J, n): G^{-1} column, the trajectories at once
-        operator = lx.FunctionLinearOperator(gram, jax.eval_shape(lambda: column), tags=lx.positive_semidefinite_tag)
-        sol = lx.linear_solve(operator, column, lx.CG(rtol=cg_rtol, atol=0.0, max_steps=cg_max_steps), throw=False)
+        sol = lx.linear_solve(operator, column, lx.CG(rtol=cg_rtol, atol=0.0, max_steps=cg_max_steps),
+                              options={"preconditioner": preconditioner}, throw=False)
         return jnp.where(sol.result == lx.RESULTS.successful, sol.value, jnp.nan)
 
     X = jax.lax.map(solve_column, jnp.moveaxis(lin.B, 2, 0))  # (p, J, n)
