@@ -72,6 +72,7 @@ def test_euler_spectrum_from_exact_data():
     assert fit.losses[-1] <= 1e-20 * np.mean(np.concatenate(data.states) ** 2)
 
 
+@pytest.mark.slow  # the compilations are shared with the two default tests; the fit itself ~10 s
 def test_quasi_geostrophic_spectrum_from_exact_data():
     start = -(L * (L + 1.0))
     start[0] = -2.0 - F  # the gauge at the truth's degree 1
