@@ -7,7 +7,12 @@ import jax
 import numpy as np
 import pytest
 
-from integrators import Observations, add_field_noise, read_vorticity_snapshots, write_vorticity_snapshots
+from integrators import (
+    Observations,
+    add_field_noise,
+    read_vorticity_snapshots,
+    write_vorticity_snapshots,
+)
 from liepoisson.systems import Zeitlin
 
 EPS = np.finfo(np.float64).eps
