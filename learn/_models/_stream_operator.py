@@ -164,7 +164,6 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
         self.tol = check_stage_tolerance(tol)
         self.iterations = positive_int(iterations, "iterations")
         self.max_iter = positive_int(max_iter, "max_iter")
-        self.compensated = False
 
     @property
     def N(self) -> int:
@@ -201,6 +200,10 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
     def step(self, y: jax.Array) -> jax.Array:
         check_h(self)
         return super().step(y + self._shift()) - self._shift()
+
+    def compensated_step(self, y: jax.Array) -> jax.Array:
+        check_h(self)
+        return super().compensated_step(y + self._shift()) - self._shift()
 
     def carry(self, y: jax.Array):
         check_h(self)
