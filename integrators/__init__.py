@@ -36,6 +36,11 @@ from ._observations import (
     observe as observe,
     uneven_times as uneven_times,
 )
+from ._vorticity_snapshots import (
+    add_field_noise as add_field_noise,
+    read_vorticity_snapshots as read_vorticity_snapshots,
+    write_vorticity_snapshots as write_vorticity_snapshots,
+)
 from ._lie_group import (
     LIE_GROUP_METHODS as LIE_GROUP_METHODS,
     AbstractLieGroupMethod as AbstractLieGroupMethod,

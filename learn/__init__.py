@@ -23,6 +23,15 @@ from ._models._drag import DRAG_KINDS as DRAG_KINDS, Dissipative as Dissipative,
 from ._models._equivariant import GroupAveraged as GroupAveraged
 from ._models._glpnet import GLPNet as GLPNet, linear_to_activation as linear_to_activation
 from ._models._isospectral import IsospectralPolynomial as IsospectralPolynomial
+from ._models._spectrum import (
+    AbstractGaugedSpectrum as AbstractGaugedSpectrum,
+    AbstractSpectrum as AbstractSpectrum,
+    DegreeSpectrum as DegreeSpectrum,
+    HarmonicSpectrum as HarmonicSpectrum,
+    QuasiGeostrophicSpectrum as QuasiGeostrophicSpectrum,
+    in_gauge as in_gauge,
+)
+from ._models._stream_operator import StreamOperator as StreamOperator, planetary_vorticity as planetary_vorticity
 from ._models._nonholonomic import AbstractDAlembertMap as AbstractDAlembertMap
 from ._models._nonholonomic import DAlembertMap as DAlembertMap
 from ._models._nonholonomic import QuadraticDAlembertMap as QuadraticDAlembertMap
@@ -96,6 +105,7 @@ from ._training._criterion import (
     SkippedFamily as SkippedFamily,
 )
 from ._training._fit_splitting import fit_splitting as fit_splitting
+from ._training._stream_fit import StreamOperatorFit as StreamOperatorFit, fit_stream_operator as fit_stream_operator
 from ._training._phase import fit_phase as fit_phase
 from ._training._identify import (
     PrincipalAxes as PrincipalAxes,

@@ -179,3 +179,60 @@ def vorticity_on_grid(W: np.ndarray, n_theta: int | None = None, n_phi: int | No
                 f += omega[l * l + l + m] * math.sqrt(2.0) * (-1) ** m * Y.real
                 f += omega[l * l + l - m] * (-math.sqrt(2.0)) * (-1) ** m * Y.imag
     return theta, phi, math.sqrt(4 * np.pi) * f
+
+
+# -- operators diagonal in the spherical harmonics ------------------------------------------------
+@functools.cache
+def _multiplier_arrays(N: int) -> tuple[np.ndarray, ...]:
+    r"""The arrays of `harmonic_multiplier` at size N, padded to `(N, N)` per diagonal $m$:
+    `rows`, `cols` (entry $k$ of the m-th upper diagonal, $(k, k + m)$; padding at (0, 0)),
+    `valid` (k < N - m), `basis` `(N, N, N)` (`harmonic_basis(N)[m]` in the top-left corner,
+    zeros elsewhere), `sign` $(-1)^m$, and the harmonic indices `plus` $l^2 + l + m$ and
+    `minus` $l^2 + l - m$ of column $j$ ($l = m + j$; 0 where $l \ge N$)."""
+    m = np.arange(N)[:, None]
+    k = np.arange(N)[None, :]
+    valid = k < N - m
+    rows = np.where(valid, k, 0)
+    cols = np.where(valid, k + m, 0)
+    basis = np.zeros((N, N, N))
+    for mm, V in enumerate(harmonic_basis(N)):
+        basis[mm, : N - mm, : N - mm] = V
+    l = m + k  # column j = k of diagonal m is degree l = m + j
+    plus = np.where(valid, l * l + l + m, 0)
+    minus = np.where(valid, l * l + l - m, 0)
+    sign = (-1.0) ** np.arange(N)
+    return rows, cols, valid, basis, sign, plus, minus
+
+
+def harmonic_multiplier(W: jax.Array, multiplier: jax.Array) -> jax.Array:
+    r"""$\sum_{lm}\mu_{lm}\,\omega_{lm}T_{lm}$ for skew-Hermitian `W` `(N, N)` $= \sum_{lm}
+    \omega_{lm}T_{lm}$ and real `multiplier` $\mu$ `(N^2,)` (index $l^2 + l + m$): the operator
+    diagonal in the quantized spherical harmonics with eigenvalue $\mu_{lm}$ (JAX, traceable
+    and differentiable in both arguments). $\mu_{lm} = -1/(l(l+1))$, $\mu_{00} = 0$ is
+    $\Delta_N^{-1}$ (`solve_poisson`).
+
+    Each upper diagonal $m$ of $W$ is $i(-1)^m V_m c$ with $V_m$ the m-th block's eigenvectors
+    (`harmonic_basis`, $V_m^\top V_m = N\,1$) and $c_l = (\omega_{l,m} - i\,\omega_{l,-m})/\sqrt2$
+    (`harmonics_to_matrix`): $c = -i(-1)^m V_m^\top d_m/N$, its real part scaled by
+    $\mu_{l,m}$ and its imaginary part by $\mu_{l,-m}$, and back; the lower diagonals by
+    skew-Hermitian symmetry. One batched product by the padded $V_m$ each way, real and
+    imaginary parts apart: $4N^3$ real multiply-adds, no matrix larger than $N\times N$ per
+    diagonal."""
+    W = jnp.asarray(W)
+    N = W.shape[-1]
+    rows, cols, valid, basis, sign, plus, minus = _multiplier_arrays(N)
+    multiplier = jnp.asarray(multiplier)
+    d = jnp.where(valid, W[rows, cols], 0.0)  # (N m, N k): the upper diagonals
+    zr = jnp.einsum("mkj,mk->mj", basis, jnp.real(d))
+    zi = jnp.einsum("mkj,mk->mj", basis, jnp.imag(d))
+    # c = -i (-1)^m z / N: Re c = (-1)^m Im z / N, Im c = -(-1)^m Re z / N
+    s = sign[:, None] / N
+    c_re = s * zi * jnp.where(valid, multiplier[plus], 0.0)
+    c_im = -s * zr * jnp.where(valid, multiplier[minus], 0.0)
+    # d' = i (-1)^m V c': Re d' = -(-1)^m V Im c', Im d' = (-1)^m V Re c'
+    out_re = -sign[:, None] * jnp.einsum("mkj,mj->mk", basis, c_im)
+    out_im = sign[:, None] * jnp.einsum("mkj,mj->mk", basis, c_re)
+    out = jax.lax.complex(out_re, out_im)
+    U = jnp.zeros((N, N), dtype=jnp.complex128).at[rows[valid], cols[valid]].set(out[valid])
+    strict = jnp.triu(U, 1)
+    return U - jnp.conj(strict.T)

@@ -11,6 +11,8 @@ argument, and progress bars. Not a user API: these names may change with the lib
   y)`: |grad C_j(y)| |y|, the size a Casimir change is measured against.
 - `check_fits_in_memory(need, what, remedy)`: `ValueError` before allocating `need` bytes that
   would not fit in the memory one request may take.
+- `harmonic_multiplier(W, multiplier)`: the operator on u(N) diagonal in the quantized
+  spherical harmonics (Zeitlin's model): sum of mu_lm omega_lm T_lm, in JAX.
 - `jsonable(value)`: `value` as reading it back from JSON gives it (tuples as lists).
 - `show_progress(progress)`, `progress_bar(total, desc, unit, progress)`: tqdm bars, on by
   default only when stderr is a terminal.
@@ -22,6 +24,7 @@ from ._jsonable import jsonable as jsonable
 from ._matrix_algebra import SEMIDIRECT as SEMIDIRECT
 from ._matrix_algebra import dagger as dagger
 from ._memory import check_fits_in_memory as check_fits_in_memory
+from ._quantized_sphere import harmonic_multiplier as harmonic_multiplier
 from ._progress import progress_bar as progress_bar
 from ._progress import show_progress as show_progress
 from ._validation import (

@@ -1,0 +1,137 @@
+"""learn.fit_stream_operator: the spectrum of a fluid's stream operator identified from
+observed vorticity fields (Euler and quasi-geostrophic flow on the sphere, N = 8)."""
+
+import functools
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import learn
+from integrators import IsospectralMidpoint, Observations, add_field_noise
+from liepoisson.systems import RigidBody, Zeitlin
+
+N = 8
+F = 10.0
+L = np.arange(1, N)
+TOL = 1e-13  # the stage tolerance of truth and model: the data are the model's map to this
+
+
+@functools.cache
+def _times():
+    rng = np.random.default_rng(0)
+    return [np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 0.12, 8))]) for _ in range(3)]
+
+
+def _starts():
+    system = Zeitlin(N)
+    return [2 * system.random_state(j, decay=0.5, lmax=N - 1) for j in range(3)]
+
+
+@functools.cache
+def euler_data():
+    """Zeitlin's model by `integrators.IsospectralMidpoint` (the tridiagonal Poisson solve: no
+    code shared with the model's spectral one), one step per interval."""
+    system = Zeitlin(N)
+    method = IsospectralMidpoint(system, 0.1, tol=TOL)
+    states = []
+    for y, t in zip(_starts(), _times()):
+        ys = [y]
+        for dt in np.diff(t):
+            ys.append(np.asarray(method.with_h(float(dt)).rollout(ys[-1], 1))[-1])
+        states.append(np.stack(ys))
+    return Observations(system, _times(), states)
+
+
+@functools.cache
+def quasi_geostrophic_data():
+    system = Zeitlin(N)
+    truth = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(F), tol=TOL, iterations=16)
+    roll = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))
+    states = [np.asarray(roll(truth, jnp.asarray(y), jnp.asarray(np.diff(t)))) for y, t in zip(_starts(), _times())]
+    return Observations(system, _times(), states)
+
+
+def _model(values):
+    # 11 stage iterations converge on these intervals: every fit keeps them, and so shares one compilation
+    return learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values), tol=TOL, iterations=11)
+
+
+def test_euler_spectrum_from_exact_data():
+    data = euler_data()
+    assert min(np.linalg.norm(y[-1] - y[0]) / np.linalg.norm(y[0]) for y in data.states) > 0.2  # they move
+    start = -(L * (L + 1.0)) * (1 + 0.2 * np.sin(L))
+    start[0] = -2.0  # the gauge: degree 1 held at the truth's (the flow cannot tell; learn.DegreeSpectrum)
+    fit = learn.fit_stream_operator(_model(start), data, iterations=40, rtol=1e-14, standard_errors=False)
+    true = -(L * (L + 1.0))
+    # exact data of the model's own map (to the stage tolerance 1e-13 of |W|): the misfit at the
+    # truth is ~1e-13 of the field, and eigenvalues whose fields move by O(1) of their norm are
+    # found to that over their sensitivity; 1e-8 leaves 1e5 for the high degrees' conditioning
+    assert np.max(np.abs(fit.values - true) / np.abs(true)) <= 1e-8, fit.values
+    assert fit.losses[-1] <= 1e-20 * np.mean(np.concatenate(data.states) ** 2)
+
+
+@pytest.mark.slow  # the compilations are shared with the two default tests; the fit itself ~10 s
+def test_quasi_geostrophic_spectrum_from_exact_data():
+    start = -(L * (L + 1.0))
+    start[0] = -2.0 - F  # the gauge at the truth's degree 1
+    fit = learn.fit_stream_operator(_model(start), quasi_geostrophic_data(), iterations=40, rtol=1e-14,
+                                    standard_errors=False)
+    true = -(L * (L + 1.0)) - F
+    assert np.max(np.abs(fit.values - true) / np.abs(true)) <= 1e-8, fit.values  # as the Euler case
+
+
+def test_quasi_geostrophic_spectrum_from_noisy_data_within_three_standard_errors():
+    data = quasi_geostrophic_data()
+    noisy = add_field_noise(data, 1e-3, seed=3)
+    start = -(L * (L + 1.0))
+    start[0] = -2.0 - F
+    fit = learn.fit_stream_operator(_model(start), noisy, iterations=40)
+    true = -(L * (L + 1.0)) - F
+    se = fit.standard_errors
+    assert se[0] == 0.0 and np.all(np.isfinite(se[1:])) and np.all(se[1:] > 0)
+    z = np.abs(fit.values - true)[1:] / se[1:]
+    assert np.all(z <= 3), z
+    # the errors are of the size the standard errors say: not all far inside them either
+    assert np.max(z) >= 0.1, z
+    # the residuals' noise estimate matches the noise put in (1530 degrees of freedom: 2%)
+    assert fit.noise == pytest.approx(noisy.metadata["noise_std"], rel=0.1)
+    # the learned rollout keeps every Casimir tr(iW)^k: unitary conjugations, whatever was fitted
+    model = fit.model
+    rng = np.random.default_rng(1)
+    intervals = jnp.asarray(rng.uniform(0.05, 0.12, 30))
+    ys = np.asarray(eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))(model, jnp.asarray(fit.starts[0]),
+                                                                              intervals))
+    W0, W1 = (np.asarray(model.system.algebra.matrix(y)) for y in (ys[0], ys[-1]))
+    e0, e1 = np.linalg.eigvalsh(1j * W0), np.linalg.eigvalsh(1j * W1)
+    for k in range(1, N + 1):
+        # 30 unitary conjugations, each a rounding of a few eps of |W| (a random walk), the
+        # k-th power multiplying it by k: 1e-13 of sum |e|^k
+        assert abs(np.sum(e1**k) - np.sum(e0**k)) <= 1e-13 * np.sum(np.abs(e0) ** k), k
+
+
+@pytest.mark.slow
+def test_the_true_family_is_identified():
+    """The limit: the quasi-geostrophic family fitted to its own data finds F."""
+    model = learn.StreamOperator(Zeitlin(N), learn.QuasiGeostrophicSpectrum(0.0), tol=TOL, iterations=11)
+    fit = learn.fit_stream_operator(model, quasi_geostrophic_data(), iterations=40, rtol=1e-14,
+                                    standard_errors=False)
+    assert abs(float(fit.values[0]) - F) <= 1e-8 * F  # as the exact cases above
+
+
+def test_bad_input():
+    data = euler_data()
+    with pytest.raises(TypeError, match="model must be a learn.StreamOperator"):
+        learn.fit_stream_operator(learn.IsospectralPolynomial(Zeitlin(N)), data)
+    with pytest.raises(TypeError, match="data must be integrators.Observations"):
+        learn.fit_stream_operator(_model(-(L * (L + 1.0))), (data.states, data.times))
+    with pytest.raises(ValueError, match=r"data holds fields of N = 8 \(dimension 64\); the model is for N = 6"):
+        learn.fit_stream_operator(learn.StreamOperator(Zeitlin(6)), data)
+    rigid = Observations(RigidBody(), [np.arange(3.0)], [np.ones((3, 3))])
+    with pytest.raises(ValueError, match="data must be observations of liepoisson.systems.Zeitlin"):
+        learn.fit_stream_operator(_model(-(L * (L + 1.0))), rigid)
+    with pytest.raises(ValueError, match="max_step must be"):
+        learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, max_step=-1.0)
+    with pytest.raises(ValueError, match="rtol must be a number in"):
+        learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, rtol=2.0)

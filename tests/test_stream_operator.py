@@ -1,0 +1,151 @@
+"""learn.StreamOperator and its spectra; liepoisson.internals.harmonic_multiplier."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import learn
+from integrators import IsospectralMidpoint
+from liepoisson._quantized_sphere import harmonics_to_matrix, laplacian, solve_poisson
+from liepoisson.internals import harmonic_multiplier
+from liepoisson.systems import RigidBody, Zeitlin
+
+EPS = np.finfo(np.float64).eps
+
+
+def _degrees(N):
+    return np.floor(np.sqrt(np.arange(N * N) + 0.5))
+
+
+@pytest.mark.parametrize("N", [2, 3, 8, 16])
+def test_harmonic_multiplier_against_the_coefficients(N):
+    rng = np.random.default_rng(N)
+    omega, mu = rng.normal(size=N * N), rng.normal(size=N * N)
+    W = harmonics_to_matrix(omega, N)
+    out = np.asarray(harmonic_multiplier(W, mu))
+    # reference: the coefficients multiplied and mapped back by the numpy per-diagonal loop
+    reference = harmonics_to_matrix(mu * omega, N)
+    # two transforms by orthogonal bases scaled by sqrt(N): a few eps per entry, times N
+    assert np.max(np.abs(out - reference)) <= 16 * N * EPS * np.max(np.abs(reference))
+    assert np.max(np.abs(out + out.conj().T)) == 0.0  # skew-Hermitian by construction
+
+
+@pytest.mark.parametrize("N", [3, 8, 16])
+def test_harmonic_multiplier_inverts_the_laplacian(N):
+    W = harmonics_to_matrix(np.random.default_rng(1).normal(size=N * N), N)
+    l = _degrees(N)
+    inverse = np.where(l > 0, -1.0 / np.maximum(l * (l + 1), 1.0), 0.0)
+    P = np.asarray(harmonic_multiplier(W, inverse))
+    reference = np.asarray(solve_poisson(W))  # the tridiagonal solve: no shared code
+    # the tridiagonal solve's own round-off grows with N^2 (its pivots up to N^2): 64 N^2 eps
+    assert np.max(np.abs(P - reference)) <= 64 * N * N * EPS * np.max(np.abs(reference))
+
+
+def test_quasi_geostrophic_stream_against_a_dense_solve():
+    N, F = 6, 10.0
+    system = Zeitlin(N)
+    model = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(F), h=0.1)
+    W = harmonics_to_matrix(np.random.default_rng(2).normal(size=N * N), N)
+    # (Delta_N - F) as a dense N^2 x N^2 complex matrix from the entrywise Laplacian
+    basis = np.eye(N * N).reshape(N * N, N, N)
+    L = np.stack([np.asarray(laplacian(E)).reshape(-1) for E in basis], axis=1) - F * np.eye(N * N)
+    P = np.linalg.solve(L, W.reshape(-1)).reshape(N, N)
+    P -= np.trace(P) / N * np.eye(N)  # the multiples of 1 commute with W: the model drops them
+    out = np.asarray(model.stream_matrix(W))
+    assert np.max(np.abs(out - P)) <= 64 * N * EPS * np.max(np.abs(P))
+
+
+def test_at_the_laplacian_it_is_zeitlins_model():
+    N = 8
+    system = Zeitlin(N)
+    y0 = system.random_state(1, decay=0.0)
+    model = learn.StreamOperator(system, h=0.05, tol=1e-13, iterations=12)
+    reference = IsospectralMidpoint(system, 0.05, tol=1e-13)
+    a, b = model.rollout(y0, 20), reference.rollout(y0, 20)
+    # both stage iterations meet tol 1e-13 of ||W||: the two maps agree to that, 20 steps
+    assert np.max(np.abs(a - b)) <= 20 * 1e-13 * np.max(np.abs(b))
+    assert np.max(np.abs(b[-1] - b[0])) > 0.1  # the field moved
+    intervals = jnp.full(20, 0.05)
+    c = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))(model, jnp.asarray(y0), intervals)
+    assert np.max(np.abs(np.asarray(c) - a)) <= 20 * 1e-13 * np.max(np.abs(b))
+
+
+def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters():
+    N = 8
+    system = Zeitlin(N)
+    rng = np.random.default_rng(3)
+    spectrum = learn.DegreeSpectrum(-np.arange(1, N) * (np.arange(1, N) + 1.0) * rng.uniform(0.5, 2.0, N - 1))
+    model = learn.StreamOperator(system, spectrum, rotation=0.7, tol=1e-12, iterations=10)
+    y0 = system.random_state(4, decay=0.0)
+    intervals = jnp.asarray(rng.uniform(0.02, 0.08, 50))
+    ys = np.asarray(eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))(model, jnp.asarray(y0), intervals))
+    assert np.all(np.isfinite(ys))
+    f = 0.7 * learn.planetary_vorticity(N)
+    q0, q1 = (np.asarray(system.algebra.matrix(y)) + f for y in (ys[0], ys[-1]))
+    assert np.linalg.norm(q1 - q0) > 0.1 * np.linalg.norm(q0)  # it moved
+    e0, e1 = np.linalg.eigvalsh(1j * q0), np.linalg.eigvalsh(1j * q1)
+    for k in range(1, N + 1):
+        scale = np.sum(np.abs(e0) ** k)
+        # tr(iq)^k from the spectrum; each step a unitary conjugation adds a rounding of a few
+        # eps of |q| to q: 50 steps, a random walk of them, times k (the k-th power): 1e-13
+        assert abs(np.sum(e1**k) - np.sum(e0**k)) <= 1e-13 * scale, k
+    # the relative vorticity's spectrum is not kept on a rotating sphere: the term matters
+    w0, w1 = np.linalg.eigvalsh(1j * (q0 - f)), np.linalg.eigvalsh(1j * (q1 - f))
+    assert np.max(np.abs(w1 - w0)) > 1e-6 * np.max(np.abs(w0))
+
+
+def test_gauge():
+    N = 8
+    l = np.arange(1, N)
+    qg = -(l * (l + 1.0)) - 10.0
+    moved = learn.in_gauge(qg, 0, -2.0)
+    assert moved[0] == -2.0
+    # the same flow: the inverse eigenvalues differ by one constant
+    assert np.ptp(1 / moved - 1 / qg) <= 8 * EPS
+    spectrum = learn.DegreeSpectrum(qg)
+    assert np.array_equal(spectrum.values(), qg)
+    assert spectrum.inverse_values.shape == (N - 2,)  # the reference degree is not learned
+
+
+def test_bad_input():
+    system = Zeitlin(4)
+    with pytest.raises(TypeError, match="system must be liepoisson.systems.Zeitlin"):
+        learn.StreamOperator(RigidBody())
+    with pytest.raises(ValueError, match=r"spectrum must hold 3 eigenvalues \(degrees 1..3\) for N = 4; got 2"):
+        learn.StreamOperator(system, learn.DegreeSpectrum([-2.0, -6.0]))
+    with pytest.raises(ValueError, match=r"values must be finite and nonzero.*values\[1\] = nan"):
+        learn.DegreeSpectrum([-2.0, np.nan, -12.0])
+    with pytest.raises(ValueError, match=r"values must be finite and nonzero.*values\[0\] = 0"):
+        learn.DegreeSpectrum([0.0, -6.0, -12.0])
+    with pytest.raises(TypeError, match="spectrum must be a learn.AbstractSpectrum"):
+        learn.StreamOperator(system, "per-degree")
+    with pytest.raises(TypeError, match="rotation must be None or a real number"):
+        learn.StreamOperator(system, rotation=True)
+    with pytest.raises(ValueError, match="rotation must be finite"):
+        learn.StreamOperator(system, rotation=float("inf"))
+    with pytest.raises(ValueError, match="F must be finite and > -2"):
+        learn.QuasiGeostrophicSpectrum(-3.0)
+    with pytest.raises(ValueError, match="reference must be an index of values"):
+        learn.DegreeSpectrum([-2.0, -6.0, -12.0], reference_degree=4)
+
+
+def test_hamiltonian_is_zeitlins_at_the_laplacian():
+    N = 6
+    system = Zeitlin(N)
+    model = learn.StreamOperator(system, h=0.1)
+    y = system.random_state(5)
+    # at the Laplacian's spectrum the energy is Zeitlin's (the pairing's normalisation)
+    assert abs(float(model.hamiltonian(y)) - float(system.hamiltonian(y))) <= 64 * EPS * float(system.hamiltonian(y))
+
+
+def test_save_and_load(tmp_path):
+    N = 6
+    values = -np.arange(1, N) * (np.arange(1, N) + 1.0) - 3.0
+    model = learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values, reference_degree=2), rotation=0.3,
+                                 h=0.05, iterations=7)
+    model.save(tmp_path / "m.h5")
+    loaded = learn.StreamOperator.load(tmp_path / "m.h5")
+    assert np.array_equal(loaded.spectrum.values(), model.spectrum.values())
+    assert loaded.spectrum.reference == 1 and float(loaded.rotation) == 0.3
+    assert loaded.iterations == 7 and loaded.h == 0.05
