@@ -58,6 +58,7 @@ def _model(values):
     return learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values), tol=TOL, iterations=11)
 
 
+@pytest.mark.slow  # ~100 s on 2 loaded cores, mostly compiling the fit at N = 8: over the default run's budget
 def test_euler_spectrum_from_exact_data():
     data = euler_data()
     assert min(np.linalg.norm(y[-1] - y[0]) / np.linalg.norm(y[0]) for y in data.states) > 0.2  # they move
@@ -72,7 +73,7 @@ def test_euler_spectrum_from_exact_data():
     assert fit.losses[-1] <= 1e-20 * np.mean(np.concatenate(data.states) ** 2)
 
 
-@pytest.mark.slow  # the compilations are shared with the two default tests; the fit itself ~10 s
+@pytest.mark.slow  # the compilations are shared with the two tests above (slow too); the fit itself ~10 s
 def test_quasi_geostrophic_spectrum_from_exact_data():
     start = -(L * (L + 1.0))
     start[0] = -2.0 - F  # the gauge at the truth's degree 1
@@ -82,6 +83,7 @@ def test_quasi_geostrophic_spectrum_from_exact_data():
     assert np.max(np.abs(fit.values - true) / np.abs(true)) <= 1e-8, fit.values  # as the Euler case
 
 
+@pytest.mark.slow  # ~100 s on 2 loaded cores, mostly compiling the fit at N = 8: over the default run's budget
 def test_quasi_geostrophic_spectrum_from_noisy_data_within_three_standard_errors():
     data = quasi_geostrophic_data()
     noisy = add_field_noise(data, 1e-3, seed=3)
