@@ -60,6 +60,12 @@ class AbstractLearnedMap(AbstractStepMap):
         equals $y_1$ exactly when the step carries $y_0$ to $y_1$ (`learn.Reversible`)."""
         return self.step(y0)
 
+    def body_records_hint(self) -> str:
+        """How to learn from `integrators.BodyObservations` with this map's kind when the map
+        itself cannot (it is no `AbstractBodyMap`): a sentence `learn.BodyLoss` adds to its
+        error; empty when there is no way."""
+        return ""
+
     def default_optimiser(self) -> tuple[AbstractStage, ...]:
         """The optimiser stages `learn.fit` runs when given none: 100,000 epochs of Adam
         (learning rate 1e-3), the paper's for its MLPs."""

@@ -183,6 +183,11 @@ class LPNet(AbstractCasimirConservingMap, AbstractOneFlowMap, AbstractReconstruc
     def exact_flows_per_step(self) -> int:
         return self.parametrisation.exact_flows
 
+    def body_records_hint(self) -> str:
+        """An LPNet reads no body velocity: `learn.BodyLPNet` wraps it for body records."""
+        return ("an LPNet reads no body velocity: wrap it, learn.BodyLPNet(lpnet), or start one with "
+                "learn.BodyLPNet.at_quadratic(system, *learn.weak_form_quadratic(data)[:2])")
+
     def hyperparameters(self) -> dict[str, Any]:
         out = {"network": self.network.spec(), "parametrisation": type(self.parametrisation).__name__}
         return out if self.phase is None else {**out, "phase": self.phase.spec()}

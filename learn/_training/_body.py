@@ -29,8 +29,7 @@ from integrators import BodyObservations
 from liepoisson import vmap_samples
 from liepoisson.internals import positive_float, positive_int
 
-from .._models._base import AbstractBodyMap
-from .._models._lpnet import LPNet
+from .._models._base import AbstractBodyMap, AbstractLearnedMap
 from ._losses import AbstractLoss
 from ._observed import SegmentsObjective
 from ._problem import Description, Fitted, FittedProblem
@@ -196,9 +195,8 @@ class BodyLoss(AbstractLoss):
         if not isinstance(data, BodyObservations):
             raise TypeError(f"learn.BodyLoss compares a map with integrators.BodyObservations; got {type(data).__name__}")
         if not isinstance(model, AbstractBodyMap):
-            hint = (" (an LPNet reads no body velocity: wrap it, learn.BodyLPNet(lpnet), or start one with "
-                    "learn.BodyLPNet.at_quadratic(system, *learn.weak_form_quadratic(data)[:2]))"
-                    if isinstance(model, LPNet) else "")
+            hint = model.body_records_hint() if isinstance(model, AbstractLearnedMap) else ""
+            hint = f" ({hint})" if hint else ""
             raise TypeError(f"learning from body observations needs a map that carries the configuration and reads "
                             f"a body velocity (learn.GLPNet, learn.Dissipative, learn.BodyLPNet); got "
                             f"{type(model).__name__}{hint}")
