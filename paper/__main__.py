@@ -29,7 +29,7 @@ from pathlib import Path
 
 from integrators.internals import atomic_write_text
 
-from ._cluster import ENV, scheduler
+from ._cluster import ENV, THREADS, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 from ._verdict import SEEDS_FILE, SEEDS_KEY, verdict_table
@@ -133,11 +133,12 @@ def _options(parser: argparse.ArgumentParser, top: bool) -> None:
     parser.add_argument("--full", action="store_true", default=default(False), help="short for --profile full")
     parser.add_argument("--no-progress", action="store_true", default=default(False), help="no progress bars")
     parser.add_argument(
-        "--scheduler", nargs="?", const="local", default=default(os.environ.get(ENV)), metavar="ADDRESS",
-        help="where the independent trainings (seeds, baselines, G-LPNets, step sizes) run: 'processes' "
-             "(worker processes on this machine, one per core), 'none' (this process, one after the other), "
+        "--scheduler", nargs="?", const="local", default=default(os.environ.get(ENV) or THREADS), metavar="ADDRESS",
+        help="where the independent trainings (seeds, baselines, G-LPNets, step sizes) run: 'threads' "
+             "(threads of this process, one per core), 'processes' (worker processes on this machine, one per "
+             "core), 'none' (this process, one after the other), "
              "a Dask scheduler address (tcp://host:8786), or no value for a Dask LocalCluster sized to this "
-             f"machine (extra 'dask'); default ${ENV}, else 'none'",
+             f"machine (extra 'dask'); default ${ENV}, else 'threads'",
     )
 
 

@@ -1,16 +1,22 @@
-"""Where the experiments' independent trainings (seeds, a baseline, a G-LPNet) run: here, one
-after the other (the default); in worker processes on this machine, one per core
-(`--scheduler processes`); or on a Dask cluster (`--scheduler [ADDRESS]`).
+"""Where the experiments' independent trainings (seeds, a baseline, a G-LPNet) run: in threads
+of this process, one per core (the default, `--scheduler threads`); here, one after the other
+(`--scheduler none`); in worker processes on this machine, one per core (`--scheduler
+processes`); or on a Dask cluster (`--scheduler [ADDRESS]`).
 
-Measured on the 2-core machine of BENCHMARKS.md ("Trainings in worker processes"): two
-trainings at once each take more than twice as long as one alone (a training already keeps both
-cores busy), so the default stays one process; the workers pay off with more cores or a
+Threads are the default because the experiments' small networks keep about one core busy a
+training (XLA splits only large products), so two trainings at once use the second core:
+on the 2-core machine of BENCHMARKS.md ("Quick-profile budgets") the main job took 411 s in
+threads against 489 s one after the other, every figure identical (a training's result does not
+depend on what runs beside it; its `wall_time_s` does). Worker
+processes pay a JAX runtime and compilations each, and two of them at once each took more than
+twice as long as one alone ("Trainings in worker processes"): they pay off with more cores or a
 cluster."""
 
 from __future__ import annotations
 
 import concurrent.futures
 import contextlib
+import contextvars
 import multiprocessing
 import os
 from collections.abc import Callable, Iterator, Sequence
@@ -25,9 +31,12 @@ CONNECT_TIMEOUT = 30.0
 
 #: `scheduler`'s spec for worker processes on this machine.
 PROCESSES = "processes"
+#: `scheduler`'s spec for threads of this process, one per core.
+THREADS = "threads"
 
 _client: Any = None
 _pool: concurrent.futures.ProcessPoolExecutor | None = None
+_threads: concurrent.futures.ThreadPoolExecutor | None = None
 
 
 @contextlib.contextmanager
@@ -36,9 +45,18 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
     `LocalCluster` sized to the machine (one single-threaded worker per core), a scheduler
     address such as `tcp://10.0.0.5:8786`, or `"processes"`: worker processes on this machine,
     one per core, without Dask; `None`/`""`/`"none"`: this process. Yields a description."""
-    global _client, _pool
+    global _client, _pool, _threads
     if spec is None or spec.strip().lower() in ("", "none"):
         yield None
+        return
+    if spec.strip().lower() == THREADS:
+        workers = os.cpu_count() or 1
+        with concurrent.futures.ThreadPoolExecutor(workers) as pool:
+            _threads = pool
+            try:
+                yield f"{workers} threads of this process"
+            finally:
+                _threads = None
         return
     if spec.strip().lower() == PROCESSES:
         try:
@@ -77,7 +95,7 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
 def on_cluster() -> bool:
     """Whether trainings run elsewhere now (worker processes or a Dask cluster): their
     progress bars would interleave, so callers turn them off."""
-    return _client is not None or _pool is not None
+    return _client is not None or _pool is not None or _threads is not None
 
 
 class _Done:
@@ -106,6 +124,8 @@ def submit(fn: Callable[..., Any], *args: Any) -> Any:
         import cloudpickle
 
         return _pool.submit(_call, cloudpickle.dumps((fn, args)))
+    if _threads is not None:  # in this thread's context (JAX's configuration is context-local)
+        return _threads.submit(contextvars.copy_context().run, fn, *args)
     if _client is not None:
         return _client.submit(fn, *args, pure=False)
     return _Done(fn(*args))
@@ -113,7 +133,7 @@ def submit(fn: Callable[..., Any], *args: Any) -> Any:
 
 def map_trainings(fn: Callable[..., Any], items: Sequence[tuple[Any, ...]]) -> list[Any]:
     """`[fn(*args) for args in items]`, where trainings run now (results in order)."""
-    if _pool is not None:
+    if _pool is not None or _threads is not None:
         return [f.result() for f in [submit(fn, *args) for args in items]]
     results = dict(map_unordered(fn, enumerate(items), client=_client))
     return [results[i] for i in range(len(items))]

@@ -352,6 +352,31 @@ def test_paper_trainings_on_a_local_cluster_give_the_numbers_of_one_process(tmp_
     np.testing.assert_allclose(dask["energy_rel_err_max_seeds"], one["energy_rel_err_max_seeds"], rtol=1000 * 2.2e-16)
 
 
+@pytest.mark.slow  # two E1 smoke runs: ~20 s
+def test_paper_trainings_in_threads_give_the_numbers_of_one_after_the_other(tmp_path, capsys):
+    """The default `--scheduler threads`: E1's seeds, baseline and G-LPNet trained two at a time
+    in threads give every figure of the run one after the other, bit for bit (same process, same
+    compiled programs: nothing may depend on what runs beside a training)."""
+    from paper.__main__ import main
+
+    argv = ["run", "E1", "--profile", "smoke", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "one"), "--scheduler", "none"]) == 0
+    assert "trainings on the" not in capsys.readouterr().out
+    assert main([*argv, "--out", str(tmp_path / "threads")]) == 0  # the default
+    assert "threads of this process" in capsys.readouterr().out
+    one, threads = (json.loads((tmp_path / d / "E1" / "metrics.json").read_text()) for d in ("one", "threads"))
+
+    def figures(metrics, prefix=""):  # every number but the timings
+        for key, value in metrics.items():
+            if isinstance(value, dict):
+                yield from figures(value, f"{prefix}{key}.")
+            elif "time" not in key and isinstance(value, (int, float, list)):
+                yield f"{prefix}{key}", value
+
+    assert dict(figures(threads)) == dict(figures(one))
+    assert len(dict(figures(one))) > 20  # the seeds', the baseline's and the G-LPNet's figures
+
+
 @pytest.mark.slow  # two E4 smoke runs, one in a spawned process: 12 s
 def test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process(tmp_path, capsys, monkeypatch):
     """`--scheduler processes`: the LPNet and the baseline of E4 trained in a spawned worker
@@ -362,7 +387,7 @@ def test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process(tmp
     # paper anew (~3 s); the trainings travel and come back the same way with one or many
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     argv = ["run", "E4", "--profile", "smoke", "--no-progress"]
-    assert main([*argv, "--out", str(tmp_path / "one")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "one"), "--scheduler", "none"]) == 0
     capsys.readouterr()
     assert main([*argv, "--out", str(tmp_path / "pool"), "--scheduler", "processes"]) == 0
     assert "trainings on the 1 worker processes on this machine" in capsys.readouterr().out
