@@ -201,6 +201,7 @@ def test_a_fit_on_attitudes_alone_learns_the_rotated_body():
     assert predicted_attitude_error(net, 0.02) < 1e-2
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_each_interval_is_rolled_out_in_its_own_count_of_sub_steps():
     from learn._training._body import BodyObjective, body_segments, lifted_segment, sub_steps
 

@@ -61,6 +61,7 @@ def test_relative_configurations_are_left_invariant_and_compose_back(system):
     np.testing.assert_allclose(back[:, 4:], g[:, 4:], atol=16 * EPS * max(1.0, np.abs(g[:, 4:]).max(initial=0.0)))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_the_losss_shared_trunk_is_the_network_on_each_trajectory_padding_counted_out():
     obs = body_observations()
     short = it.BodyObservations(BODY, [obs.times[0][:3], *obs.times[1:]],

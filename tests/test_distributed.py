@@ -76,6 +76,7 @@ def test_threads_of_one_worker_do_not_share_an_integrator():
     assert done.stdout.strip().endswith("bitwise equal")
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_a_user_system_is_sent_to_the_workers_once_and_integrated_bitwise_alike(client):
     algebra = lp.so3()
     system = lp.systems.LiePoissonSystem(

@@ -68,6 +68,7 @@ def test_bad_choices_are_refused_before_any_fit(no_fitting, kwargs, match):
         learn.fit_splitting(BODY, noisy(), progress=False, **kwargs)
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_held_out_prediction_prefers_the_even_quadratic_over_spurious_linear_terms():
     """The issue's failure, small: the body has no linear terms; with the fits converged on
     every trajectory, held-out trajectories (whole, 5 folds) choose the even quadratic, and the

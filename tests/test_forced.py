@@ -162,6 +162,7 @@ def test_strang_with_the_exact_body_never_raises_the_energy():
     assert H[-1] < 0.01 * H[0]
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_zero_velocity_no_nan():
     system = Forced(RigidBody(INERTIA), [QuadraticDrag(0.1), LinearDrag(0.1)])
     step = it.ForcedSplitting(system, 0.1)

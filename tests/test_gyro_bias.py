@@ -55,6 +55,7 @@ def _at_a_bias(problem):
     return y, r, J, float(jnp.max(jnp.abs(J)))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_the_normal_equations_with_a_shared_bias_are_the_dense_ones():
     problem = _problem()
     y, r_dense, J_dense, scale = _at_a_bias(problem)

@@ -84,6 +84,7 @@ def _carried_matrices(step_map, y0, count, every=100):
     return np.asarray(run(step_map.carry(jnp.asarray(y0)))[1])
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_compensated_summation_keeps_the_casimirs_at_round_off():
     z = lp.systems.Zeitlin(8)
     y0 = initial_state(z)
@@ -123,6 +124,7 @@ def test_compensated_wraps_only_compensable_maps():
         it.IsospectralMidpoint(z, 0.1, compensated=True)
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 @pytest.mark.parametrize("method", [it.IsospectralMidpoint, it.IsospectralTripleJump])
 def test_compensated_isospectral_map_is_a_step_map_of_the_wrapped_one(method):
     z = lp.systems.Zeitlin(4)

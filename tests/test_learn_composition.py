@@ -168,6 +168,7 @@ def test_an_unknown_start_is_refused_naming_it(init):
         learn.AffineMLP(3, 3, init=init)
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_a_fit_from_a_zero_start_lowers_the_loss():
     # the gradient reaches the zero last layer (and through it the hidden ones): pairs of a map
     # whose alpha varies with the state, y1 = exp flow of grad H(y0) (a Lie-Euler step)

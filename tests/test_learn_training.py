@@ -88,6 +88,7 @@ def test_lpnet_fit_decreases_loss_and_keeps_best(rb, fitted):
     assert np.max(np.abs(C - C[0])) < 1e-12
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_lpnet_alpha_loss_and_minibatches(rb, pairs):
     net = learn.LPNet(rb, hidden=(8,), key=1)
     adam = learn.Adam(50, learning_rate=1e-2, final_learning_rate=1e-3, batch_size=32, log_every=1)

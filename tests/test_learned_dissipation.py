@@ -67,6 +67,7 @@ def _compiled_drag_flow():
     return jax.jit(lambda model, t, y: model.drag_flow(t, y))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 @settings(max_examples=8, deadline=None)
 @given(st.integers(0, 2**31 - 1), st.sampled_from(KINDS), st.floats(1e-3, 5.0))
 def test_the_drag_step_never_raises_the_learned_energy(seed, kind_axes, t):

@@ -28,6 +28,7 @@ def test_theta_one_zero_is_the_classical_midpoint():
     assert np.max(np.abs(a - b)) <= 4 * EPS * np.max(np.abs(b))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_any_theta_keeps_the_spectrum_to_round_off():
     z = lp.systems.Zeitlin(5)
     y = z.random_state(2)

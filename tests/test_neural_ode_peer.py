@@ -19,6 +19,7 @@ def _data(n: int, seed: int) -> it.Observations:
     return it.observe(BODY, y0 / np.linalg.norm(y0, axis=1, keepdims=True), 0.1 * np.arange(9))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_neural_ode_fits_exact_rigid_body_trajectories_to_1e_4():
     data = _data(2, 0)
     choice = fit_neural_ode(data, 1500, hidden=((8, 8),))
@@ -30,6 +31,7 @@ def test_neural_ode_fits_exact_rigid_body_trajectories_to_1e_4():
     assert rollout_error(choice.field, list(data.times), list(data.states), flow=rk4_flow) < 1e-4
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_the_rule_keeps_the_shape_of_the_lowest_held_out_error():
     choice = fit_neural_ode(_data(5, 1), 30, hidden=((2,), (8, 8)))
     assert set(choice.scores) == {(2,), (8, 8)} and all(np.isfinite(e) for e in choice.scores.values())

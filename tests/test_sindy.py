@@ -74,6 +74,7 @@ def test_sindy_from_exact_states_keeps_euler_terms_only():
     assert np.max(np.abs(chosen.field.coefficients - _euler_coefficients())) < 1e-3
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_weak_sindy_recovers_euler_equations_and_follows_heyoka():
     model = WeakSINDyModel(windows=(9, 33))
     data = _regular_data()

@@ -56,6 +56,7 @@ def test_quasi_geostrophic_stream_against_a_dense_solve():
     assert np.max(np.abs(out - P)) <= 64 * N * EPS * np.max(np.abs(P))
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_at_the_laplacian_it_is_zeitlins_model():
     N = 8
     system = Zeitlin(N)

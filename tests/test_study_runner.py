@@ -78,6 +78,7 @@ class RefinedGLPNet(AbstractStepMapModel, AbstractHamiltonianModel):
         return Identified(family=choice.chosen, bic={s.family: s.bic for s in choice.scores})
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_a_new_row_loss_wrapper_and_family_run_through_the_study_runner(tmp_path, monkeypatch):
     from paper import w2_observations as w2
 

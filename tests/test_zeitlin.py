@@ -83,6 +83,7 @@ def test_vorticity_of_a_single_harmonic_on_the_grid():
     assert f.shape == (8, 6) and phi.shape == (6,)
 
 
+@pytest.mark.slow  # moved from the default run for its 4-minute budget (3-7 s on 2 quiet workers)
 def test_zeitlin_hamiltonian_gradient_and_vector_field():
     z = lp.systems.Zeitlin(4)
     y = z.random_state(0)
