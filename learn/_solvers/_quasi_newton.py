@@ -64,9 +64,21 @@ class _ScipyRun:
         self._waiting = False
         self.x: np.ndarray = np.asarray(x0, dtype=np.float64)
 
-        def fun(x):
+        def evaluate(x):
             v, g = value_and_grad(jnp.asarray(x), data)
             return float(v), np.asarray(g, dtype=np.float64)
+
+        # SciPy's first evaluation (at x0) is made here, so that the value and gradient compile
+        # in the caller's thread, not in SciPy's: XLA's compilation and the persistent
+        # compilation cache's write of the executable segfaulted in that thread (once, under
+        # load, in the slow suite); the same compiled function gives the same numbers.
+        start = np.array(x0, dtype=np.float64)
+        first = [evaluate(start)]
+
+        def fun(x):
+            if first and np.array_equal(x, start):
+                return first.pop()
+            return evaluate(x)
 
         def callback(intermediate_result):
             self._out.put(("iteration", float(intermediate_result.fun), np.array(intermediate_result.x)))
