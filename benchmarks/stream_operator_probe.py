@@ -94,7 +94,8 @@ def main() -> None:
         fit = _timed("one more iteration and the standard errors",
                      lambda: learn.fit_stream_operator(fit.model, data, iterations=1, rtol=args.rtol, starts=fit.starts,
                                                        progress=True))
-        z = (np.abs(fit.values - true) / fit.standard_errors)[1:]
+        with np.errstate(divide="ignore", invalid="ignore"):  # NaN where a standard error's solve failed
+            z = (np.abs(fit.values - true) / fit.standard_errors)[1:]
         print(f"|error|/standard error: largest {np.nanmax(z[held[1:]]):.3g} over degrees <= {args.lmax}, "
               f"{np.nanmax(z):.3g} over all; noise {fit.noise:.3g}", flush=True)
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GB ({_load()})", flush=True)
