@@ -15,20 +15,34 @@ $$\begin{pmatrix}A + \lambda D_\theta & B^\top\\ B & G + \lambda D_s\end{pmatrix
 \;(\text{block diagonal}),$$
 
 eliminating $\theta$ (a $p\times p$ solve): the starts' reduced system
-$(G + \lambda D_s - B(A + \lambda D_\theta)^{-1}B^\top)\,\delta s = -(c - B(A +
-\lambda D_\theta)^{-1}g_\theta)$ is solved by conjugate gradients (lineax), each iteration one
-linearised rollout forward and its transpose back per trajectory (`jax.linearize`,
-`jax.linear_transpose`); $J_\theta$ by $p$ forward passes per trajectory, reduced at once to
-$A$ and $B_j = J_{s_j}^\top J_{\theta,j}$ (`(n, p)`). The standard errors of $\theta$ are
-those of the Gauss-Newton covariance at the solution with the starts profiled out,
-$\hat\sigma^2\big(A - \sum_j B_j^\top G_j^{-1}B_j\big)^{-1}$ ($G_j^{-1}B_j$ by conjugate
-gradients), $\hat\sigma^2$ the residual sum of squares over its degrees of freedom.
+
+$$\big(J_s^\top(1 - J_\theta A_\lambda^{-1}J_\theta^\top)J_s + \lambda D_s\big)\,\delta s =
+-\big(c - J_s^\top J_\theta A_\lambda^{-1}g_\theta\big), \qquad A_\lambda = A + \lambda D_\theta$$
+
+(the Schur complement $G + \lambda D_s - BA_\lambda^{-1}B^\top$) is solved by conjugate
+gradients (lineax), the rollouts linearised once per solve (`jax.linearize`): each iteration
+one linearised rollout forward and its transpose back per trajectory, $J_\theta$ (`(L n, p)` per
+trajectory, kept) applied as a matrix, $B$ never formed. The solves are inexact (an inexact
+Newton method: the relative tolerance the square root of the last iteration's relative
+decrease of the loss, at most `FORCING_MAX`). The cost and the gradient $g_\theta, c$ are
+exact at every point (one reverse pass per trajectory); $J_\theta$ costs $p$ forward passes
+per trajectory (`jax.jacfwd`, one rollout's primal shared by the $p$ tangents) and is
+recomputed only where it pays: after an iteration that more than halved the loss or whose
+gain ratio was below 1/4, before a step whose loss is finite is refused, and before the fit
+stops. Near the
+minimum the parameters hardly move, and a $J_\theta$ from a nearby point only shapes the steps
+(the exact gradient fixes where they lead). The standard errors of $\theta$ are those of the
+Gauss-Newton covariance at the solution with the starts profiled out,
+$\hat\sigma^2\big(A - \sum_j B_j^\top G_j^{-1}B_j\big)^{-1}$ ($B$ by $p$ transposed passes,
+$G_j^{-1}B_j$ by conjugate gradients, both `PROFILE_BATCH` columns at a time), $\hat\sigma^2$ the
+residual sum of squares over its degrees of freedom.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Any
 
 import equinox as eqx
@@ -36,6 +50,7 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import numpy as np
+import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from integrators import Observations
@@ -52,6 +67,12 @@ MAX_TRIALS = 30
 #: The most quasi-Newton iterations per step the fit raises `iterations` to when a rollout of
 #: the start is not finite (a step whose stage has not converged is NaN).
 MAX_STAGE_ITERATIONS = 24
+#: The conjugate gradients' relative tolerance is the square root of the last iteration's
+#: relative decrease of the loss (an inexact Newton method's forcing term), at most this and at
+#: least `cg_rtol`.
+FORCING_MAX = 0.1
+#: The columns of $B$ that `_profiled` pushes through the linearised rollouts together.
+PROFILE_BATCH = 16
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,14 +170,16 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       interval).
     - `iterations`: Levenberg-Marquardt iterations at most; `rtol`: stop once an iteration
       lowers the loss by less than `rtol` of it.
-    - `cg_rtol`, `cg_max_steps`: the conjugate gradients' relative tolerance and step cap (a
-      step whose solve stops at the cap is still tried: the loss decides; a standard error
-      whose solve does not converge is NaN).
+    - `cg_rtol`, `cg_max_steps`: the conjugate gradients' tightest relative tolerance (the
+      steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles; the standard
+      errors' use `cg_rtol`) and step cap (a step whose solve stops at the cap is still tried:
+      the loss decides; a standard error whose solve does not converge is NaN).
     - `standard_errors`: compute the parameters' covariance at the solution ($p$ conjugate
       gradient solves per trajectory; `False`: NaN).
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
-    - `progress`: print each iteration's loss.
+    - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
+      loss and time (wall and CPU).
 
     **Returns:** a `learn.StreamOperatorFit`.
     """
@@ -188,37 +211,59 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     params, _ = eqx.partition(model, _trained(model))
     unravel = ravel_pytree(params)[1]
     p = x.size
+    L = padded.states.shape[1]
+    check_fits_in_memory(8 * data.n_trajectories * L * data.system.dim * p,
+                         f"J_theta: {data.n_trajectories} trajectories of up to {L} fields of {data.system.dim} "
+                         f"components by {p} parameters", "fit fewer or shorter trajectories, or fewer parameters")
     counts = jnp.sum(padded.mask, axis=1)  # observations per trajectory: the starts' scaling
     n_residuals = int(np.sum(np.asarray(counts))) * data.system.dim
 
-    state = _linearise(rebuild(x), starts, padded, substeps)
+    state = _linearisation(rebuild(x), starts, padded, substeps, None)
     if not np.isfinite(float(state.cost)):
         raise FloatingPointError("fit_stream_operator: the loss at the start is not finite; check the data and the "
                                  "model's start (a step too large for the stage iteration: use max_step=)")
     D_theta = _scaling(state.A)
     lam, nu = 1e-3, 2.0
     losses = [float(state.cost) / n_residuals]
-    stopped, done = "iterations", 0
+    stopped, done, fresh, forcing = "iterations", 0, True, FORCING_MAX
     for _ in range(iterations):
         D_theta = jnp.maximum(D_theta, _scaling(state.A))
         accepted = False
         for _ in range(MAX_TRIALS):
-            dx, dS = _solve(rebuild(x), starts, padded, state, D_theta, counts, jnp.asarray(lam), substeps, cg_rtol,
-                            cg_max_steps)
-            if bool(jnp.all(jnp.isfinite(dx)) and jnp.all(jnp.isfinite(dS))):
-                cost_new = float(_cost(rebuild(x + dx), starts + dS, padded, substeps))
-                g_delta = float(state.g_theta @ dx + jnp.sum(state.c * dS))
-                damped = float(dx @ (D_theta * dx) + jnp.sum(counts[:, None] * dS * dS))
-                predicted = -g_delta + lam * damped
-                if np.isfinite(cost_new) and cost_new < float(state.cost) and predicted > 0:
-                    rho = (float(state.cost) - cost_new) / predicted
-                    lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), LAMBDA_RANGE[0])
-                    nu = 2.0
-                    before = float(state.cost)
-                    x, starts = x + dx, starts + dS
-                    state = _linearise(rebuild(x), starts, padded, substeps)
-                    accepted = True
-                    break
+            clock = _clock()
+            step = _solve(rebuild(x), starts, padded, state, D_theta, counts, jnp.asarray(lam), substeps,
+                          jnp.asarray(max(forcing, cg_rtol)), cg_max_steps)
+            cost_new = float(_cost(rebuild(x + step.dx), starts + step.dS, padded, substeps))
+            predicted = float(step.predicted)
+            if progress:
+                print(f"fit_stream_operator:   lambda {lam:.1e}: {int(step.cg_steps)} conjugate gradient steps "
+                      f"(rtol {max(forcing, cg_rtol):.0e}), loss {cost_new / n_residuals:.6e}, "
+                      f"{_since(clock)}", flush=True)
+            if np.isfinite(cost_new) and cost_new < float(state.cost) and predicted > 0:
+                rho = (float(state.cost) - cost_new) / predicted
+                lam = max(lam * max(1 / 3, 1 - (2 * rho - 1) ** 3), LAMBDA_RANGE[0])
+                nu = 2.0
+                before = float(state.cost)
+                x, starts = x + step.dx, starts + step.dS
+                decrease = (before - cost_new) / before
+                # far from the minimum (the loss halved) or mispredicted: a new J_theta; else the
+                # old one with the gradient at the new point
+                fresh = decrease > 0.5 or rho < 0.25
+                clock = _clock()
+                state = _linearisation(rebuild(x), starts, padded, substeps, None if fresh else state)
+                if progress:
+                    print(f"fit_stream_operator:   {'J_theta and ' if fresh else ''}gradient "
+                          f"{_since(clock)}", flush=True)
+                accepted = True
+                break
+            if not fresh and np.isfinite(cost_new):
+                # refused with a kept J_theta (not for a step so long that the rollout broke
+                # down: that is the damping's to fix): linearise afresh, same damping
+                state = _linearisation(rebuild(x), starts, padded, substeps, None)
+                fresh = True
+                continue
+            if lam >= LAMBDA_RANGE[1]:
+                break
             lam = min(lam * nu, LAMBDA_RANGE[1])
             nu *= 2
         if not accepted:
@@ -227,17 +272,23 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         done += 1
         losses.append(float(state.cost) / n_residuals)
         if progress:
-            print(f"fit_stream_operator: iteration {done}, loss {losses[-1]:.6e}, lambda {lam:.1e}")
+            print(f"fit_stream_operator: iteration {done}, loss {losses[-1]:.6e}, lambda {lam:.1e}", flush=True)
+        forcing = min(FORCING_MAX, math.sqrt(max(decrease, 0.0)))
         if before - float(state.cost) <= rtol * before:
-            stopped = "converged"
-            break
+            if fresh:
+                stopped = "converged"
+                break
+            state = _linearisation(rebuild(x), starts, padded, substeps, None)  # judged with a fresh J_theta
+            fresh = True
 
     fitted = rebuild(x)
     dof = n_residuals - p - starts.size
     sigma2 = float(state.cost) / dof if dof > 0 else float("nan")
     if standard_errors:
-        covariance = sigma2 * np.linalg.inv(np.asarray(_profiled(fitted, starts, padded, state, counts, substeps, cg_rtol,
-                                                                  cg_max_steps)))
+        if not fresh:
+            state = _linearisation(fitted, starts, padded, substeps, None)
+        covariance = sigma2 * np.linalg.inv(np.asarray(_profiled(fitted, starts, padded, state.J_theta, state.A, counts,
+                                                                  substeps, cg_rtol, cg_max_steps)))
     else:
         covariance = np.full((p, p), np.nan)
     variances = np.diag(covariance)
@@ -251,6 +302,16 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         rotation_standard_error=None if fitted.rotation is None else float(se.rotation),
         starts=np.asarray(starts), covariance=np.asarray(covariance), noise=math.sqrt(sigma2),
         losses=losses, iterations=done, stopped=stopped, substeps=substeps)
+
+
+def _clock() -> tuple[float, float]:
+    return time.perf_counter(), time.process_time()
+
+
+def _since(clock: tuple[float, float]) -> str:
+    """The wall and CPU time since `clock` (`_clock()`; the CPU time of every thread: a measure
+    that a loaded machine does not inflate)."""
+    return f"{time.perf_counter() - clock[0]:.2f} s ({time.process_time() - clock[1]:.2f} s CPU)"
 
 
 def _scaling(A: jax.Array) -> jax.Array:
@@ -288,18 +349,6 @@ def _rollouts(model: StreamOperator, starts: jax.Array, intervals: jax.Array, su
     return jax.vmap(lambda s, dt: model.rollout_intervals(s, dt, substeps))(starts, intervals)
 
 
-class _Linearisation(eqx.Module):
-    r"""At `(x, S)`: `cost` (sum of squares), `A` $= J_\theta^\top J_\theta$, `g_theta` $=
-    J_\theta^\top r$, `B` `(J, n, p)` $= J_{s_j}^\top J_{\theta,j}$, `c` `(J, n)` $= J_{s_j}^\top
-    r_j$."""
-
-    cost: jax.Array
-    A: jax.Array
-    g_theta: jax.Array
-    B: jax.Array
-    c: jax.Array
-
-
 def _trained(model: StreamOperator) -> Any:
     """The filter of what a fit moves: the model's inexact arrays but a gauged spectrum's fixed
     inverse eigenvalue."""
@@ -320,81 +369,146 @@ def _residuals(model, s, y, dt, mask, substeps):
     return (model.rollout_intervals(s, dt, substeps) - y) * mask[:, None]
 
 
+def _all_residuals(model, S, data, substeps):
+    """The residuals `(J, L, n)` of every trajectory (its padding 0)."""
+    return jax.vmap(lambda s, y, dt, m: _residuals(model, s, y, dt, m, substeps))(
+        S, data.states, data.intervals, data.mask)
+
+
 @eqx.filter_jit
 def _cost(model, S, data, substeps):
-    r = jax.vmap(lambda s, y, dt, m: _residuals(model, s, y, dt, m, substeps))(
-        S, data.states, data.intervals, data.mask)
+    r = _all_residuals(model, S, data, substeps)
     return jnp.sum(r * r)
 
 
-def _one(model, s, y, dt, mask, substeps):
+class _Linearisation(eqx.Module):
+    r"""At `(x, S)`: `cost` (sum of squares), `g_theta` $= J_\theta^\top r$ and `c` `(J, n)` $=
+    J_{s_j}^\top r_j$ (one reverse pass per trajectory: exact), `J_theta` `(J, L n, p)` and
+    `A` $= J_\theta^\top J_\theta$ (of this point or of an earlier one: `_linearisation`)."""
+
+    cost: jax.Array
+    g_theta: jax.Array
+    c: jax.Array
+    J_theta: jax.Array
+    A: jax.Array
+
+
+@eqx.filter_jit
+def _gradient(model, S, data, substeps):
+    r"""`(cost, g_theta, c)`: one rollout and one reverse pass per trajectory (one trajectory at
+    a time, `lax.map`: one's reverse-mode residuals held)."""
     x, rebuild = _flat(model)
 
-    def f(z):
-        r = _residuals(rebuild(z), s, y, dt, mask, substeps).reshape(-1)
-        return r, r
+    def one(a):
+        s, y, dt, m = a
+        r, pullback = jax.vjp(lambda z, s: _residuals(rebuild(z), s, y, dt, m, substeps), x, s)
+        g, c = pullback(r)
+        return jnp.sum(r * r), g, c
 
-    J_theta, r = jax.jacfwd(f, has_aux=True)(x)  # (L n, p)
-    _, pullback = jax.vjp(lambda z: _residuals(model, z, y, dt, mask, substeps).reshape(-1), s)
-    B = jax.vmap(lambda column: pullback(column)[0], in_axes=1, out_axes=1)(J_theta)  # (n, p)
-    c = pullback(r)[0]
-    return r @ r, J_theta.T @ J_theta, J_theta.T @ r, B, c
-
-
-@eqx.filter_jit
-def _linearise(model, S, data, substeps):
-    # one trajectory at a time (lax.map): at most one J_theta (L n x p) held
-    cost, A, g, B, c = jax.lax.map(lambda a: _one(model, *a, substeps), (S, data.states, data.intervals, data.mask))
-    return _Linearisation(jnp.sum(cost), jnp.sum(A, 0), jnp.sum(g, 0), B, c)
-
-
-def _gram(model, S, data, substeps):
-    r"""$V \mapsto G V$, $G$ the starts' block-diagonal $J_s^\top J_s$ (each trajectory
-    linearised once)."""
-    def one(s, y, dt, mask, v):
-        _, forward = jax.linearize(lambda z: _residuals(model, z, y, dt, mask, substeps), s)
-        backward = jax.linear_transpose(forward, s)
-        return backward(forward(v))[0]
-
-    return lambda V: jax.vmap(one)(S, data.states, data.intervals, data.mask, V)
+    cost, g, c = jax.lax.map(one, (S, data.states, data.intervals, data.mask))
+    return jnp.sum(cost), jnp.sum(g, 0), c
 
 
 @eqx.filter_jit
-def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_steps):
-    A_lam = lin.A + lam * jnp.diag(D_theta)
-    gram = _gram(model, S, data, substeps)
-    d = (1.0 + lam) * counts[:, None]  # the starts' scaling (the flow about keeps norms: G ~ counts)
+def _theta_jacobian(model, S, data, substeps):
+    r"""`(J_theta, A)`: $J_{\theta,j}$ `(L n, p)` of every trajectory by `jax.jacfwd` ($p$
+    tangents batched through one rollout: no reverse pass), one trajectory at a time."""
+    x, rebuild = _flat(model)
 
-    def reduced(V):
-        w = jnp.linalg.solve(A_lam, jnp.einsum("jnp,jn->p", lin.B, V))
-        return gram(V) + lam * counts[:, None] * V - jnp.einsum("jnp,p->jn", lin.B, w)
+    def one(a):
+        s, y, dt, m = a
+        return jax.jacfwd(lambda z: _residuals(rebuild(z), s, y, dt, m, substeps).reshape(-1))(x)
 
-    structure = jax.eval_shape(lambda: S)
-    operator = lx.FunctionLinearOperator(reduced, structure, tags=lx.positive_semidefinite_tag)
-    preconditioner = lx.FunctionLinearOperator(lambda V: V / d, structure, tags=lx.positive_semidefinite_tag)
-    rhs = -(lin.c - jnp.einsum("jnp,p->jn", lin.B, jnp.linalg.solve(A_lam, lin.g_theta)))
-    sol = lx.linear_solve(operator, rhs, lx.CG(rtol=cg_rtol, atol=0.0, max_steps=cg_max_steps),
-                          options={"preconditioner": preconditioner}, throw=False)
-    dS = sol.value  # an inexact step (CG stopped at max_steps) is still a step: the loss judges it
-    dx = -jnp.linalg.solve(A_lam, lin.g_theta + jnp.einsum("jnp,jn->p", lin.B, dS))
-    return dx, dS
+    J_theta = jax.lax.map(one, (S, data.states, data.intervals, data.mask))
+    return J_theta, jnp.einsum("jip,jiq->pq", J_theta, J_theta)
+
+
+def _linearisation(model, S, data, substeps, previous: _Linearisation | None) -> _Linearisation:
+    r"""The cost and exact gradient at `(model, S)`; $J_\theta$ and $A$ computed there
+    (`previous` `None`: $p$ forward passes per trajectory, the fit's largest cost) or kept
+    from `previous` (its point near: the gradient, exact, fixes the minimum; $J_\theta$ only
+    shapes the steps towards it)."""
+    cost, g_theta, c = _gradient(model, S, data, substeps)
+    J_theta, A = _theta_jacobian(model, S, data, substeps) if previous is None else (previous.J_theta, previous.A)
+    return _Linearisation(cost, g_theta, c, J_theta, A)
+
+
+class _Step(eqx.Module):
+    """A Levenberg-Marquardt step: `dx`, `dS`, the decrease of the sum of squares its linear
+    model predicts (`predicted`) and the conjugate gradient steps it took."""
+
+    dx: jax.Array
+    dS: jax.Array
+    predicted: jax.Array
+    cg_steps: jax.Array
+
+
+def _scaled_cg(operator, rhs, rtol, max_steps):
+    r"""$x$ with $\|Mx - b\|_2 \le$ `rtol` $\|b\|_2$ (and the last step's change as small) by
+    conjugate gradients (lineax) on the positive semidefinite `operator` $M$, whose diagonal
+    is about 1 (scaled by the caller: Jacobi's preconditioner): `(x, steps)`, `x` the last
+    iterate at `max_steps` too."""
+    structure = jax.eval_shape(lambda: rhs)
+    M = lx.FunctionLinearOperator(operator, structure, tags=lx.positive_semidefinite_tag)
+    solver = lx.CG(rtol=0.0, atol=rtol * jnp.sqrt(jnp.sum(rhs * rhs)), norm=optx.two_norm, max_steps=max_steps)
+    sol = lx.linear_solve(M, rhs, solver, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == lx.RESULTS.successful
 
 
 @eqx.filter_jit
-def _profiled(model, S, data, lin, counts, substeps, cg_rtol, cg_max_steps):
-    r"""$A - \sum_j B_j^\top G_j^{-1}B_j$: the parameters' Gauss-Newton matrix with the starts
-    profiled out ($G_j^{-1}B_j$ by conjugate gradients, one per column)."""
-    gram = _gram(model, S, data, substeps)
+def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_steps) -> _Step:
+    r"""The damped step (module docstring): $\theta$ eliminated,
 
-    structure = jax.eval_shape(lambda: S)
-    operator = lx.FunctionLinearOperator(gram, structure, tags=lx.positive_semidefinite_tag)
-    preconditioner = lx.FunctionLinearOperator(lambda V: V / counts[:, None], structure,
-                                               tags=lx.positive_semidefinite_tag)
+    $$\big(J_s^\top (1 - J_\theta A_\lambda^{-1}J_\theta^\top) J_s + \lambda D_s\big)\,\delta s
+    = -\big(c - J_s^\top J_\theta A_\lambda^{-1} g_\theta\big), \quad
+    \delta\theta = -A_\lambda^{-1}(g_\theta + J_\theta^\top J_s\,\delta s),$$
 
-    def solve_column(column):  # column (J, n): G^{-1} column, the trajectories at once
-        sol = lx.linear_solve(operator, column, lx.CG(rtol=cg_rtol, atol=0.0, max_steps=cg_max_steps),
-                              options={"preconditioner": preconditioner}, throw=False)
-        return jnp.where(sol.result == lx.RESULTS.successful, sol.value, jnp.nan)
+    $A_\lambda = A + \lambda D_\theta$, $D_s = $ counts (the flow keeps norms: $G_j \approx$
+    counts$_j$), by conjugate gradients on the system scaled by $((1 + \lambda)D_s)^{-1/2}$
+    (the rollouts linearised once: each step one forward pass and its transpose per
+    trajectory; $J_\theta$ applied as the matrix it is). `cg_rtol` the relative residual
+    (the fit's forcing term)."""
+    lu = jax.scipy.linalg.lu_factor(lin.A + lam * jnp.diag(D_theta))
+    r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
+    transpose = jax.linear_transpose(forward, S)
 
-    X = jax.lax.map(solve_column, jnp.moveaxis(lin.B, 2, 0))  # (p, J, n)
-    return lin.A - jnp.einsum("jnp,qjn->pq", lin.B, X)
+    def theta_part(u):  # J_theta A_lam^{-1} J_theta^T u, u (J, L, n)
+        w = jax.scipy.linalg.lu_solve(lu, jnp.einsum("jip,ji->p", lin.J_theta, u.reshape(u.shape[0], -1)))
+        return jnp.einsum("jip,p->ji", lin.J_theta, w).reshape(u.shape)
+
+    scale = 1.0 / jnp.sqrt((1.0 + lam) * counts)[:, None]
+
+    def reduced(Z):
+        V = scale * Z
+        u = forward(V)
+        return scale * (transpose(u - theta_part(u))[0] + lam * counts[:, None] * V)
+
+    v = jax.scipy.linalg.lu_solve(lu, lin.g_theta)
+    rhs = -(lin.c - transpose(jnp.einsum("jip,p->ji", lin.J_theta, v).reshape(r.shape))[0])
+    Z, steps, _ = _scaled_cg(reduced, scale * rhs, cg_rtol, cg_max_steps)
+    dS = scale * Z  # an inexact step (CG stopped at max_steps) is still a step: the loss judges it
+    u = forward(dS)
+    dx = -jax.scipy.linalg.lu_solve(lu, lin.g_theta + jnp.einsum("jip,ji->p", lin.J_theta, u.reshape(u.shape[0], -1)))
+    # the decrease of the model the step minimises, |r|^2 + 2 g.delta + |J delta|^2 (g exact, J
+    # with J_theta as kept)
+    change = u + jnp.einsum("jip,p->ji", lin.J_theta, dx).reshape(u.shape)
+    return _Step(dx, dS, -2.0 * (lin.g_theta @ dx + jnp.sum(lin.c * dS)) - jnp.sum(change * change), steps)
+
+
+@eqx.filter_jit
+def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_steps):
+    r"""$A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$: the parameters'
+    Gauss-Newton matrix with the starts profiled out ($B$ by $p$ transposed passes,
+    $G^{-1}B$ by conjugate gradients, `PROFILE_BATCH` columns at a time sharing each pass;
+    NaN where a solve does not converge)."""
+    r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
+    transpose = jax.linear_transpose(forward, S)
+    scale = 1.0 / jnp.sqrt(counts)[:, None]
+
+    def column(Jp):  # Jp (J, L n): (B column, G^{-1} B column), G scaled by counts^{-1/2}
+        b = transpose(Jp.reshape(r.shape))[0]
+        Z, _, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps)
+        return b, jnp.where(ok, scale * Z, jnp.nan)
+
+    B, X = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0), batch_size=PROFILE_BATCH)  # (p, J, n) each
+    return A - jnp.einsum("pjn,qjn->pq", B, X)
