@@ -9,7 +9,7 @@ on the 2-core machine of BENCHMARKS.md ("Quick-profile budgets") the main job to
 threads against 489 s one after the other, every figure identical (a training's result does not
 depend on what runs beside it; its `wall_time_s` does). Worker
 processes pay a JAX runtime and compilations each, and two of them at once each took more than
-twice as long as one alone ("Trainings in worker processes"): they pay off with more cores or a
+twice as long as one alone (the same section): they pay off with more cores or a
 cluster."""
 
 from __future__ import annotations
