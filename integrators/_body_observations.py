@@ -29,9 +29,9 @@ from ._ground_truth import initial_configurations, taylor_integrator
 from ._noise import noise_level
 from ._observations import (
     _per_trajectory,
+    check_file_format,
     check_times,
     file_groups,
-    format_version,
     long_columns,
     observation_plan,
     propagate_grids,
@@ -326,12 +326,7 @@ class BodyObservations(AbstractObservedTrajectories):
         f = open_hdf5(path, "liepoisson body observations (written by BodyObservations.save)")
         try:
             with f:
-                if f.attrs.get("format") != FORMAT:
-                    raise ValueError(f"{path!r} is not a liepoisson body-observations file (attribute format is "
-                                     f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
-                version = format_version(f.attrs["format_version"], path)
-                if version != FORMAT_VERSION:
-                    raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads {FORMAT_VERSION}")
+                check_file_format(f, path, FORMAT, FORMAT_VERSION, "body-observations")
                 index, t = f["trajectory"][...], f["t"][...]
                 data = {k: f[k][...] for k in MEASURED if k in f}
                 name = f.attrs["system"]

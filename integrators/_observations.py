@@ -376,13 +376,7 @@ class Observations(AbstractObservedTrajectories):
         f = open_hdf5(path, "liepoisson observations (written by Observations.save), or a .npz/.csv file")
         try:
             with f:
-                if f.attrs.get("format") != FORMAT:
-                    raise ValueError(f"{path!r} is not a liepoisson observations file (attribute format is "
-                                     f"{f.attrs.get('format')!r}, expected {FORMAT!r})")
-                version = format_version(f.attrs["format_version"], path)
-                if version != FORMAT_VERSION:
-                    raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads "
-                                     f"{FORMAT_VERSION}")
+                check_file_format(f, path, FORMAT, FORMAT_VERSION, "observations")
                 columns = tuple(_column(f[key][...], key, path) for key in ("trajectory", "t", "states"))
                 name = _text(f.attrs["system"])
                 params = _json_attribute(f.attrs["system_params"], "system_params", path)
@@ -417,6 +411,18 @@ def _shown(value: Any) -> Any:
     if isinstance(value, bytes):
         return _text(value)
     return value.item() if isinstance(value, np.generic) else value
+
+
+def check_file_format(f: Any, path: str, expected_format: str, expected_version: int, what: str) -> None:
+    """A `ValueError` naming the file `path` (open as `f`) unless its attributes `format` and
+    `format_version` are `expected_format` and `expected_version`; `what` names the kind of
+    file in the message (`"observations"`, `"body-observations"`)."""
+    if f.attrs.get("format") != expected_format:
+        raise ValueError(f"{path!r} is not a liepoisson {what} file (attribute format is "
+                         f"{f.attrs.get('format')!r}, expected {expected_format!r})")
+    version = format_version(f.attrs["format_version"], path)
+    if version != expected_version:
+        raise ValueError(f"{path!r} has format_version {version}; this liepoisson reads {expected_version}")
 
 
 def format_version(value: Any, path: str) -> int:

@@ -22,7 +22,7 @@ from ._casimirs import polynomial_casimirs
 from ._coadjoint import AbstractCoadjointFlow, MatrixExponentialFlow
 from ._polynomial import Polynomial
 from ._structure import check_structure_constants, generic_corank
-from ._validation import as_state
+from ._validation import as_state, matrix_basis
 
 
 def _warn_if_casimirs_missing(C: np.ndarray, found: int, degree: int, name: Any) -> None:
@@ -159,14 +159,7 @@ class LieAlgebra(AbstractLieAlgebra):
         `ValueError` naming the pair whose commutator leaves the span, or when the matrices
         are dependent.
         """
-        try:
-            E = np.array(basis, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise TypeError(f"basis must be an array (n, m, m) of real matrices; got {type(basis).__name__}") from err
-        if E.ndim != 3 or E.shape[1] != E.shape[2] or E.shape[0] < 1:
-            raise ValueError(f"basis must be an array (n, m, m) of n square matrices; got shape {E.shape}")
-        if not np.all(np.isfinite(E)):
-            raise ValueError("basis must be finite; got NaN or inf entries")
+        E = matrix_basis(basis, "(n, m, m)")
         n = E.shape[0]
         flat = E.reshape(n, -1).T  # (m*m, n): columns are the basis matrices
         if np.linalg.matrix_rank(flat) < n:

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_state, is_traced
+from ._validation import as_state, is_traced, matrix_basis
 
 #: How far from 1 the norm of a quaternion given as input may be (a star tracker prints 7-9
 #: digits; a quaternion rounded to 7 digits is off by up to ~2e-7): nearer, it is normalised;
@@ -431,14 +431,7 @@ class MatrixGroup(AbstractLieGroup):
     squares on the basis)."""
 
     def __init__(self, basis: ArrayLike, name: str = "matrix group"):
-        try:
-            basis = np.array(basis, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise TypeError(f"basis must be a real array of matrices (dim, N, N); got {type(basis).__name__}") from err
-        if basis.ndim != 3 or basis.shape[1] != basis.shape[2] or basis.shape[0] < 1:
-            raise ValueError(f"basis must have shape (dim, N, N); got shape {basis.shape}")
-        if not np.all(np.isfinite(basis)):
-            raise ValueError("basis must be finite")
+        basis = matrix_basis(basis, "(dim, N, N)")
         self.basis = basis
         self.dim = basis.shape[0]
         self.n = basis.shape[1]

@@ -109,6 +109,20 @@ def finite_vector(x: Any, name: str, dim: int) -> np.ndarray:
     return arr
 
 
+def matrix_basis(x: Any, shape: str) -> np.ndarray:
+    """A basis of matrices: a finite float64 array of at least one square matrix (the argument
+    `basis` of `LieAlgebra.from_matrices` and `MatrixGroup`; `shape` names its axes)."""
+    try:
+        basis = np.array(x, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"basis must be an array {shape} of real matrices; got {type(x).__name__}") from err
+    if basis.ndim != 3 or basis.shape[1] != basis.shape[2] or basis.shape[0] < 1:
+        raise ValueError(f"basis must be an array {shape} of square matrices, at least one; got shape {basis.shape}")
+    if not np.all(np.isfinite(basis)):
+        raise ValueError("basis must be finite; got NaN or inf entries")
+    return basis
+
+
 def positive_int(x: Any, name: str, minimum: int = 1) -> int:
     """An integer >= `minimum` (an integral float such as `1e5` is accepted)."""
     if isinstance(x, bool) or not isinstance(x, (numbers.Integral, np.integer)):

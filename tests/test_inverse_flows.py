@@ -86,17 +86,23 @@ def _generic_direct_sum():
 
 
 # -- round trips: every algebra, every system ------------------------------------------------
+def _round_trips(name, owner, flow, inverse, seed):
+    """For t = T and -T: random states of `name`, moved by `flow` (a method of `owner`, an
+    algebra or a system) with random Casimir-projected parameters, and `inverse` finds them."""
+    rng = np.random.default_rng(seed)
+    for t in (T, -T):
+        y0 = _states(name, owner.dim, rng)
+        grads = np.asarray(owner.casimir_gradients(y0))
+        y1 = np.asarray(flow(_parameters(rng, grads, owner.dim), t, y0))
+        found = inverse(y0, y1, t)
+        assert isinstance(found, np.ndarray)
+        _check_round_trip(flow, grads, found, t, y0, y1)
+
+
 @algebra_names
 def test_coadjoint_flow_parameters_round_trip(name):
     g = algebra(name)
-    rng = np.random.default_rng(0)
-    for t in (T, -T):
-        mu0 = _states(name, g.dim, rng)
-        grads = np.asarray(g.casimir_gradients(mu0))
-        mu1 = np.asarray(g.coadjoint_flow(_parameters(rng, grads, g.dim), t, mu0))
-        found = g.coadjoint_flow_parameters(mu0, mu1, t)
-        assert isinstance(found, np.ndarray)
-        _check_round_trip(g.coadjoint_flow, grads, found, t, mu0, mu1)
+    _round_trips(name, g, g.coadjoint_flow, g.coadjoint_flow_parameters, seed=0)
 
 
 @algebra_names
@@ -117,12 +123,7 @@ def test_coadjoint_flow_parameters_on_a_basis_axis(name):
 @system_names
 def test_test_flow_parameters_round_trip(name):
     s = system(name)
-    rng = np.random.default_rng(2)
-    for t in (T, -T):
-        y0 = _states(name, s.dim, rng)
-        grads = np.asarray(s.casimir_gradients(y0))
-        y1 = np.asarray(s.test_flow(_parameters(rng, grads, s.dim), t, y0))
-        _check_round_trip(s.test_flow, grads, s.test_flow_parameters(y0, y1, t), t, y0, y1)
+    _round_trips(name, s, s.test_flow, s.test_flow_parameters, seed=2)
 
 
 @pytest.mark.parametrize("name", ["RigidBody", "Kirchhoff"])

@@ -28,6 +28,14 @@ SYSTEMS: dict[str, type] = {
     cls.name: cls for cls in (RigidBody, HeavyTop, Kirchhoff, ExtendedPendulum, ChargedParticle, GeneralizedRigidBody, Zeitlin)
 }
 
+#: The systems built around another one, by name: the class (its `from_params(params,
+#: from_name)` rebuilds the inner system by name), how errors call it, the fields of its params.
+_WRAPPERS: dict[str, tuple[type, str, str]] = {
+    DoubleBracket.name: (DoubleBracket, "a DoubleBracket", "system, system_params, gamma, metric"),
+    Forced.name: (Forced, "a Forced system", "system, system_params, forces"),
+    LiePoissonDAlembert.name: (LiePoissonDAlembert, "a LiePoissonDAlembert", "system, system_params, constraints"),
+}
+
 # A system given to a loader reproduces the saved Hamiltonian at the probe points to this
 # relative tolerance: the same formula evaluated by another code path differs by a few
 # roundings per operation, far below 1e-12 for any Hamiltonian of a few dozen operations.
@@ -39,20 +47,11 @@ def from_name(name: str, params: dict[str, Any] | None = None) -> AbstractPoisso
     `LiePoissonSystem` is rebuilt from the definition in its `params` (`params["kind"]`)."""
     if isinstance(params, dict) and params.get("kind") == KIND:
         return LiePoissonSystem.from_params(name, params)
-    if name == DoubleBracket.name:
+    if name in _WRAPPERS:
+        cls, what, fields = _WRAPPERS[name]
         if not isinstance(params, dict):
-            raise ValueError("a DoubleBracket is rebuilt from its params (system, system_params, gamma, metric); "
-                             f"got {params!r}")
-        return DoubleBracket.from_params(params, from_name)
-    if name == Forced.name:
-        if not isinstance(params, dict):
-            raise ValueError(f"a Forced system is rebuilt from its params (system, system_params, forces); got {params!r}")
-        return Forced.from_params(params, from_name)
-    if name == LiePoissonDAlembert.name:
-        if not isinstance(params, dict):
-            raise ValueError("a LiePoissonDAlembert is rebuilt from its params (system, system_params, constraints); "
-                             f"got {params!r}")
-        return LiePoissonDAlembert.from_params(params, from_name)
+            raise ValueError(f"{what} is rebuilt from its params ({fields}); got {params!r}")
+        return cls.from_params(params, from_name)
     if name not in SYSTEMS:
         raise ValueError(
             f"unknown system {name!r}; known systems are {sorted(SYSTEMS)}, DoubleBracket, Forced, LiePoissonDAlembert and user LiePoissonSystems "
