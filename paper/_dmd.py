@@ -91,7 +91,7 @@ def fit_exact_dmd(times: Sequence[np.ndarray], states: Sequence[np.ndarray], ran
     X, Y = [], []
     for t, y in zip(times, states):
         t = np.asarray(t, dtype=np.float64)
-        grid = t[0] + dt * np.arange(int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1)
+        grid = t[0] + dt * np.arange(math.floor((t[-1] - t[0]) / dt + 1e-9) + 1)
         even = CubicSpline(t, np.asarray(y), axis=0)(grid)
         X.append(even[:-1])
         Y.append(even[1:])
@@ -160,7 +160,7 @@ def chosen_rank(kind: str, times: Sequence[np.ndarray], states: Sequence[np.ndar
     early_y = [np.asarray(y)[:k] for y, k in zip(states, keep)]
     limit = min(min(keep), states[0].shape[1]) if kind == "optimised" else states[0].shape[1]
     scores = {}
-    for r in sorted(set(int(r) for r in ranks)):
+    for r in sorted({int(r) for r in ranks}):
         if not 1 <= r <= limit:
             continue
         try:

@@ -412,7 +412,7 @@ def casimir_drift(system: lp.systems.Zeitlin, ys: np.ndarray, rotation: float | 
 
 def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> W8Row:
     """Fit `model` on `condition`'s data and measure its forecasts."""
-    base = dict(N=condition.N, truth=condition.truth.name, noise=condition.noise, model=model.label)
+    base = {"N": condition.N, "truth": condition.truth.name, "noise": condition.noise, "model": model.label}
     data = condition.data
     begin = time.perf_counter()
     forecaster = model.fit(condition, data, progress=progress)

@@ -8,7 +8,7 @@ import scipy.linalg as sl
 
 pytest.importorskip("pydmd")
 
-from paper import _dmd  # noqa: E402
+from paper import _dmd
 
 #: A damped linear system of dimension 6: two rotations and two decays.
 EIGENVALUES = np.array([-0.05 + 1.0j, -0.05 - 1.0j, -0.2 + 2.5j, -0.2 - 2.5j, -0.1, -0.6])
