@@ -13,11 +13,13 @@ from .w4_bodies import EXPERIMENT as _W4
 from .w5_zeitlin import EXPERIMENT as _W5
 from .w6_nonholonomic import EXPERIMENT as _W6
 from .w7_air import EXPERIMENT as _W7
+from .w8_fluids import EXPERIMENT as _W8
 
-EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5, _W6, _W7)}
+EXPERIMENTS = {exp.id: exp for exp in (_E1, _E2, _E3, _E4, _E5, _E6, _W1, _W2, _W3, _W4, _W5, _W6, _W7, _W8)}
 
 #: What `python -m paper` runs without a subcommand: the paper's six experiments. The studies
 #: beyond the paper (W1, an hour-scale sweep; W2, learning from observations; W3, dissipation;
 #: W4, bodies observed by their attitude, pose and velocities; W5, Zeitlin's fluid at N = 16
-#: and 32; W6, nonholonomic systems) run on request: `python -m paper run W1 W2 W3 W4 W5 W6`.
+#: and 32; W6, nonholonomic systems; W7, bodies in air; W8, fluids from data) run on request:
+#: `python -m paper run W1 W2 W3 W4 W5 W6 W7 W8`.
 PAPER_EXPERIMENTS = tuple(i for i in EXPERIMENTS if i.startswith("E"))

@@ -1,0 +1,71 @@
+"""W8, fluids from data (`paper/w8_fluids.py`): its pieces (the limit's fixed Laplacian, the
+truths' spectra, the Casimir drift, the profiles), and the whole study at the smoke profile
+(slow)."""
+
+import json
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import learn
+from liepoisson.systems import Zeitlin
+from paper import w8_fluids as w8
+from paper.__main__ import main
+from paper._registry import EXPERIMENTS
+
+
+def test_w8_is_registered_with_a_profile_of_each_name():
+    assert EXPERIMENTS["W8"] is w8.EXPERIMENT
+    assert set(w8.PROFILES) == {"smoke", "quick", "full"}
+    assert w8.PROFILES["full"].sizes == (32, 64, 128)  # the issue's sizes
+    for P in w8.PROFILES.values():
+        assert set(P.truths) <= set(w8.TRUTHS)
+
+
+def test_the_limits_laplacian_is_the_quasi_geostrophic_family_at_zero_and_learns_nothing():
+    N = 6
+    fixed = w8.LaplacianSpectrum()
+    np.testing.assert_array_equal(np.asarray(fixed.eigenvalues(N))[1:],
+                                  np.asarray(learn.QuasiGeostrophicSpectrum(0.0).eigenvalues(N))[1:])
+    model = learn.StreamOperator(Zeitlin(N), fixed, rotation=0.5)
+    params = eqx.filter(model, eqx.is_inexact_array)
+    assert [float(x) for x in jax.tree_util.tree_leaves(params)] == [0.5]  # the rotation is its one parameter
+    assert w8.TRUTHS["QG F = 10"].degree_values(4).tolist() == [-12.0, -16.0, -22.0]
+
+
+def test_casimir_drift_is_round_off_for_a_unitary_conjugation_and_sees_the_absolute_vorticity():
+    N = 6
+    system = Zeitlin(N)
+    W = np.asarray(system.algebra.matrix(system.random_state(0)))
+    rng = np.random.default_rng(0)
+    U, _ = np.linalg.qr(rng.normal(size=(N, N)) + 1j * rng.normal(size=(N, N)))
+    f = learn.planetary_vorticity(N)
+    q1 = U @ (W + f) @ U.conj().T  # the absolute vorticity conjugated: W1 = q1 - f
+    ys = np.stack([system.algebra.coordinates(jnp.asarray(m)) for m in (W, q1 - f)])[None]
+    assert w8.casimir_drift(system, ys, rotation=1.0) <= 1e-14
+    assert w8.casimir_drift(system, ys) > 1e-3  # the relative vorticity's are not kept
+    assert w8.casimir_drift(system, np.full_like(ys, np.nan)) == np.inf
+
+
+@pytest.mark.slow  # compiles four fits' standard errors at N = 8: ~6 min on 2 loaded cores
+def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
+    args = ["run", "W8", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]
+    assert main(args) == 0
+    metrics = json.loads((tmp_path / "W8" / "metrics.json").read_text())
+    rows = metrics["rows"]
+    truths = w8.PROFILES["smoke"].truths
+    learned = [r for r in rows if r["model"] == w8.LEARNED]
+    assert [r["truth"] for r in learned] == list(truths)
+    assert len(metrics["verdict"]) == len(truths)
+    for r in learned + [r for r in rows if r["model"] == w8.LIMIT]:
+        assert r["casimir_drift"] <= 1e-13  # unitary conjugations of q, whatever was fitted
+        assert r["error_1"] <= 0.05 and r["z"] is not None  # from a start with 1% noise
+    assert len(list((tmp_path / "W8" / "snapshots").rglob("*.h5"))) == len(truths) * w8.PROFILES["smoke"].n_train
+    table = (tmp_path / "W8" / "table.md").read_text()
+    assert table.startswith("# W8") and "limit (the true family)" in table
+    assert main(args) == 0  # every row resumed: nothing refitted
+    again = json.loads((tmp_path / "W8" / "metrics.json").read_text())
+    assert again["resumed_rows"] == len(rows) and again["rows"] == rows
