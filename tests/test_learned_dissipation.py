@@ -22,6 +22,8 @@ from integrators.splitting import Strang, TripleJump
 from liepoisson.systems import Forced, LinearDrag, QuadraticDrag, RigidBody
 
 BODY = RigidBody((1.0, 1.9, 2.1))
+#: A body in air: its inertia and its quadratic drag (the flights of `_flights`).
+I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
 
 
 def _net(seed: int, method=Strang) -> learn.GLPNet:
@@ -32,6 +34,17 @@ def _net(seed: int, method=Strang) -> learn.GLPNet:
                         (jnp.asarray(rng.normal(size=3)), jnp.asarray(rng.normal(size=(3, 3))),
                          jnp.asarray(rng.normal(size=3))))
     return learn.GLPNet(BODY, terms=terms, method=method, h=0.1)
+
+
+def _flights(n: int, seed: int, records: int, noise: float, system=None) -> it.BodyObservations:
+    """Gyroscope records every 10 ms of `n` flights from the identity attitude, spun about the
+    middle axis (8-12 rad/s; N(0, 0.3) about the others; numpy seed `seed`), noise `noise`
+    (seed 1): the body in air (`Forced(RigidBody(I), QuadraticDrag(D))`) unless `system`."""
+    rng = np.random.default_rng(seed)
+    omega = np.column_stack([rng.normal(0, 0.3, n), rng.uniform(8, 12, n), rng.normal(0, 0.3, n)])
+    system = Forced(RigidBody(I), QuadraticDrag(D)) if system is None else system
+    return it.observe_body(system, omega * I, np.tile([0, 0, 0, 1.0], (n, 1)), np.arange(records) * 0.01,
+                           measure="velocities", noise=noise, seed=1)
 
 
 def _drag(seed: int, kind: str, any_axes: bool) -> learn.LearnedDrag:
@@ -141,12 +154,7 @@ def test_bad_input():
 
 @pytest.mark.slow  # ~60 s: four flights fitted with the quadratic drag
 def test_fit_dissipative_finds_a_forced_body():
-    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
-    rng = np.random.default_rng(0)
-    n = 6
-    omega = np.column_stack([rng.normal(0, 0.3, n), rng.uniform(8, 12, n), rng.normal(0, 0.3, n)])
-    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (n, 1)),
-                           np.arange(61) * 0.01, measure="velocities", noise=1e-3, seed=1)
+    data = _flights(6, seed=0, records=61, noise=1e-3)
     model, records = learn.fit_dissipative(RigidBody(I), data, kinds=("linear", "quadratic"), progress=False)
     choice = records[-1].choice
     assert choice.chosen.endswith("quadratic drag") and records[0].choice is choice
@@ -181,13 +189,9 @@ def test_a_gyroscope_bias_is_found():
 
 
 def test_weak_form_drag_tells_a_body_in_air_from_one_in_vacuum():
-    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
-    rng = np.random.default_rng(0)
-    omega = np.column_stack([rng.normal(0, 0.3, 8), rng.uniform(8, 12, 8), rng.normal(0, 0.3, 8)])
     ratios = {}
     for name, system in (("air", Forced(RigidBody(I), QuadraticDrag(D))), ("vacuum", RigidBody(I))):
-        data = it.observe_body(system, omega * I, np.tile([0, 0, 0, 1.0], (8, 1)), np.arange(101) * 0.01,
-                               measure="velocities", noise=2e-3, seed=1)
+        data = _flights(8, seed=0, records=101, noise=2e-3, system=system)  # the same spins in both
         _, _, misfit = learn.weak_form_quadratic(data, linear=False, diagonal=True)
         A, _, found, with_drag = learn.weak_form_drag(data, "quadratic", diagonal=True)
         ratios[name] = misfit / with_drag
@@ -214,13 +218,9 @@ def test_fit_splitting_dissipation_argument():
 
 @pytest.mark.slow  # ~2 min: the families and the drag families on six short flights
 def test_fit_splitting_offers_drag_families_to_a_body_in_air_and_chooses_one():
-    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
-    rng = np.random.default_rng(0)
-    omega = np.column_stack([rng.normal(0, 0.3, 6), rng.uniform(8, 12, 6), rng.normal(0, 0.3, 6)])
     # 0.8 s flights: the drag screen's ratio is 7.5 (0.6 s flights gave 2.1, below DRAG_SCREEN_RATIO
     # once the screen compared with the fullest quadratic, any axes and linear terms: ee4bf4b)
-    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (6, 1)),
-                           np.arange(81) * 0.01, measure="velocities", noise=2e-3, seed=1)
+    data = _flights(6, seed=0, records=81, noise=2e-3)
     model, records = learn.fit_splitting(RigidBody(I), data, progress=False)  # no family skipped on these
     choice = records[-1].choice
     # on the axes of the best conservative family (on these flights, any axes)
@@ -231,11 +231,7 @@ def test_fit_splitting_offers_drag_families_to_a_body_in_air_and_chooses_one():
 
 @pytest.mark.slow  # ~2 min: two families, each refitted without each of two sessions
 def test_held_out_sessions_choose_the_drag_on_body_records():
-    I, D = np.array([1.0, 1.9, 2.1]), np.diag([0.02, 0.03, 0.025])
-    rng = np.random.default_rng(1)
-    omega = np.column_stack([rng.normal(0, 0.3, 6), rng.uniform(8, 12, 6), rng.normal(0, 0.3, 6)])
-    data = it.observe_body(Forced(RigidBody(I), QuadraticDrag(D)), omega * I, np.tile([0, 0, 0, 1.0], (6, 1)),
-                           np.arange(61) * 0.01, measure="velocities", noise=2e-3, seed=1)
+    data = _flights(6, seed=1, records=61, noise=2e-3)
     # two sessions, labelled on the data: held out whole without groups= (the data's groups)
     data = it.BodyObservations.concatenate([data.select([0, 1, 2]), data.select([3, 4, 5])],
                                            groups=["monday", "tuesday"])
