@@ -5,11 +5,10 @@ processes`); or on a Dask cluster (`--scheduler [ADDRESS]`).
 
 Threads are the default because the experiments' small networks keep about one core busy a
 training (XLA splits only large products), so two trainings at once use the second core:
-on the 2-core machine of BENCHMARKS.md ("Quick-profile budgets") the main job took 411 s in
-threads against 489 s one after the other, every figure identical (a training's result does not
-depend on what runs beside it; its `wall_time_s` does). Worker
-processes pay a JAX runtime and compilations each, and two of them at once each took more than
-twice as long as one alone (the same section): they pay off with more cores or a
+on 2 cores the main job is faster so, every figure identical (BENCHMARKS.md, "Quick-profile
+budgets"): a training's result does not depend on what runs beside it; its `wall_time_s` does.
+Worker processes pay a JAX runtime and compilations each, and two of them at once each took
+more than twice as long as one alone (the same section): they pay off with more cores or a
 cluster."""
 
 from __future__ import annotations

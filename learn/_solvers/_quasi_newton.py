@@ -69,9 +69,9 @@ class _ScipyRun:
             return float(v), np.asarray(g, dtype=np.float64)
 
         # SciPy's first evaluation (at x0) is made here, so that the value and gradient compile
-        # in the caller's thread, not in SciPy's: XLA's compilation and the persistent
-        # compilation cache's write of the executable segfaulted in that thread (once, under
-        # load, in the slow suite); the same compiled function gives the same numbers.
+        # in the caller's thread, not in SciPy's (a segfault was seen in the persistent cache's
+        # write of an executable compiled in SciPy's thread; not the only crash of that kind:
+        # issue 63); the same compiled function gives the same numbers.
         start = np.array(x0, dtype=np.float64)
         first = [evaluate(start)]
 
