@@ -34,8 +34,9 @@ minimum the parameters hardly move, and a $J_\theta$ from a nearby point only sh
 (the exact gradient fixes where they lead). The standard errors of $\theta$ are those of the
 Gauss-Newton covariance at the solution with the starts profiled out,
 $\hat\sigma^2\big(A - \sum_j B_j^\top G_j^{-1}B_j\big)^{-1}$ ($B$ by $p$ transposed passes,
-$G_j^{-1}B_j$ by conjugate gradients, both `PROFILE_BATCH` columns at a time), $\hat\sigma^2$ the
-residual sum of squares over its degrees of freedom.
+$G_j^{-1}B_j$ by conjugate gradients, both `PROFILE_BATCH` columns at a time, the product formed
+so that its error is second order in the solves': they run to the square root of the steps'
+tightest tolerance), $\hat\sigma^2$ the residual sum of squares over its degrees of freedom.
 """
 
 from __future__ import annotations
@@ -172,7 +173,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       lowers the loss by less than `rtol` of it.
     - `cg_rtol`, `cg_max_steps`: the conjugate gradients' tightest relative tolerance (the
       steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles; the standard
-      errors' use `cg_rtol`) and step cap (a step whose solve stops at the cap is still tried:
+      errors' use its square root: their product is second order in the solves' error,
+      `_profiled`) and step cap (a step whose solve stops at the cap is still tried:
       the loss decides; a standard error whose solve does not converge is NaN).
     - `standard_errors`: compute the parameters' covariance at the solution ($p$ conjugate
       gradient solves per trajectory; `False`: NaN).
@@ -287,8 +289,14 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     if standard_errors:
         if not fresh:
             state = _linearisation(fitted, starts, padded, substeps, None)
-        covariance = sigma2 * np.linalg.inv(np.asarray(_profiled(fitted, starts, padded, state.J_theta, state.A, counts,
-                                                                  substeps, cg_rtol, cg_max_steps)))
+        clock = _clock()
+        profiled, cg_steps = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
+                                       math.sqrt(cg_rtol), cg_max_steps)
+        covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
+        if progress:
+            print(f"fit_stream_operator: standard errors: {p} solves of {int(np.min(cg_steps))}-"
+                  f"{int(np.max(cg_steps))} conjugate gradient steps (rtol {math.sqrt(cg_rtol):.0e}), "
+                  f"{_since(clock)}", flush=True)
     else:
         covariance = np.full((p, p), np.nan)
     variances = np.diag(covariance)
@@ -497,18 +505,24 @@ def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_
 
 @eqx.filter_jit
 def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_steps):
-    r"""$A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$: the parameters'
-    Gauss-Newton matrix with the starts profiled out ($B$ by $p$ transposed passes,
-    $G^{-1}B$ by conjugate gradients, `PROFILE_BATCH` columns at a time sharing each pass;
-    NaN where a solve does not converge)."""
+    r"""`(S_p, steps)`: $S_p = A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$,
+    the parameters' Gauss-Newton matrix with the starts profiled out, and the conjugate gradient
+    steps of each column's solve `(p,)`. $B$ by $p$ transposed passes, $X \approx G^{-1}B$ by
+    conjugate gradients, `PROFILE_BATCH` columns at a time sharing each pass (NaN where a solve
+    does not converge); the product taken as $B^\top X + X^\top B - X^\top GX$, whose error is
+    $-E^\top GE$ for the solves' error $E = X - G^{-1}B$: second order in it (the first-order
+    $B^\top X$ is off by $B^\top E$), so that solves to a relative residual $\epsilon$ give
+    $S_p$ to about $\epsilon^2$ (one more pass per column for $GX$)."""
     r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
     transpose = jax.linear_transpose(forward, S)
     scale = 1.0 / jnp.sqrt(counts)[:, None]
 
-    def column(Jp):  # Jp (J, L n): (B column, G^{-1} B column), G scaled by counts^{-1/2}
+    def column(Jp):  # Jp (J, L n): B column, X column (G^{-1} B, G scaled by counts^{-1/2}), G X column
         b = transpose(Jp.reshape(r.shape))[0]
-        Z, _, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps)
-        return b, jnp.where(ok, scale * Z, jnp.nan)
+        Z, steps, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps)
+        x = jnp.where(ok, scale * Z, jnp.nan)
+        return b, x, transpose(forward(x))[0], steps
 
-    B, X = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0), batch_size=PROFILE_BATCH)  # (p, J, n) each
-    return A - jnp.einsum("pjn,qjn->pq", B, X)
+    B, X, GX, steps = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0), batch_size=PROFILE_BATCH)  # (p, J, n) each
+    BX = jnp.einsum("pjn,qjn->pq", B, X)
+    return A - (BX + BX.T - jnp.einsum("pjn,qjn->pq", X, GX)), steps
