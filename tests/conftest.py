@@ -5,6 +5,7 @@ import tempfile
 
 import jax
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, settings
 
 jax.config.update("jax_enable_x64", True)
@@ -67,3 +68,32 @@ def pytest_collection_finish(session):
 def pytest_sessionfinish(session, exitstatus):
     if os.environ.get("PYTEST_XDIST_WORKER") is None:
         shutil.rmtree(os.environ[_CACHE_VAR], ignore_errors=True)
+
+
+# A test that kills its pytest-xdist worker runs once more, in the fresh worker that replaces it;
+# a second crash fails it. Why: about 1 in 600 slow tests has ended its worker inside XLA's
+# compiler (SIGSEGV or SIGABRT in `backend_compile_and_load`, once in an executable's
+# serialisation), with or without the persistent cache above, under load or not, never when
+# rerun alone (`test_linear_term_fits_a_quadratic_plus_cosine_piece_a_sigmoid_cannot` twice,
+# two others once; issue 63). Only crashes are rerun: a test that fails fails.
+_CRASHED: set[str] = set()
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_handlecrashitem(crashitem, report, sched):
+    if crashitem not in _CRASHED:
+        _CRASHED.add(crashitem)
+        sched.mark_test_pending(crashitem)
+        report.outcome = "rerun"
+
+
+def pytest_report_teststatus(report, config):
+    if report.outcome == "rerun":
+        return "rerun", "R", ("RERUN", {"yellow": True})
+    return None
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if _CRASHED:
+        terminalreporter.write_line(f"rerun after crashing their worker: {', '.join(sorted(_CRASHED))}",
+                                    yellow=True)

@@ -161,6 +161,20 @@ def test_ci_builds_the_docs_from_the_docs_install_in_its_own_venv():
     assert "NO_MKDOCS_2_WARNING=1" in lines[build] and "MPLBACKEND=Agg" in lines[build]
 
 
+def test_ci_runs_the_default_suite_then_the_slow_one_then_the_docs():
+    """.ci/run: the README's test command, then every `@pytest.mark.slow` test (`-m slow`: the
+    default run deselects them), both in the test venv, before the docs venv."""
+    lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
+             if line.strip() and not line.lstrip().startswith("#")]
+    default = lines.index("python -m pytest")
+    slow = lines.index("python -m pytest -m slow")
+    docs_venv = next(k for k, line in enumerate(lines) if "-m venv --clear" in line)
+    assert default < slow < docs_venv, lines
+    assert "deactivate" not in lines[default:slow], "the slow suite runs in the test venv"
+    readme = (ROOT / "README.md").read_text()
+    assert "`python -m pytest -m slow`" in readme, "the README no longer says how to run the long tests"
+
+
 def test_home_page_points_to_every_tutorial_the_paper_and_the_experiments():
     import paper._registry
 
