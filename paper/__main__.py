@@ -31,6 +31,7 @@ from integrators.internals import atomic_write_text
 
 from ._cluster import ENV, THREADS, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
+from ._mappings import release_compiled_programs
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
 from ._verdict import SEEDS_FILE, SEEDS_KEY, verdict_table
 
@@ -110,6 +111,7 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
         t = time.perf_counter()
         results[exp_id] = exp.execute(profile=profile, progress=progress, out_dir=out / exp_id)
         print(f"   done in {time.perf_counter() - t:.0f} s -> {out / exp_id}")
+        release_compiled_programs()  # paper._mappings
     table = summary_table(results)
     atomic_write_text(out / "summary.md", table)
     verdict = verdict_table(EXPERIMENTS, {k: v for k, v in results.items() if EXPERIMENTS[k].paper_values},

@@ -25,6 +25,7 @@ from ._experiment import (
     saved_row,
     table_lines,
 )
+from ._mappings import release_compiled_programs
 from ._study import AbstractStudyModel
 
 
@@ -83,6 +84,7 @@ class AbstractStudy(AbstractExperiment):
             rows.append(row)
             if progress:
                 print(self.line(row), flush=True)
+            release_compiled_programs()  # a long study compiles thousands of programs: paper._mappings
         return rows
 
     def announce(self, condition: Any) -> str | None:
@@ -115,6 +117,7 @@ class AbstractStudy(AbstractExperiment):
                 print(text, flush=True)
             models = [m for m in self.models(P, condition) if self.admits(condition, m)]
             rows += self.condition_rows(profile, condition, models, out_dir, progress)
+            release_compiled_programs()
         figures = self.figures(rows, seen, out_dir)
         return {"rows": [row_to_json(r) for r in rows], "verdict": self.verdict(rows, seen),
                 **({"figures": figures} if figures else {}), **self.summary(P, rows, seen)}

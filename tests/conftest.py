@@ -70,12 +70,19 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(os.environ[_CACHE_VAR], ignore_errors=True)
 
 
-# A test that kills its pytest-xdist worker runs once more, in the fresh worker that replaces it;
-# a second crash fails it. Why: about 1 in 600 slow tests has ended its worker inside XLA's
-# compiler (SIGSEGV or SIGABRT in `backend_compile_and_load`, once in an executable's
-# serialisation), with or without the persistent cache above, under load or not, never when
-# rerun alone (`test_linear_term_fits_a_quadratic_plus_cosine_piece_a_sigmoid_cannot` twice,
-# two others once; issue 63). Only crashes are rerun: a test that fails fails.
+# A worker compiles thousands of programs, each held by JAX's caches as a few dozen memory
+# mappings: past Linux's vm.max_map_count (65,530) XLA dies in the next compilation (the slow
+# suite's workers crashed so, SIGSEGV or SIGABRT in `backend_compile_and_load`, at 66% and 88% of
+# the run, in the same two tests each time, never alone: issue 63). Released between tests once
+# past half the limit (`paper._mappings`).
+def pytest_runtest_teardown(item, nextitem):
+    from paper._mappings import release_compiled_programs
+
+    release_compiled_programs()
+
+
+# A test that kills its pytest-xdist worker anyway runs once more, in the fresh worker that
+# replaces it; a second crash fails it. Only crashes are rerun: a test that fails fails.
 _CRASHED: set[str] = set()
 
 
