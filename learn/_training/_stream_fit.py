@@ -264,12 +264,19 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                 state = _linearisation(rebuild(x), starts, padded, substeps, None)
                 fresh = True
                 continue
+            if np.isfinite(cost_new) and 0 <= predicted <= rtol * float(state.cost):
+                # refused with a fresh J_theta, and the step's model promised less than the
+                # stopping rule asks: the loss is at its floor (round-off decides the trials;
+                # at N = 128 each costs a minute)
+                break
             if lam >= LAMBDA_RANGE[1]:
                 break
             lam = min(lam * nu, LAMBDA_RANGE[1])
             nu *= 2
         if not accepted:
-            stopped = "no damping lowers the loss"
+            converged = np.isfinite(cost_new) and 0 <= predicted <= rtol * float(state.cost)
+            stopped = "converged (no step the linear model says can lower the loss by rtol)" if converged else \
+                "no damping lowers the loss"
             break
         done += 1
         losses.append(float(state.cost) / n_residuals)
