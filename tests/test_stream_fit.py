@@ -90,6 +90,7 @@ def test_quasi_geostrophic_spectrum_from_noisy_data_within_three_standard_errors
     start = -(L * (L + 1.0))
     start[0] = -2.0 - F
     fit = learn.fit_stream_operator(_model(start), noisy, iterations=40)
+    assert fit.stopped.startswith("converged"), fit.stopped  # at the noise floor, not out of iterations
     true = -(L * (L + 1.0)) - F
     se = fit.standard_errors
     assert se[0] == 0.0 and np.all(np.isfinite(se[1:])) and np.all(se[1:] > 0)
