@@ -73,12 +73,14 @@ def pytest_sessionfinish(session, exitstatus):
 # A worker compiles thousands of programs, each held by JAX's caches as a few dozen memory
 # mappings: past Linux's vm.max_map_count (65,530) XLA dies in the next compilation (the slow
 # suite's workers crashed so, SIGSEGV or SIGABRT in `backend_compile_and_load`, at 66% and 88% of
-# the run, in the same two tests each time, never alone: issue 63). Released between tests once
-# past half the limit (`paper._mappings`).
+# the run, in the same two tests each time, never alone: issue 63). Released after each long
+# test once past the share of the limit `paper._mappings` sets (the default run's workers live
+# four minutes; releasing there cost recompilations: 211 s -> 338 s).
 def pytest_runtest_teardown(item, nextitem):
-    from paper._mappings import release_compiled_programs
+    if item.get_closest_marker("slow") is not None:
+        from paper._mappings import release_compiled_programs
 
-    release_compiled_programs()
+        release_compiled_programs()
 
 
 # A test that kills its pytest-xdist worker anyway runs once more, in the fresh worker that
