@@ -22,7 +22,7 @@ SHARE = 0.75
 #: ... and have grown by this share of it since the last release: not every program's mappings
 #: come back (XLA pools its kernels' memory, and objects outside JAX's caches hold programs), and
 #: a process that stays above `SHARE` after a release would otherwise empty the caches before
-#: every call (the default test run went from 207 s to 325 s so).
+#: every call.
 STEP = 0.1
 
 _after_last_release = [0]

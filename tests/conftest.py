@@ -75,7 +75,7 @@ def pytest_sessionfinish(session, exitstatus):
 # suite's workers crashed so, SIGSEGV or SIGABRT in `backend_compile_and_load`, at 66% and 88% of
 # the run, in the same two tests each time, never alone: issue 63). Released after each long
 # test once past the share of the limit `paper._mappings` sets (the default run's workers live
-# four minutes; releasing there cost recompilations: 211 s -> 338 s).
+# a few minutes and never came near it).
 def pytest_runtest_teardown(item, nextitem):
     if item.get_closest_marker("slow") is not None:
         from paper._mappings import release_compiled_programs
