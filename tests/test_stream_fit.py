@@ -64,7 +64,8 @@ def test_euler_spectrum_from_exact_data():
     assert min(np.linalg.norm(y[-1] - y[0]) / np.linalg.norm(y[0]) for y in data.states) > 0.2  # they move
     start = -(L * (L + 1.0)) * (1 + 0.2 * np.sin(L))
     start[0] = -2.0  # the gauge: degree 1 held at the truth's (the flow cannot tell; learn.DegreeSpectrum)
-    fit = learn.fit_stream_operator(_model(start), data, iterations=40, rtol=1e-14, standard_errors=False)
+    fit = learn.fit_stream_operator(_model(start), data, iterations=40, rtol=1e-14, chi2_tol=0.0,
+                                    standard_errors=False)  # exact data: chi^2 has no noise to stop at
     true = -(L * (L + 1.0))
     # exact data of the model's own map (to the stage tolerance 1e-13 of |W|): the misfit at the
     # truth is ~1e-13 of the field, and eigenvalues whose fields move by O(1) of their norm are
@@ -78,7 +79,7 @@ def test_quasi_geostrophic_spectrum_from_exact_data():
     start = -(L * (L + 1.0))
     start[0] = -2.0 - F  # the gauge at the truth's degree 1
     fit = learn.fit_stream_operator(_model(start), quasi_geostrophic_data(), iterations=40, rtol=1e-14,
-                                    standard_errors=False)
+                                    chi2_tol=0.0, standard_errors=False)
     true = -(L * (L + 1.0)) - F
     assert np.max(np.abs(fit.values - true) / np.abs(true)) <= 1e-8, fit.values  # as the Euler case
 
@@ -100,6 +101,14 @@ def test_quasi_geostrophic_spectrum_from_noisy_data_within_three_standard_errors
     assert np.max(z) >= 0.1, z
     # the residuals' noise estimate matches the noise put in (1530 degrees of freedom: 2%)
     assert fit.noise == pytest.approx(noisy.metadata["noise_std"], rel=0.1)
+    # chi2_tol's stop (chi^2 lowered by less than 0.01) leaves the estimate within a small part of
+    # its error bar of the minimum itself (continued with only rtol = 1e-14 to stop): a step that
+    # lowers chi^2 by eps moves it by about sqrt(eps) = 0.1 standard errors; 0.5 leaves room for
+    # the few iterations before the stop each contributing
+    tight = learn.fit_stream_operator(fit.model, noisy, iterations=40, rtol=1e-14, chi2_tol=0.0,
+                                      starts=fit.starts, standard_errors=False)
+    moved = np.abs(tight.values - fit.values)[1:] / se[1:]
+    assert np.max(moved) <= 0.5, moved
     # the learned rollout keeps every Casimir tr(iW)^k: unitary conjugations, whatever was fitted
     model = fit.model
     rng = np.random.default_rng(1)
@@ -118,7 +127,7 @@ def test_quasi_geostrophic_spectrum_from_noisy_data_within_three_standard_errors
 def test_the_true_family_is_identified():
     """The limit: the quasi-geostrophic family fitted to its own data finds F."""
     model = learn.StreamOperator(Zeitlin(N), learn.QuasiGeostrophicSpectrum(0.0), tol=TOL, iterations=11)
-    fit = learn.fit_stream_operator(model, quasi_geostrophic_data(), iterations=40, rtol=1e-14,
+    fit = learn.fit_stream_operator(model, quasi_geostrophic_data(), iterations=40, rtol=1e-14, chi2_tol=0.0,
                                     standard_errors=False)
     assert abs(float(fit.values[0]) - F) <= 1e-8 * F  # as the exact cases above
 
@@ -138,6 +147,9 @@ def test_bad_input():
         learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, max_step=-1.0)
     with pytest.raises(ValueError, match="rtol must be a number in"):
         learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, rtol=2.0)
+    for bad in (-0.1, float("nan"), float("inf"), "0.01", True):
+        with pytest.raises(ValueError, match="chi2_tol must be a finite number >= 0"):
+            learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, chi2_tol=bad)
 
 
 @pytest.mark.slow  # ~70 s on 2 loaded cores, compiling three programs at N = 4

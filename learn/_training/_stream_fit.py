@@ -153,7 +153,8 @@ def check_stream_data(model: Any, data: Any) -> None:
 
 
 def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: float | None = None,
-                        iterations: int = 50, rtol: float = 1e-10, cg_rtol: float = 1e-8,
+                        iterations: int = 50, rtol: float = 1e-10, chi2_tol: float = 0.01,
+                        cg_rtol: float = 1e-8,
                         cg_max_steps: int = 200, standard_errors: bool = True, starts: Any = None,
                         progress: bool = False) -> StreamOperatorFit:
     r"""Fit `model`'s stream operator and one initial field per trajectory to `data` by
@@ -170,7 +171,11 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       keep each step of the longest interval at most `max_step` (`None`: one step per
       interval).
     - `iterations`: Levenberg-Marquardt iterations at most; `rtol`: stop once an iteration
-      lowers the loss by less than `rtol` of it.
+      lowers the loss by less than `rtol` of it; `chi2_tol`: stop once it lowers $\chi^2 =
+      \mathrm{SSR}/\hat\sigma^2$ by less than `chi2_tol` ($\hat\sigma^2$ the residual sum of
+      squares over its degrees of freedom): a step that lowers $\chi^2$ by $\epsilon$ moves the
+      parameters by about $\sqrt\epsilon$ standard errors, so the default 0.01 stops where the
+      estimate changes by a tenth of its error bar (`0`: only `rtol` stops, e.g. exact data).
     - `cg_rtol`, `cg_max_steps`: the conjugate gradients' tightest relative tolerance (the
       steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles; the standard
       errors' use its square root: their product is second order in the solves' error,
@@ -189,6 +194,9 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     iterations = positive_int(iterations, "iterations")
     if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 <= rtol < 1:
         raise ValueError(f"rtol must be a number in [0, 1); got {rtol!r}")
+    if isinstance(chi2_tol, bool) or not isinstance(chi2_tol, (int, float)) or not 0 <= chi2_tol < math.inf:
+        raise ValueError(f"chi2_tol must be a finite number >= 0 (the least decrease of chi^2 worth an "
+                         f"iteration, e.g. 0.01); got {chi2_tol!r}")
     cg_rtol = positive_float(cg_rtol, "cg_rtol")
     cg_max_steps = positive_int(cg_max_steps, "cg_max_steps")
     all_intervals = data.intervals()
@@ -219,6 +227,12 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                          f"components by {p} parameters", "fit fewer or shorter trajectories, or fewer parameters")
     counts = jnp.sum(padded.mask, axis=1)  # observations per trajectory: the starts' scaling
     n_residuals = int(np.sum(np.asarray(counts))) * data.system.dim
+    dof = n_residuals - p - data.n_trajectories * data.system.dim
+
+    def negligible(decrease: float, cost: float) -> bool:
+        """Whether lowering the residual sum of squares `cost` by `decrease` is below both
+        stopping rules: `rtol` of it, and `chi2_tol` of chi^2 (`cost / dof` per unit)."""
+        return decrease <= max(rtol * cost, chi2_tol * cost / dof if dof > 0 else 0.0)
 
     state = _linearisation(rebuild(x), starts, padded, substeps, None)
     if not np.isfinite(float(state.cost)):
@@ -264,7 +278,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                 state = _linearisation(rebuild(x), starts, padded, substeps, None)
                 fresh = True
                 continue
-            if np.isfinite(cost_new) and 0 <= predicted <= rtol * float(state.cost):
+            if np.isfinite(cost_new) and 0 <= predicted and negligible(predicted, float(state.cost)):
                 # refused with a fresh J_theta, and the step's model promised less than the
                 # stopping rule asks: the loss is at its floor (round-off decides the trials;
                 # at N = 128 each costs a minute)
@@ -274,8 +288,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             lam = min(lam * nu, LAMBDA_RANGE[1])
             nu *= 2
         if not accepted:
-            converged = np.isfinite(cost_new) and 0 <= predicted <= rtol * float(state.cost)
-            stopped = "converged (no step the linear model says can lower the loss by rtol)" if converged else \
+            converged = np.isfinite(cost_new) and 0 <= predicted and negligible(predicted, float(state.cost))
+            stopped = "converged (no step the linear model says can lower the loss by rtol or chi2_tol)" if converged else \
                 "no damping lowers the loss"
             break
         done += 1
@@ -283,7 +297,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         if progress:
             print(f"fit_stream_operator: iteration {done}, loss {losses[-1]:.6e}, lambda {lam:.1e}", flush=True)
         forcing = min(FORCING_MAX, math.sqrt(max(decrease, 0.0)))
-        if before - float(state.cost) <= rtol * before:
+        if negligible(before - float(state.cost), before):
             if fresh:
                 stopped = "converged"
                 break
@@ -291,7 +305,6 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             fresh = True
 
     fitted = rebuild(x)
-    dof = n_residuals - p - starts.size
     sigma2 = float(state.cost) / dof if dof > 0 else float("nan")
     if standard_errors:
         if not fresh:
