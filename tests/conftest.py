@@ -38,9 +38,12 @@ EPS = np.finfo(np.float64).eps
 
 # One JAX compilation cache per test run, shared by the pytest-xdist workers (which inherit the
 # variable from the controlling process): the suite's many small fits compile the same programs
-# again and again, and a cache hit skips XLA. Removed when the run ends.
+# again and again, and a cache hit skips XLA. Removed when the run ends, unless the caller set
+# the variable (.ci/run: one cache for the default run and the slow one, which compiles many of
+# the same programs), in which case the caller owns it.
 _CACHE_VAR = "LIEPOISSON_TEST_JAX_CACHE"
-if os.environ.get("PYTEST_XDIST_WORKER") is None:
+_OWN_CACHE = os.environ.get("PYTEST_XDIST_WORKER") is None and not os.environ.get(_CACHE_VAR)
+if _OWN_CACHE:
     os.environ[_CACHE_VAR] = tempfile.mkdtemp(prefix="liepoisson-tests-jax-cache-")
 jax.config.update("jax_compilation_cache_dir", os.environ[_CACHE_VAR])
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -66,7 +69,7 @@ def pytest_collection_finish(session):
 
 
 def pytest_sessionfinish(session, exitstatus):
-    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+    if _OWN_CACHE:
         shutil.rmtree(os.environ[_CACHE_VAR], ignore_errors=True)
 
 

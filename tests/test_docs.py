@@ -167,7 +167,7 @@ def test_ci_runs_the_default_suite_then_the_slow_one_then_the_docs():
     lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
              if line.strip() and not line.lstrip().startswith("#")]
     default = lines.index("python -m pytest")
-    slow = lines.index("python -m pytest -m slow")
+    slow = next(k for k, line in enumerate(lines) if line.startswith("python -m pytest -m slow"))
     docs_venv = next(k for k, line in enumerate(lines) if "-m venv --clear" in line)
     assert default < slow < docs_venv, lines
     assert "deactivate" not in lines[default:slow], "the slow suite runs in the test venv"
