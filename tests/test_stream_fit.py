@@ -132,6 +132,37 @@ def test_the_true_family_is_identified():
     assert abs(float(fit.values[0]) - F) <= 1e-8 * F  # as the exact cases above
 
 
+@pytest.mark.slow  # two fits at N = 6, each compiled
+def test_the_fit_keeps_the_order_and_order_6_removes_the_steps_bias():
+    """On the exact flow (heyoka at machine precision), one step per interval: the QG family's
+    F, 0 in truth, is biased by the step's error, O(h^2) at order 2; at order 6 (the same
+    intervals, seven midpoints a step) the bias is 100 times smaller. Fails if the fit
+    drops the model's order."""
+    from integrators import ground_truth
+
+    n = 6
+    system = Zeitlin(n)
+    rng = np.random.default_rng(5)
+    times, states = [], []
+    for j in range(2):
+        t = np.concatenate([[0.0], np.cumsum(rng.uniform(0.08, 0.12, 8))])
+        y = system.random_state(10 + j, decay=0.5, lmax=n - 1)
+        ys = [y]
+        for dt in np.diff(t):
+            ys.append(ground_truth(system, ys[-1], float(dt), 1, progress=False).states[0, -1])
+        times.append(t)
+        states.append(np.stack(ys))
+    data = Observations(system, times, states)
+    biases = {}
+    for order in (2, 6):
+        model = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(0.3), order=order, tol=TOL, iterations=12)
+        fit = learn.fit_stream_operator(model, data, iterations=30, rtol=1e-14, chi2_tol=0.0, standard_errors=False)
+        assert fit.model.order == order
+        biases[order] = abs(float(fit.values[0]))
+    assert biases[2] > 1e-4, biases  # the midpoint's bias is there to be removed
+    assert biases[6] <= biases[2] / 100, biases
+
+
 def test_bad_input():
     data = euler_data()
     with pytest.raises(TypeError, match="model must be a learn.StreamOperator"):

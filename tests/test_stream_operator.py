@@ -72,12 +72,13 @@ def test_at_the_laplacian_it_is_zeitlins_model():
     assert np.max(np.abs(np.asarray(c) - a)) <= 20 * 1e-13 * np.max(np.abs(b))
 
 
-def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters():
+@pytest.mark.parametrize("order", [2, 6])
+def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters(order):
     N = 8
     system = Zeitlin(N)
     rng = np.random.default_rng(3)
     spectrum = learn.DegreeSpectrum(-np.arange(1, N) * (np.arange(1, N) + 1.0) * rng.uniform(0.5, 2.0, N - 1))
-    model = learn.StreamOperator(system, spectrum, rotation=0.7, tol=1e-12, iterations=10)
+    model = learn.StreamOperator(system, spectrum, rotation=0.7, order=order, tol=1e-12, iterations=10)
     y0 = system.random_state(4, decay=0.0)
     intervals = jnp.asarray(rng.uniform(0.02, 0.08, 50))
     ys = np.asarray(eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))(model, jnp.asarray(y0), intervals))
@@ -94,6 +95,33 @@ def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters():
     # the relative vorticity's spectrum is not kept on a rotating sphere: the term matters
     w0, w1 = np.linalg.eigvalsh(1j * (q0 - f)), np.linalg.eigvalsh(1j * (q1 - f))
     assert np.max(np.abs(w1 - w0)) > 1e-6 * np.max(np.abs(w0))
+
+
+def test_orders_against_heyoka():
+    """`order=2, 4, 6` converge at their order to the exact flow (heyoka's Taylor method at
+    machine precision, an independent reference); a rollout at uneven intervals equals the
+    inherited `step` at equal ones."""
+    from integrators import ground_truth
+
+    N, T = 6, 0.4
+    system = Zeitlin(N)
+    y0 = system.random_state(2, decay=0.0)
+    exact = ground_truth(system, y0, T, 1, progress=False).states[0, -1]
+    roll = eqx.filter_jit(lambda m, y, d, n: m.rollout_intervals(y, d, n))  # n: a Python int, static
+    for order, rate in ((2, 4.0), (4, 16.0), (6, 64.0)):
+        model = learn.StreamOperator(system, order=order, tol=1e-14, iterations=20)
+        # two uneven intervals, run in n and 2n steps each
+        errors = [np.linalg.norm(np.asarray(roll(model, jnp.asarray(y0), jnp.asarray([0.15, T - 0.15]), n))[-1] - exact)
+                  for n in (2, 4)]
+        # the error of a method of order p falls 2^p-fold when h halves; h is small enough
+        # (h |B| ~ 0.05-0.1) for the leading term to dominate to within 25%
+        assert 0.75 * rate <= errors[0] / errors[1] <= 1.25 * rate, (order, errors)
+        assert errors[1] <= 1e-3 * np.linalg.norm(exact)
+    model = learn.StreamOperator(system, order=4, h=0.05, tol=1e-14, iterations=20)
+    steps = np.asarray(model.rollout(y0, 6))
+    intervals = np.asarray(roll(model, jnp.asarray(y0), jnp.full(6, 0.05), 1))
+    # both iterate every stage to 1e-14 of |W|, from different starts: they agree to that, 6 x 5 midpoints
+    assert np.max(np.abs(steps - intervals)) <= 30 * 1e-14 * np.max(np.abs(steps))
 
 
 def test_gauge():
@@ -125,6 +153,9 @@ def test_bad_input():
         learn.StreamOperator(system, rotation=True)
     with pytest.raises(ValueError, match="rotation must be finite"):
         learn.StreamOperator(system, rotation=float("inf"))
+    for order in (3, 1, 8, True, "4"):
+        with pytest.raises(ValueError, match=r"order must be 2 \(the isospectral midpoint\), 4 or 6"):
+            learn.StreamOperator(system, order=order)
     with pytest.raises(ValueError, match="F must be finite and > -2"):
         learn.QuasiGeostrophicSpectrum(-3.0)
     with pytest.raises(ValueError, match="reference must be an index of values"):
@@ -144,9 +175,9 @@ def test_save_and_load(tmp_path):
     N = 6
     values = -np.arange(1, N) * (np.arange(1, N) + 1.0) - 3.0
     model = learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values, reference_degree=2), rotation=0.3,
-                                 h=0.05, iterations=7)
+                                 order=4, h=0.05, iterations=7)
     model.save(tmp_path / "m.h5")
     loaded = learn.StreamOperator.load(tmp_path / "m.h5")
     assert np.array_equal(loaded.spectrum.values(), model.spectrum.values())
     assert loaded.spectrum.reference == 1 and float(loaded.rotation) == 0.3
-    assert loaded.iterations == 7 and loaded.h == 0.05
+    assert loaded.iterations == 7 and loaded.h == 0.05 and loaded.order == 4

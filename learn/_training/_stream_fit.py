@@ -354,16 +354,17 @@ def _with_converging_iterations(model: StreamOperator, starts: jax.Array, data: 
     """`model` with the fewest stage iterations (from its own, up to `MAX_STAGE_ITERATIONS`)
     whose rollouts from `starts` over the data's intervals are finite, plus one (the
     parameters move)."""
+    def with_iterations(k: int) -> StreamOperator:
+        return StreamOperator(model.system, model.spectrum, rotation=None if model.rotation is None else
+                              float(model.rotation), order=model.order, tol=model.tol, iterations=k,
+                              max_iter=model.max_iter)
+
     k = model.iterations
     while True:
-        trial = StreamOperator(model.system, model.spectrum, rotation=None if model.rotation is None else
-                               float(model.rotation), tol=model.tol, iterations=k, max_iter=model.max_iter)
+        trial = with_iterations(k)
         ys = _rollouts(trial, starts, data.intervals, substeps)
         if bool(jnp.all(jnp.isfinite(ys))):
-            if k == model.iterations:
-                return trial
-            return StreamOperator(model.system, model.spectrum, rotation=None if model.rotation is None else
-                                  float(model.rotation), tol=model.tol, iterations=k + 1, max_iter=model.max_iter)
+            return trial if k == model.iterations else with_iterations(k + 1)
         if k >= MAX_STAGE_ITERATIONS:
             raise ValueError(
                 f"model: a step's stage iteration does not meet tol={model.tol:g} in {MAX_STAGE_ITERATIONS} "
