@@ -1,8 +1,7 @@
 """The process's memory mappings, and JAX's compiled programs released before they run out.
 
 XLA's CPU backend loads every compiled program as several memory mappings (its kernels' code
-and data: measured 5 to 26 a small program in a fresh process), kept while JAX's caches hold
-the program. Linux refuses a process more than `vm.max_map_count` of them (65,530 by default), and
+and data: BENCHMARKS.md, "The default test run"), kept while JAX's caches hold the program. Linux refuses a process more than `vm.max_map_count` of them (65,530 by default), and
 XLA does not survive the refusal: a process that compiles a few thousand programs (a long
 study, a test worker) then dies inside `backend_compile_and_load` (SIGSEGV or SIGABRT) at
 whatever it compiles next. `release_compiled_programs` empties JAX's caches (`jax.clear_caches`)

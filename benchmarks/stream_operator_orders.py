@@ -1,0 +1,117 @@
+"""The error of `learn.StreamOperator`'s orders at a given cost (BENCHMARKS.md, "Fluids from
+data"): Euler's equations on the sphere (Zeitlin's model at the Laplacian's spectrum, N = 16),
+a random field with every degree (W8's training field, unit harmonic norm: one eddy turnover
+is t = 1) run to t = 1 in `n` equal steps per interval of 0.1, against heyoka's Taylor method
+at machine precision; the cost is the midpoints (each one stage iteration to 1e-13) per eddy
+turnover. Beside the three orders, Yoshida's triple jump of the midpoint
+(`integrators.IsospectralTripleJump`), the order-4 composition the library had before.
+
+    python -m benchmarks.stream_operator_orders [--N 16]
+    python -m benchmarks.stream_operator_orders --report
+    python -m benchmarks.stream_operator_orders --w8-limit
+
+`--w8-limit`: what the step's error does to a fit, W8's limit (the quasi-geostrophic family,
+F from 0) on W8's Euler data at N = 16, noise 1e-3 (the quick profile's condition), at order 2
+with steps of at most 0.05 eddy turnovers and at orders 4 and 6 with one step an interval
+(0.15): F with its standard error, |F|/SE, the fit's time and the field error at one eddy
+turnover (`benchmarks/results/stream_operator_orders_w8_limit.json`).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import learn
+from integrators import IsospectralTripleJump, ground_truth
+from liepoisson.systems import Zeitlin
+
+from ._report import add_output_arguments, default_out, saved_results, write_json
+
+NAME = "stream_operator_orders"
+STEPS = (1, 2, 3, 4, 6)  # steps per interval of 0.1
+
+
+def measure(N: int) -> list[dict]:
+    jax.config.update("jax_enable_x64", True)
+    system = Zeitlin(N)
+    y0 = system.random_state(100, lmax=N - 1, decay=0.5)  # W8's first training field
+    exact = ground_truth(system, y0, 1.0, 1, progress=False).states[0, -1]
+    roll = eqx.filter_jit(lambda m, y, n: m.rollout_intervals(y, jnp.full(10, 0.1), n))
+    results = []
+    for order in (2, 4, 6):
+        model = learn.StreamOperator(system, order=order, tol=1e-13, iterations=16)
+        for n in STEPS:
+            y = np.asarray(roll(model, jnp.asarray(y0), n))[-1]
+            results.append({"method": f"order {order}", "midpoints_per_tau": 10 * n * len(model.substeps),
+                            "error": float(np.linalg.norm(y - exact) / np.linalg.norm(exact))})
+    for n in STEPS:
+        method = IsospectralTripleJump(system, 0.1 / n, tol=1e-13)
+        y = np.asarray(method.rollout(y0, 10 * n))[-1]
+        results.append({"method": "triple jump", "midpoints_per_tau": 30 * n,
+                        "error": float(np.linalg.norm(y - exact) / np.linalg.norm(exact))})
+    return results
+
+
+def w8_limit() -> list[dict]:
+    import tempfile
+    import time
+    from pathlib import Path
+
+    from paper import w8_fluids as w8
+
+    results = []
+    for order, fit_step in ((2, 0.05), (4, 0.15), (6, 0.15)):
+        P = w8.PROFILES["quick"].replace(order=order, fit_step=fit_step)
+        condition = w8.Condition(16, w8.TRUTHS["Euler"], 1e-3, P)
+        with tempfile.TemporaryDirectory() as folder:
+            condition.folder = Path(folder)
+            data = condition.data  # written and read back before the clock starts
+            start = time.perf_counter()
+            fitted = w8.LimitModel(P.lm_iterations).fit(condition, data)
+            seconds = time.perf_counter() - start
+            starts, reference = condition.test
+            forecast = fitted.predict(starts, condition.step, reference.shape[1] - 1)
+        error = np.linalg.norm(forecast - reference, axis=-1) / np.linalg.norm(reference, axis=-1)
+        results.append({"order": order, "fit_step": fit_step, "F": fitted.parameters, "z": fitted.z,
+                        "fit_seconds": seconds, "error_at_tau": float(error[:, condition.steps].mean())})
+        print(f"order {order}, steps <= {fit_step} tau: {fitted.parameters}, |F|/SE {fitted.z:.3g}, fit {seconds:.0f} s, "
+              f"field error at tau {results[-1]['error_at_tau']:.3g}", flush=True)
+    return results
+
+
+def report(results: list[dict]) -> None:
+    print("method        midpoints per tau: relative error at tau")
+    for method in dict.fromkeys(r["method"] for r in results):
+        rows = [r for r in results if r["method"] == method]
+        print(f"{method:<13s} " + " | ".join(f"{r['midpoints_per_tau']}: {r['error']:.2e}" for r in rows))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--N", type=int, default=16)
+    parser.add_argument("--w8-limit", action="store_true", help="the step's bias in W8's limit (module docstring)")
+    add_output_arguments(parser, NAME)
+    args = parser.parse_args(argv)
+    if args.w8_limit:
+        out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")
+        if args.report:
+            for r in saved_results(out):
+                print(r)
+            return
+        write_json(out, args, w8_limit())
+        return
+    if args.report:
+        report(saved_results(args.out))
+        return
+    results = measure(args.N)
+    report(results)
+    write_json(args.out, args, results)
+
+
+if __name__ == "__main__":
+    main()
