@@ -133,10 +133,10 @@ def test_the_true_family_is_identified():
 
 
 @pytest.mark.slow  # two fits at N = 6, each compiled
-def test_the_fit_keeps_the_order_and_order_6_removes_the_steps_bias():
+def test_the_fit_keeps_the_order_and_order_4_removes_the_steps_bias():
     """On the exact flow (heyoka at machine precision), one step per interval: the QG family's
-    F, 0 in truth, is biased by the step's error, O(h^2) at order 2; at order 6 (the same
-    intervals, seven midpoints a step) the bias is 100 times smaller. Fails if the fit
+    F, 0 in truth, is biased by the step's error, O(h^2) at order 2; at order 4 (the same
+    intervals, five midpoints a step) the bias is 100 times smaller. Fails if the fit
     drops the model's order."""
     from integrators import ground_truth
 
@@ -154,13 +154,14 @@ def test_the_fit_keeps_the_order_and_order_6_removes_the_steps_bias():
         states.append(np.stack(ys))
     data = Observations(system, times, states)
     biases = {}
-    for order in (2, 6):
+    for order in (2, 4):
         model = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(0.3), order=order, tol=TOL, iterations=12)
         fit = learn.fit_stream_operator(model, data, iterations=30, rtol=1e-14, chi2_tol=0.0, standard_errors=False)
         assert fit.model.order == order
         biases[order] = abs(float(fit.values[0]))
+    # measured: 8.0e-3 at order 2, 7.0e-6 at order 4
     assert biases[2] > 1e-4, biases  # the midpoint's bias is there to be removed
-    assert biases[6] <= biases[2] / 100, biases
+    assert biases[4] <= biases[2] / 100, biases
 
 
 def test_bad_input():
