@@ -51,12 +51,9 @@ forecast by every model from that noisy field, in steps of $\Delta$ (the stream 
 each in equal steps of order `order` (`learn.StreamOperator`'s) of at most `fit_step` eddy
 turnovers, as in their fits, where every interval is run in the same number of steps, the
 fewest that keep the longest one's at most `fit_step`), against the truth from the clean field.
-A fitted model carries its step's error into its parameters: Euler's limit at N = 16, noise
-1e-3 found, at order 2 and `fit_step` 0.05 (three midpoints an interval),
-$F = -0.0046 \pm 7.9\times10^{-5}$ (58 standard errors; 0.0102 at 0.075, 0.040 at 0.15: $O(h^2)$);
-at order 4 and 0.15 (one step of five midpoints an interval) $-0.00020 \pm 7.6\times10^{-5}$
-(2.6 SE), at order 6 and 0.15 $-0.00016$ (2.1 SE; the same noise), in 305 s against 122 s, the
-field error at $\tau$ 0.0011 against 0.0028 (quick and full: order 4, 0.15). DMD's modes span
+A fitted model carries its step's error into its parameters: at order 2 enough to put Euler's
+limit many standard errors off at low noise, at order 4 with one step an interval within noise
+(BENCHMARKS.md, "The step's order"; quick and full: order 4, 0.15). DMD's modes span
 what the training snapshots span (rank at most their number): the part of a test field
 outside them is lost at $t = 0$ (its size is in the DMD rows' note).
 
@@ -108,7 +105,7 @@ PROFILES = profiles(
     # stream operators' first fit (continuation in time, `_fit`; smoke: all, no continuation,
     # as measured; quick, full: NOT yet measured, the N = 16 check was cut by the deadline); fit_step: the stream operators'
     # longest step in eddy turnovers (fit_stream_operator's max_step; forecasts too); order: theirs (the
-    # module docstring: order 4 at 0.15 measured against order 2 at 0.05, Euler's limit at N = 16); fine: the
+    # module docstring); fine: the
     # truth's steps per interval; lm_iterations: fit_stream_operator's at most; dmd_ranks: the DMD candidates.
     # "smoke" exercises the whole pipeline (tests); numbers are meaningless at N = 8.
     smoke=Profile(sizes=(8,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-2,), n_train=3,
