@@ -1,7 +1,7 @@
 """Memory and time probe of `learn.fit_stream_operator` at N = 32 to 128 (issue 65): Euler's
 equations on the sphere (Zeitlin's model) observed at uneven times with noise 1e-3 of the
 field, a spectrum per degree fitted with one start per trajectory. The data are the model's
-own map (`--order`, one step per interval) at the true spectrum: the fit can reach the noise.
+own map (`--composition`, one step per interval) at the true spectrum: the fit can reach the noise.
 Not a test.
 
     PYTHONPATH=. python benchmarks/stream_operator_probe.py --N 64
@@ -60,7 +60,9 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=10, help="Levenberg-Marquardt iterations at most")
     parser.add_argument("--rtol", type=float, default=1e-8, help="the fit's rtol")
     parser.add_argument("--chi2-tol", type=float, default=0.01, help="the fit's chi2_tol (its default)")
-    parser.add_argument("--order", type=int, default=2, help="the order of the model and of the truth (2, 4 or 6)")
+    parser.add_argument("--composition", default=None,
+                        help="the composition of midpoints of the model and of the truth (Suzuki, Yoshida6, ...; "
+                             "default: one midpoint a step)")
     parser.add_argument("--no-standard-errors", action="store_true")
     args = parser.parse_args()
     jax.monitoring.register_event_duration_secs_listener(_listener)
@@ -70,7 +72,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     times = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.02, 0.05, args.snapshots - 1))])
              for _ in range(args.trajectories)]
-    truth = learn.StreamOperator(system, "degree", order=args.order, tol=1e-12, iterations=12)
+    truth = learn.StreamOperator(system, "degree", composition=args.composition, tol=1e-12, iterations=12)
     roll = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))
     clean = []
     for j, t in enumerate(times):
@@ -84,7 +86,7 @@ def main() -> None:
     l = np.arange(1, N)
     guess = -(l * (l + 1.0)) * (1 + 0.2 * np.sin(l))  # a wrong start, the gauge (degree 1) at the truth's
     guess[0] = -2.0
-    model = learn.StreamOperator(system, learn.DegreeSpectrum(guess), order=args.order, tol=1e-10, iterations=6)
+    model = learn.StreamOperator(system, learn.DegreeSpectrum(guess), composition=args.composition, tol=1e-10, iterations=6)
     fit = _timed("fit", lambda: learn.fit_stream_operator(model, data, iterations=args.iterations, rtol=args.rtol,
                                                           chi2_tol=args.chi2_tol, standard_errors=False,
                                                           progress=True))

@@ -34,3 +34,12 @@ from ._splitting._strang import Strang as Strang
 #: Every splitting method (the classes: `cls()` is the method, `cls(system, h)` its step map),
 #: for parametrised tests and sweeps.
 METHODS = (LieTrotter, Strang, TripleJump, Suzuki, McLachlan4, Yoshida6, BlanesMoan4)
+
+
+def splitting_method_by_name(name: str, argument: str = "method") -> AbstractSplittingMethod:
+    """The method of `METHODS` whose class is called `name` (`"Suzuki"` -> `Suzuki()`), as files
+    and profiles name it; `ValueError` naming `argument` and the known names otherwise."""
+    for cls in METHODS:
+        if cls.__name__ == name:
+            return cls()
+    raise ValueError(f"{argument}: unknown splitting method {name!r}; known: {', '.join(c.__name__ for c in METHODS)}")

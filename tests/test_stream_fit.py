@@ -154,10 +154,11 @@ def test_the_fit_keeps_the_order_and_order_4_removes_the_steps_bias():
         states.append(np.stack(ys))
     data = Observations(system, times, states)
     biases = {}
-    for order in (2, 4):
-        model = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(0.3), order=order, tol=TOL, iterations=12)
+    for order, composition in ((2, None), (4, "Suzuki")):
+        model = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(0.3), composition=composition, tol=TOL,
+                                     iterations=12)
         fit = learn.fit_stream_operator(model, data, iterations=30, rtol=1e-14, chi2_tol=0.0, standard_errors=False)
-        assert fit.model.order == order
+        assert fit.model.composition == model.composition and fit.model.order == order
         biases[order] = abs(float(fit.values[0]))
     # measured: 8.0e-3 at order 2, 7.0e-6 at order 4
     assert biases[2] > 1e-4, biases  # the midpoint's bias is there to be removed

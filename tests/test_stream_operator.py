@@ -7,6 +7,7 @@ import pytest
 
 import learn
 from integrators import IsospectralMidpoint
+from integrators.splitting import BlanesMoan4, LieTrotter, Strang, Suzuki, Yoshida6
 from liepoisson._quantized_sphere import harmonics_to_matrix, laplacian, solve_poisson
 from liepoisson.internals import harmonic_multiplier
 from liepoisson.systems import RigidBody, Zeitlin
@@ -72,13 +73,13 @@ def test_at_the_laplacian_it_is_zeitlins_model():
     assert np.max(np.abs(np.asarray(c) - a)) <= 20 * 1e-13 * np.max(np.abs(b))
 
 
-@pytest.mark.parametrize("order", [2, 6])
-def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters(order):
+@pytest.mark.parametrize("composition", [None, Yoshida6])
+def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters(composition):
     N = 8
     system = Zeitlin(N)
     rng = np.random.default_rng(3)
     spectrum = learn.DegreeSpectrum(-np.arange(1, N) * (np.arange(1, N) + 1.0) * rng.uniform(0.5, 2.0, N - 1))
-    model = learn.StreamOperator(system, spectrum, rotation=0.7, order=order, tol=1e-12, iterations=10)
+    model = learn.StreamOperator(system, spectrum, rotation=0.7, composition=composition, tol=1e-12, iterations=10)
     y0 = system.random_state(4, decay=0.0)
     intervals = jnp.asarray(rng.uniform(0.02, 0.08, 50))
     ys = np.asarray(eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))(model, jnp.asarray(y0), intervals))
@@ -98,7 +99,7 @@ def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters(order):
 
 
 def test_orders_against_heyoka():
-    """`order=2, 4, 6` converge at their order to the exact flow (heyoka's Taylor method at
+    """No composition, `Suzuki` and `Yoshida6` converge at their orders 2, 4 and 6 to the exact flow (heyoka's Taylor method at
     machine precision, an independent reference); a rollout at uneven intervals equals the
     inherited `step` at equal ones."""
     from integrators import ground_truth
@@ -108,16 +109,16 @@ def test_orders_against_heyoka():
     y0 = system.random_state(2, decay=0.0)
     exact = ground_truth(system, y0, T, 1, progress=False).states[0, -1]
     roll = eqx.filter_jit(lambda m, y, d, n: m.rollout_intervals(y, d, n))  # n: a Python int, static
-    for order, rate in ((2, 4.0), (4, 16.0), (6, 64.0)):
-        model = learn.StreamOperator(system, order=order, tol=1e-14, iterations=20)
+    for composition, rate in ((None, 4.0), (Suzuki, 16.0), (Yoshida6(), 64.0)):
+        model = learn.StreamOperator(system, composition=composition, tol=1e-14, iterations=20)
         # two uneven intervals, run in n and 2n steps each
         errors = [np.linalg.norm(np.asarray(roll(model, jnp.asarray(y0), jnp.asarray([0.15, T - 0.15]), n))[-1] - exact)
                   for n in (2, 4)]
         # the error of a method of order p falls 2^p-fold when h halves; h is small enough
         # (h |B| ~ 0.05-0.1) for the leading term to dominate to within 25%
-        assert 0.75 * rate <= errors[0] / errors[1] <= 1.25 * rate, (order, errors)
+        assert 0.75 * rate <= errors[0] / errors[1] <= 1.25 * rate, (composition, errors)
         assert errors[1] <= 1e-3 * np.linalg.norm(exact)
-    model = learn.StreamOperator(system, order=4, h=0.05, tol=1e-14, iterations=20)
+    model = learn.StreamOperator(system, composition="Suzuki", h=0.05, tol=1e-14, iterations=20)
     steps = np.asarray(model.rollout(y0, 6))
     intervals = np.asarray(roll(model, jnp.asarray(y0), jnp.full(6, 0.05), 1))
     # both iterate every stage to 1e-14 of |W|, from different starts: they agree to that, 6 x 5 midpoints
@@ -153,9 +154,13 @@ def test_bad_input():
         learn.StreamOperator(system, rotation=True)
     with pytest.raises(ValueError, match="rotation must be finite"):
         learn.StreamOperator(system, rotation=float("inf"))
-    for order in (3, 1, 8, True, "4"):
-        with pytest.raises(ValueError, match=r"order must be 2 \(the isospectral midpoint\), 4 or 6"):
-            learn.StreamOperator(system, order=order)
+    for composition in (4, True, Strang, LieTrotter(), BlanesMoan4):  # not a composition of midpoints
+        with pytest.raises(TypeError, match=r"composition must be None \(the isospectral midpoint\) or a composition"):
+            learn.StreamOperator(system, composition=composition)
+    with pytest.raises(ValueError, match="composition: unknown splitting method 'Suzuki4'; known: LieTrotter, "):
+        learn.StreamOperator(system, composition="Suzuki4")
+    with pytest.raises(ValueError, match="composition composes one step .* takes no ordering"):
+        learn.StreamOperator(system, composition=Suzuki(ordering=(0,)))
     with pytest.raises(ValueError, match="F must be finite and > -2"):
         learn.QuasiGeostrophicSpectrum(-3.0)
     with pytest.raises(ValueError, match="reference must be an index of values"):
@@ -175,9 +180,13 @@ def test_save_and_load(tmp_path):
     N = 6
     values = -np.arange(1, N) * (np.arange(1, N) + 1.0) - 3.0
     model = learn.StreamOperator(Zeitlin(N), learn.DegreeSpectrum(values, reference_degree=2), rotation=0.3,
-                                 order=4, h=0.05, iterations=7)
+                                 composition=Suzuki, h=0.05, iterations=7)
     model.save(tmp_path / "m.h5")
     loaded = learn.StreamOperator.load(tmp_path / "m.h5")
     assert np.array_equal(loaded.spectrum.values(), model.spectrum.values())
     assert loaded.spectrum.reference == 1 and float(loaded.rotation) == 0.3
-    assert loaded.iterations == 7 and loaded.h == 0.05 and loaded.order == 4
+    assert loaded.iterations == 7 and loaded.h == 0.05 and loaded.composition == Suzuki()
+    # a file of 527b794..9644ff9 named the composition by its order
+    hp = {**model.hyperparameters(), "order": 6}
+    del hp["composition"]
+    assert learn.StreamOperator.from_hyperparameters(Zeitlin(N), hp).composition == Yoshida6()

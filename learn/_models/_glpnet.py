@@ -234,13 +234,10 @@ def method_record(method: AbstractSplittingMethod) -> dict[str, Any]:
 def method_from_record(record: Any) -> AbstractSplittingMethod:
     """The method of `method_record`, or of a bare class name (files written before the
     ordering was recorded)."""
-    from integrators.splitting import METHODS
+    from integrators.splitting import splitting_method_by_name
 
     name, ordering = (record, None) if isinstance(record, str) else (record["name"], record["ordering"])
-    for cls in METHODS:
-        if cls.__name__ == name:
-            return cls(ordering=ordering)
-    raise ValueError(f"unknown splitting method {name!r}; known: {[c.__name__ for c in METHODS]}")
+    return type(splitting_method_by_name(name))(ordering=ordering)
 
 
 def linear_to_activation(net: GLPNet, linear: GLPNet, X: jax.Array, width: float = 0.05) -> GLPNet:

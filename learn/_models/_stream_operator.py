@@ -23,7 +23,7 @@ from integrators.internals import (
     check_isospectral,
     check_stage_tolerance,
 )
-from integrators.splitting import Suzuki, Yoshida6
+from integrators.splitting import AbstractCompositionMethod, splitting_method_by_name
 from liepoisson.internals import harmonic_multiplier, positive_float, positive_int
 from liepoisson.systems import AbstractPoissonSystem, Zeitlin
 
@@ -41,12 +41,24 @@ DEFAULT_ITERATIONS = 4
 PREDICTOR_DEGREE = 2
 
 
-#: A step's midpoints as fractions of it, by order: the midpoint itself; Suzuki's five-stage
-#: fractal (order 4) and Yoshida's seven-stage solution A (order 6), the tables of
-#: `integrators.splitting`. On Zeitlin's model (N = 16, to one eddy turnover) they reach a given
-#: error at far fewer midpoints than the triple jump (BENCHMARKS.md, "Fluids from data").
-_COMPOSITIONS = {2: IsospectralMidpoint.substeps, 4: tuple(map(float, Suzuki.coefficients)),
-                 6: tuple(map(float, Yoshida6.coefficients))}
+
+def composition_method(composition: Any) -> AbstractCompositionMethod | None:
+    """`composition` as a composition method of `integrators.splitting` (a class, an instance,
+    or a class name such as `"Suzuki"`), or `None` (one midpoint a step); `TypeError` or
+    `ValueError` naming the argument otherwise."""
+    if composition is None:
+        return None
+    if isinstance(composition, str):
+        composition = splitting_method_by_name(composition, "composition")
+    if not (isinstance(composition, AbstractCompositionMethod)
+            or (isinstance(composition, type) and issubclass(composition, AbstractCompositionMethod))):
+        raise TypeError(f"composition must be None (the isospectral midpoint) or a composition method of "
+                        f"integrators.splitting (Suzuki, Yoshida6, TripleJump, McLachlan4: a class, an instance or "
+                        f"its name); got {composition!r}")
+    method = composition() if isinstance(composition, type) else composition
+    if method.ordering is not None:
+        raise ValueError(f"composition composes one step (the midpoint), so it takes no ordering; got {method!r}")
+    return method
 
 
 def planetary_vorticity(N: int) -> np.ndarray:
@@ -141,13 +153,16 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
       the default, `"harmonic"`, `"quasi-geostrophic"`), started at the Laplacian's.
     - `rotation`: `None` (no rotation term, the default) or the start of the learned angular
       velocity $\Omega$ of the sphere.
-    - `order`: 2 (the default), one isospectral midpoint a step; 4, Suzuki's symmetric
-      composition of five midpoints ($\gamma h$, $\gamma = p, p, 1 - 4p, p, p$,
-      $p = 1/(4 - 4^{1/3})$); 6, Yoshida's of seven (`integrators.splitting.Suzuki`,
-      `Yoshida6`). Each midpoint is a unitary conjugation, so every order keeps the Casimirs
-      alike. A model fitted to data at steps $h$ carries the step's error into its parameters,
-      $O(h^{order})$: at order 2 enough to bias the identified spectrum by many standard errors
-      at low noise (BENCHMARKS.md, "Fluids from data").
+    - `composition`: `None` (the default), one isospectral midpoint a step (order 2); or a
+      symmetric composition method of `integrators.splitting` (class, instance or name), whose
+      table $\gamma$ makes the step the midpoints of $\gamma_1 h, \dots, \gamma_s h$:
+      `Suzuki` (order 4, five midpoints, $\gamma = p, p, 1 - 4p, p, p$, $p = 1/(4 - 4^{1/3})$),
+      `Yoshida6` (order 6, seven), `TripleJump`, `McLachlan4`. Each midpoint is a unitary
+      conjugation, so every composition keeps the Casimirs alike. A model fitted to data at
+      steps $h$ carries the step's error into its parameters, $O(h^{order})$: at order 2
+      enough to bias the identified spectrum by many standard errors at low noise; on
+      Zeitlin's model Suzuki's reaches a given error at far fewer midpoints than the triple
+      jump (BENCHMARKS.md, "The step's order").
     - `h`, `tol`, `max_iter` as `integrators.IsospectralMidpoint`; `iterations` the fixed
       quasi-Newton iterations of every midpoint (default `DEFAULT_ITERATIONS`: straight-line
       steps, differentiable in both modes; a step that has not met `tol` is NaN).
@@ -158,10 +173,10 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
 
     spectrum: AbstractSpectrum
     rotation: jax.Array | None
-    order: int = eqx.field(static=True)
+    composition: AbstractCompositionMethod | None = eqx.field(static=True)
 
     def __init__(self, system: AbstractPoissonSystem, spectrum: Any = "degree", *, rotation: float | None = None,
-                 order: int = 2, h: float | None = None, tol: float = ISOSPECTRAL_TOL,
+                 composition: Any = None, h: float | None = None, tol: float = ISOSPECTRAL_TOL,
                  iterations: int = DEFAULT_ITERATIONS, max_iter: int = ISOSPECTRAL_MAX_ITER, key: Any = None):
         if not isinstance(system, Zeitlin):
             raise TypeError(f"system must be liepoisson.systems.Zeitlin(N) (a fluid on the sphere, u(N)*); got "
@@ -177,10 +192,7 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
             if not np.isfinite(float(rotation)):
                 raise ValueError(f"rotation must be finite; got {rotation!r}")
             self.rotation = jnp.asarray(float(rotation))
-        if isinstance(order, (bool, np.bool_)) or order not in _COMPOSITIONS:
-            raise ValueError(f"order must be 2 (the isospectral midpoint), 4 or 6 (compositions of it); got "
-                             f"{order!r}")
-        self.order = int(order)
+        self.composition = composition_method(composition)
         self.h = None if h is None else positive_float(h, "h")
         self.tol = check_stage_tolerance(tol)
         self.iterations = positive_int(iterations, "iterations")
@@ -192,8 +204,15 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
 
     @property
     def substeps(self) -> tuple[float, ...]:  # type: ignore[override]
-        """The midpoints of a step, as fractions of it (`order`'s composition)."""
-        return _COMPOSITIONS[self.order]
+        """The midpoints of a step, as fractions of it (`composition`'s table)."""
+        if self.composition is None:
+            return IsospectralMidpoint.substeps
+        return tuple(map(float, self.composition.coefficients))
+
+    @property
+    def order(self) -> int:
+        """The step's order: 2 (the midpoint), else `composition`'s."""
+        return 2 if self.composition is None else int(self.composition.order)
 
     # -- the operator ---------------------------------------------------------------------------
     def _planetary(self) -> jax.Array | float:
@@ -306,12 +325,14 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
     def hyperparameters(self) -> dict[str, Any]:
         reference = self.spectrum.reference if isinstance(self.spectrum, AbstractGaugedSpectrum) else None
         return {"spectrum": self.spectrum.kind, "reference": reference, "rotation": self.rotation is not None,
-                "order": self.order, "tol": self.tol, "iterations": self.iterations, "max_iter": self.max_iter}
+                "composition": None if self.composition is None else type(self.composition).__name__, "tol": self.tol, "iterations": self.iterations, "max_iter": self.max_iter}
 
     @classmethod
     def from_hyperparameters(cls, system: AbstractPoissonSystem, hyperparameters: dict[str, Any], *,
                              key: Any = 0, h: float | None = None) -> StreamOperator:
         hp = dict(hyperparameters)
+        if "order" in hp:  # files of 527b794..: an order named the composition
+            hp["composition"] = {2: None, 4: "Suzuki", 6: "Yoshida6"}[hp.pop("order")]
         rotation = 0.0 if hp.pop("rotation", False) else None
         spectrum = spectrum_of(hp.pop("spectrum", "degree"), system.N)
         reference = hp.pop("reference", None)

@@ -356,7 +356,7 @@ def _with_converging_iterations(model: StreamOperator, starts: jax.Array, data: 
     parameters move)."""
     def with_iterations(k: int) -> StreamOperator:
         return StreamOperator(model.system, model.spectrum, rotation=None if model.rotation is None else
-                              float(model.rotation), order=model.order, tol=model.tol, iterations=k,
+                              float(model.rotation), composition=model.composition, tol=model.tol, iterations=k,
                               max_iter=model.max_iter)
 
     k = model.iterations
