@@ -70,7 +70,7 @@ MAX_TRIALS = 30
 MAX_STAGE_ITERATIONS = 24
 #: The conjugate gradients' relative tolerance is the square root of the last iteration's
 #: relative decrease of the loss (an inexact Newton method's forcing term), at most this and at
-#: least `cg_rtol`.
+#: least `cg_rtol` and the square root of the least relative decrease the stopping rules count.
 FORCING_MAX = 0.1
 #: The columns of $B$ that `_profiled` pushes through the linearised rollouts together.
 PROFILE_BATCH = 16
@@ -177,7 +177,9 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       parameters by about $\sqrt\epsilon$ standard errors, so the default 0.01 stops where the
       estimate changes by a tenth of its error bar (`0`: only `rtol` stops, e.g. exact data).
     - `cg_rtol`, `cg_max_steps`: the conjugate gradients' tightest relative tolerance (the
-      steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles; the standard
+      steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles, to no
+      tighter than $\sqrt{\max(\mathtt{rtol}, \mathtt{chi2\_tol}/\mathrm{dof})}$, what an
+      iteration the stopping rules still count needs; the standard
       errors' use its square root: their product is second order in the solves' error,
       `_profiled`) and step cap (a step whose solve stops at the cap is still tried:
       the loss decides; a standard error whose solve does not converge is NaN).
@@ -229,10 +231,19 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     n_residuals = int(np.sum(np.asarray(counts))) * data.system.dim
     dof = n_residuals - p - data.n_trajectories * data.system.dim
 
+    # the least relative decrease of the loss the stopping rules count: `rtol`, or `chi2_tol`
+    # of chi^2 (`cost / dof` per unit)
+    least = max(rtol, chi2_tol / dof if dof > 0 else 0.0)
+
     def negligible(decrease: float, cost: float) -> bool:
         """Whether lowering the residual sum of squares `cost` by `decrease` is below both
-        stopping rules: `rtol` of it, and `chi2_tol` of chi^2 (`cost / dof` per unit)."""
-        return decrease <= max(rtol * cost, chi2_tol * cost / dof if dof > 0 else 0.0)
+        stopping rules."""
+        return decrease <= least * cost
+
+    # no solve tighter than the forcing term of an iteration that lowers the loss by `least`:
+    # one that lowers it by less stops the fit anyway (at N = 128 the solves of 1e-6 and 3e-8
+    # took 82 s and 112 s, against 40 s at 2e-3)
+    floor = max(cg_rtol, math.sqrt(least))
 
     state = _linearisation(rebuild(x), starts, padded, substeps, None)
     if not np.isfinite(float(state.cost)):
@@ -242,18 +253,27 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     lam, nu = 1e-3, 2.0
     losses = [float(state.cost) / n_residuals]
     stopped, done, fresh, forcing = "iterations", 0, True, FORCING_MAX
+
+    def relinearised(why: str) -> _Linearisation:
+        clock = _clock()
+        new = _linearisation(rebuild(x), starts, padded, substeps, None)
+        if progress:
+            print(f"fit_stream_operator:   J_theta and gradient afresh ({why}) {_since(clock)}", flush=True)
+        return new
+
     for _ in range(iterations):
         D_theta = jnp.maximum(D_theta, _scaling(state.A))
         accepted = False
         for _ in range(MAX_TRIALS):
             clock = _clock()
+            step_fresh = fresh  # the step is made with a J_theta of this point
             step = _solve(rebuild(x), starts, padded, state, D_theta, counts, jnp.asarray(lam), substeps,
-                          jnp.asarray(max(forcing, cg_rtol)), cg_max_steps)
+                          jnp.asarray(max(forcing, floor)), cg_max_steps)
             cost_new = float(_cost(rebuild(x + step.dx), starts + step.dS, padded, substeps))
             predicted = float(step.predicted)
             if progress:
                 print(f"fit_stream_operator:   lambda {lam:.1e}: {int(step.cg_steps)} conjugate gradient steps "
-                      f"(rtol {max(forcing, cg_rtol):.0e}), loss {cost_new / n_residuals:.6e}, "
+                      f"(rtol {max(forcing, floor):.0e}), loss {cost_new / n_residuals:.6e}, "
                       f"{_since(clock)}", flush=True)
             if np.isfinite(cost_new) and cost_new < float(state.cost) and predicted > 0:
                 rho = (float(state.cost) - cost_new) / predicted
@@ -275,7 +295,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             if not fresh and np.isfinite(cost_new):
                 # refused with a kept J_theta (not for a step so long that the rollout broke
                 # down: that is the damping's to fix): linearise afresh, same damping
-                state = _linearisation(rebuild(x), starts, padded, substeps, None)
+                state = relinearised("a step refused")
                 fresh = True
                 continue
             if np.isfinite(cost_new) and 0 <= predicted and negligible(predicted, float(state.cost)):
@@ -298,11 +318,14 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             print(f"fit_stream_operator: iteration {done}, loss {losses[-1]:.6e}, lambda {lam:.1e}", flush=True)
         forcing = min(FORCING_MAX, math.sqrt(max(decrease, 0.0)))
         if negligible(before - float(state.cost), before):
-            if fresh:
+            # judged by a step made with a fresh J_theta (the state after it keeps the step's
+            # J_theta: asking whether that is fresh relinearised after every later iteration)
+            if step_fresh:
                 stopped = "converged"
                 break
-            state = _linearisation(rebuild(x), starts, padded, substeps, None)  # judged with a fresh J_theta
-            fresh = True
+            if not fresh:
+                state = relinearised("a negligible step made with an older one")
+                fresh = True
 
     fitted = rebuild(x)
     sigma2 = float(state.cost) / dof if dof > 0 else float("nan")
