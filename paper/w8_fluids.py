@@ -113,8 +113,8 @@ PROFILES = profiles(
     quick=Profile(sizes=(16,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                   n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
                   dmd_ranks=(4, 8, 16, 32)),
-    # the sizes the issue asks; the fit takes ~8 minutes at N = 64 today (BENCHMARKS, the
-    # stream operator probe): the full profile waits for a faster fit_stream_operator
+    # the sizes the issue asks (BENCHMARKS, the stream operator probe: ~10 min a fit at N = 128);
+    # hours at N = 32 and days at 128 in all: resumable row by row (--out)
     full=Profile(sizes=(32, 64, 128), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                  n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
                  dmd_ranks=(4, 8, 16, 32, 64)),
