@@ -5,16 +5,20 @@ need: system, data, test set), its `models` (instances of `paper._study.Abstract
 learned and peer alike), how one model is measured on one condition (`evaluate`, returning the
 study's typed row) and its table's `columns`; the runner owns the rest: the rows in order, each
 saved as it is measured and read back by a rerun into the same folder (an interrupted run
-resumes; atomic writes), the progress lines, the verdict, the figures and the tables. A new row
+resumes; atomic writes; a rerun with other settings of the profile is refused, not mixed with
+them: `check_settings`), the progress lines, the verdict, the figures and the tables. A new row
 of a study is one model in its `models`; a new study is one subclass.
 """
 
 from __future__ import annotations
 
 import abc
+import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
+
+from integrators.internals import atomic_write_text, json_values
 
 from ._experiment import (
     AbstractExperiment,
@@ -107,8 +111,31 @@ class AbstractStudy(AbstractExperiment):
         """What metrics.json records besides the rows, the verdict and the figures."""
         return {}
 
+    def check_settings(self, profile: str, out_dir: Path) -> None:
+        """`ValueError` if `out_dir` holds what a run of `profile` saved with other settings than
+        the profile has now (`<out_dir>/<profile>-settings.json`, written by `run`): its rows and
+        data would be read back beside new ones as if they were alike."""
+        path = Path(out_dir) / f"{profile}-settings.json"
+        if not path.exists():
+            return
+        try:
+            saved = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise ValueError(f"{path}: not a settings file of this library ({err}); delete {out_dir} to recompute "
+                             "its rows, or run into another folder (--out)") from None
+        now = _settings(self.profiles[profile])
+        if saved != now:
+            changed = sorted(k for k in {*saved, *now} if saved.get(k) != now.get(k))
+            what = "; ".join(f"{k}: {saved.get(k)!r} then, {now.get(k)!r} now" for k in changed)
+            raise ValueError(f"{out_dir} holds the {profile} profile's rows of other settings ({what}): run into "
+                             f"another folder (--out), or delete {out_dir} to recompute them")
+
     def run(self, profile: str, out_dir: Path, progress: bool) -> dict[str, Any]:
         P = self.profiles[profile]
+        self.check_settings(profile, out_dir)
+        settings = Path(out_dir) / f"{profile}-settings.json"
+        if not settings.exists():
+            atomic_write_text(settings, json.dumps(_settings(P), indent=2) + "\n")
         rows: list[Any] = []
         seen: list[Any] = []
         for condition in self.conditions(P):
@@ -153,3 +180,8 @@ GRID_COLUMNS = (
 def peer(rows: Iterable[Any], row: Any, model: str) -> Any | None:
     """The row of `model` on `row`'s condition (its `condition` property), or `None`."""
     return next((r for r in rows if r.condition == row.condition and r.model == model), None)
+
+
+def _settings(P: Profile) -> dict[str, Any]:
+    """`P`'s settings as a settings file holds them (JSON values; anything else by its repr)."""
+    return json.loads(json.dumps(json_values(P.as_dict()), default=repr))

@@ -152,3 +152,56 @@ def test_one_profile_type_for_every_experiment():
         assert all(type(P) is Profile for P in budgets.values()), exp_id
         assert len({frozenset(P.as_dict()) for P in budgets.values()}) == 1, exp_id
     assert W4["full"].then.part == "LLPNN protocol"  # a study's second part: a Profile too
+
+
+def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tmp_path, capsys):
+    from paper.__main__ import main
+    from paper._runner import AbstractStudy
+
+    @dataclasses.dataclass(frozen=True)
+    class Row:
+        condition: int
+        value: float
+
+    evaluated = []
+
+    class Tiny(AbstractStudy):
+        id = "T"
+        title = "tiny"
+        profiles = profiles(smoke=Profile(conditions=(1, 2), scale=2.0))
+        row_type = Row
+
+        def conditions(self, P):
+            return P.conditions
+
+        def models(self, P, condition):
+            return ["one"]
+
+        def evaluate(self, condition, model, progress):
+            evaluated.append(condition)
+            return Row(condition, condition * self.profiles["smoke"].scale)
+
+        def row_name(self, profile, condition, model):
+            return f"{profile}-{condition}.json"
+
+        def description(self, metrics):
+            return ""
+
+    study = Tiny()
+    assert study.execute("smoke", progress=False, out_dir=tmp_path)["rows"][1]["value"] == 4.0
+    assert study.execute("smoke", progress=False, out_dir=tmp_path)["resumed_rows"] == 2 and evaluated == [1, 2]
+    # the same profile with another setting: the saved rows (of scale 2) are not read back as its
+    study.profiles = profiles(smoke=Profile(conditions=(1, 2), scale=3.0))
+    with pytest.raises(ValueError, match=r"holds the smoke profile's rows of other settings \(scale: 2.0 then, "
+                                         r"3.0 now\): run into another folder \(--out\), or delete"):
+        study.execute("smoke", progress=False, out_dir=tmp_path)
+    assert evaluated == [1, 2]
+    # the command line says so in one line before running anything (W8's folder, its settings changed)
+    (tmp_path / "W8").mkdir()
+    (tmp_path / "W8" / "smoke-settings.json").write_text(json.dumps({"sizes": [9]}))
+    assert main(["run", "W8", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds the smoke profile's rows of other settings" in err and "sizes: [9] then" in err
+    (tmp_path / "W8" / "smoke-settings.json").write_text("{not json")
+    assert main(["run", "W8", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 2
+    assert "not a settings file of this library" in capsys.readouterr().err
