@@ -9,12 +9,19 @@ turnover. Beside the three orders, Yoshida's triple jump of the midpoint
     python -m benchmarks.stream_operator_orders [--N 16]
     python -m benchmarks.stream_operator_orders --report
     python -m benchmarks.stream_operator_orders --w8-limit
+    python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Suzuki --fit-step 0.15 --cg-rtol 1e-4
+    python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Yoshida6 --fit-step 0.075 \
+        --se-from benchmarks/results/stream_operator_orders_step_bias_N32_Suzuki_0.15.json
 
 `--w8-limit`: what the step's error does to a fit, W8's limit (the quasi-geostrophic family,
 F from 0) on W8's Euler data at N = 16, noise 1e-3 (the quick profile's condition), at order 2
 with steps of at most 0.05 eddy turnovers and at orders 4 and 6 with one step an interval
 (0.15): F with its standard error, |F|/SE, the fit's time and the field error at one eddy
 turnover (`benchmarks/results/stream_operator_orders_w8_limit.json`).
+
+`--step-bias`: the same for W8's learned spectrum per degree at the full profile's sizes: fitted
+to the clean training snapshots from the truth, its deviation is the step's bias, reported over
+the standard errors the fit has at noise 1e-3 (`step_bias`).
 """
 
 from __future__ import annotations
@@ -85,6 +92,44 @@ def w8_limit() -> list[dict]:
     return results
 
 
+def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | None, cg_rtol: float) -> dict:
+    """The step's bias of W8's learned spectrum per degree (Euler truth, W8's full-profile
+    training fields and clock at size `N`): the fit on the CLEAN snapshots from the truth, whose
+    deviation is the bias, over the standard errors at noise 1e-3 (the clean fit's, scaled from
+    its residual noise to 1e-3's noise; or read from `se_from`, an earlier run's results: they
+    hardly depend on the step)."""
+    import time
+
+    import integrators as it
+    from paper import w8_fluids as w8
+
+    P = w8.PROFILES["full"].replace(composition=composition, fit_step=fit_step)
+    condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+    clean = np.asarray(w8._rollouts(condition.truth.model(condition.system),
+                                    jnp.asarray(condition._fields(w8.TRAIN_SEED, P.n_train)),
+                                    jnp.asarray(np.diff(condition.clock)), P.fine))
+    data = it.Observations(condition.system, [condition.clock] * P.n_train, list(clean))
+    sigma = it.add_field_noise(data, 1e-3, seed=w8.NOISE_SEED).metadata["noise_std"]
+    true = -np.arange(1, N) * np.arange(2, N + 1.0)
+    model = learn.StreamOperator(condition.system, learn.DegreeSpectrum(true, reference_degree=N - 1),
+                                 composition=composition, tol=w8.MODEL_TOL, iterations=6)
+    start = time.perf_counter()
+    fit = learn.fit_stream_operator(model, data, max_step=fit_step * condition.tau, iterations=3, rtol=1e-14,
+                                    chi2_tol=0.0, cg_rtol=cg_rtol, standard_errors=se_from is None, progress=True)
+    seconds = time.perf_counter() - start
+    if se_from is None:
+        se = np.asarray(fit.standard_errors) / fit.noise * sigma
+    else:
+        se = np.asarray(saved_results(se_from)[-1]["standard_errors"])
+    bias = np.asarray(fit.values) - true
+    z = np.abs(bias[:-1]) / se[:-1]  # the last degree is the gauge's reference (not fitted)
+    print(f"N = {N}, {composition or 'midpoint'}, steps <= {fit_step} tau ({fit.substeps} an interval): bias/SE at "
+          f"noise 1e-3 by degree {np.array2string(z, precision=2, max_line_width=150)}; max {z.max():.3g} at degree "
+          f"{int(np.argmax(z)) + 1}; fit {seconds:.0f} s", flush=True)
+    return {"N": N, "composition": composition, "fit_step": fit_step, "substeps": fit.substeps,
+            "bias": bias.tolist(), "standard_errors": se.tolist(), "z": z.tolist(), "fit_seconds": seconds}
+
+
 def report(results: list[dict]) -> None:
     print("method        midpoints per tau: relative error at tau")
     for method in dict.fromkeys(r["method"] for r in results):
@@ -96,8 +141,24 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--N", type=int, default=16)
     parser.add_argument("--w8-limit", action="store_true", help="the step's bias in W8's limit (module docstring)")
+    parser.add_argument("--step-bias", action="store_true",
+                        help="the step's bias of W8's learned spectrum per degree (module docstring)")
+    parser.add_argument("--composition", default="Suzuki", help="--step-bias: the model's (None: the midpoint)")
+    parser.add_argument("--fit-step", type=float, default=0.15, help="--step-bias: the longest step, eddy turnovers")
+    parser.add_argument("--se-from", default=None, help="--step-bias: the standard errors of an earlier run's file")
+    parser.add_argument("--cg-rtol", type=float, default=1e-8, help="--step-bias: fit_stream_operator's cg_rtol")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
+    if args.step_bias:
+        composition = None if args.composition == "None" else args.composition
+        tag = f"{NAME}_step_bias_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
+        out = args.out if args.out != default_out(NAME) else default_out(tag)
+        if args.report:
+            for r in saved_results(out):
+                print(r)
+            return
+        write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol)])
+        return
     if args.w8_limit:
         out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")
         if args.report:
