@@ -33,7 +33,6 @@ from ._cluster import ENV, THREADS, scheduler
 from ._experiment import DEFAULT_OUT, REFERENCE_DIR, check_out_dir, markdown_row
 from ._mappings import release_compiled_programs
 from ._registry import EXPERIMENTS, PAPER_EXPERIMENTS
-from ._runner import AbstractStudy
 from ._verdict import SEEDS_FILE, SEEDS_KEY, verdict_table
 
 PROFILES = ("smoke", "quick", "full")
@@ -104,13 +103,12 @@ def _run(ids: list[str], profile: str, progress: bool | None, out: Path) -> int:
             print(f"python -m paper: error: --out {str(folder)!r} cannot be created ({why}); give a folder you can "
                   "write to (python -m paper --out DIR)", file=sys.stderr)
             return 2
-    for exp_id in ids:  # a study's rows saved there of other settings: before anything runs
-        if isinstance(EXPERIMENTS[exp_id], AbstractStudy):
-            try:
-                EXPERIMENTS[exp_id].check_settings(profile, out / exp_id)
-            except ValueError as err:
-                print(f"python -m paper: error: {err}", file=sys.stderr)
-                return 2
+    for exp_id in ids:  # results saved there with other settings: before anything runs
+        try:
+            EXPERIMENTS[exp_id].check_settings(profile, out / exp_id)
+        except ValueError as err:
+            print(f"python -m paper: error: {err}", file=sys.stderr)
+            return 2
     results = {}
     t0 = time.perf_counter()
     for exp_id in ids:

@@ -274,6 +274,10 @@ class AbstractExperiment(abc.ABC):
         ("wall_time_s", "training wall time [s]"),
     )
 
+    def check_settings(self, profile: str, out_dir: Path) -> None:
+        """`ValueError` if `out_dir` holds results saved with other settings of `profile` than
+        it has now (nothing saved to resume from: nothing to check; studies override this)."""
+
     @abc.abstractmethod
     def run(self, profile: str, out_dir: Path, progress: bool) -> dict[str, Any]:
         """Run at `profile` ("quick" or "full"), write figures into `out_dir`, return metrics."""

@@ -52,10 +52,9 @@ each in equal steps of the `composition` of midpoints (`learn.StreamOperator`'s)
 turnovers, as in their fits, where every interval is run in the same number of steps, the
 fewest that keep the longest one's at most `fit_step`), against the truth from the clean field.
 A fitted model carries its step's error into its parameters, the more visibly the smaller the
-error bars: at N = 16 the midpoint put Euler's limit 58 standard errors off at noise 1e-3,
-Suzuki's order 4 in one step an interval 2.6; at N = 32 Suzuki's put the per-degree spectrum's
-degree 1 16 standard errors off (fitted to exact data), Yoshida's order 6 in two steps 0.5
-(BENCHMARKS.md, "The step's order"; quick: Suzuki's, 0.15; full: Yoshida6, 0.075). DMD's modes span
+error bars (more data, larger N): hence a higher order and shorter steps in the full profile
+than in quick (quick: Suzuki's, 0.15; full: Yoshida6, 0.075; the biases measured in
+BENCHMARKS.md, "The step's order"). DMD's modes span
 what the training snapshots span (rank at most their number): the part of a test field
 outside them is lost at $t = 0$ (its size is in the DMD rows' note).
 
@@ -115,9 +114,9 @@ PROFILES = profiles(
     quick=Profile(sizes=(16,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                   n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
                   dmd_ranks=(4, 8, 16, 32)),
-    # the sizes the issue asks; Yoshida's order 6 in two steps an interval: at N = 32 Suzuki's in one
-    # put the spectrum's degree 1 16 standard errors off on exact data, this 0.5 (BENCHMARKS, "The
-    # step's order"); hours at N = 32, days at 128: resumable row by row (--out)
+    # the sizes the issue asks; Yoshida's order 6 in two steps an interval (Suzuki's in one biases the
+    # per-degree spectrum at N = 32 by many standard errors: BENCHMARKS, "The step's order");
+    # resumable row by row (--out)
     full=Profile(sizes=(32, 64, 128), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                  n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.075, composition="Yoshida6", fine=8, lm_iterations=30,
                  dmd_ranks=(4, 8, 16, 32, 64)),
