@@ -54,7 +54,7 @@ import liepoisson as lp
 from integrators.internals import figure, series_styles
 
 from ._experiment import Column, Profile, fmt, profiles, table_lines
-from ._neural_ode import fit_neural_ode
+from ._neural_ode import HIDDEN, fit_neural_ode
 from ._runner import AbstractStudy
 from ._study import AbstractStudyModel
 
@@ -62,6 +62,8 @@ H = 0.1
 SETTLED = 0.01  # the settling time: the state stays within this relative distance of its final value
 EVERY = 10  # the series of the figure: every EVERY-th step
 DATA_SEED, NOISE_SEED, TEST_SEED = 0, 1, 2
+#: The neural ODE's hidden layers tried (`paper._neural_ode.fit_neural_ode`).
+NEURAL_ODE_HIDDEN = HIDDEN
 #: The basis direction of the admissible velocities a mirror symmetry flips, per system that has
 #: one (`learn.QuadraticDAlembertMap(reflection=...)`): the sleigh's omega -> -omega.
 MIRRORS = {"Chaplygin sleigh": 0}
@@ -416,7 +418,7 @@ class QuadraticDAlembertMapModel(AbstractLearnedVelocityModel):
 @dataclasses.dataclass(frozen=True)
 class NeuralODEModel(AbstractLearnedVelocityModel):
     """`learn.NeuralODE` on the velocities, its size and budget (at most `bfgs_steps` BFGS
-    iterations) chosen by `paper._neural_ode.fit_neural_ode`."""
+    iterations) chosen among `NEURAL_ODE_HIDDEN` by `paper._neural_ode.fit_neural_ode`."""
 
     noise: float = 0.0
     bfgs_steps: int = 500
@@ -424,7 +426,7 @@ class NeuralODEModel(AbstractLearnedVelocityModel):
     kind: str = "baseline"
 
     def fit(self, system, data, *, progress=False):
-        return fit_neural_ode(data, self.bfgs_steps, key=DATA_SEED, seed=DATA_SEED).net
+        return fit_neural_ode(data, self.bfgs_steps, NEURAL_ODE_HIDDEN, key=DATA_SEED, seed=DATA_SEED).net
 
 
 def models(name: str, P: Profile) -> list[AbstractNonholonomicModel]:

@@ -678,8 +678,13 @@ def test_w6_measure_reports_a_divergence_and_an_exact_copy():
     assert w6.measure("sleigh", system, "turning", "learned", turning, truth).heading_error_max_rel == np.inf
 
 
-@pytest.mark.slow  # the whole W6 pipeline, ~20 s (the maps' properties: tests/test_learned_nonholonomic.py)
-def test_w6_smoke_keeps_the_constraint_where_the_neural_ode_does_not(tmp_path):
+@pytest.mark.slow  # the whole W6 pipeline, ~2.5 min (the maps' properties: tests/test_learned_nonholonomic.py)
+def test_w6_smoke_keeps_the_constraint_where_the_neural_ode_does_not(tmp_path, monkeypatch):
+    from paper import w6_nonholonomic as w6
+
+    # the neural ODE peer fitted once per row, one hidden shape (three shapes: four fits, each
+    # compiled anew, 30 s a row); the rule's choice among shapes: tests/test_neural_ode_peer.py
+    monkeypatch.setattr(w6, "NEURAL_ODE_HIDDEN", w6.NEURAL_ODE_HIDDEN[:1])
     assert main(["run", "W6", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 0
     metrics = json.loads((tmp_path / "W6" / "metrics.json").read_text())
     rows = metrics["rows"]
