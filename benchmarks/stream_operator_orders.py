@@ -9,7 +9,8 @@ turnover. Beside the three orders, Yoshida's triple jump of the midpoint
     python -m benchmarks.stream_operator_orders [--N 16]
     python -m benchmarks.stream_operator_orders --report
     python -m benchmarks.stream_operator_orders --w8-limit
-    python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Suzuki --fit-step 0.15 --cg-rtol 1e-4
+    python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Suzuki --fit-step 0.15 --cg-rtol 1e-4 \
+        --se-rtol 1e-2
     python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Yoshida6 --fit-step 0.075 \
         --se-from benchmarks/results/stream_operator_orders_step_bias_N32_Suzuki_0.15.json
 
@@ -92,7 +93,8 @@ def w8_limit() -> list[dict]:
     return results
 
 
-def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | None, cg_rtol: float) -> dict:
+def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | None, cg_rtol: float,
+              se_rtol: float) -> dict:
     """The step's bias of W8's learned spectrum per degree (Euler truth, W8's full-profile
     training fields and clock at size `N`): the fit on the CLEAN snapshots from the truth, whose
     deviation is the bias, over the standard errors at noise 1e-3 (the clean fit's, scaled from
@@ -115,7 +117,8 @@ def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | N
                                  composition=composition, tol=w8.MODEL_TOL, iterations=6)
     start = time.perf_counter()
     fit = learn.fit_stream_operator(model, data, max_step=fit_step * condition.tau, iterations=3, rtol=1e-14,
-                                    chi2_tol=0.0, cg_rtol=cg_rtol, standard_errors=se_from is None, progress=True)
+                                    chi2_tol=0.0, cg_rtol=cg_rtol, standard_errors=se_from is None, se_rtol=se_rtol,
+                                    progress=True)
     seconds = time.perf_counter() - start
     if se_from is None:
         se = np.asarray(fit.standard_errors) / fit.noise * sigma
@@ -147,6 +150,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--fit-step", type=float, default=0.15, help="--step-bias: the longest step, eddy turnovers")
     parser.add_argument("--se-from", default=None, help="--step-bias: the standard errors of an earlier run's file")
     parser.add_argument("--cg-rtol", type=float, default=1e-8, help="--step-bias: fit_stream_operator's cg_rtol")
+    parser.add_argument("--se-rtol", type=float, default=1e-3, help="--step-bias: fit_stream_operator's se_rtol")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
     if args.step_bias:
@@ -157,7 +161,8 @@ def main(argv: list[str] | None = None) -> None:
             for r in saved_results(out):
                 print(r)
             return
-        write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol)])
+        write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
+                                             args.se_rtol)])
         return
     if args.w8_limit:
         out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")

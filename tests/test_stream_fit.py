@@ -187,6 +187,11 @@ def test_bad_input():
     for bad in (-0.1, float("nan"), float("inf"), "0.01", True):
         with pytest.raises(ValueError, match="chi2_tol must be a finite number >= 0"):
             learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, chi2_tol=bad)
+    for name in ("cg_rtol", "se_rtol"):
+        with pytest.raises(ValueError, match=f"{name} must be below 1"):
+            learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, **{name: 10.0})
+        with pytest.raises(ValueError, match=name):
+            learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, **{name: 0.0})
 
 
 @pytest.mark.slow  # ~70 s on 2 loaded cores, compiling three programs at N = 4

@@ -34,9 +34,9 @@ minimum the parameters hardly move, and a $J_\theta$ from a nearby point only sh
 (the exact gradient fixes where they lead). The standard errors of $\theta$ are those of the
 Gauss-Newton covariance at the solution with the starts profiled out,
 $\hat\sigma^2\big(A - \sum_j B_j^\top G_j^{-1}B_j\big)^{-1}$ ($B$ by $p$ transposed passes,
-$G_j^{-1}B_j$ by conjugate gradients, both `PROFILE_BATCH` columns at a time, the product formed
-so that its error is second order in the solves': they run to the square root of the steps'
-tightest tolerance), $\hat\sigma^2$ the residual sum of squares over its degrees of freedom.
+$G_j^{-1}B_j$ by conjugate gradients, a column at a time, the product formed so that its error
+is second order in the solves': they run to `se_rtol`), $\hat\sigma^2$ the residual sum of
+squares over its degrees of freedom.
 """
 
 from __future__ import annotations
@@ -72,8 +72,6 @@ MAX_STAGE_ITERATIONS = 24
 #: relative decrease of the loss (an inexact Newton method's forcing term), at most this and at
 #: least `cg_rtol` and the square root of the least relative decrease the stopping rules count.
 FORCING_MAX = 0.1
-#: The columns of $B$ that `_profiled` pushes through the linearised rollouts together.
-PROFILE_BATCH = 16
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,8 +153,8 @@ def check_stream_data(model: Any, data: Any) -> None:
 def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: float | None = None,
                         iterations: int = 50, rtol: float = 1e-10, chi2_tol: float = 0.01,
                         cg_rtol: float = 1e-8,
-                        cg_max_steps: int = 200, standard_errors: bool = True, starts: Any = None,
-                        progress: bool = False) -> StreamOperatorFit:
+                        cg_max_steps: int = 200, standard_errors: bool = True, se_rtol: float = 1e-3,
+                        starts: Any = None, progress: bool = False) -> StreamOperatorFit:
     r"""Fit `model`'s stream operator and one initial field per trajectory to `data` by
     trajectory least squares (module docstring: Levenberg-Marquardt with the starts eliminated
     by conjugate gradients; nothing of size $N^2\times N^2$ is formed).
@@ -179,12 +177,15 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     - `cg_rtol`, `cg_max_steps`: the conjugate gradients' tightest relative tolerance (the
       steps' solves start looser, `FORCING_MAX`, and tighten as the loss settles, to no
       tighter than $\sqrt{\max(\mathtt{rtol}, \mathtt{chi2\_tol}/\mathrm{dof})}$, what an
-      iteration the stopping rules still count needs; the standard
-      errors' use its square root: their product is second order in the solves' error,
-      `_profiled`) and step cap (a step whose solve stops at the cap is still tried:
-      the loss decides; a standard error whose solve does not converge is NaN).
+      iteration the stopping rules still count needs) and step cap (a step whose solve stops
+      at the cap is still tried: the loss decides; a standard error whose solve does not
+      converge is NaN).
     - `standard_errors`: compute the parameters' covariance at the solution ($p$ conjugate
-      gradient solves per trajectory; `False`: NaN).
+      gradient solves, the fit's largest cost at N = 32; `False`: NaN); `se_rtol` their
+      relative tolerance: the covariance is second order in the solves' error (`_profiled`),
+      so 1e-3 gives standard errors within 1.5e-4 of those of solves to 1e-6 (W8's Euler data
+      at N = 32: 1.2e-5 but at degree 1) in 54% of their steps (BENCHMARKS.md, "Fluids from
+      data").
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
@@ -199,7 +200,11 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     if isinstance(chi2_tol, bool) or not isinstance(chi2_tol, (int, float)) or not 0 <= chi2_tol < math.inf:
         raise ValueError(f"chi2_tol must be a finite number >= 0 (the least decrease of chi^2 worth an "
                          f"iteration, e.g. 0.01); got {chi2_tol!r}")
-    cg_rtol = positive_float(cg_rtol, "cg_rtol")
+    cg_rtol, se_rtol = positive_float(cg_rtol, "cg_rtol"), positive_float(se_rtol, "se_rtol")
+    for name, value in (("cg_rtol", cg_rtol), ("se_rtol", se_rtol)):
+        if value >= 1:
+            raise ValueError(f"{name} must be below 1 (a relative residual: 1 or more asks the conjugate gradients "
+                             f"for no step at all); got {value!r}")
     cg_max_steps = positive_int(cg_max_steps, "cg_max_steps")
     all_intervals = data.intervals()
     if max_step is None:
@@ -334,11 +339,11 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             state = _linearisation(fitted, starts, padded, substeps, None)
         clock = _clock()
         profiled, cg_steps = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
-                                       math.sqrt(cg_rtol), cg_max_steps)
+                                       se_rtol, cg_max_steps)
         covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
         if progress:
             print(f"fit_stream_operator: standard errors: {p} solves of {int(np.min(cg_steps))}-"
-                  f"{int(np.max(cg_steps))} conjugate gradient steps (rtol {math.sqrt(cg_rtol):.0e}), "
+                  f"{int(np.max(cg_steps))} conjugate gradient steps (rtol {se_rtol:.0e}), "
                   f"{_since(clock)}", flush=True)
     else:
         covariance = np.full((p, p), np.nan)
@@ -552,11 +557,13 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
     r"""`(S_p, steps)`: $S_p = A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$,
     the parameters' Gauss-Newton matrix with the starts profiled out, and the conjugate gradient
     steps of each column's solve `(p,)`. $B$ by $p$ transposed passes, $X \approx G^{-1}B$ by
-    conjugate gradients, `PROFILE_BATCH` columns at a time sharing each pass (NaN where a solve
-    does not converge); the product taken as $B^\top X + X^\top B - X^\top GX$, whose error is
-    $-E^\top GE$ for the solves' error $E = X - G^{-1}B$: second order in it (the first-order
-    $B^\top X$ is off by $B^\top E$), so that solves to a relative residual $\epsilon$ give
-    $S_p$ to about $\epsilon^2$ (one more pass per column for $GX$)."""
+    conjugate gradients, one column after another (NaN where a solve does not converge; 16
+    columns batched through each pass took 1.6x the CPU time at N = 16: a batch runs to its
+    slowest column's steps, and a batched pass costs as much as its columns' one by one); the
+    product taken as $B^\top X + X^\top B - X^\top GX$, whose error is $-E^\top GE$ for the
+    solves' error $E = X - G^{-1}B$: second order in it (the first-order $B^\top X$ is off by
+    $B^\top E$), so that solves to a relative residual $\epsilon$ give $S_p$ to about
+    $\epsilon^2$ (one more pass per column for $GX$)."""
     r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
     transpose = jax.linear_transpose(forward, S)
     scale = 1.0 / jnp.sqrt(counts)[:, None]
@@ -567,6 +574,6 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
         x = jnp.where(ok, scale * Z, jnp.nan)
         return b, x, transpose(forward(x))[0], steps
 
-    B, X, GX, steps = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0), batch_size=PROFILE_BATCH)  # (p, J, n) each
+    B, X, GX, steps = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0))  # (p, J, n) each
     BX = jnp.einsum("pjn,qjn->pq", B, X)
     return A - (BX + BX.T - jnp.einsum("pjn,qjn->pq", X, GX)), steps
