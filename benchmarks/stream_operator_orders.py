@@ -23,6 +23,15 @@ turnover (`benchmarks/results/stream_operator_orders_w8_limit.json`).
 `--step-bias`: the same for W8's learned spectrum per degree at the full profile's sizes: fitted
 to the clean training snapshots from the truth, its deviation is the step's bias, reported over
 the standard errors the fit has at noise 1e-3 (`step_bias`).
+
+`--se-solves`: what the standard errors' solves cost and how exact they are (`se_solves`): W8's
+Euler training data at noise 1e-3, fitted without standard errors, then the profiled
+Gauss-Newton matrix (`learn._training._stream_fit._profiled`, what `fit_stream_operator` does
+after its last iteration) at each `--se-rtols` tolerance, its CPU time and conjugate gradient
+steps, and the standard errors' largest relative deviation from those at the tightest:
+
+    python -m benchmarks.stream_operator_orders --se-solves --N 32 --composition Suzuki --fit-step 0.15 \
+        --se-rtols 1e-3 1e-2 1e-6
 """
 
 from __future__ import annotations
@@ -133,6 +142,53 @@ def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | N
             "bias": bias.tolist(), "standard_errors": se.tolist(), "z": z.tolist(), "fit_seconds": seconds}
 
 
+def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[float]) -> list[dict]:
+    """The standard errors' solves at each of `rtols` (module docstring, `--se-solves`)."""
+    import time
+
+    import integrators as it
+    from learn._training import _stream_fit as fitting
+    from paper import w8_fluids as w8
+
+    P = w8.PROFILES["full"].replace(composition=composition, fit_step=fit_step)
+    condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+    clean = np.asarray(w8._rollouts(condition.truth.model(condition.system),
+                                    jnp.asarray(condition._fields(w8.TRAIN_SEED, P.n_train)),
+                                    jnp.asarray(np.diff(condition.clock)), P.fine))
+    data = it.add_field_noise(it.Observations(condition.system, [condition.clock] * P.n_train, list(clean)), 1e-3,
+                              seed=w8.NOISE_SEED)
+    true = -np.arange(1, N) * np.arange(2, N + 1.0)
+    model = learn.StreamOperator(condition.system, learn.DegreeSpectrum(true, reference_degree=N - 1),
+                                 composition=composition, tol=w8.MODEL_TOL, iterations=6)
+    fit = learn.fit_stream_operator(model, data, max_step=fit_step * condition.tau, iterations=P.lm_iterations,
+                                    standard_errors=False, progress=True)
+    fitted = eqx.tree_at(lambda m: m.h, fit.model, None, is_leaf=lambda v: v is None)
+    padded, starts = fitting._padded(data), jnp.asarray(fit.starts)
+    state = fitting._linearisation(fitted, starts, padded, fit.substeps, None)
+    counts = jnp.sum(padded.mask, axis=1)
+    results = []
+    jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
+                                            jnp.asarray(0.5), 500))  # compiled once: the timings below run it
+    for rtol in sorted(rtols, reverse=True):
+        wall, cpu = time.perf_counter(), time.process_time()
+        profiled, steps = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
+                                            jnp.asarray(rtol), 500)
+        se = np.sqrt(np.abs(np.diag(fit.noise**2 * np.linalg.inv(np.asarray(profiled)))))
+        results.append({"N": N, "composition": composition, "fit_step": fit_step, "rtol": rtol,
+                        "wall_seconds": time.perf_counter() - wall, "cpu_seconds": time.process_time() - cpu,
+                        "steps": np.asarray(steps).tolist(), "standard_errors": se[:-1].tolist()})
+    tightest = np.asarray(results[-1]["standard_errors"])
+    for r in results:
+        deviation = np.abs(np.asarray(r["standard_errors"]) / tightest - 1.0)
+        r["deviation_max"], r["deviation_median"] = float(deviation.max()), float(np.median(deviation))
+        r["deviation_degree"] = int(np.argmax(deviation)) + 1
+        print(f"se_rtol {r['rtol']:g}: {r['cpu_seconds']:.0f} s CPU ({r['wall_seconds']:.0f} s wall), "
+              f"{sum(r['steps'])} CG steps ({min(r['steps'])}-{max(r['steps'])} a column); standard errors "
+              f"within {r['deviation_max']:.1e} of rtol {min(rtols):g}'s (degree {r['deviation_degree']}; "
+              f"median {r['deviation_median']:.1e})", flush=True)
+    return results
+
+
 def report(results: list[dict]) -> None:
     print("method        midpoints per tau: relative error at tau")
     for method in dict.fromkeys(r["method"] for r in results):
@@ -151,6 +207,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--se-from", default=None, help="--step-bias: the standard errors of an earlier run's file")
     parser.add_argument("--cg-rtol", type=float, default=1e-8, help="--step-bias: fit_stream_operator's cg_rtol")
     parser.add_argument("--se-rtol", type=float, default=1e-3, help="--step-bias: fit_stream_operator's se_rtol")
+    parser.add_argument("--se-solves", action="store_true", help="the standard errors' solves (module docstring)")
+    parser.add_argument("--se-rtols", type=float, nargs="+", default=[1e-3, 1e-2, 1e-6],
+                        help="--se-solves: the tolerances (the tightest the reference)")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
     if args.step_bias:
@@ -163,6 +222,16 @@ def main(argv: list[str] | None = None) -> None:
             return
         write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
                                              args.se_rtol)])
+        return
+    if args.se_solves:
+        composition = None if args.composition == "None" else args.composition
+        tag = f"{NAME}_se_solves_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
+        out = args.out if args.out != default_out(NAME) else default_out(tag)
+        if args.report:
+            for r in saved_results(out):
+                print(r)
+            return
+        write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
         return
     if args.w8_limit:
         out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")
