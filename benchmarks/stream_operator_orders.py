@@ -52,6 +52,7 @@ from ._report import add_output_arguments, default_out, saved_results, write_jso
 NAME = "stream_operator_orders"
 STEPS = (1, 2, 3, 4, 6)  # steps per interval of 0.1
 COMPOSITIONS = {2: None, 4: "Suzuki", 6: "Yoshida6"}  # by order: learn.StreamOperator's composition
+CG_MAX_STEPS = 200  # fit_stream_operator's default cg_max_steps
 
 
 def measure(N: int) -> list[dict]:
@@ -143,7 +144,8 @@ def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | N
 
 
 def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[float]) -> list[dict]:
-    """The standard errors' solves at each of `rtols` (module docstring, `--se-solves`)."""
+    """The standard errors' solves at each of `rtols` (module docstring, `--se-solves`), of the
+    fitted inverse eigenvalues (their relative deviations are those of the eigenvalues')."""
     import time
 
     import integrators as it
@@ -168,18 +170,20 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
     counts = jnp.sum(padded.mask, axis=1)
     results = []
     jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
-                                            jnp.asarray(0.5), 500))  # compiled once: the timings below run it
+                                            jnp.asarray(0.5), CG_MAX_STEPS))  # compiled once for the timings
     for rtol in sorted(rtols, reverse=True):
         wall, cpu = time.perf_counter(), time.process_time()
         profiled, steps = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
-                                            jnp.asarray(rtol), 500)
-        se = np.sqrt(np.abs(np.diag(fit.noise**2 * np.linalg.inv(np.asarray(profiled)))))
+                                            jnp.asarray(rtol), CG_MAX_STEPS)
+        variances = np.diag(fit.noise**2 * np.linalg.inv(np.asarray(profiled)))
+        # of the fitted inverse eigenvalues, degrees 1..N - 2 (the gauge's reference N - 1 is held)
+        se = np.where(variances >= 0, np.sqrt(np.abs(variances)), np.nan)
         results.append({"N": N, "composition": composition, "fit_step": fit_step, "rtol": rtol,
                         "wall_seconds": time.perf_counter() - wall, "cpu_seconds": time.process_time() - cpu,
-                        "steps": np.asarray(steps).tolist(), "standard_errors": se[:-1].tolist()})
-    tightest = np.asarray(results[-1]["standard_errors"])
+                        "steps": np.asarray(steps).tolist(), "inverse_standard_errors": se.tolist()})
+    tightest = np.asarray(results[-1]["inverse_standard_errors"])
     for r in results:
-        deviation = np.abs(np.asarray(r["standard_errors"]) / tightest - 1.0)
+        deviation = np.abs(np.asarray(r["inverse_standard_errors"]) / tightest - 1.0)
         r["deviation_max"], r["deviation_median"] = float(deviation.max()), float(np.median(deviation))
         r["deviation_degree"] = int(np.argmax(deviation)) + 1
         print(f"se_rtol {r['rtol']:g}: {r['cpu_seconds']:.0f} s CPU ({r['wall_seconds']:.0f} s wall), "

@@ -184,8 +184,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       gradient solves, the fit's largest cost at N = 32; `False`: NaN); `se_rtol` their
       relative tolerance: the covariance is second order in the solves' error (`_profiled`),
       so 1e-3 gives standard errors within 1.5e-4 of those of solves to 1e-6 (W8's Euler data
-      at N = 32: 1.2e-5 but at degree 1) in 54% of their steps (BENCHMARKS.md, "Fluids from
-      data").
+      at N = 32; the largest at degree 1, the median 1.2e-5) in 54% of their steps
+      (BENCHMARKS.md, "Fluids from data").
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
@@ -339,7 +339,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             state = _linearisation(fitted, starts, padded, substeps, None)
         clock = _clock()
         profiled, cg_steps = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
-                                       se_rtol, cg_max_steps)
+                                       jnp.asarray(se_rtol), cg_max_steps)  # traced: one compilation for any
         covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
         if progress:
             print(f"fit_stream_operator: standard errors: {p} solves of {int(np.min(cg_steps))}-"
