@@ -216,26 +216,19 @@ def main(argv: list[str] | None = None) -> None:
                         help="--se-solves: the tolerances (the tightest the reference)")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
-    if args.step_bias:
+    if args.step_bias or args.se_solves:
         composition = None if args.composition == "None" else args.composition
-        tag = f"{NAME}_step_bias_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
+        kind = "step_bias" if args.step_bias else "se_solves"
+        tag = f"{NAME}_{kind}_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
         out = args.out if args.out != default_out(NAME) else default_out(tag)
         if args.report:
             for r in saved_results(out):
                 print(r)
-            return
-        write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
+        elif args.step_bias:
+            write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
                                              args.se_rtol)])
-        return
-    if args.se_solves:
-        composition = None if args.composition == "None" else args.composition
-        tag = f"{NAME}_se_solves_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
-        out = args.out if args.out != default_out(NAME) else default_out(tag)
-        if args.report:
-            for r in saved_results(out):
-                print(r)
-            return
-        write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
+        else:
+            write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
         return
     if args.w8_limit:
         out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")

@@ -183,9 +183,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     - `standard_errors`: compute the parameters' covariance at the solution ($p$ conjugate
       gradient solves, the fit's largest cost at N = 32; `False`: NaN); `se_rtol` their
       relative tolerance: the covariance is second order in the solves' error (`_profiled`),
-      so 1e-3 gives standard errors within 1.5e-4 of those of solves to 1e-6 (W8's Euler data
-      at N = 32; the largest at degree 1, the median 1.2e-5) in 54% of their steps
-      (BENCHMARKS.md, "Fluids from data").
+      so a loose 1e-3 gives them nearly as a tight one would at about half the steps
+      (BENCHMARKS.md, "The step's order": the standard errors' solves).
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
@@ -557,9 +556,9 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
     r"""`(S_p, steps)`: $S_p = A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$,
     the parameters' Gauss-Newton matrix with the starts profiled out, and the conjugate gradient
     steps of each column's solve `(p,)`. $B$ by $p$ transposed passes, $X \approx G^{-1}B$ by
-    conjugate gradients, one column after another (NaN where a solve does not converge; 16
-    columns batched through each pass took 1.6x the CPU time at N = 16: a batch runs to its
-    slowest column's steps, and a batched pass costs as much as its columns' one by one); the
+    conjugate gradients, one column after another (NaN where a solve does not converge; a batch
+    of columns runs to its slowest column's steps and costs as much as its columns one by one:
+    BENCHMARKS.md, the standard errors' solves); the
     product taken as $B^\top X + X^\top B - X^\top GX$, whose error is $-E^\top GE$ for the
     solves' error $E = X - G^{-1}B$: second order in it (the first-order $B^\top X$ is off by
     $B^\top E$), so that solves to a relative residual $\epsilon$ give $S_p$ to about
