@@ -236,10 +236,9 @@ _XLA_OPT = "--xla_backend_optimization_level"
 def in_optimised_process(fn, *args):
     """`fn(*args)` in a fresh process whose XLA compiles with LLVM's optimisations (level 2,
     JAX's default), for a test whose time goes into running compiled code rather than compiling
-    it: the suite's level 0 (tests/conftest.py) compiles faster and runs slower, W2's heavy top
-    469 s at level 0 against 114 s at level 2, alone on one core (the whole slow suite at level 2
-    ran longer than at level 0: most of it compiles). `fn` a module-level function and its
-    result picklable; an exception in it is raised here."""
+    it: the suite's level 0 (tests/conftest.py) compiles faster and runs slower (BENCHMARKS.md,
+    "The default test run"). `fn` a module-level function and its result picklable; an
+    exception in it is raised here."""
     flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if not f.startswith(_XLA_OPT)]
     before = os.environ.get("XLA_FLAGS")
     # the child reads XLA_FLAGS when its JAX first computes; Pool starts it here
