@@ -140,8 +140,9 @@ def test_docs_extra_has_what_the_executed_pages_import():
 
 
 def test_ci_builds_the_docs_from_the_docs_install_in_its_own_venv():
-    """.ci/run: after the tests, a fresh second venv, exactly `pip install -e ".[docs]"`, and the
-    strict build run from that venv."""
+    """.ci/run: a fresh second venv, exactly `pip install -e ".[docs]"` by its own pip (in the
+    background while the tests run, waited for after them), and the strict build run from that
+    venv after the tests."""
     lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
              if line.strip() and not line.lstrip().startswith("#")]
 
@@ -151,25 +152,26 @@ def test_ci_builds_the_docs_from_the_docs_install_in_its_own_venv():
         return found[-1]
 
     tests = index(r"python -m pytest")
-    venv = index(r"python3? -m venv --clear (\S+)")
+    venv = index(r"-m venv --clear (\S+)")
     docs_venv = re.search(r"-m venv --clear (\S+)", lines[venv]).group(1)
+    install = index(rf'^{re.escape(docs_venv)}/bin/pip install -e "\.\[docs\]"$')
+    waited = index(r"^wait ")
     activate = index(rf"source {re.escape(docs_venv)}/bin/activate")
-    install = index(r'^pip install -e "\.\[docs\]"$')
     build = index(r"python -m mkdocs build --strict")
-    assert tests < venv < activate < install < build, lines
+    assert venv < install < tests < waited < activate < build, lines
     assert docs_venv != ".ci-venv", "the docs venv must be a second one, not the test venv"
-    assert "NO_MKDOCS_2_WARNING=1" in lines[build] and "MPLBACKEND=Agg" in lines[build]
+    assert "NO_MKDOCS_2_WARNING=1" in lines[build - 1] + lines[build] and "MPLBACKEND=Agg" in lines[build - 1] + lines[build]
 
 
 def test_ci_runs_the_default_suite_then_the_slow_one_then_the_docs():
     """.ci/run: the README's test command, then every `@pytest.mark.slow` test (`-m slow`: the
-    default run deselects them), both in the test venv, before the docs venv."""
+    default run deselects them), both in the test venv, before the docs build."""
     lines = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
              if line.strip() and not line.lstrip().startswith("#")]
     default = lines.index("python -m pytest")
     slow = next(k for k, line in enumerate(lines) if line.startswith("python -m pytest -m slow"))
-    docs_venv = next(k for k, line in enumerate(lines) if "-m venv --clear" in line)
-    assert default < slow < docs_venv, lines
+    docs = next(k for k, line in enumerate(lines) if "mkdocs build" in line)
+    assert default < slow < docs, lines
     assert "deactivate" not in lines[default:slow], "the slow suite runs in the test venv"
     readme = (ROOT / "README.md").read_text()
     assert "`python -m pytest -m slow`" in readme, "the README no longer says how to run the long tests"
