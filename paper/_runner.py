@@ -8,18 +8,25 @@ saved as it is measured and read back by a rerun into the same folder (an interr
 resumes; atomic writes; a rerun with other settings of the profile is refused, not mixed with
 them: `check_settings`), the progress lines, the verdict, the figures and the tables. A new row
 of a study is one model in its `models`; a new study is one subclass.
+
+Processes that run the same study into the same folder share its rows (`paper._claims`): each
+computes the rows no other holds, then reads the others' as they are saved. So a long study
+uses every core when started once per core: `python -m paper run W8 --full --out DIR &` twice.
 """
 
 from __future__ import annotations
 
 import abc
+import dataclasses
 import json
-from collections.abc import Iterable, Sequence
+import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from integrators.internals import atomic_write_text, json_values
 
+from ._claims import claim, holder, release
 from ._experiment import (
     AbstractExperiment,
     Column,
@@ -31,6 +38,18 @@ from ._experiment import (
 )
 from ._mappings import release_compiled_programs
 from ._study import AbstractStudyModel
+
+#: Seconds between two looks at a row another process is computing (`AbstractStudy.run`).
+POLL_SECONDS = 30.0
+
+
+@dataclasses.dataclass(frozen=True)
+class _Elsewhere:
+    """A row another process claimed (`paper._claims`): read once it is saved at `path`, or
+    computed here by `compute` if that process ends without saving it."""
+
+    path: Path
+    compute: Callable[[], Any]
 
 
 class AbstractStudy(AbstractExperiment):
@@ -75,21 +94,49 @@ class AbstractStudy(AbstractExperiment):
     def condition_rows(self, profile: str, condition: Any, models: Sequence[AbstractStudyModel], out_dir: Path,
                        progress: bool) -> list[Any]:
         """The rows of `models` on `condition`, each read from its file if an earlier run saved
-        it (`row_name`), else evaluated (and saved). A study whose models are measured together
-        (W1: timings relative to one of them) overrides this."""
-        rows = []
+        it (`row_name`), else evaluated (and saved), or, while another process holds its claim,
+        an `_Elsewhere` that `run` reads when that process has saved it. A study whose models
+        are measured together (W1: timings relative to one of them) overrides this."""
+        rows: list[Any] = []
         for model in models:
             name = self.row_name(profile, condition, model)
             if name is None:
-                row = self.evaluate(condition, model, progress)
+                rows.append(self.evaluate(condition, model, progress))
             else:
-                row = saved_row(self.row_type, out_dir / "rows" / name,
-                                lambda model=model: self.evaluate(condition, model, progress))
-            rows.append(row)
+                row = self._saved_or_claimed(out_dir / "rows" / name,
+                                             lambda model=model: self.evaluate(condition, model, progress))
+                rows.append(row)
+                if isinstance(row, _Elsewhere):
+                    if progress:
+                        print(f"  {name}: computed by another process ({holder(row.path)}); read when saved",
+                              flush=True)
+                    continue
             if progress:
-                print(self.line(row), flush=True)
+                print(self.line(rows[-1]), flush=True)
             release_compiled_programs()  # a long study compiles thousands of programs: paper._mappings
         return rows
+
+    def _saved_or_claimed(self, path: Path, compute: Callable[[], Any]) -> Any:
+        """The row saved at `path`, else computed here and saved if this process can claim it,
+        else an `_Elsewhere`."""
+        if not path.exists():
+            if not claim(path):
+                return _Elsewhere(path, compute)
+            try:
+                return saved_row(self.row_type, path, compute)  # looks again: saved meanwhile, it is read
+            finally:
+                release(path)
+        return saved_row(self.row_type, path, compute)
+
+    def _awaited(self, row: _Elsewhere, progress: bool) -> Any:
+        """The row another process claimed: read when saved, computed here if it never is."""
+        while True:
+            found = self._saved_or_claimed(row.path, row.compute)
+            if not isinstance(found, _Elsewhere):
+                if progress:
+                    print(self.line(found), flush=True)
+                return found
+            time.sleep(POLL_SECONDS)
 
     def announce(self, condition: Any) -> str | None:
         """A line printed (with progress) before the condition's rows (`None`: nothing)."""
@@ -145,6 +192,7 @@ class AbstractStudy(AbstractExperiment):
             models = [m for m in self.models(P, condition) if self.admits(condition, m)]
             rows += self.condition_rows(profile, condition, models, out_dir, progress)
             release_compiled_programs()
+        rows = [self._awaited(r, progress) if isinstance(r, _Elsewhere) else r for r in rows]
         figures = self.figures(rows, seen, out_dir)
         return {"rows": [row_to_json(r) for r in rows], "verdict": self.verdict(rows, seen),
                 **({"figures": figures} if figures else {}), **self.summary(P, rows, seen)}

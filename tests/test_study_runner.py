@@ -154,22 +154,22 @@ def test_one_profile_type_for_every_experiment():
     assert W4["full"].then.part == "LLPNN protocol"  # a study's second part: a Profile too
 
 
-def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tmp_path, capsys):
-    from paper.__main__ import main
+@dataclasses.dataclass(frozen=True)
+class _TinyRow:
+    condition: int
+    value: float
+
+
+def _tiny_study(evaluated: list, grid=(1, 2), scale=2.0):
+    """A study of one model on the conditions `grid` whose row is `condition * scale`, saved
+    per condition; each evaluation appended to `evaluated`."""
     from paper._runner import AbstractStudy
-
-    @dataclasses.dataclass(frozen=True)
-    class Row:
-        condition: int
-        value: float
-
-    evaluated = []
 
     class Tiny(AbstractStudy):
         id = "T"
         title = "tiny"
-        profiles = profiles(smoke=Profile(conditions=(1, 2), scale=2.0))
-        row_type = Row
+        profiles = profiles(smoke=Profile(conditions=grid, scale=scale))
+        row_type = _TinyRow
 
         def conditions(self, P):
             return P.conditions
@@ -179,7 +179,7 @@ def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tm
 
         def evaluate(self, condition, model, progress):
             evaluated.append(condition)
-            return Row(condition, condition * self.profiles["smoke"].scale)
+            return _TinyRow(condition, condition * self.profiles["smoke"].scale)
 
         def row_name(self, profile, condition, model):
             return f"{profile}-{condition}.json"
@@ -187,7 +187,14 @@ def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tm
         def description(self, metrics):
             return ""
 
-    study = Tiny()
+    return Tiny()
+
+
+def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tmp_path, capsys):
+    from paper.__main__ import main
+
+    evaluated = []
+    study = _tiny_study(evaluated)
     assert study.execute("smoke", progress=False, out_dir=tmp_path)["rows"][1]["value"] == 4.0
     assert study.execute("smoke", progress=False, out_dir=tmp_path)["resumed_rows"] == 2 and evaluated == [1, 2]
     # the same profile with another setting: the saved rows (of scale 2) are not read back as its
@@ -205,3 +212,56 @@ def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tm
     (tmp_path / "W8" / "smoke-settings.json").write_text("{not json")
     assert main(["run", "W8", "--profile", "smoke", "--no-progress", "--out", str(tmp_path)]) == 2
     assert "not a settings file of this library" in capsys.readouterr().err
+
+
+def test_processes_running_one_study_into_one_folder_share_its_rows(tmp_path, monkeypatch, capsys):
+    """A row another process has claimed is not computed again: it is read once that process
+    saves it; a claim whose process died is no claim (the kernel drops its lock)."""
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    from paper import _runner
+    from paper._claims import holder
+    evaluated = []
+    monkeypatch.setattr(_runner, "POLL_SECONDS", 0.02)
+    row2 = tmp_path / "rows" / "smoke-2.json"
+    with subprocess.Popen(  # another process: claims row 2, saves it (value 99) when told to
+            [sys.executable, "-c", ("import json, sys; from pathlib import Path; from paper._claims import claim, "
+                                    "release; p = Path(sys.argv[1]); assert claim(p); print('claimed', flush=True); "
+                                    "sys.stdin.readline(); p.write_text(json.dumps({'condition': 2, 'value': 99.0})); "
+                                    "release(p)"), str(row2)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as other:
+        try:
+            assert other.stdout.readline().strip() == "claimed"
+            assert holder(row2).endswith(f" {other.pid}")
+
+            def finish_when_the_others_are_done():
+                deadline = time.monotonic() + 60
+                while evaluated != [1, 3] and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                other.stdin.write("\n")
+                other.stdin.flush()
+
+            threading.Thread(target=finish_when_the_others_are_done, daemon=True).start()
+            metrics = _tiny_study(evaluated, (1, 2, 3)).execute("smoke", progress=True, out_dir=tmp_path)
+        finally:
+            other.kill()
+    assert evaluated == [1, 3]  # row 2 was the other process's
+    assert [r["value"] for r in metrics["rows"]] == [2.0, 99.0, 6.0]  # in the study's order, read when saved
+    assert "smoke-2.json: computed by another process" in capsys.readouterr().out
+    assert not list((tmp_path / "rows").glob("*.claim"))  # every claim released, its file deleted
+
+    # a process that dies holding a claim leaves its file but not its lock: the row is computed here
+    row2.unlink()
+    with subprocess.Popen([sys.executable, "-c", ("import sys, time; from pathlib import Path; "
+                                                  "from paper._claims import claim; assert claim(Path(sys.argv[1])); "
+                                                  "print('claimed', flush=True); time.sleep(600)"), str(row2)],
+                          stdout=subprocess.PIPE, text=True) as dead:
+        assert dead.stdout.readline().strip() == "claimed"
+        dead.kill()
+    assert row2.with_name(row2.name + ".claim").exists() and holder(row2) is None
+    again = _tiny_study(evaluated, (1, 2, 3)).execute("smoke", progress=False, out_dir=tmp_path)
+    assert evaluated == [1, 3, 2] and [r["value"] for r in again["rows"]] == [2.0, 4.0, 6.0]
+    assert not list((tmp_path / "rows").glob("*.claim"))
