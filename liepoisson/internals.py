@@ -24,9 +24,9 @@ from ._jsonable import jsonable as jsonable
 from ._matrix_algebra import SEMIDIRECT as SEMIDIRECT
 from ._matrix_algebra import dagger as dagger
 from ._memory import check_fits_in_memory as check_fits_in_memory
-from ._quantized_sphere import harmonic_multiplier as harmonic_multiplier
 from ._progress import progress_bar as progress_bar
 from ._progress import show_progress as show_progress
+from ._quantized_sphere import harmonic_multiplier as harmonic_multiplier
 from ._validation import (
     as_state as as_state,
 )

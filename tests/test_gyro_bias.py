@@ -5,7 +5,6 @@ recording sessions found from their flights."""
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest

@@ -210,6 +210,6 @@ def test_a_glpnet_fit_from_a_zero_start_lowers_the_loss():
     y1 = np.asarray(it.splitting.Strang(RB, 0.1).rollout(y0, 1))[:, -1]
     net = learn.GLPNet(RB, n_modules=6, init="zero", h=0.1, method=it.splitting.Strang)
     before = float(learn.state_mse(net, jnp.asarray(y0), jnp.asarray(y1)))
-    fitted, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(15)), validation_fraction=0.0,
+    _, record = learn.fit(net, (y0, y1), h=0.1, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(15)), validation_fraction=0.0,
                                progress=False)
     assert record.train_loss < 0.1 * before

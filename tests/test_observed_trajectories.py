@@ -103,7 +103,7 @@ def test_bad_groups_are_named(groups, error, match):
 def test_a_file_with_foreign_groups_is_refused(tmp_path):
     import h5py
 
-    times, states, obs, body = _both()
+    _, _, obs, body = _both()
     for data, kind in ((obs, it.Observations), (body, it.BodyObservations)):
         path = tmp_path / f"{kind.__name__}.h5"
         data.save(path)

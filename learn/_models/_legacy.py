@@ -21,7 +21,7 @@ def upgrade_attributes(attrs: dict[str, Any], where: str) -> dict[str, Any]:
             "write it again with the version that made it, or train the model anew"
         )
     if not isinstance(attrs.get("hyperparameters"), dict):
-        raise ValueError(f"{where} is a version-1 file without the hyperparameters of a learned map (damaged, or "
+        raise ValueError(f"{where} is a version-1 file without the hyperparameters of a learned map (damaged, or "  # noqa: TRY004 - an unfit value (file, data), not an argument of the wrong type
                          "not a model file)")
     hp = dict(attrs["hyperparameters"])
     old = cls = attrs.get("class")

@@ -228,7 +228,7 @@ def check_dissipation(dissipation: Any, data: Any, activation: str | None, famil
     if not kinds or any(k not in DRAG_KINDS for k in kinds):
         raise ValueError(f"dissipation must be 'auto', None or a sequence of {DRAG_KINDS}; got {dissipation!r}")
     if not isinstance(data, AbstractObservedTrajectories):
-        raise ValueError("dissipation= offers drag families on observations (integrators.Observations, "
+        raise ValueError("dissipation= offers drag families on observations (integrators.Observations, "  # noqa: TRY004 - an unfit value (file, data), not an argument of the wrong type
                          "BodyObservations); pairs and trajectories fit one conservative family")
     return kinds
 

@@ -84,7 +84,7 @@ def inertia(model: AbstractBodyMap, data: BodyObservations | Observations | None
         return Inertia(moments, axes)
     n_bootstrap = positive_int(n_bootstrap, "n_bootstrap")
     if not isinstance(data, BodyObservations):
-        raise ValueError("n_bootstrap > 0 refits the map to resampled trajectories: give data= (the "
+        raise ValueError("n_bootstrap > 0 refits the map to resampled trajectories: give data= (the "  # noqa: TRY004 - an unfit value (file, data), not an argument of the wrong type
                          f"integrators.BodyObservations it was fitted to); got {type(data).__name__}")
     from ._fit import fit
 
