@@ -41,7 +41,9 @@ def test_release_frees_the_mappings_of_compiled_programs():
     before, compiled, kept, unchanged, released, after, again = json.loads(out.stdout.strip().splitlines()[-1])
     added = compiled - before
     assert added > 100  # XLA's CPU backend: several mappings a program (measured ~190 for these 40)
-    assert not kept and unchanged >= compiled - 10
+    # nothing released: the count may drift by a few dozen (XLA's pools and threads, the compilation
+    # cache's writes: 24 seen on a loaded core), far less than a release gives back (below)
+    assert not kept and unchanged > compiled - added // 3
     assert released and after < compiled - added // 3  # measured: ~120 of ~190 given back (pools)
     assert not again
 

@@ -98,6 +98,7 @@ def test_casimirs_of_the_absolute_vorticity_are_kept_for_any_parameters(composit
     assert np.max(np.abs(w1 - w0)) > 1e-6 * np.max(np.abs(w0))
 
 
+@pytest.mark.slow  # eight rollout programs compiled (three compositions, two step counts each): 34 s of the default run's ~480 s CPU
 def test_orders_against_heyoka():
     """No composition, `Suzuki` and `Yoshida6` converge at their orders 2, 4 and 6 to the exact flow (heyoka's Taylor method at
     machine precision, an independent reference); a rollout at uneven intervals equals the
