@@ -5,10 +5,12 @@ computing each one twice.
 A process computes the row saved at `<row>.json` only while it holds an exclusive lock
 (`fcntl.flock`) on `<row>.json.claim`; it unlocks and deletes the file when the row is saved or
 its computation failed. The operating system releases the lock of a process that dies, so no
-claim outlives its process (an interrupted session leaves nothing to clean up). A lock taken on
-a file just released finds the row saved (`AbstractStudy` looks again before computing): the
-worst a race costs is one row computed twice, never a wrong row (rows are written atomically).
-Where there is no `fcntl` (Windows) every claim succeeds: processes do not share rows.
+claim outlives its process (the file it leaves holds no lock: the next process takes it). A
+lock taken on a file that was deleted meanwhile is dropped and taken again on the file now at
+the path, and a process that wins a claim looks for the saved row before computing it
+(`AbstractStudy`); rows are written atomically, so a race costs at worst a row computed twice,
+never a wrong row. Where there is no `fcntl` (Windows) every claim succeeds and no file is
+made: processes do not share rows.
 """
 
 from __future__ import annotations
@@ -37,20 +39,33 @@ def claim(row: Path) -> bool:
     """Claim the row to be saved at `row` for this process: True if it is this process's to
     compute (it holds the lock), False while another process holds it."""
     path = _path(row)
-    if path in _HELD:
+    if fcntl is None or path in _HELD:
         return True
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
-    if fcntl is not None:
+    while True:
+        fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino  # not a file deleted since it was opened
         except BlockingIOError:
             os.close(fd)
             return False
-    os.ftruncate(fd, 0)  # who holds it, for a reader of the folder
-    os.write(fd, f"{socket.gethostname()} {os.getpid()}\n".encode())
-    _HELD[path] = fd
-    return True
+        except FileNotFoundError:
+            same = False
+        except BaseException:
+            os.close(fd)
+            raise
+        if not same:  # released and deleted by its holder meanwhile: claim the file now at the path
+            os.close(fd)
+            continue
+        try:
+            os.ftruncate(fd, 0)  # who holds it, for a reader of the folder
+            os.write(fd, f"{socket.gethostname()} {os.getpid()}\n".encode())
+        except BaseException:
+            os.close(fd)
+            raise
+        _HELD[path] = fd
+        return True
 
 
 def holder(row: Path) -> str | None:
@@ -58,13 +73,13 @@ def holder(row: Path) -> str | None:
     path = _path(row)
     if path in _HELD:
         return f"{socket.gethostname()} {os.getpid()}"
+    if fcntl is None:
+        return None
     try:
         fd = os.open(path, os.O_RDONLY)
     except FileNotFoundError:
         return None
     try:
-        if fcntl is None:
-            return None
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -194,8 +194,10 @@ def row_from_json(cls: type, values: dict[str, Any]) -> Any:
                   for f in dataclasses.fields(cls) if f.name in values or absent(f)})
 
 
-#: Rows `saved_row` read from an earlier run during the current `execute` (its metrics'
-#: `resumed_rows`: `total_time_s` is the time of this run's rows only).
+#: Rows `saved_row` read, not computed, during the current `execute` (its metrics'
+#: `resumed_rows`): saved by an earlier run, or by another process running the same study into
+#: the same folder (`paper._claims`). `total_time_s` is this run's time: its own rows, and its
+#: waits for the other process's.
 _RESUMED: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("resumed_rows", default=None)
 
 

@@ -108,8 +108,8 @@ class AbstractStudy(AbstractExperiment):
                 rows.append(row)
                 if isinstance(row, _Elsewhere):
                     if progress:
-                        print(f"  {name}: computed by another process ({holder(row.path)}); read when saved",
-                              flush=True)
+                        who = holder(row.path) or "released since"
+                        print(f"  {name}: computed by another process ({who}); read when saved", flush=True)
                     continue
             if progress:
                 print(self.line(rows[-1]), flush=True)

@@ -155,10 +155,14 @@ def test_ci_builds_the_docs_from_the_docs_install_in_its_own_venv():
     venv = index(r"-m venv --clear (\S+)")
     docs_venv = re.search(r"-m venv --clear (\S+)", lines[venv]).group(1)
     install = index(rf'^{re.escape(docs_venv)}/bin/pip install -e "\.\[docs\]"$')
-    waited = index(r"^wait ")
+    background = index(r"^\) > (\S+) 2>&1 &$")  # the install's subshell, in the background
+    pid = index(r"^(\w+)=\$!$")
+    name = re.match(r"(\w+)=", lines[pid]).group(1)
+    waited = index(rf'^wait "\${name}" \|\| status=\$\?$')  # its exit status kept ...
+    failed = index(r'exit "\$status"')  # ... and a failed install fails the script
     activate = index(rf"source {re.escape(docs_venv)}/bin/activate")
     build = index(r"python -m mkdocs build --strict")
-    assert venv < install < tests < waited < activate < build, lines
+    assert venv < install < background < pid < tests < waited <= failed < activate < build, lines
     assert docs_venv != ".ci-venv", "the docs venv must be a second one, not the test venv"
     assert "NO_MKDOCS_2_WARNING=1" in lines[build - 1] + lines[build] and "MPLBACKEND=Agg" in lines[build - 1] + lines[build]
 

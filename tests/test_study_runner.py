@@ -253,15 +253,30 @@ def test_processes_running_one_study_into_one_folder_share_its_rows(tmp_path, mo
     assert "smoke-2.json: computed by another process" in capsys.readouterr().out
     assert not list((tmp_path / "rows").glob("*.claim"))  # every claim released, its file deleted
 
-    # a process that dies holding a claim leaves its file but not its lock: the row is computed here
+    # a process that dies holding a claim, while this one waits for the row, leaves its file but not
+    # its lock: the row is computed here
     row2.unlink()
     with subprocess.Popen([sys.executable, "-c", ("import sys, time; from pathlib import Path; "
                                                   "from paper._claims import claim; assert claim(Path(sys.argv[1])); "
                                                   "print('claimed', flush=True); time.sleep(600)"), str(row2)],
                           stdout=subprocess.PIPE, text=True) as dead:
-        assert dead.stdout.readline().strip() == "claimed"
-        dead.kill()
-    assert row2.with_name(row2.name + ".claim").exists() and holder(row2) is None
-    again = _tiny_study(evaluated, (1, 2, 3)).execute("smoke", progress=False, out_dir=tmp_path)
-    assert evaluated == [1, 3, 2] and [r["value"] for r in again["rows"]] == [2.0, 4.0, 6.0]
+        try:
+            assert dead.stdout.readline().strip() == "claimed"
+            del evaluated[:]
+
+            def die_while_waited_for():
+                deadline = time.monotonic() + 60
+                while not (row2.with_name("smoke-3.json").exists() or time.monotonic() > deadline):
+                    time.sleep(0.01)  # row 3 saved: this process is past row 2, waiting for it
+                time.sleep(0.1)
+                dead.kill()
+
+            row2.with_name("smoke-3.json").unlink()
+            threading.Thread(target=die_while_waited_for, daemon=True).start()
+            again = _tiny_study(evaluated, (1, 2, 3)).execute("smoke", progress=False, out_dir=tmp_path)
+        finally:
+            dead.kill()
+    assert not row2.with_name(row2.name + ".claim").exists() and holder(row2) is None
+    assert evaluated == [3, 2] and [r["value"] for r in again["rows"]] == [2.0, 4.0, 6.0]
+    assert again["resumed_rows"] == 1  # row 1, saved by the first run
     assert not list((tmp_path / "rows").glob("*.claim"))
