@@ -2,9 +2,12 @@
 it, its size and budget chosen on the training data by one rule (`fit_neural_ode`;
 docs/conventions.md, "Peers"):
 
-- **budget**: BFGS (`learn.ScipyBFGS`, kept if it lowers the loss) until the training loss
-  falls by less than `BFGS_RTOL` of itself over 20 iterations, at most `iterations` (the
-  study's cap);
+- **budget**: L-BFGS-B (`learn.ScipyLBFGSB`, 50 correction pairs, kept if it lowers the loss)
+  until the training loss falls by less than `RTOL` of itself over 20 iterations, at most
+  `iterations` (the study's cap). Not SciPy's BFGS: its inverse-Hessian update is two dense
+  n x n products a step, O(n^3) in the ~4,600 weights of a 64 x 64 net, and at 100 iterations
+  on W6's data it was 54x slower and 150x higher in loss (BENCHMARKS.md, "W6: learned maps
+  that keep the constraint");
 - **size**: every hidden-layer shape of `hidden` (tanh, scalings from the training data: the
   states' mean and spread in, the spread of their finite-difference rates out) fitted so to the
   training trajectories less a held-out `HELD_OUT` of them (whole trajectories, seeded); each
@@ -34,8 +37,8 @@ from ._sindy import rollout_error
 HIDDEN = ((16, 16), (32, 32), (64, 64))
 #: The fraction of the training trajectories held out to choose the shape.
 HELD_OUT = 0.2
-#: BFGS stops once the loss falls by less than this fraction over 20 iterations (the budget).
-BFGS_RTOL = 1e-9
+#: L-BFGS-B stops once the loss falls by less than this fraction over 20 iterations (the budget).
+RTOL = 1e-9
 
 
 class NetworkField:
@@ -113,7 +116,7 @@ def _fit(data: it.Observations, hidden: tuple[int, ...], iterations: int, key: i
     net = learn.NeuralODE(data.system, hidden=hidden, activation="tanh", key=key,
                           input_scaling=(tuple(states.mean(0)), tuple(np.maximum(states.std(0), 1e-12))),
                           output_scaling=((0.0,) * states.shape[1], tuple(np.maximum(rates.std(0), 1e-12))))
-    fitted, record = learn.fit(net, data, optimiser=learn.KeepIfBetter(learn.ScipyBFGS(iterations, rtol=BFGS_RTOL)),
+    fitted, record = learn.fit(net, data, optimiser=learn.KeepIfBetter(learn.ScipyLBFGSB(iterations, rtol=RTOL)),
                                validation_fraction=0.0, seed=seed, progress=False)
     return fitted, int(record.stages[-1].iterations)
 
@@ -123,7 +126,7 @@ def fit_neural_ode(data: it.Observations, iterations: int, hidden: Any = HIDDEN,
     """The neural ODE of `data` (an `integrators.Observations`, its trajectory loss with fitted
     starts) by the rule of this module's docstring: the shape of `hidden` whose fit to the
     training trajectories less `HELD_OUT` of them (drawn by `seed`) best follows the held-out
-    ones, refitted to all; BFGS at most `iterations`, stopped at `BFGS_RTOL`. Weights drawn by
+    ones, refitted to all; L-BFGS-B at most `iterations`, stopped at `RTOL`. Weights drawn by
     `key`."""
     shapes = _check(hidden, iterations)
     if len(data) > 1:

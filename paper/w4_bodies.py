@@ -20,7 +20,7 @@ drawn from [0.05, 0.3]. The momenta are never observed. Fitted to the same obser
   constant, derivative or support width chosen on the training trajectories' rollouts (every
   study's rule, `paper._sindy.choose_sparse_field`);
 - **neural ODE**: `learn.NeuralODE`, an MLP field for the body velocities (tanh) fitted to
-  their trajectories by BFGS, integrated as SINDy's: no structure; its hidden layers and
+  their trajectories by L-BFGS-B, integrated as SINDy's: no structure; its hidden layers and
   budget chosen on held-out training trajectories (every study's rule,
   `paper._neural_ode.fit_neural_ode`).
 
@@ -84,7 +84,7 @@ H_REGULAR, UNEVEN = 0.1, (0.05, 0.3)
 #: `H_EVAL` (splitting errors below the noise-free target of 1e-4 rad at t = 50).
 MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
 N_TEST = 12
-#: BFGS iterations of the neural ODE's fit per Levenberg-Marquardt step of the others' (a
+#: L-BFGS-B iterations of the neural ODE's fit per Levenberg-Marquardt step of the others' (a
 #: Jacobian of its ~1300 weights costs as many passes as ~500 gradients).
 NEURAL_ODE_ITERATIONS = 5
 #: The neural ODE's hidden layers tried (`paper._neural_ode.fit_neural_ode`).
@@ -399,8 +399,8 @@ class WeakSINDyBodyModel(AbstractVelocityFieldModel):
 @dataclasses.dataclass(frozen=True)
 class NeuralODEBodyModel(AbstractVelocityFieldModel):
     """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field, tanh, RK4 sub-steps)
-    fitted by BFGS on their trajectories with fitted starts, its hidden layers (of
-    `NEURAL_ODE_HIDDEN`) and budget (at most `NEURAL_ODE_ITERATIONS` BFGS iterations per
+    fitted by L-BFGS-B on their trajectories with fitted starts, its hidden layers (of
+    `NEURAL_ODE_HIDDEN`) and budget (at most `NEURAL_ODE_ITERATIONS` L-BFGS-B iterations per
     Levenberg-Marquardt step of the other fits) chosen on held-out training trajectories
     (`paper._neural_ode.fit_neural_ode`: every study's rule); the kinematics integrated beside
     it. No structure: the peer that shows what the Lie-Poisson one buys."""

@@ -18,7 +18,7 @@ heading), `learn.DAlembertMap`
 the trajectory loss), `learn.QuadraticDAlembertMap` (the family of every quadratic energy,
 four parameters, stepped by its exact flow; fitted the same way; for the sleigh also with its
 mirror symmetry, `reflection=0`) and `learn.NeuralODE` on the velocities (tanh; its hidden
-layers and budget, at most `bfgs_steps` BFGS iterations, chosen on held-out training
+layers and budget, at most `neural_ode_iterations` L-BFGS-B iterations, chosen on held-out training
 trajectories: every study's rule, `paper._neural_ode.fit_neural_ode`). Beside the classical
 integrators, the exact flow in closed form (`QuadraticDAlembertMap.from_system`).
 
@@ -72,11 +72,11 @@ CLASSICAL = {"RK4": it.RK4, "implicit midpoint": it.ImplicitMidpoint, "GaussLege
 
 PROFILES = profiles(
     # "smoke" exercises the whole pipeline in seconds (tests); numbers are meaningless.
-    smoke=Profile(n_train=6, train_steps=5, n_test=2, t_end=2.0, noises=(0.0, 1e-3), lm_steps=2, bfgs_steps=2),
+    smoke=Profile(n_train=6, train_steps=5, n_test=2, t_end=2.0, noises=(0.0, 1e-3), lm_steps=2, neural_ode_iterations=2),
     quick=Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=50,
-                  bfgs_steps=100),
+                  neural_ode_iterations=500),
     full=Profile(n_train=100, train_steps=20, n_test=12, t_end=200.0, noises=(0.0, 1e-3), lm_steps=200,
-                 bfgs_steps=500),
+                 neural_ode_iterations=2000),
 )
 
 
@@ -417,16 +417,16 @@ class QuadraticDAlembertMapModel(AbstractLearnedVelocityModel):
 
 @dataclasses.dataclass(frozen=True)
 class NeuralODEModel(AbstractLearnedVelocityModel):
-    """`learn.NeuralODE` on the velocities, its size and budget (at most `bfgs_steps` BFGS
+    """`learn.NeuralODE` on the velocities, its size and budget (at most `iterations` L-BFGS-B
     iterations) chosen among `NEURAL_ODE_HIDDEN` by `paper._neural_ode.fit_neural_ode`."""
 
     noise: float = 0.0
-    bfgs_steps: int = 500
+    iterations: int = 2000
     label: str = "neural ODE"
     kind: str = "baseline"
 
     def fit(self, system, data, *, progress=False):
-        return fit_neural_ode(data, self.bfgs_steps, NEURAL_ODE_HIDDEN, key=DATA_SEED, seed=DATA_SEED).net
+        return fit_neural_ode(data, self.iterations, NEURAL_ODE_HIDDEN, key=DATA_SEED, seed=DATA_SEED).net
 
 
 def models(name: str, P: Profile) -> list[AbstractNonholonomicModel]:
@@ -440,7 +440,7 @@ def models(name: str, P: Profile) -> list[AbstractNonholonomicModel]:
         if name in MIRRORS:  # the family with the body's mirror symmetry
             out.append(QuadraticDAlembertMapModel(noise, P.lm_steps, reflection=MIRRORS[name],
                                                   label="QuadraticDAlembertMap, mirror"))
-        out.append(NeuralODEModel(noise, P.bfgs_steps))
+        out.append(NeuralODEModel(noise, P.neural_ode_iterations))
     return out
 
 

@@ -25,7 +25,7 @@ def test_neural_ode_fits_exact_rigid_body_trajectories_to_1e_4():
     choice = fit_neural_ode(data, 1500, hidden=((8, 8),))
     assert isinstance(choice, NeuralODEChoice) and choice.hidden == (8, 8)
     # its rollouts (LSODA of the learned field) from each trajectory's first observation follow
-    # the observations to 1e-4 relative RMS (measured 2e-6 at 1500 BFGS iterations)
+    # the observations to 1e-4 relative RMS (L-BFGS-B, at most 1500 iterations)
     assert rollout_error(choice.field, list(data.times), list(data.states)) < 1e-4
     # and by its own step (RK4, 4 sub-steps of 0.025: their error is far below)
     assert rollout_error(choice.field, list(data.times), list(data.states), flow=rk4_flow) < 1e-4
