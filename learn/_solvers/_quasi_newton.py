@@ -185,7 +185,9 @@ class _AbstractScipy(AbstractSolver):
 @dataclasses.dataclass(frozen=True)
 class ScipyBFGS(_AbstractScipy):
     r"""SciPy's BFGS (dense inverse Hessian) on the full-batch loss with JAX gradients: for a
-    few dozen weights (the paper's choice for G-LPNets).
+    few dozen weights (the paper's choice for G-LPNets). Not for thousands: SciPy updates the
+    inverse Hessian by two dense $n \times n$ products a step, $O(n^3)$: use `learn.ScipyLBFGSB`
+    (BENCHMARKS.md, "W6: learned maps that keep the constraint", a 64 x 64 neural ODE).
 
     `iterations` at most; `rtol`: stop once the loss has fallen by less than `rtol` of its value
     over the last 20 iterations (0, the default: run every iteration, or until the line search
