@@ -6,7 +6,7 @@ docs/conventions.md, "Peers"):
   until the training loss falls by less than `RTOL` of itself over 20 iterations, at most
   `iterations` (the study's cap). Not SciPy's BFGS: its inverse-Hessian update is two dense
   n x n products a step, O(n^3) in the ~4,600 weights of a 64 x 64 net, and at 100 iterations
-  on W6's data it was 54x slower and 150x higher in loss (BENCHMARKS.md, "W6: learned maps
+  on W6's data it was far slower and ended far higher in loss (BENCHMARKS.md, "W6: learned maps
   that keep the constraint");
 - **size**: every hidden-layer shape of `hidden` (tanh, scalings from the training data: the
   states' mean and spread in, the spread of their finite-difference rates out) fitted so to the
