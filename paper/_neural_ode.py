@@ -94,7 +94,7 @@ class NeuralODEChoice:
 
     def describe(self) -> str:
         scores = ", ".join(f"{'x'.join(map(str, h))}: {e:.3g}" for h, e in self.scores.items())
-        return f"hidden {'x'.join(map(str, self.hidden))}, {self.iterations} BFGS iterations (held-out errors {scores})"
+        return f"hidden {'x'.join(map(str, self.hidden))}, {self.iterations} L-BFGS-B iterations (held-out errors {scores})"
 
 
 def _check(hidden: Any, iterations: Any) -> tuple[tuple[int, ...], ...]:
