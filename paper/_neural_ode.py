@@ -77,7 +77,7 @@ def rk4_flow(field: Any, y: np.ndarray, t: np.ndarray, blow_up: float = np.inf, 
 @dataclasses.dataclass(frozen=True)
 class NeuralODEChoice:
     """The neural ODE `fit_neural_ode` kept: `net` (fitted to every training trajectory), its
-    `hidden` shape, the BFGS `iterations` it ran, and every shape's held-out rollout error
+    `hidden` shape, the L-BFGS-B `iterations` it ran, and every shape's held-out rollout error
     (`scores`). Predicts as its field."""
 
     net: learn.NeuralODE

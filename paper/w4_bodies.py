@@ -86,9 +86,12 @@ MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
 N_TEST = 12
 #: L-BFGS-B iterations of the neural ODE's fit at most, per Levenberg-Marquardt step of the
 #: others' (5000 at the full profile's 200: at 1000 the cap bound its fit, BENCHMARKS.md, "W4's
-#: peers by the rule"). Not in the profile's settings: rows saved under another value are not
-#: told apart (delete them).
+#: peers by the rule"); the profile's `neural_ode_iterations`.
 NEURAL_ODE_ITERATIONS = 25
+#: The same in the LLPNN part (1000 at 200 steps, the budget of its earlier reference): its 200
+#: x 101 observations cost ~30 times W4's own per iteration (1.9 s on a shared core, 2026-12-04),
+#: three fits of 5000 a body would take ~5 h.
+LLPNN_NEURAL_ODE_ITERATIONS = 5
 #: The neural ODE's hidden layers tried (`paper._neural_ode.fit_neural_ode`).
 NEURAL_ODE_HIDDEN = ((32, 32), (64, 64))
 #: Adam epochs of the DeepONet (LLPNN protocol only), from 3e-3 to 1e-5 (BENCHMARKS.md, "The
@@ -402,15 +405,17 @@ class WeakSINDyBodyModel(AbstractVelocityFieldModel):
 class NeuralODEBodyModel(AbstractVelocityFieldModel):
     """A neural ODE on the velocities (`learn.NeuralODE`, an MLP field, tanh, RK4 sub-steps)
     fitted by L-BFGS-B on their trajectories with fitted starts, its hidden layers (of
-    `NEURAL_ODE_HIDDEN`) and budget (at most `NEURAL_ODE_ITERATIONS` L-BFGS-B iterations per
+    `NEURAL_ODE_HIDDEN`) and budget (at most `iterations_per_step` L-BFGS-B iterations per
     Levenberg-Marquardt step of the other fits) chosen on held-out training trajectories
     (`paper._neural_ode.fit_neural_ode`: every study's rule); the kinematics integrated beside
     it. No structure: the peer that shows what the Lie-Poisson one buys."""
 
     label: str = "neural ODE"
+    #: The L-BFGS-B iterations at most per unit of `steps`.
+    iterations_per_step: int = NEURAL_ODE_ITERATIONS
 
     def field(self, as_states):
-        return fit_neural_ode(as_states, NEURAL_ODE_ITERATIONS * self.steps, NEURAL_ODE_HIDDEN, key=TRAIN_SEED,
+        return fit_neural_ode(as_states, self.iterations_per_step * self.steps, NEURAL_ODE_HIDDEN, key=TRAIN_SEED,
                               seed=TRAIN_SEED)
 
 
@@ -467,12 +472,14 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
     return out
 
 
-def models(operator_baselines: bool = False, steps: int = 200) -> list[AbstractBodyModel]:
+def models(operator_baselines: bool = False, steps: int = 200,
+           neural_ode_iterations: int = NEURAL_ODE_ITERATIONS) -> list[AbstractBodyModel]:
     """W4's models, fitted in `steps` Levenberg-Marquardt steps (or as many units of their own
-    iterations); with `operator_baselines`, the LLPNN protocol's others too (a DeepONet and an
-    LPNet on reconstructed momenta)."""
+    iterations: `neural_ode_iterations` L-BFGS-B iterations a unit for the neural ODE); with
+    `operator_baselines`, the LLPNN protocol's others too (a DeepONet and an LPNet on
+    reconstructed momenta)."""
     out: list[AbstractBodyModel] = [GLPNetBodyModel(steps=steps), LimitBodyModel(steps=steps),
-                                    NeuralODEBodyModel(steps=steps)]
+                                    NeuralODEBodyModel(steps=steps, iterations_per_step=neural_ode_iterations)]
     if sindy_available():
         out += [SINDyBodyModel(steps=steps), WeakSINDyBodyModel(steps=steps)]
     if operator_baselines:
@@ -526,9 +533,11 @@ def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int,
 #: W4's settings: `steps`, Levenberg-Marquardt steps per fit; `n_trajectories`,
 #: `n_observations`, `t_end`: the protocol's when None; `part`: a part of the study with its own
 #: protocol (rows marked with it), run after the profile `then` names it; `operator_baselines`:
-#: the LLPNN protocol's baselines besides W4's models.
+#: the LLPNN protocol's baselines besides W4's models; `neural_ode_iterations`: the neural ODE's
+#: L-BFGS-B iterations at most per step.
 DEFAULTS = Profile(systems=(), noises=(), samplings=(), steps=200, n_trajectories=None, n_observations=None,
-                   t_end=None, n_test=N_TEST, part=None, then=None, operator_baselines=False)
+                   t_end=None, n_test=N_TEST, part=None, then=None, operator_baselines=False,
+                   neural_ode_iterations=NEURAL_ODE_ITERATIONS)
 
 
 def slug(P: Profile) -> str:
@@ -547,7 +556,8 @@ def part_title(P: Profile) -> str:
 #: velocities, 50 test trajectories to t = 200), with its baselines: a neural ODE, a DeepONet
 #: and an LPNet on reconstructed momenta.
 LLPNN = DEFAULTS.replace(systems=("satellite", "vehicle"), noises=(0.005,), samplings=("regular",), n_trajectories=200,
-                         n_observations=101, t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True)
+                         n_observations=101, t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True,
+                         neural_ode_iterations=LLPNN_NEURAL_ODE_ITERATIONS)
 
 
 def _parts() -> list[Profile]:
@@ -624,7 +634,8 @@ class W4(AbstractStudy):
             part = part.then
 
     def models(self, P, condition):
-        return models(condition.P.operator_baselines, condition.P.steps)
+        P = condition.P
+        return models(P.operator_baselines, P.steps, P.neural_ode_iterations)
 
     def admits(self, condition, model):
         return True  # a model that cannot take the data says so
