@@ -38,6 +38,15 @@ _pool: concurrent.futures.ProcessPoolExecutor | None = None
 _threads: concurrent.futures.ThreadPoolExecutor | None = None
 
 
+def cores() -> int:
+    """The cores this process may run on (`taskset`, a container's CPU set: its affinity), not
+    the machine's: a process pinned to one core of two gets one worker, not two that share it."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):  # no affinity on this platform (macOS, Windows)
+        return os.cpu_count() or 1
+
+
 @contextlib.contextmanager
 def scheduler(spec: str | None) -> Iterator[str | None]:
     """Within the block, `submit` and `map_trainings` run where `spec` says: `"local"`, a
@@ -49,11 +58,11 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
         yield None
         return
     if spec.strip().lower() == THREADS:
-        workers = os.cpu_count() or 1
+        workers = cores()
         with concurrent.futures.ThreadPoolExecutor(workers) as pool:
             _threads = pool
             try:
-                yield f"{workers} threads of this process"
+                yield f"{workers} thread{'' if workers == 1 else 's'} of this process"
             finally:
                 _threads = None
         return
@@ -63,12 +72,12 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
         except ImportError as err:
             raise ImportError("worker processes send the trainings by cloudpickle: pip install 'liepoisson[paper]'") \
                 from err
-        workers = os.cpu_count() or 1
+        workers = cores()
         # spawn, not fork: a forked JAX runtime deadlocks
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             _pool = pool
             try:
-                yield f"{workers} worker processes on this machine"
+                yield f"{workers} worker process{'' if workers == 1 else 'es'} on this machine"
             finally:
                 _pool = None
         return
@@ -76,7 +85,7 @@ def scheduler(spec: str | None) -> Iterator[str | None]:
     with contextlib.ExitStack() as stack:
         if spec.strip().lower() == "local":
             cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None))
+                n_workers=cores(), threads_per_worker=1, processes=True, dashboard_address=None))
             client = stack.enter_context(distributed.Client(cluster))
         else:
             try:

@@ -364,7 +364,7 @@ def test_paper_trainings_in_threads_give_the_numbers_of_one_after_the_other(tmp_
     assert main([*argv, "--out", str(tmp_path / "one"), "--scheduler", "none"]) == 0
     assert "trainings on the" not in capsys.readouterr().out
     assert main([*argv, "--out", str(tmp_path / "threads")]) == 0  # the default
-    assert "threads of this process" in capsys.readouterr().out
+    assert "of this process" in capsys.readouterr().out
     one, threads = (json.loads((tmp_path / d / "E1" / "metrics.json").read_text()) for d in ("one", "threads"))
 
     def figures(metrics, prefix=""):  # every number but the timings
@@ -386,12 +386,12 @@ def test_paper_trainings_in_worker_processes_give_the_numbers_of_one_process(tmp
 
     # one worker process (a pool of one per core): each spawned process imports JAX and the
     # paper anew (~3 s); the trainings travel and come back the same way with one or many
-    monkeypatch.setattr("os.cpu_count", lambda: 1)
+    monkeypatch.setattr("paper._cluster.cores", lambda: 1)
     argv = ["run", "E4", "--profile", "smoke", "--no-progress"]
     assert main([*argv, "--out", str(tmp_path / "one"), "--scheduler", "none"]) == 0
     capsys.readouterr()
     assert main([*argv, "--out", str(tmp_path / "pool"), "--scheduler", "processes"]) == 0
-    assert "trainings on the 1 worker processes on this machine" in capsys.readouterr().out
+    assert "trainings on the 1 worker process on this machine" in capsys.readouterr().out
     one, pool = (json.loads((tmp_path / d / "E4" / "metrics.json").read_text()) for d in ("one", "pool"))
     for key in ("train_loss", "val_loss"):  # the trainings: bitwise
         assert pool[key] == one[key], key
@@ -462,3 +462,17 @@ def test_save_ground_truth_with_configurations_writes_what_ground_truth_gives_an
     resumed = integrators.Trajectories.load(
         integrators.save_ground_truth(tmp_path / "again.h5", BODY, y0, 0.1, 20, chunk_size=2, g0=g0))
     np.testing.assert_array_equal(resumed.configurations[2:], reference.configurations[2:])
+
+
+def test_threads_are_as_many_as_the_cores_this_process_may_use(monkeypatch):
+    """A process pinned to some cores (taskset, a container's CPU set) trains on as many threads
+    as it has cores, not the machine's count; without affinity (macOS) the machine's."""
+    from paper import _cluster
+
+    monkeypatch.setattr(_cluster.os, "sched_getaffinity", lambda pid: {1}, raising=False)
+    monkeypatch.setattr(_cluster.os, "cpu_count", lambda: 8)
+    assert _cluster.cores() == 1
+    with _cluster.scheduler("threads") as description:
+        assert description == "1 thread of this process"
+    monkeypatch.delattr(_cluster.os, "sched_getaffinity")
+    assert _cluster.cores() == 8
