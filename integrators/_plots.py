@@ -15,6 +15,7 @@ from liepoisson.systems import AbstractPoissonSystem
 from ._comparison import Comparison
 from ._convergence import Convergence
 from ._diagnostics import DiagnosticsReport
+from ._files import atomic_path
 
 # Line styles by position: the reference first, then the maps compared with it.
 _STYLES = ("b-", "r--", "g:", "m-.", "c--", "y:")
@@ -54,6 +55,21 @@ def figure(**kwargs: Any):
     return Figure(**kwargs)
 
 
+def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
+    """`fig.savefig` to `path` atomically (`atomic_path`: a figure interrupted, or drawn by two
+    processes at once, never leaves a half file), in the format of its suffix (matplotlib's
+    default format, its suffix added, when it has none); `kwargs` as `savefig`'s. The path
+    written."""
+    from matplotlib import rcParams
+
+    path = Path(os.fspath(path))
+    if not path.suffix:
+        path = path.with_name(f"{path.name}.{rcParams['savefig.format']}")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=path.suffix[1:].lower(), **kwargs)
+    return path
+
+
 def plot_comparison(
     out_dir: str | os.PathLike,
     system: AbstractPoissonSystem,
@@ -90,7 +106,7 @@ def plot_comparison(
     axes[0].legend(loc="upper right", fontsize=7)
     axes[-1].set_xlabel("t")
     fig.tight_layout()
-    fig.savefig(out_dir / "components.png", dpi=110)
+    save_figure(fig, out_dir / "components.png", dpi=110)
     files.append("components.png")
 
     if system.dim >= 3:
@@ -106,7 +122,7 @@ def plot_comparison(
         ax.set_zlabel(names[2])
         ax.legend(fontsize=7)
         fig.tight_layout()
-        fig.savefig(out_dir / "phase_portrait.png", dpi=110)
+        save_figure(fig, out_dir / "phase_portrait.png", dpi=110)
         files.append("phase_portrait.png")
 
     n_cas = system.n_casimirs
@@ -127,7 +143,7 @@ def plot_comparison(
     axes[0].legend(fontsize=7)
     axes[-1].set_xlabel("t")
     fig.tight_layout()
-    fig.savefig(out_dir / "conservation.png", dpi=110)
+    save_figure(fig, out_dir / "conservation.png", dpi=110)
     files.append("conservation.png")
 
     fig = figure(figsize=(8, 3))
@@ -143,7 +159,7 @@ def plot_comparison(
     ax.set_ylabel("|y(t) - y_ref(t)|")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out_dir / "trajectory_error.png", dpi=110)
+    save_figure(fig, out_dir / "trajectory_error.png", dpi=110)
     files.append("trajectory_error.png")
     return files
 
@@ -175,7 +191,7 @@ def plot_diagnostics(report: DiagnosticsReport, path: str | os.PathLike, *, titl
     axes[-1].set_xlabel("t")
     if title:
         axes[0].set_title(title)
-    fig.savefig(os.fspath(path))
+    save_figure(fig, path)
 
 
 def _comparison_axes(comparison: Comparison, figsize: tuple[float, float]) -> tuple[Any, Any]:
@@ -205,7 +221,7 @@ def plot_work_precision(comparison: Comparison, path: str | os.PathLike) -> None
     ax.set_xlabel("wall time per step and trajectory [s]")
     ax.set_ylabel("|y(T) - y_ref(T)|")
     ax.legend(fontsize=7)
-    fig.savefig(os.fspath(path))
+    save_figure(fig, path)
 
 
 def plot_energy(comparison: Comparison, path: str | os.PathLike) -> None:
@@ -220,7 +236,7 @@ def plot_energy(comparison: Comparison, path: str | os.PathLike) -> None:
     ax.set_xlabel("t")
     ax.set_ylabel("|E(t) - E(0)| / <E>")
     ax.legend(fontsize=7)
-    fig.savefig(os.fspath(path))
+    save_figure(fig, path)
 
 
 def plot_convergence(convergence: Convergence, path: str | os.PathLike, *, label: str = "") -> None:
@@ -237,7 +253,7 @@ def plot_convergence(convergence: Convergence, path: str | os.PathLike, *, label
     ax.set_xlabel("h")
     ax.set_ylabel("|y(T) - y_ref(T)|")
     ax.legend(fontsize=7)
-    fig.savefig(os.fspath(path))
+    save_figure(fig, path)
 
 
 def plot_vorticity(system: Any, states: Any, path: str | os.PathLike, *, titles: Any = None,
@@ -274,4 +290,4 @@ def plot_vorticity(system: Any, states: Any, path: str | os.PathLike, *, titles:
         if title is not None:
             ax.set_title(str(title), fontsize=9)
     fig.colorbar(image, ax=axes.tolist(), shrink=0.7, label="vorticity")
-    fig.savefig(os.fspath(path))
+    save_figure(fig, path)

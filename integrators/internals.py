@@ -22,7 +22,7 @@ these names may change with the library.
   size `observe`'s noise is relative to.
 - `json_values(value, nan=None)`: results as JSON values (numpy as numbers, infinities as
   strings, NaN as `nan`): the paper's metrics and the benchmarks' result files.
-- `figure(**kw)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
+- `figure(**kw)`, `save_figure(fig, path)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
   library's style.
 - `check_isospectral(system)`, `check_stage_tolerance(tol)`, `ISOSPECTRAL_TOL`,
   `ISOSPECTRAL_MAX_ITER`: what the isospectral methods accept and their defaults (a learned map
@@ -55,6 +55,7 @@ from ._lapack import serial_lapack as serial_lapack
 from ._lapack import serial_lapack_block as serial_lapack_block
 from ._observations import rms_size as rms_size
 from ._plots import figure as figure
+from ._plots import save_figure as save_figure
 from ._plots import series_styles as series_styles
 from ._plots import span_decades as span_decades
 from ._runge_kutta import rk4_steps as rk4_steps

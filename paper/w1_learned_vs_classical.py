@@ -24,7 +24,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles, span_decades
+from integrators.internals import figure, save_figure, series_styles, span_decades
 
 from ._cluster import map_trainings, on_cluster
 from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
@@ -393,7 +393,7 @@ def _plots(rows: list[W1Row], out_dir: Path) -> list[str]:
         axes[1].legend(fontsize=7, ncol=2)
         fig.tight_layout()
         names.append(f"work_precision_{name.replace(' ', '_')}.png")
-        fig.savefig(out_dir / names[-1], dpi=120)
+        save_figure(fig, out_dir / names[-1], dpi=120)
     return names
 
 

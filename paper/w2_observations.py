@@ -54,7 +54,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles, span_decades
+from integrators.internals import figure, save_figure, series_styles, span_decades
 from liepoisson.internals import casimir_scale
 
 from ._experiment import Column, Profile, fmt, optional, profiles
@@ -449,7 +449,7 @@ class W2(AbstractStudy):
                 span_decades(ax, "y")
                 ax.legend()
             name = f"state_error_{system.replace(' ', '_')}.png"
-            fig.savefig(out_dir / name, dpi=120)
+            save_figure(fig, out_dir / name, dpi=120)
             names.append(name)
         names.extend(_profile_plots(rows, out_dir))
         return names
@@ -518,7 +518,7 @@ def _profile_plots(rows: list[W2Row], out_dir: Path) -> list[str]:
             axes[1, column].set_ylabel("its part no quadratic H has")
             axes[1, column].set_xlabel("angle around the great circle through V on |Pi| = 1 [rad]")
         name = f"leaf_profile_{system.replace(' ', '_')}.png"
-        fig.savefig(out_dir / name, dpi=120)
+        save_figure(fig, out_dir / name, dpi=120)
         names.append(name)
     return names
 

@@ -50,7 +50,7 @@ import integrators as it
 import learn
 import liepoisson as lp
 from integrators import splitting as sp
-from integrators.internals import figure, series_styles
+from integrators.internals import figure, save_figure, series_styles
 
 from ._experiment import Column, Profile, fmt, optional, profiles, row_from_json, table_lines
 from ._runner import AbstractStudy
@@ -438,7 +438,7 @@ def _plot(energies: dict[tuple[str, str], np.ndarray], keys: list[str], out_dir:
         bottom.set_ylabel("|H - H heyoka|")
     fig.tight_layout()
     name = "energy.png"
-    fig.savefig(out_dir / name, dpi=120)
+    save_figure(fig, out_dir / name, dpi=120)
     return name
 
 

@@ -64,7 +64,7 @@ from scipy.spatial.transform import Rotation
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles
+from integrators.internals import figure, save_figure, series_styles
 
 from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
 from ._neural_ode import fit_neural_ode
@@ -698,7 +698,7 @@ class W4(AbstractStudy):
             prefix = next((slug(P) + "_" for P in _parts() if P.part == part and part is not None), "")
             name = f"attitude_error_{prefix}{system}.png"
             fig.tight_layout()
-            fig.savefig(out_dir / name, dpi=110)
+            save_figure(fig, out_dir / name, dpi=110)
             names.append(name)
         return names
 

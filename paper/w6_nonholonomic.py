@@ -51,7 +51,7 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles
+from integrators.internals import figure, save_figure, series_styles
 
 from ._experiment import Column, Profile, fmt, profiles, table_lines
 from ._neural_ode import HIDDEN, fit_neural_ode
@@ -577,7 +577,7 @@ def plot(rows: list[W6Row], out_dir: Path) -> str:
         column[-1].set_xlabel("t")
     fig.tight_layout()
     name = "nonholonomic.png"
-    fig.savefig(out_dir / name, dpi=110)
+    save_figure(fig, out_dir / name, dpi=110)
     return name
 
 

@@ -68,7 +68,7 @@ from scipy.optimize import least_squares
 import integrators as it
 import learn
 import liepoisson as lp
-from integrators.internals import figure, series_styles
+from integrators.internals import figure, save_figure, series_styles
 
 from ._experiment import Column, Profile, fmt, optional, profiles, table_lines
 from ._runner import AbstractStudy
@@ -626,7 +626,7 @@ def _plot(rows: list[W7Row], test: Session, noise: float, out_dir: Path) -> str:
     fig.suptitle(f"a test flight (twice the training spins), gyro noise {noise:g} rad/s")
     fig.tight_layout()
     name = f"test_flight_noise_{noise:g}.png"
-    fig.savefig(out_dir / name, dpi=110)
+    save_figure(fig, out_dir / name, dpi=110)
     return name
 
 

@@ -298,3 +298,32 @@ def test_figures_of_rollouts_of_many_lengths_compile_once_per_bucket():
         for n in (17, 40, 77, 101, 119):
             it.rollout_figures(m, m.rollout(y0, n), reference.states[:, : n + 1])
     assert seen["traces"] == 0
+
+
+def test_save_figure_is_atomic_and_takes_its_format_from_the_suffix(tmp_path, monkeypatch):
+    """`save_figure` writes the format its suffix names (matplotlib's default, suffix added,
+    when there is none), and a drawing that fails leaves the file it replaces whole, with no
+    temporary beside it."""
+    pytest.importorskip("matplotlib")
+    from matplotlib.figure import Figure
+
+    from integrators.internals import figure, save_figure
+
+    fig = figure()
+    fig.add_subplot().plot([0, 1], [1, 0])
+    assert save_figure(fig, tmp_path / "a.svg") == tmp_path / "a.svg"
+    assert (tmp_path / "a.svg").read_text().lstrip().startswith("<?xml")
+    assert save_figure(fig, tmp_path / "b") == tmp_path / "b.png"
+    assert (tmp_path / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    before = (tmp_path / "b.png").read_bytes()
+
+    def broken(self, path, **kwargs):
+        with open(path, "wb") as f:
+            f.write(b"half a fig")
+        raise RuntimeError("drawing failed")
+
+    monkeypatch.setattr(Figure, "savefig", broken)
+    with pytest.raises(RuntimeError, match="drawing failed"):
+        save_figure(fig, tmp_path / "b.png")
+    assert (tmp_path / "b.png").read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.svg", "b.png"]
