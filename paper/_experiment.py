@@ -201,20 +201,30 @@ def row_from_json(cls: type, values: dict[str, Any]) -> Any:
 _RESUMED: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("resumed_rows", default=None)
 
 
+def read_row(cls: type, path: Path, warn: bool = True) -> Any | None:
+    """The row of type `cls` an earlier run saved at `path`, or `None` if there is none or the
+    file is of another format (with a warning unless `warn` is False: it will be refitted)."""
+    if not path.exists():
+        return None
+    try:
+        row = row_from_json(cls, json.loads(path.read_text()))
+    except (TypeError, json.JSONDecodeError) as err:
+        if warn:
+            import sys
+
+            print(f"warning: refitting {path}: not a row of this version ({err})", file=sys.stderr)
+        return None
+    if (resumed := _RESUMED.get()) is not None:
+        resumed.append(path)
+    return row
+
+
 def saved_row(cls: type, path: Path, compute: Callable[[], Any]) -> Any:
     """The row of type `cls` an earlier run saved at `path` (an interrupted study resumes: each
     row is saved when it is done), else `compute()`, saved there first. A file of another
     format is refitted, with a warning."""
-    if path.exists():
-        try:
-            row = row_from_json(cls, json.loads(path.read_text()))
-            if (resumed := _RESUMED.get()) is not None:
-                resumed.append(path)
-            return row
-        except (TypeError, json.JSONDecodeError) as err:
-            import sys
-
-            print(f"warning: refitting {path}: not a row of this version ({err})", file=sys.stderr)
+    if (row := read_row(cls, path)) is not None:
+        return row
     row = compute()
     atomic_write_text(path, json.dumps(row_to_json(row), indent=2) + "\n")
     return row

@@ -31,6 +31,7 @@ from ._experiment import (
     AbstractExperiment,
     Column,
     Profile,
+    read_row,
     row_from_json,
     row_to_json,
     saved_row,
@@ -119,14 +120,14 @@ class AbstractStudy(AbstractExperiment):
     def _saved_or_claimed(self, path: Path, compute: Callable[[], Any]) -> Any:
         """The row saved at `path`, else computed here and saved if this process can claim it,
         else an `_Elsewhere`."""
-        if not path.exists():
-            if not claim(path):
-                return _Elsewhere(path, compute)
-            try:
-                return saved_row(self.row_type, path, compute)  # looks again: saved meanwhile, it is read
-            finally:
-                release(path)
-        return saved_row(self.row_type, path, compute)
+        if (row := read_row(self.row_type, path, warn=False)) is not None:
+            return row
+        if not claim(path):  # a missing row, or one of another format, is refitted by one process
+            return _Elsewhere(path, compute)
+        try:
+            return saved_row(self.row_type, path, compute)  # looks again: saved meanwhile, it is read
+        finally:
+            release(path)
 
     def _awaited(self, row: _Elsewhere, progress: bool) -> Any:
         """The row another process claimed: read when saved, computed here if it never is."""

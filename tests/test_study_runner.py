@@ -280,3 +280,40 @@ def test_processes_running_one_study_into_one_folder_share_its_rows(tmp_path, mo
     assert evaluated == [3, 2] and [r["value"] for r in again["rows"]] == [2.0, 4.0, 6.0]
     assert again["resumed_rows"] == 1  # row 1, saved by the first run
     assert not list((tmp_path / "rows").glob("*.claim"))
+
+
+def test_a_row_of_another_format_is_refitted_by_one_process_only(tmp_path, monkeypatch, capsys):
+    """A saved row of an older format is refitted, but not while another process holds its
+    claim: that process's row is read when saved (before, the file's existence skipped the claim
+    and both refitted it)."""
+    import subprocess
+    import sys
+
+    from paper import _runner
+
+    monkeypatch.setattr(_runner, "POLL_SECONDS", 0.02)
+    rows = tmp_path / "rows"
+    rows.mkdir()
+    for k in (1, 2):
+        (rows / f"smoke-{k}.json").write_text(json.dumps({"old": k}))  # another version's rows
+    row2 = rows / "smoke-2.json"
+    with subprocess.Popen(  # holds row 2's claim, saves its row (value 99) when told to
+            [sys.executable, "-c", ("import json, sys; from pathlib import Path; from paper._claims import claim, "
+                                    "release; p = Path(sys.argv[1]); assert claim(p); print('claimed', flush=True); "
+                                    "sys.stdin.readline(); p.write_text(json.dumps({'condition': 2, 'value': 99.0})); "
+                                    "release(p)"), str(row2)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as other:
+        try:
+            assert other.stdout.readline().strip() == "claimed"
+            evaluated = []
+            study = _tiny_study(evaluated)
+            first = study.condition_rows("smoke", 1, ["one"], tmp_path, progress=False)
+            second = study.condition_rows("smoke", 2, ["one"], tmp_path, progress=False)
+            assert evaluated == [1] and first[0].value == 2.0  # row 1 refitted here, row 2 left to the holder
+            assert isinstance(second[0], _runner._Elsewhere)
+            other.stdin.write("\n")
+            other.stdin.flush()
+            assert study._awaited(second[0], progress=False).value == 99.0 and evaluated == [1]
+        finally:
+            other.kill()
+    assert "refitting" in capsys.readouterr().err  # the one refit says so
