@@ -11,7 +11,7 @@ velocities / 1000; the predictions are converted back): the figures must not cha
 protocols, models and figures are `paper.w4_bodies`'s; `--trajectories`, `--observations`,
 `--t-end` and `--n-test` change their sizes, e.g. the protocol of Latent Lie-Poisson Neural
 Networks (200 trajectories x 101 observations at h = 0.1, noise 0.005, 50 test trajectories
-of 2001 points):
+of 2001 points; W4's LLPNN part gives its neural ODE `--neural-ode-iterations-per-step 5`):
 
     python -m benchmarks.body_observations --noise 0.005 --sampling regular --trajectories 200
         --observations 101 --t-end 200 --n-test 50 --models G-LPNet limit
@@ -48,9 +48,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--observations", type=int, default=None, help="observations per trajectory")
     parser.add_argument("--t-end", type=float, default=None, help="the predictions' horizon (the protocol's)")
     parser.add_argument("--n-test", type=int, default=w4.N_TEST, help="held-out initial conditions")
+    parser.add_argument("--neural-ode-iterations-per-step", type=int, default=w4.NEURAL_ODE_ITERATIONS,
+                        help="the neural ODE's L-BFGS-B iterations per step (W4's; its LLPNN part: "
+                             f"{w4.LLPNN_NEURAL_ODE_ITERATIONS})")
     parser.add_argument("--out", default=default_out("body_observations"))
     args = parser.parse_args(argv)
-    models = [m for m in w4.models(operator_baselines=True, steps=args.steps) if m.label in args.models]
+    models = [m for m in w4.models(operator_baselines=True, steps=args.steps,
+                                   neural_ode_iterations_per_step=args.neural_ode_iterations_per_step)
+              if m.label in args.models]
     if args.time_unit != 1.0:  # the learned maps; SINDy's fits are not covariant in time (its thresholds)
         models = [dataclasses.replace(m, unit=args.time_unit) for m in models if isinstance(m, w4.LearnedBodyModel)]
     rows = []

@@ -45,6 +45,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sampling", nargs="+", choices=("regular", "uneven"), default=["uneven"])
     parser.add_argument("--models", nargs="+", choices=list(MODELS), default=["SINDy", "weak SINDy"])
     parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--neural-ode-iterations-per-step", type=int, default=w4.NEURAL_ODE_ITERATIONS,
+                        help="the neural ODE's L-BFGS-B iterations per step (W4's)")
     parser.add_argument("--out", default=str(default_out("w4_peers")))
     args = parser.parse_args(argv)
     rows = []
@@ -55,7 +57,8 @@ def main(argv: list[str] | None = None) -> None:
             for noise in args.noise:
                 data = w4.observations(protocol, noise, sampling)
                 for name in args.models:
-                    model = _Chosen(MODELS[name](steps=args.steps))
+                    budget = {"iterations_per_step": args.neural_ode_iterations_per_step} if name == "neural ODE" else {}
+                    model = _Chosen(MODELS[name](steps=args.steps, **budget))
                     start = time.perf_counter()
                     row = w4.evaluate(protocol, model, data, test, system=system, noise=noise, sampling=sampling)
                     rows.append({"system": system, "sampling": sampling, "noise": noise, "model": name,

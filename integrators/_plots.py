@@ -57,16 +57,23 @@ def figure(**kwargs: Any):
 
 def save_figure(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
     """`fig.savefig` to `path` atomically (`atomic_path`: a figure interrupted, or drawn by two
-    processes at once, never leaves a half file), in the format of its suffix (matplotlib's
-    default format, its suffix added, when it has none); `kwargs` as `savefig`'s. The path
-    written."""
+    processes at once, never leaves a half file; a symlink at `path` is replaced, not written
+    through), in the format `format=` names, else its suffix's (matplotlib's default format,
+    its suffix added, when it has none); other `kwargs` as `savefig`'s. The path written;
+    `ValueError` naming the format if matplotlib cannot write it."""
     from matplotlib import rcParams
 
     path = Path(os.fspath(path))
+    fmt = kwargs.pop("format", None) or path.suffix[1:] or rcParams["savefig.format"]
+    fmt = str(fmt).lower()
     if not path.suffix:
-        path = path.with_name(f"{path.name}.{rcParams['savefig.format']}")
+        path = path.with_name(f"{path.name.rstrip('.')}.{fmt}")
+    supported = fig.canvas.get_supported_filetypes()
+    if fmt not in supported:
+        raise ValueError(f"save_figure: cannot write {path}: format {fmt!r} is not one of matplotlib's "
+                         f"({', '.join(sorted(supported))}); give the file one of these suffixes")
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=path.suffix[1:].lower(), **kwargs)
+        fig.savefig(tmp, format=fmt, **kwargs)
     return path
 
 

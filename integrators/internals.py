@@ -22,8 +22,8 @@ these names may change with the library.
   size `observe`'s noise is relative to.
 - `json_values(value, nan=None)`: results as JSON values (numpy as numbers, infinities as
   strings, NaN as `nan`): the paper's metrics and the benchmarks' result files.
-- `figure(**kw)`, `save_figure(fig, path)`, `series_styles(n)`, `span_decades(ax, axis)`: matplotlib figures in the
-  library's style.
+- `figure(**kw)`, `save_figure(fig, path)`, `series_styles(n)`, `span_decades(ax, axis)`:
+  matplotlib figures in the library's style, saved atomically.
 - `check_isospectral(system)`, `check_stage_tolerance(tol)`, `ISOSPECTRAL_TOL`,
   `ISOSPECTRAL_MAX_ITER`: what the isospectral methods accept and their defaults (a learned map
   on the same step uses them).

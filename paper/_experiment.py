@@ -194,21 +194,21 @@ def row_from_json(cls: type, values: dict[str, Any]) -> Any:
                   for f in dataclasses.fields(cls) if f.name in values or absent(f)})
 
 
-#: Rows `saved_row` read, not computed, during the current `execute` (its metrics'
+#: Rows `read_row` read, not computed, during the current `execute` (its metrics'
 #: `resumed_rows`): saved by an earlier run, or by another process running the same study into
 #: the same folder (`paper._claims`). `total_time_s` is this run's time: its own rows, and its
 #: waits for the other process's.
 _RESUMED: contextvars.ContextVar[list[Path] | None] = contextvars.ContextVar("resumed_rows", default=None)
 
 
-def read_row(cls: type, path: Path, warn: bool = True) -> Any | None:
+def read_row(cls: type, path: Path, *, warn: bool = True) -> Any | None:
     """The row of type `cls` an earlier run saved at `path`, or `None` if there is none or the
     file is of another format (with a warning unless `warn` is False: it will be refitted)."""
     if not path.exists():
         return None
     try:
         row = row_from_json(cls, json.loads(path.read_text()))
-    except (TypeError, json.JSONDecodeError) as err:
+    except (TypeError, UnicodeDecodeError, json.JSONDecodeError) as err:
         if warn:
             import sys
 

@@ -86,7 +86,7 @@ MAX_STEP, H_EVAL, H_SAVE = 0.05, 0.05, 1.0
 N_TEST = 12
 #: L-BFGS-B iterations of the neural ODE's fit at most, per Levenberg-Marquardt step of the
 #: others' (5000 at the full profile's 200: at 1000 the cap bound its fit, BENCHMARKS.md, "W4's
-#: peers by the rule"); the profile's `neural_ode_iterations`.
+#: peers by the rule"); the profile's `neural_ode_iterations_per_step`.
 NEURAL_ODE_ITERATIONS = 25
 #: The same in the LLPNN part (1000 at 200 steps, the budget of its earlier reference): its 200
 #: x 101 observations cost ~30 times W4's own per iteration (1.9 s on a shared core, 2026-12-04),
@@ -473,13 +473,13 @@ def measure(protocol: BodyProtocol, test: TestSet, prediction: Prediction) -> di
 
 
 def models(operator_baselines: bool = False, steps: int = 200,
-           neural_ode_iterations: int = NEURAL_ODE_ITERATIONS) -> list[AbstractBodyModel]:
+           neural_ode_iterations_per_step: int = NEURAL_ODE_ITERATIONS) -> list[AbstractBodyModel]:
     """W4's models, fitted in `steps` Levenberg-Marquardt steps (or as many units of their own
-    iterations: `neural_ode_iterations` L-BFGS-B iterations a unit for the neural ODE); with
+    iterations: `neural_ode_iterations_per_step` L-BFGS-B iterations a unit for the neural ODE); with
     `operator_baselines`, the LLPNN protocol's others too (a DeepONet and an LPNet on
     reconstructed momenta)."""
     out: list[AbstractBodyModel] = [GLPNetBodyModel(steps=steps), LimitBodyModel(steps=steps),
-                                    NeuralODEBodyModel(steps=steps, iterations_per_step=neural_ode_iterations)]
+                                    NeuralODEBodyModel(steps=steps, iterations_per_step=neural_ode_iterations_per_step)]
     if sindy_available():
         out += [SINDyBodyModel(steps=steps), WeakSINDyBodyModel(steps=steps)]
     if operator_baselines:
@@ -533,11 +533,11 @@ def bootstrap_inertia(protocol: BodyProtocol, data: it.BodyObservations, n: int,
 #: W4's settings: `steps`, Levenberg-Marquardt steps per fit; `n_trajectories`,
 #: `n_observations`, `t_end`: the protocol's when None; `part`: a part of the study with its own
 #: protocol (rows marked with it), run after the profile `then` names it; `operator_baselines`:
-#: the LLPNN protocol's baselines besides W4's models; `neural_ode_iterations`: the neural ODE's
-#: L-BFGS-B iterations at most per step.
+#: the LLPNN protocol's baselines besides W4's models; `neural_ode_iterations_per_step`: the
+#: neural ODE's L-BFGS-B iterations at most per step (`steps` times this in all).
 DEFAULTS = Profile(systems=(), noises=(), samplings=(), steps=200, n_trajectories=None, n_observations=None,
                    t_end=None, n_test=N_TEST, part=None, then=None, operator_baselines=False,
-                   neural_ode_iterations=NEURAL_ODE_ITERATIONS)
+                   neural_ode_iterations_per_step=NEURAL_ODE_ITERATIONS)
 
 
 def slug(P: Profile) -> str:
@@ -557,7 +557,7 @@ def part_title(P: Profile) -> str:
 #: and an LPNet on reconstructed momenta.
 LLPNN = DEFAULTS.replace(systems=("satellite", "vehicle"), noises=(0.005,), samplings=("regular",), n_trajectories=200,
                          n_observations=101, t_end=200.0, n_test=50, part="LLPNN protocol", operator_baselines=True,
-                         neural_ode_iterations=LLPNN_NEURAL_ODE_ITERATIONS)
+                         neural_ode_iterations_per_step=LLPNN_NEURAL_ODE_ITERATIONS)
 
 
 def _parts() -> list[Profile]:
@@ -635,7 +635,7 @@ class W4(AbstractStudy):
 
     def models(self, P, condition):
         P = condition.P
-        return models(P.operator_baselines, P.steps, P.neural_ode_iterations)
+        return models(P.operator_baselines, P.steps, P.neural_ode_iterations_per_step)
 
     def admits(self, condition, model):
         return True  # a model that cannot take the data says so

@@ -304,7 +304,7 @@ def test_save_figure_is_atomic_and_takes_its_format_from_the_suffix(tmp_path, mo
     """`save_figure` writes the format its suffix names (matplotlib's default, suffix added,
     when there is none), and a drawing that fails leaves the file it replaces whole, with no
     temporary beside it."""
-    pytest.importorskip("matplotlib")
+    matplotlib = pytest.importorskip("matplotlib")
     from matplotlib.figure import Figure
 
     from integrators.internals import figure, save_figure
@@ -313,8 +313,20 @@ def test_save_figure_is_atomic_and_takes_its_format_from_the_suffix(tmp_path, mo
     fig.add_subplot().plot([0, 1], [1, 0])
     assert save_figure(fig, tmp_path / "a.svg") == tmp_path / "a.svg"
     assert (tmp_path / "a.svg").read_text().lstrip().startswith("<?xml")
-    assert save_figure(fig, tmp_path / "b") == tmp_path / "b.png"
+    with matplotlib.rc_context({"savefig.format": "png"}):
+        assert save_figure(fig, tmp_path / "b") == tmp_path / "b.png"
     assert (tmp_path / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # format= wins over the suffix, as in savefig; an upper-case suffix is its format
+    assert save_figure(fig, tmp_path / "c.png", format="svg") == tmp_path / "c.png"
+    assert (tmp_path / "c.png").read_text().lstrip().startswith("<?xml")
+    save_figure(fig, tmp_path / "D.PNG")
+    assert (tmp_path / "D.PNG").read_bytes()[:4] == b"\x89PNG"
+    (tmp_path / "c.png").unlink()
+    (tmp_path / "D.PNG").unlink()
+    # a format matplotlib cannot write: refused by name, before any folder is made
+    with pytest.raises(ValueError, match="format 'txt' is not one of matplotlib's"):
+        save_figure(fig, tmp_path / "new" / "x.txt")
+    assert not (tmp_path / "new").exists()
     before = (tmp_path / "b.png").read_bytes()
 
     def broken(self, path, **kwargs):

@@ -734,22 +734,24 @@ def test_w4s_llpnn_baselines_predict_and_the_lpnets_rollout_keeps_its_invariants
     assert {"DeepONet", "LPNet on reconstructed momenta"} <= {m.label for m in w4.models(llpnn.operator_baselines)}
 
 
-def test_w4_neural_ode_budget_is_a_profile_setting(tmp_path):
+def test_w4_neural_ode_budget_is_a_profile_setting(tmp_path, monkeypatch):
     """The neural ODE's budget is a setting of the profile each part runs (so the settings check
     refuses rows saved under another), and the model of each condition is fitted with its own."""
     from paper import w4_bodies as w4
     from paper._runner import _settings
 
     full, llpnn = w4.PROFILES["full"], w4.PROFILES["full"].then
-    assert (full.neural_ode_iterations, llpnn.neural_ode_iterations) == (w4.NEURAL_ODE_ITERATIONS,
-                                                                          w4.LLPNN_NEURAL_ODE_ITERATIONS)
+    assert (full.neural_ode_iterations_per_step, llpnn.neural_ode_iterations_per_step) == (
+        w4.NEURAL_ODE_ITERATIONS, w4.LLPNN_NEURAL_ODE_ITERATIONS)
+    budgets = []
+    monkeypatch.setattr(w4, "fit_neural_ode", lambda data, iterations, *a, **k: budgets.append(iterations))
     study = w4.W4()
     for P in (full, llpnn):
-        condition = types.SimpleNamespace(P=P)
-        (node,) = [m for m in study.models(full, condition) if m.label == "neural ODE"]
-        assert node.iterations_per_step * node.steps == P.neural_ode_iterations * P.steps
+        (node,) = [m for m in study.models(full, types.SimpleNamespace(P=P)) if m.label == "neural ODE"]
+        node.field(None)  # what the fit is given
+    assert budgets == [full.neural_ode_iterations_per_step * full.steps, llpnn.neural_ode_iterations_per_step * llpnn.steps]
     # a folder holding rows saved under another budget is refused, not mixed
-    changed = dict(w4.PROFILES, smoke=w4.PROFILES["smoke"].replace(neural_ode_iterations=1))
-    (tmp_path / "smoke-settings.json").write_text(json.dumps(_settings(changed["smoke"])))
-    with pytest.raises(ValueError, match="neural_ode_iterations: 1 then, 25 now"):
+    other = w4.PROFILES["smoke"].replace(neural_ode_iterations_per_step=1)
+    (tmp_path / "smoke-settings.json").write_text(json.dumps(_settings(other)))
+    with pytest.raises(ValueError, match="neural_ode_iterations_per_step: 1 then, 25 now"):
         study.check_settings("smoke", tmp_path)

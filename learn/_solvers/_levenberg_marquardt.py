@@ -68,7 +68,7 @@ class _Residuals(AbstractAtStructure):
     whose flat trainable leaves are $x$, compiled once per structure. The Jacobian of a
     fit's last step travels in its result (`Result.linearisation`): the criterion and the
     discretisation error read the fitted map's residuals and Jacobian there (one evaluation
-    fewer per fit; BENCHMARKS.md, "Every W4 fit under 2 minutes")."""
+    fewer per fit; BENCHMARKS.md, "Every W4 fit under 2 minutes on 2 quiet cores")."""
 
     def __init__(self, objective: AbstractLeastSquares, y: Any):
         super().__init__(objective, y)

@@ -619,7 +619,7 @@ PRUNE_RATIO = 100.0
 #: (`weak_form_quadratic`) more than this many times the least of any family's is skipped.
 #: The misfit is the least squared singular value of the same equations with fewer columns:
 #: where the family holds the body, noise alone, within 2x of the fuller family's (tested);
-#: the ratios on W4's rotated bodies: BENCHMARKS.md, "Every W4 fit under 2 minutes".
+#: the ratios on W4's rotated bodies: BENCHMARKS.md, "Every W4 fit under 2 minutes on 2 quiet cores".
 SCREEN_RATIO = 10.0
 
 
