@@ -214,6 +214,20 @@ def test_a_rerun_with_other_settings_is_refused_not_mixed_with_the_saved_rows(tm
     assert "not a settings file of this library" in capsys.readouterr().err
 
 
+def _holder(row):
+    """Another process that claims `row`, prints 'claimed', and saves it (condition 2, value
+    99) and releases it once a line is written to its stdin."""
+    import subprocess
+    import sys
+
+    return subprocess.Popen(
+        [sys.executable, "-c", ("import json, sys; from pathlib import Path; from paper._claims import claim, "
+                                "release; p = Path(sys.argv[1]); assert claim(p); print('claimed', flush=True); "
+                                "sys.stdin.readline(); p.write_text(json.dumps({'condition': 2, 'value': 99.0})); "
+                                "release(p)"), str(row)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+
+
 def test_processes_running_one_study_into_one_folder_share_its_rows(tmp_path, monkeypatch, capsys):
     """A row another process has claimed is not computed again: it is read once that process
     saves it; a claim whose process died is no claim (the kernel drops its lock)."""
@@ -227,12 +241,7 @@ def test_processes_running_one_study_into_one_folder_share_its_rows(tmp_path, mo
     evaluated = []
     monkeypatch.setattr(_runner, "POLL_SECONDS", 0.02)
     row2 = tmp_path / "rows" / "smoke-2.json"
-    with subprocess.Popen(  # another process: claims row 2, saves it (value 99) when told to
-            [sys.executable, "-c", ("import json, sys; from pathlib import Path; from paper._claims import claim, "
-                                    "release; p = Path(sys.argv[1]); assert claim(p); print('claimed', flush=True); "
-                                    "sys.stdin.readline(); p.write_text(json.dumps({'condition': 2, 'value': 99.0})); "
-                                    "release(p)"), str(row2)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as other:
+    with _holder(row2) as other:  # another process: claims row 2, saves it (value 99) when told to
         try:
             assert other.stdout.readline().strip() == "claimed"
             assert holder(row2).endswith(f" {other.pid}")
@@ -286,8 +295,6 @@ def test_a_row_of_another_format_is_refitted_by_one_process_only(tmp_path, monke
     """A saved row of an older format is refitted, but not while another process holds its
     claim: that process's row is read when saved (before, the file's existence skipped the claim
     and both refitted it)."""
-    import subprocess
-    import sys
 
     from paper import _runner
 
@@ -297,12 +304,7 @@ def test_a_row_of_another_format_is_refitted_by_one_process_only(tmp_path, monke
     for k in (1, 2):
         (rows / f"smoke-{k}.json").write_text(json.dumps({"old": k}))  # another version's rows
     row2 = rows / "smoke-2.json"
-    with subprocess.Popen(  # holds row 2's claim, saves its row (value 99) when told to
-            [sys.executable, "-c", ("import json, sys; from pathlib import Path; from paper._claims import claim, "
-                                    "release; p = Path(sys.argv[1]); assert claim(p); print('claimed', flush=True); "
-                                    "sys.stdin.readline(); p.write_text(json.dumps({'condition': 2, 'value': 99.0})); "
-                                    "release(p)"), str(row2)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) as other:
+    with _holder(row2) as other:  # holds row 2's claim, saves its row (value 99) when told to
         try:
             assert other.stdout.readline().strip() == "claimed"
             evaluated = []
