@@ -89,8 +89,8 @@ N_TEST = 12
 #: peers by the rule"); the profile's `neural_ode_iterations_per_step`.
 NEURAL_ODE_ITERATIONS = 25
 #: The same in the LLPNN part (1000 at 200 steps, the budget of its earlier reference): its 200
-#: x 101 observations cost ~30 times W4's own per iteration (1.9 s on a shared core, 2026-12-04),
-#: three fits of 5000 a body would take ~5 h.
+#: x 101 observations cost many times W4's own per iteration, and 5000 would take hours a body
+#: (BENCHMARKS.md, "The LLPNN protocol as W4's second part, with its baselines").
 LLPNN_NEURAL_ODE_ITERATIONS = 5
 #: The neural ODE's hidden layers tried (`paper._neural_ode.fit_neural_ode`).
 NEURAL_ODE_HIDDEN = ((32, 32), (64, 64))
