@@ -20,9 +20,16 @@ from paper._registry import EXPERIMENTS
 def test_w8_is_registered_with_a_profile_of_each_name():
     assert EXPERIMENTS["W8"] is w8.EXPERIMENT
     assert set(w8.PROFILES) == {"smoke", "quick", "full"}
-    assert w8.PROFILES["full"].sizes == (32, 64, 128)  # the issue's sizes
+    # the grid at N = 32 and one condition of each noise at N = 64 (a learned fit there is
+    # ~7-8 core-hours); N = 128's fit time is a benchmark's
+    full = w8.PROFILES["full"]
+    keys = [c.key for c in w8.EXPERIMENT.conditions(full)]
+    assert len(keys) == len(set(keys)) == 8 + 2
+    assert {c.N for c in w8.EXPERIMENT.conditions(full)} == {32, 64}
+    assert {c.noise for c in w8.EXPERIMENT.conditions(full) if c.N == 64} == {1e-3, 1e-2}
     for P in w8.PROFILES.values():
         assert set(P.truths) <= set(w8.TRUTHS)
+        assert {name for _, name, _ in P.spot_checks} <= set(w8.TRUTHS)
 
 
 def test_the_limits_laplacian_is_the_quasi_geostrophic_family_at_zero_and_learns_nothing():
