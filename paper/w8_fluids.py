@@ -187,6 +187,7 @@ class Condition:
         self.N, self.truth, self.noise, self.P = N, truth, noise, P
         self.system = lp.systems.Zeitlin(N)
         self.folder: Path | None = None  # set by the study before the rows
+        self.checkpoints: Path | None = None  # the fits' checkpoints: likewise
 
     @property
     def key(self) -> str:
@@ -266,6 +267,9 @@ class Forecaster:
     #: The sphere's rotation the model's own Casimirs are of (those of q = W + rotation f);
     #: `None`: the truth's (a model without one, such as DMD).
     rotation: float | None = None
+    #: The fit's wall time, if the model knows it better than the clock around `fit` (a fit
+    #: resumed from a checkpoint: its time over every process that ran it).
+    fit_seconds: float | None = None
 
 
 class AbstractFluidModel(AbstractStudyModel):
@@ -277,14 +281,17 @@ class AbstractFluidModel(AbstractStudyModel):
 
 
 def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observations, iterations: int,
-         progress: bool) -> tuple[learn.StreamOperatorFit, Any]:
+         progress: bool, tag: str) -> tuple[learn.StreamOperatorFit, Any, float]:
     """`learn.fit_stream_operator` with steps of at most `fit_step` eddy turnovers, first on
     every trajectory's first `prefix` snapshots, then from there on all of them (continuation
     in time: the parameters that rotate the field, the degree-1 eigenvalue and the rotation,
     have a loss with other minima once the rotation angle over the data is large; fitted on all
     snapshots at once from the Laplacian's start at N = 16, the QG truths' learned operator
     stopped with field errors 0.67-0.80 at tau and the rotating truth's limit at rotation 0.51
-    of 1), and the forecasts of its fitted operator at steps as short."""
+    of 1), the forecasts of its fitted operator at steps as short, and the fits' wall time. Each
+    fit is resumable (`learn.Checkpoint` in `condition.checkpoints`, `<tag>-first.h5` and `<tag>.h5`,
+    written after every iteration and standard error's column: a learned fit at N = 64 outlasts
+    a working session)."""
     max_step = condition.P.fit_step * condition.tau
     starts = None
     k = condition.P.prefix
@@ -292,10 +299,13 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
         short = it.Observations(data.system, [t[:k] for t in data.times], [y[:k] for y in data.states],
                                 metadata=data.metadata)
         first = learn.fit_stream_operator(model, short, max_step=max_step, iterations=iterations,
-                                          standard_errors=False, progress=progress)
-        model, starts = first.model, first.starts
+                                          standard_errors=False, progress=progress,
+                                          checkpoint=_checkpoint(condition, f"{tag}-first"))
+        model, starts, seconds = first.model, first.starts, first.seconds
+    else:
+        seconds = 0.0
     fit = learn.fit_stream_operator(model, data, max_step=max_step, iterations=iterations, starts=starts,
-                                    progress=progress)
+                                    progress=progress, checkpoint=_checkpoint(condition, tag))
     fitted = learn.StreamOperator(fit.model.system, fit.spectrum, rotation=fit.rotation, composition=fit.model.composition,
                                   tol=MODEL_TOL, iterations=FORECAST_ITERATIONS)
 
@@ -303,7 +313,14 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
         substeps = max(1, math.ceil(step / max_step - 1e-12))
         return np.asarray(_rollouts(fitted, jnp.asarray(starts), jnp.full(n_steps, step), substeps))
 
-    return fit, predict
+    return fit, predict, seconds + fit.seconds
+
+
+def _checkpoint(condition: Condition, name: str) -> learn.Checkpoint:
+    """A fit's checkpoint, in the condition's folder of them, resumed if there."""
+    if condition.checkpoints is None:
+        raise ValueError("Condition.checkpoints: where the checkpoints go must be set before a fit")
+    return learn.Checkpoint(condition.checkpoints / f"{name}.h5", every=1, resume=True)
 
 
 def _pm(value: float, se: float) -> str:
@@ -324,7 +341,7 @@ class LearnedStreamModel(AbstractFluidModel):
         start = learn.DegreeSpectrum(-(l * (l + 1.0)), reference_degree=N - 1)
         model = learn.StreamOperator(condition.system, start, rotation=None if truth.rotation is None else 0.0,
                                      composition=condition.P.composition, tol=MODEL_TOL, iterations=6)
-        fit, predict = _fit(model, condition, data, self.iterations, progress)
+        fit, predict, seconds = _fit(model, condition, data, self.iterations, progress, "learned")
         true = learn.in_gauge(truth.degree_values(N), N - 2, float(fit.values[N - 2]))
         z = list(np.abs(fit.values - true)[:-1] / fit.standard_errors[:-1])
         words = f"spectrum: largest |error|/SE at degree {int(np.argmax(z)) + 1}"
@@ -334,7 +351,7 @@ class LearnedStreamModel(AbstractFluidModel):
             words += (f"; rotation {_pm(fit.rotation, fit.rotation_standard_error)} (truth in this gauge "
                       f"{rotation:.5g})")
         return Forecaster(predict, float(np.max(z)), words, f"{fit.iterations} LM iterations ({fit.stopped})",
-                          fit.rotation)
+                          fit.rotation, seconds)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -353,7 +370,7 @@ class LimitModel(AbstractFluidModel):
         else:
             model = learn.StreamOperator(condition.system, LaplacianSpectrum(), rotation=0.0,
                                          composition=condition.P.composition, tol=MODEL_TOL, iterations=6)
-        fit, predict = _fit(model, condition, data, self.iterations, progress)
+        fit, predict, seconds = _fit(model, condition, data, self.iterations, progress, "limit")
         if truth.rotation is None:
             z = abs(float(fit.values[0]) - truth.F) / float(fit.standard_errors[0])
             words = f"F = {_pm(float(fit.values[0]), float(fit.standard_errors[0]))}"
@@ -361,7 +378,7 @@ class LimitModel(AbstractFluidModel):
             z = abs(fit.rotation - truth.rotation) / fit.rotation_standard_error
             words = f"rotation {_pm(fit.rotation, fit.rotation_standard_error)}"
         return Forecaster(predict, float(z), words, f"{fit.iterations} LM iterations ({fit.stopped})",
-                          fit.rotation)
+                          fit.rotation, seconds)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -449,7 +466,7 @@ def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> 
     data = condition.data
     begin = time.perf_counter()
     forecaster = model.fit(condition, data, progress=progress)
-    fit_seconds = time.perf_counter() - begin
+    fit_seconds = time.perf_counter() - begin if forecaster.fit_seconds is None else forecaster.fit_seconds
     starts, reference = condition.test
     ys = forecaster.predict(starts, condition.step, reference.shape[1] - 1)
     scale = np.linalg.norm(reference[:, 0], axis=-1)
@@ -552,6 +569,7 @@ class W8(AbstractStudy):
 
     def condition_rows(self, profile, condition, models, out_dir, progress):
         condition.folder = out_dir / "snapshots" / f"{profile}-{condition.key}"
+        condition.checkpoints = out_dir / "checkpoints" / f"{profile}-{condition.key}"
         return super().condition_rows(profile, condition, models, out_dir, progress)
 
     def evaluate(self, condition, model, progress):

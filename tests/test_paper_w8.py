@@ -71,8 +71,21 @@ def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
         assert r["casimir_drift"] <= 1e-13  # unitary conjugations of q, whatever was fitted
         assert r["error_1"] <= 0.05 and r["z"] is not None  # from a start with 1% noise
     assert len(list((tmp_path / "W8" / "snapshots").rglob("*.h5"))) == len(truths) * w8.PROFILES["smoke"].n_train
+    # the stream operators' fits (learned and limit; smoke's prefix is every snapshot: one stage),
+    # each resumable from its checkpoint
+    assert len(list((tmp_path / "W8" / "checkpoints").rglob("*.h5"))) == len(truths) * 2
     table = (tmp_path / "W8" / "table.md").read_text()
     assert table.startswith("# W8") and "limit (the true family)" in table
     assert main(args) == 0  # every row resumed: nothing refitted
     again = json.loads((tmp_path / "W8" / "metrics.json").read_text())
     assert again["resumed_rows"] == len(rows) and again["rows"] == rows
+    # a row lost (a process killed after its fit, before the row was saved): its fit is read back
+    # from the checkpoint, not redone, and its figures are the same to the bit
+    lost = next((tmp_path / "W8" / "rows").glob("smoke-*-learned_stream_operator.json"))
+    before = json.loads(lost.read_text())
+    lost.unlink()
+    assert main(args) == 0
+    after = json.loads(lost.read_text())
+    assert after["fit_seconds"] > before["fit_seconds"]  # the fit's time over both processes
+    assert {k: v for k, v in after.items() if k != "fit_seconds"} == {k: v for k, v in before.items()
+                                                                       if k != "fit_seconds"}

@@ -192,6 +192,8 @@ def test_bad_input():
             learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, **{name: 10.0})
         with pytest.raises(ValueError, match=name):
             learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, **{name: 0.0})
+    with pytest.raises(TypeError, match="checkpoint must be a learn.Checkpoint"):
+        learn.fit_stream_operator(_model(-(L * (L + 1.0))), data, checkpoint="fit.h5")
 
 
 @pytest.mark.slow  # ~70 s on 2 loaded cores, compiling three programs at N = 4
@@ -211,18 +213,7 @@ def test_profiled_matrix_is_the_dense_schur_complement_to_second_order_in_the_so
         _profiled,
     )
 
-    n4 = 4
-    system = Zeitlin(n4)
-    rng = np.random.default_rng(5)
-    times = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.1, 0.3, 5))]) for _ in range(2)]
-    truth = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(3.0), tol=TOL, iterations=16)
-    roll = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))
-    states = [np.asarray(roll(truth, jnp.asarray(system.random_state(j, lmax=3, decay=0.5)), jnp.asarray(np.diff(t))))
-              for j, t in enumerate(times)]
-    data = add_field_noise(Observations(system, times, states), 1e-2, seed=2)
-    l = np.arange(1, n4)
-    model = learn.StreamOperator(system, learn.DegreeSpectrum(-(l * (l + 1.0)) - 3.0, reference_degree=n4 - 1),
-                                 tol=TOL, iterations=16)
+    model, data = _small_fit_problem(noise=1e-2, shift=-3.0)
     padded = _padded(data)
     S = jnp.asarray(np.stack([y[0] for y in data.states]))
     lin = _linearisation(model, S, padded, 1, None)
@@ -243,3 +234,79 @@ def test_profiled_matrix_is_the_dense_schur_complement_to_second_order_in_the_so
     assert np.max(np.abs(np.asarray(profiled) - dense)) <= 1e-6 * scale
     # and the profiling matters here: the starts take a visible part of the information
     assert np.max(np.abs(A - dense)) >= 1e-3 * scale
+
+
+def _small_fit_problem(noise: float = 1e-3, shift: float = 0.0):
+    """Noisy quasi-geostrophic fields (F = 3) at N = 4 (3 degrees, 2 trajectories of 6
+    snapshots, `noise` of the field) and a model with a spectrum per degree started at the
+    Laplacian's plus `shift`, gauge at degree 3: every part of a fit in seconds."""
+    n4 = 4
+    system = Zeitlin(n4)
+    rng = np.random.default_rng(5)
+    times = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.1, 0.3, 5))]) for _ in range(2)]
+    truth = learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(3.0), tol=TOL, iterations=16)
+    roll = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d))
+    states = [np.asarray(roll(truth, jnp.asarray(system.random_state(j, lmax=3, decay=0.5)), jnp.asarray(np.diff(t))))
+              for j, t in enumerate(times)]
+    data = add_field_noise(Observations(system, times, states), noise, seed=2)
+    l = np.arange(1, n4)
+    model = learn.StreamOperator(system, learn.DegreeSpectrum(-(l * (l + 1.0)) + shift, reference_degree=n4 - 1),
+                                 tol=TOL, iterations=16)
+    return model, data
+
+
+@pytest.mark.slow  # ~3 fits at N = 4, each compiling its programs
+def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_uninterrupted_one(tmp_path, monkeypatch):
+    from learn._training import _stream_checkpoint
+
+    model, data = _small_fit_problem()
+    path = tmp_path / "fit.h5"
+    copies = []
+    write = _stream_checkpoint.write
+
+    def write_and_copy(target, state, key, settings):  # every file the fit writes, kept aside
+        write(target, state, key, settings)
+        copies.append((state.phase, state.done, state.columns, state.seconds, path.read_bytes()))
+
+    monkeypatch.setattr(_stream_checkpoint, "write", write_and_copy)
+    whole = learn.fit_stream_operator(model, data, max_step=0.1, checkpoint=learn.Checkpoint(path, every=1))
+    monkeypatch.setattr(_stream_checkpoint, "write", write)
+    phases = [(phase, done, columns) for phase, done, columns, _, _ in copies]
+    p = whole.values.size - 1  # the gauge's degree is not fitted
+    assert whole.iterations >= 2 and whole.stopped.startswith("converged")
+    # one file per accepted iteration but the one that converged (it ends them), one when they
+    # end, one per standard error's column
+    assert phases == ([("iterations", k, 0) for k in range(1, whole.iterations)]
+                      + [("standard errors", whole.iterations, 0)]
+                      + [("standard errors", whole.iterations, k) for k in range(1, p + 1)])
+    # after iteration 1 and the last but one, when they end, after the first column, at the end
+    for k in (0, whole.iterations - 2, whole.iterations - 1, whole.iterations, len(copies) - 1):
+        path.write_bytes(copies[k][4])
+        resumed = learn.fit_stream_operator(model, data, max_step=0.1, checkpoint=learn.Checkpoint(path, resume=True))
+        for name in ("values", "standard_errors", "starts", "covariance"):
+            np.testing.assert_array_equal(getattr(resumed, name), getattr(whole, name), err_msg=f"{name}, file {k}")
+        assert (resumed.losses, resumed.iterations, resumed.stopped) == (whole.losses, whole.iterations, whole.stopped)
+        assert resumed.seconds > copies[k][3] > 0  # the time before the checkpoint counts
+
+
+
+@pytest.mark.slow  # a fit at N = 4 compiled
+def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
+    import h5py
+
+    model, data = _small_fit_problem()
+    path = tmp_path / "fit.h5"
+    learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=learn.Checkpoint(path))
+    resume = learn.Checkpoint(path, resume=True)
+    with pytest.raises(ValueError, match=r"other settings \(cg_rtol=1e-08 then, 1e-06 now\)"):
+        learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, cg_rtol=1e-6, checkpoint=resume)
+    other = add_field_noise(data, 1e-3, seed=3)
+    with pytest.raises(ValueError, match="written by a fit of other data, another model or another start"):
+        learn.fit_stream_operator(model, other, max_step=0.1, standard_errors=False, checkpoint=resume)
+    with h5py.File(path, "w") as f:  # a foreign HDF5 file
+        f["x"] = np.zeros(3)
+    with pytest.raises(ValueError, match="is not a checkpoint of learn.fit_stream_operator"):
+        learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)
+    path.write_text("not HDF5")
+    with pytest.raises(ValueError, match="not a readable HDF5 file"):
+        learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)

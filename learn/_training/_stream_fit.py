@@ -43,7 +43,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -60,6 +62,8 @@ from liepoisson.systems import Zeitlin
 
 from .._models._spectrum import AbstractGaugedSpectrum, AbstractSpectrum
 from .._models._stream_operator import StreamOperator
+from .._solvers._checkpoint import Checkpoint
+from . import _stream_checkpoint as _checkpoint
 
 #: The damping lambda (relative to the Marquardt scaling) is kept in this range.
 LAMBDA_RANGE = (1e-16, 1e16)
@@ -90,7 +94,9 @@ class StreamOperatorFit:
       Gauss-Newton covariance with the starts profiled out; `noise`: $\hat\sigma$, the
       residuals' root mean square over their degrees of freedom (per component).
     - `losses`: the mean squared residual after each accepted iteration (the first at the
-      start); `iterations`; `stopped`: why the fit stopped; `substeps`: steps per interval.
+      start); `iterations`; `stopped`: why the fit stopped; `substeps`: steps per interval;
+      `seconds`: the fit's wall time (over every process that ran it, when resumed from a
+      checkpoint).
     """
 
     model: StreamOperator
@@ -106,6 +112,7 @@ class StreamOperatorFit:
     iterations: int
     stopped: str
     substeps: int
+    seconds: float
 
 
 class _Data(eqx.Module):
@@ -154,7 +161,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                         iterations: int = 50, rtol: float = 1e-10, chi2_tol: float = 0.01,
                         cg_rtol: float = 1e-8,
                         cg_max_steps: int = 200, standard_errors: bool = True, se_rtol: float = 1e-3,
-                        starts: Any = None, progress: bool = False) -> StreamOperatorFit:
+                        starts: Any = None, checkpoint: Checkpoint | None = None,
+                        progress: bool = False) -> StreamOperatorFit:
     r"""Fit `model`'s stream operator and one initial field per trajectory to `data` by
     trajectory least squares (module docstring: Levenberg-Marquardt with the starts eliminated
     by conjugate gradients; nothing of size $N^2\times N^2$ is formed).
@@ -187,12 +195,22 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       (BENCHMARKS.md, "The step's order": the standard errors' solves).
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
+    - `checkpoint`: a `learn.Checkpoint`: the fit's state is written to its file (HDF5, a
+      temporary renamed into place) every `every` accepted iterations and every `every`
+      standard errors' columns (each a conjugate gradient solve: minutes at N = 64), and when
+      the iterations end; with `resume`, a fit of the same data, model, start and settings
+      continues from the file bit for bit as the uninterrupted fit (a file of another fit is
+      refused, saying what differs). A finished fit's file returns its result at once.
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
       loss and time (wall and CPU).
 
     **Returns:** a `learn.StreamOperatorFit`.
     """
+    begin = time.perf_counter()
     check_stream_data(model, data)
+    if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
+        raise TypeError(f"checkpoint must be a learn.Checkpoint (its file, how often, whether to resume) or None; "
+                        f"got {type(checkpoint).__name__}")
     iterations = positive_int(iterations, "iterations")
     if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 <= rtol < 1:
         raise ValueError(f"rtol must be a number in [0, 1); got {rtol!r}")
@@ -249,14 +267,39 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     # took 82 s and 112 s, against 40 s at 2e-3)
     floor = max(cg_rtol, math.sqrt(least))
 
-    state = _linearisation(rebuild(x), starts, padded, substeps, None)
-    if not np.isfinite(float(state.cost)):
-        raise FloatingPointError("fit_stream_operator: the loss at the start is not finite; check the data and the "
-                                 "model's start (a step too large for the stage iteration: use max_step=)")
-    D_theta = _scaling(state.A)
-    lam, nu = 1e-3, 2.0
-    losses = [float(state.cost) / n_residuals]
-    stopped, done, fresh, forcing = "iterations", 0, True, FORCING_MAX
+    settings = {"iterations": iterations, "rtol": rtol, "chi2_tol": chi2_tol, "cg_rtol": cg_rtol,
+                "cg_max_steps": cg_max_steps, "standard_errors": standard_errors, "se_rtol": se_rtol,
+                "substeps": substeps}
+    key = "" if checkpoint is None else _checkpoint.fingerprint(padded, x, starts,
+                                                                eqx.partition(model, _trained(model))[1])
+    saved = _checkpoint.read(checkpoint.path, key, settings) if checkpoint is not None and checkpoint.resumable() \
+        else None
+    if saved is None:
+        state = _linearisation(rebuild(x), starts, padded, substeps, None)
+        if not np.isfinite(float(state.cost)):
+            raise FloatingPointError("fit_stream_operator: the loss at the start is not finite; check the data and "
+                                     "the model's start (a step too large for the stage iteration: use max_step=)")
+        D_theta = _scaling(state.A)
+        lam, nu = 1e-3, 2.0
+        losses = [float(state.cost) / n_residuals]
+        stopped, done, fresh, forcing, phase, before_seconds = "iterations", 0, True, FORCING_MAX, "iterations", 0.0
+    else:
+        x, starts, D_theta = jnp.asarray(saved.x), jnp.asarray(saved.starts), jnp.asarray(saved.D_theta)
+        state = _Linearisation(**{name: jnp.asarray(value) for name, value in saved.state.items()})
+        lam, nu, losses = saved.lam, saved.nu, saved.losses
+        stopped, done, fresh, forcing, phase, before_seconds = (saved.stopped, saved.done, saved.fresh, saved.forcing,
+                                                                saved.phase, saved.seconds)
+        if progress:
+            print(f"fit_stream_operator: resumed from {os.fspath(checkpoint.path)!r} ({phase}, {done} iterations, "
+                  f"{saved.columns} standard errors' columns done)", flush=True)
+
+    def save(columns: int = 0, profiled: tuple | None = None) -> None:
+        """The fit's state to the checkpoint's file (`columns` of the standard errors done,
+        `profiled` their `(B, X, GX, steps)`)."""
+        _checkpoint.write(checkpoint.path, _checkpoint.FitState(
+            phase, np.asarray(x), np.asarray(starts), lam, nu, forcing, fresh, done, losses, np.asarray(D_theta),
+            {name: np.asarray(getattr(state, name)) for name in _checkpoint.STATE}, stopped,
+            before_seconds + time.perf_counter() - begin, columns, *(profiled or (None,) * 4)), key, settings)
 
     def relinearised(why: str) -> _Linearisation:
         clock = _clock()
@@ -265,7 +308,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             print(f"fit_stream_operator:   J_theta and gradient afresh ({why}) {_since(clock)}", flush=True)
         return new
 
-    for _ in range(iterations):
+    for _ in range(done, iterations) if phase == "iterations" else ():
         D_theta = jnp.maximum(D_theta, _scaling(state.A))
         accepted = False
         for _ in range(MAX_TRIALS):
@@ -330,15 +373,32 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
             if not fresh:
                 state = relinearised("a negligible step made with an older one")
                 fresh = True
+        if checkpoint is not None and done % checkpoint.every == 0:
+            save()
 
     fitted = rebuild(x)
+    if phase == "iterations":
+        if standard_errors and not fresh:
+            state = _linearisation(fitted, starts, padded, substeps, None)
+            fresh = True
+        phase = "standard errors"
+        if checkpoint is not None:
+            save()
     sigma2 = float(state.cost) / dof if dof > 0 else float("nan")
     if standard_errors:
-        if not fresh:
-            state = _linearisation(fitted, starts, padded, substeps, None)
         clock = _clock()
+
+        def after(k: int, *profiled) -> None:
+            if progress:
+                print(f"fit_stream_operator:   standard errors: column {k + 1} of {p}, {int(profiled[3][k])} conjugate "
+                      f"gradient steps, {_since(clock)}", flush=True)
+            if checkpoint is not None and ((k + 1) % checkpoint.every == 0 or k + 1 == p):
+                save(k + 1, profiled)
+
+        partial = None if saved is None or saved.B is None else (saved.B, saved.X, saved.GX, saved.steps,
+                                                                   saved.columns)
         profiled, cg_steps = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
-                                       jnp.asarray(se_rtol), cg_max_steps)  # traced: one compilation for any
+                                       jnp.asarray(se_rtol), cg_max_steps, partial=partial, after=after)
         covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
         if progress:
             print(f"fit_stream_operator: standard errors: {p} solves of {int(np.min(cg_steps))}-"
@@ -356,7 +416,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         rotation=None if fitted.rotation is None else float(fitted.rotation),
         rotation_standard_error=None if fitted.rotation is None else float(se.rotation),
         starts=np.asarray(starts), covariance=np.asarray(covariance), noise=math.sqrt(sigma2),
-        losses=losses, iterations=done, stopped=stopped, substeps=substeps)
+        losses=losses, iterations=done, stopped=stopped, substeps=substeps,
+        seconds=before_seconds + time.perf_counter() - begin)
 
 
 def _clock() -> tuple[float, float]:
@@ -551,28 +612,46 @@ def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_
     return _Step(dx, dS, -2.0 * (lin.g_theta @ dx + jnp.sum(lin.c * dS)) - jnp.sum(change * change), steps)
 
 
-@eqx.filter_jit
-def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_steps):
+def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_steps, *,
+              partial: tuple | None = None, after: Callable[..., None] | None = None):
     r"""`(S_p, steps)`: $S_p = A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$,
     the parameters' Gauss-Newton matrix with the starts profiled out, and the conjugate gradient
     steps of each column's solve `(p,)`. $B$ by $p$ transposed passes, $X \approx G^{-1}B$ by
-    conjugate gradients, one column after another (NaN where a solve does not converge; a batch
-    of columns runs to its slowest column's steps and costs as much as its columns one by one:
-    BENCHMARKS.md, the standard errors' solves); the
+    conjugate gradients, one column after another (`_profiled_column`; NaN where a solve does
+    not converge; a batch of columns runs to its slowest column's steps and costs as much as its
+    columns one by one: BENCHMARKS.md, the standard errors' solves); the
     product taken as $B^\top X + X^\top B - X^\top GX$, whose error is $-E^\top GE$ for the
     solves' error $E = X - G^{-1}B$: second order in it (the first-order $B^\top X$ is off by
     $B^\top E$), so that solves to a relative residual $\epsilon$ give $S_p$ to about
-    $\epsilon^2$ (one more pass per column for $GX$)."""
+    $\epsilon^2$ (one more pass per column for $GX$, and one rollout to linearise at). `partial`: `(B, X, GX, steps, k)` of
+    an earlier call whose first `k` columns are done (a checkpoint's); `after(k, B, X, GX,
+    steps)` is called once column `k` is."""
+    p = J_theta.shape[-1]
+    if partial is None:
+        shape = (p, *S.shape)
+        B, X, GX, steps, first = np.zeros(shape), np.zeros(shape), np.zeros(shape), np.zeros(p, np.int64), 0
+    else:
+        B, X, GX, steps = (np.array(a) for a in partial[:4])
+        first = int(partial[4])
+    for k in range(first, p):
+        b, x, gx, n = _profiled_column(model, S, data, J_theta[:, :, k], counts, substeps, cg_rtol, cg_max_steps)
+        B[k], X[k], GX[k], steps[k] = b, x, gx, n
+        if after is not None:
+            after(k, B, X, GX, steps)
+    B, X, GX = B.reshape(p, -1), X.reshape(p, -1), GX.reshape(p, -1)
+    BX = B @ X.T
+    return np.asarray(A) - (BX + BX.T - X @ GX.T), steps
+
+
+@eqx.filter_jit
+def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps):
+    """`(b, x, Gx, steps)` of one column `Jp` `(J, L n)` of $J_\theta$: $b = J_s^\top$ `Jp`,
+    $x \approx G^{-1}b$ by conjugate gradients on $G$ scaled by counts$^{-1/2}$ (NaN if they
+    do not converge), $Gx$ and their steps (`_profiled`)."""
     r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
     transpose = jax.linear_transpose(forward, S)
     scale = 1.0 / jnp.sqrt(counts)[:, None]
-
-    def column(Jp):  # Jp (J, L n): B column, X column (G^{-1} B, G scaled by counts^{-1/2}), G X column
-        b = transpose(Jp.reshape(r.shape))[0]
-        Z, steps, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps)
-        x = jnp.where(ok, scale * Z, jnp.nan)
-        return b, x, transpose(forward(x))[0], steps
-
-    B, X, GX, steps = jax.lax.map(column, jnp.moveaxis(J_theta, 2, 0))  # (p, J, n) each
-    BX = jnp.einsum("pjn,qjn->pq", B, X)
-    return A - (BX + BX.T - jnp.einsum("pjn,qjn->pq", X, GX)), steps
+    b = transpose(Jp.reshape(r.shape))[0]
+    Z, steps, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps)
+    x = jnp.where(ok, scale * Z, jnp.nan)
+    return b, x, transpose(forward(x))[0], steps

@@ -1,0 +1,115 @@
+"""The checkpoint file of `learn.fit_stream_operator`: the fit's state after an accepted
+Levenberg-Marquardt iteration or a standard error's column, from which a later call (another
+process, another day) continues bit for bit as the uninterrupted fit would have (a learned
+fit at N = 64 takes hours, most of them in the standard errors' solves)."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from typing import Any
+
+import equinox as eqx
+import h5py
+import jax
+import numpy as np
+
+from integrators.internals import atomic_path, open_hdf5
+
+FORMAT = "liepoisson stream operator fit checkpoint"
+VERSION = 1
+#: The fit's arrays kept in the file, by name (`_Linearisation`'s fields prefixed `state_`).
+STATE = ("cost", "g_theta", "c", "J_theta", "A")
+
+
+def fingerprint(*trees: Any) -> str:
+    """A hash of `trees` (their structure, every leaf's value): a checkpoint belongs to the
+    fit whose data, start and model give the same."""
+    digest = hashlib.sha256()
+    for tree in trees:
+        digest.update(eqx.tree_pformat(tree, short_arrays=True).encode())
+        for leaf in jax.tree_util.tree_leaves(tree):
+            if eqx.is_array_like(leaf):
+                a = np.ascontiguousarray(np.asarray(leaf))
+                digest.update(f"{a.dtype.str}{a.shape}".encode())
+                digest.update(a.tobytes())
+            else:
+                digest.update(repr(leaf).encode())
+    return digest.hexdigest()
+
+
+@dataclasses.dataclass
+class FitState:
+    """What `fit_stream_operator` carries from one iteration to the next (`phase`
+    "iterations"), or into the standard errors (`phase` "standard errors": `columns` of the
+    profiled matrix's `p` done, their `B`, `X`, `GX` `(p, J, n)` and `steps` `(p,)`, zero
+    past `columns`); `seconds` the fit's wall time so far, over every process that ran it."""
+
+    phase: str
+    x: np.ndarray
+    starts: np.ndarray
+    lam: float
+    nu: float
+    forcing: float
+    fresh: bool
+    done: int
+    losses: list[float]
+    D_theta: np.ndarray
+    state: dict[str, np.ndarray]
+    stopped: str
+    seconds: float
+    columns: int = 0
+    B: np.ndarray | None = None
+    X: np.ndarray | None = None
+    GX: np.ndarray | None = None
+    steps: np.ndarray | None = None
+
+
+def write(path: str | os.PathLike, fit_state: FitState, key: str, settings: dict[str, Any]) -> None:
+    """Write `fit_state` to `path` (HDF5; a temporary renamed into place: an interrupted write
+    leaves the previous file whole), marked with the fit's `key` (`fingerprint`) and `settings`."""
+    s = fit_state
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs.update(format=FORMAT, version=VERSION, key=key, settings=json.dumps(settings, sort_keys=True),
+                       phase=s.phase, lam=s.lam, nu=s.nu, forcing=s.forcing, fresh=s.fresh, done=s.done,
+                       stopped=s.stopped, seconds=s.seconds, columns=s.columns)
+        f["x"], f["starts"], f["losses"], f["D_theta"] = s.x, s.starts, np.asarray(s.losses, float), s.D_theta
+        for name in STATE:
+            f[f"state_{name}"] = s.state[name]
+        if s.B is not None:
+            f["B"], f["X"], f["GX"], f["steps"] = s.B, s.X, s.GX, s.steps
+
+
+def read(path: str | os.PathLike, key: str, settings: dict[str, Any]) -> FitState:
+    """The state in the checkpoint at `path`; `ValueError` naming `path` if it is not such a
+    file, or was written by a fit with other `settings` (each differing one named) or other
+    data, model or start (another `key`)."""
+    expected = "a checkpoint of learn.fit_stream_operator"
+    with open_hdf5(path, expected) as f:
+        attrs = dict(f.attrs)
+        if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
+            raise ValueError(f"checkpoint {os.fspath(path)!r} is not {expected} (format {attrs.get('format')!r}, "
+                             f"version {attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION}): give "
+                             "another path, or delete the file to start the fit afresh")
+        saved = json.loads(attrs["settings"])
+        now = json.loads(json.dumps(settings, sort_keys=True))
+        changed = sorted(k for k in {*saved, *now} if saved.get(k) != now.get(k))
+        if changed:
+            what = "; ".join(f"{k}={saved.get(k)!r} then, {now.get(k)!r} now" for k in changed)
+            raise ValueError(f"checkpoint {os.fspath(path)!r} was written by a fit with other settings ({what}): "
+                             "resume with the same ones, or delete the file to start afresh")
+        if attrs["key"] != key:
+            raise ValueError(f"checkpoint {os.fspath(path)!r} was written by a fit of other data, another model or "
+                             "another start: give another path, or delete the file to start afresh")
+        arrays = {name: np.asarray(f[name]) for name in f}
+    has_columns = "B" in arrays
+    return FitState(
+        phase=str(attrs["phase"]), x=arrays["x"], starts=arrays["starts"], lam=float(attrs["lam"]),
+        nu=float(attrs["nu"]), forcing=float(attrs["forcing"]), fresh=bool(attrs["fresh"]), done=int(attrs["done"]),
+        losses=[float(v) for v in arrays["losses"]], D_theta=arrays["D_theta"],
+        state={name: arrays[f"state_{name}"] for name in STATE}, stopped=str(attrs["stopped"]),
+        seconds=float(attrs["seconds"]), columns=int(attrs["columns"]),
+        B=arrays.get("B") if has_columns else None, X=arrays.get("X") if has_columns else None,
+        GX=arrays.get("GX") if has_columns else None, steps=arrays.get("steps") if has_columns else None)
