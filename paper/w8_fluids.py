@@ -316,10 +316,11 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
     return fit, predict, seconds + fit.seconds
 
 
-def _checkpoint(condition: Condition, name: str) -> learn.Checkpoint:
-    """A fit's checkpoint, in the condition's folder of them, resumed if there."""
+def _checkpoint(condition: Condition, name: str) -> learn.Checkpoint | None:
+    """A fit's checkpoint, in the condition's folder of them, resumed if there (`None`: a
+    condition built outside the study, without such a folder, fits without one)."""
     if condition.checkpoints is None:
-        raise ValueError("Condition.checkpoints: where the checkpoints go must be set before a fit")
+        return None
     return learn.Checkpoint(condition.checkpoints / f"{name}.h5", every=1, resume=True)
 
 

@@ -273,7 +273,7 @@ def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_unint
     monkeypatch.setattr(_stream_checkpoint, "write", write)
     phases = [(phase, done, columns) for phase, done, columns, _, _ in copies]
     p = whole.values.size - 1  # the gauge's degree is not fitted
-    assert whole.iterations >= 2 and whole.stopped.startswith("converged")
+    assert whole.iterations >= 2 and whole.stopped == "converged"
     # one file per accepted iteration but the one that converged (it ends them), one when they
     # end, one per standard error's column
     assert phases == ([("iterations", k, 0) for k in range(1, whole.iterations)]
@@ -287,6 +287,19 @@ def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_unint
             np.testing.assert_array_equal(getattr(resumed, name), getattr(whole, name), err_msg=f"{name}, file {k}")
         assert (resumed.losses, resumed.iterations, resumed.stopped) == (whole.losses, whole.iterations, whole.stopped)
         assert resumed.seconds > copies[k][3] > 0  # the time before the checkpoint counts
+    # a fit the iteration cap stops: its last iteration is written, then again as they end
+    copies.clear()
+    monkeypatch.setattr(_stream_checkpoint, "write", write_and_copy)
+    capped = learn.fit_stream_operator(model, data, max_step=0.1, iterations=2, standard_errors=False,
+                                       checkpoint=learn.Checkpoint(path, every=1))
+    monkeypatch.setattr(_stream_checkpoint, "write", write)
+    assert capped.stopped == "iterations"
+    assert [c[:3] for c in copies] == [("iterations", 1, 0), ("iterations", 2, 0), ("standard errors", 2, 0)]
+    path.write_bytes(copies[0][4])
+    resumed = learn.fit_stream_operator(model, data, max_step=0.1, iterations=2, standard_errors=False,
+                                        checkpoint=learn.Checkpoint(path, resume=True))
+    np.testing.assert_array_equal(resumed.values, capped.values)
+    assert resumed.losses == capped.losses
 
 
 
@@ -301,8 +314,20 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match=r"other settings \(cg_rtol=1e-08 then, 1e-06 now\)"):
         learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, cg_rtol=1e-6, checkpoint=resume)
     other = add_field_noise(data, 1e-3, seed=3)
-    with pytest.raises(ValueError, match="written by a fit of other data, another model or another start"):
+    with pytest.raises(ValueError, match=r"written by a fit of other data, start \(data, model, start compared\)"):
         learn.fit_stream_operator(model, other, max_step=0.1, standard_errors=False, checkpoint=resume)
+    with pytest.raises(ValueError, match=r"written by a fit of other data \("):  # the same start: data alone
+        learn.fit_stream_operator(model, other, max_step=0.1, standard_errors=False, checkpoint=resume,
+                                  starts=np.stack([y[0] for y in data.states]))
+    with pytest.raises(ValueError, match=r"written by a fit of other start \("):
+        learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume,
+                                  starts=np.stack([y[1] for y in data.states]))
+    with pytest.raises(ValueError, match=r"other settings \(substeps=\d+ then, \d+ now \(from max_step\)\)"):
+        learn.fit_stream_operator(model, data, max_step=0.05, standard_errors=False, checkpoint=resume)
+    with h5py.File(path, "a") as f:  # cut short
+        del f["state_J_theta"]
+    with pytest.raises(ValueError, match="lacks state_J_theta"):
+        learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)
     with h5py.File(path, "w") as f:  # a foreign HDF5 file
         f["x"] = np.zeros(3)
     with pytest.raises(ValueError, match="is not a checkpoint of learn.fit_stream_operator"):

@@ -9,6 +9,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 from typing import Any
 
 import equinox as eqx
@@ -20,16 +21,22 @@ from integrators.internals import atomic_path, open_hdf5
 
 FORMAT = "liepoisson stream operator fit checkpoint"
 VERSION = 1
+#: The fit's algorithm: raised with any change to what an iteration or a column computes, so
+#: that a file written by an older library is refused rather than resumed into other bits.
+ALGORITHM = 1
+#: What a checkpoint's keys (`fingerprint`) are of, in the order `read` names them.
+KEYS = ("data", "model", "start")
 #: The fit's arrays kept in the file, by name (`_Linearisation`'s fields prefixed `state_`).
 STATE = ("cost", "g_theta", "c", "J_theta", "A")
 
 
 def fingerprint(*trees: Any) -> str:
-    """A hash of `trees` (their structure, every leaf's value): a checkpoint belongs to the
-    fit whose data, start and model give the same."""
+    """A hash of `trees` (their structure, every leaf's value; a default repr's address left
+    out: the same in any process): a checkpoint belongs to the fit whose data, model and start
+    give the same."""
     digest = hashlib.sha256()
     for tree in trees:
-        digest.update(eqx.tree_pformat(tree, short_arrays=True).encode())
+        digest.update(re.sub(r" at 0x[0-9a-fA-F]+", "", eqx.tree_pformat(tree, short_arrays=True)).encode())
         for leaf in jax.tree_util.tree_leaves(tree):
             if eqx.is_array_like(leaf):
                 a = np.ascontiguousarray(np.asarray(leaf))
@@ -67,12 +74,14 @@ class FitState:
     steps: np.ndarray | None = None
 
 
-def write(path: str | os.PathLike, fit_state: FitState, key: str, settings: dict[str, Any]) -> None:
+def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], settings: dict[str, Any]) -> None:
     """Write `fit_state` to `path` (HDF5; a temporary renamed into place: an interrupted write
-    leaves the previous file whole), marked with the fit's `key` (`fingerprint`) and `settings`."""
+    leaves the previous file whole), marked with the fit's `keys` (`KEYS`, each a
+    `fingerprint`) and `settings`."""
     s = fit_state
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
-        f.attrs.update(format=FORMAT, version=VERSION, key=key, settings=json.dumps(settings, sort_keys=True),
+        f.attrs.update(format=FORMAT, version=VERSION, keys=json.dumps(keys, sort_keys=True),
+                       settings=json.dumps({**settings, "algorithm": ALGORITHM}, sort_keys=True),
                        phase=s.phase, lam=s.lam, nu=s.nu, forcing=s.forcing, fresh=s.fresh, done=s.done,
                        stopped=s.stopped, seconds=s.seconds, columns=s.columns)
         f["x"], f["starts"], f["losses"], f["D_theta"] = s.x, s.starts, np.asarray(s.losses, float), s.D_theta
@@ -82,27 +91,39 @@ def write(path: str | os.PathLike, fit_state: FitState, key: str, settings: dict
             f["B"], f["X"], f["GX"], f["steps"] = s.B, s.X, s.GX, s.steps
 
 
-def read(path: str | os.PathLike, key: str, settings: dict[str, Any]) -> FitState:
+def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]) -> FitState:
     """The state in the checkpoint at `path`; `ValueError` naming `path` if it is not such a
-    file, or was written by a fit with other `settings` (each differing one named) or other
-    data, model or start (another `key`)."""
+    file (or lacks a part), or was written by a fit with other `settings` or by another
+    library's algorithm (each differing one named), or of other data, another model or another
+    start (`keys` that differ, named)."""
     expected = "a checkpoint of learn.fit_stream_operator"
+    where = f"checkpoint {os.fspath(path)!r}"
     with open_hdf5(path, expected) as f:
         attrs = dict(f.attrs)
         if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
-            raise ValueError(f"checkpoint {os.fspath(path)!r} is not {expected} (format {attrs.get('format')!r}, "
-                             f"version {attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION}): give "
-                             "another path, or delete the file to start the fit afresh")
+            raise ValueError(f"{where} is not {expected} (format {attrs.get('format')!r}, version "
+                             f"{attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION}): give another path, "
+                             "or delete the file to start the fit afresh")
+        missing = [name for name in ("keys", "settings", "phase", "lam", "nu", "forcing", "fresh", "done", "stopped",
+                                     "seconds", "columns") if name not in attrs]
+        missing += [name for name in ("x", "starts", "losses", "D_theta", *(f"state_{n}" for n in STATE)) if name not in f]
+        if missing:
+            raise ValueError(f"{where} lacks {', '.join(missing)} (a file cut short or edited): delete it to start the "
+                             "fit afresh")
         saved = json.loads(attrs["settings"])
-        now = json.loads(json.dumps(settings, sort_keys=True))
+        now = json.loads(json.dumps({**settings, "algorithm": ALGORITHM}, sort_keys=True))
         changed = sorted(k for k in {*saved, *now} if saved.get(k) != now.get(k))
         if changed:
-            what = "; ".join(f"{k}={saved.get(k)!r} then, {now.get(k)!r} now" for k in changed)
-            raise ValueError(f"checkpoint {os.fspath(path)!r} was written by a fit with other settings ({what}): "
-                             "resume with the same ones, or delete the file to start afresh")
-        if attrs["key"] != key:
-            raise ValueError(f"checkpoint {os.fspath(path)!r} was written by a fit of other data, another model or "
-                             "another start: give another path, or delete the file to start afresh")
+            what = "; ".join(f"{k}={saved.get(k)!r} then, {now.get(k)!r} now"
+                             + (" (from max_step)" if k == "substeps" else "")
+                             + (" (the library's fit changed since)" if k == "algorithm" else "") for k in changed)
+            raise ValueError(f"{where} was written by a fit with other settings ({what}): resume with the same ones, "
+                             "or delete the file to start afresh")
+        then = json.loads(attrs["keys"])
+        differ = [name for name in KEYS if then.get(name) != keys.get(name)]
+        if differ:
+            raise ValueError(f"{where} was written by a fit of other {', '.join(differ)} ({', '.join(KEYS)} compared): "
+                             "give another path, or delete the file to start afresh")
         arrays = {name: np.asarray(f[name]) for name in f}
     has_columns = "B" in arrays
     return FitState(

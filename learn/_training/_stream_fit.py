@@ -95,8 +95,8 @@ class StreamOperatorFit:
       residuals' root mean square over their degrees of freedom (per component).
     - `losses`: the mean squared residual after each accepted iteration (the first at the
       start); `iterations`; `stopped`: why the fit stopped; `substeps`: steps per interval;
-      `seconds`: the fit's wall time (over every process that ran it, when resumed from a
-      checkpoint).
+      `seconds`: the fit's wall time (resumed from a checkpoint: the time saved in it, that
+      of every process that ran the fit to its last write, plus this call's).
     """
 
     model: StreamOperator
@@ -197,10 +197,12 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       trajectory's first observation), e.g. a previous fit's `starts`.
     - `checkpoint`: a `learn.Checkpoint`: the fit's state is written to its file (HDF5, a
       temporary renamed into place) every `every` accepted iterations and every `every`
-      standard errors' columns (each a conjugate gradient solve: minutes at N = 64), and when
+      standard errors' columns (each a conjugate gradient solve: minutes at N = 64; give
+      `every=1` for such fits: `Checkpoint`'s default writes almost only at the end), and when
       the iterations end; with `resume`, a fit of the same data, model, start and settings
-      continues from the file bit for bit as the uninterrupted fit (a file of another fit is
-      refused, saying what differs). A finished fit's file returns its result at once.
+      continues from the file bit for bit as the uninterrupted fit (a file of another fit, or
+      of an older library's algorithm, is refused, saying what differs). A finished fit's file
+      returns its result at once.
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
       loss and time (wall and CPU).
 
@@ -270,9 +272,10 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     settings = {"iterations": iterations, "rtol": rtol, "chi2_tol": chi2_tol, "cg_rtol": cg_rtol,
                 "cg_max_steps": cg_max_steps, "standard_errors": standard_errors, "se_rtol": se_rtol,
                 "substeps": substeps}
-    key = "" if checkpoint is None else _checkpoint.fingerprint(padded, x, starts,
-                                                                eqx.partition(model, _trained(model))[1])
-    saved = _checkpoint.read(checkpoint.path, key, settings) if checkpoint is not None and checkpoint.resumable() \
+    keys = {} if checkpoint is None else {"data": _checkpoint.fingerprint(padded),
+                                          "model": _checkpoint.fingerprint(x, eqx.partition(model, _trained(model))[1]),
+                                          "start": _checkpoint.fingerprint(starts)}
+    saved = _checkpoint.read(checkpoint.path, keys, settings) if checkpoint is not None and checkpoint.resumable() \
         else None
     if saved is None:
         state = _linearisation(rebuild(x), starts, padded, substeps, None)
@@ -299,7 +302,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         _checkpoint.write(checkpoint.path, _checkpoint.FitState(
             phase, np.asarray(x), np.asarray(starts), lam, nu, forcing, fresh, done, losses, np.asarray(D_theta),
             {name: np.asarray(getattr(state, name)) for name in _checkpoint.STATE}, stopped,
-            before_seconds + time.perf_counter() - begin, columns, *(profiled or (None,) * 4)), key, settings)
+            before_seconds + time.perf_counter() - begin, columns, *(profiled or (None,) * 4)), keys, settings)
 
     def relinearised(why: str) -> _Linearisation:
         clock = _clock()
