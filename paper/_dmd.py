@@ -11,7 +11,8 @@ $b = \Phi^+ x_0$ (least squares).
   even grid of the data's median interval by a cubic spline in time (scipy's
   `CubicSpline`, per component), the pairs of consecutive resampled snapshots of every
   trajectory are stacked (`pydmd.DMD.fit(X, Y)`), and $\omega = \log\lambda/\Delta t$.
-- **Optimised DMD** fits the uneven times themselves, but one trajectory at a time: the
+- **Optimised DMD** fits the uneven times themselves (eigenvalues stable:
+  `EIG_CONSTRAINTS`), but one trajectory at a time: the
   trajectories must share their clock, and are stacked as one state `(J n, m)`, so that
   every trajectory $x_j(t) = \Phi\,e^{\Omega t}b_j$ shares $\Omega$ and the stacked modes are
   $\Phi\,\mathrm{diag}(b_j)$ per block; $\Phi$'s column $k$ is the leading left singular
@@ -36,6 +37,12 @@ import numpy as np
 #: it 4e-3 off the eigenvalues of an exactly linear system (tests/test_dmd_peers.py); at these
 #: it finds them to 2e-9.
 VARPRO_OPTIONS = {"tol": 1e-12, "maxiter": 200}
+#: The optimised DMD's eigenvalues: stable (real parts <= 0; pydmd's constraint for data that do
+#: not grow: W8's flows keep their enstrophy). Unconstrained, on W8's slow QG F = 100 fields (6-7%
+#: of their norm moved over the data) a trial step's eigenvalue grew until $e^{\omega t}$
+#: overflowed, and LAPACK's least squares on the NaN that followed never returned. (Conjugate
+#: pairs as well would lose a real system's single real eigenvalues: tests/test_dmd_peers.py.)
+EIG_CONSTRAINTS = frozenset({"stable"})
 #: The share of every training trajectory's snapshots (its last ones) the rank rule holds out.
 HELD_OUT_FRACTION = 1 / 3
 
@@ -117,9 +124,13 @@ def fit_optimised_dmd(times: Sequence[np.ndarray], states: Sequence[np.ndarray],
                          "same")
     n, J = states[0].shape[1], len(states)
     stacked = np.concatenate([np.asarray(y).T for y in states])  # (J n, m)
-    with warnings.catch_warnings(record=True) as caught:
+    # an overflow or a NaN in pydmd's arithmetic raises (FloatingPointError: a rank the solver
+    # cannot fit) instead of reaching LAPACK, whose least squares on a NaN can hang
+    with warnings.catch_warnings(record=True) as caught, np.errstate(over="raise", invalid="raise",
+                                                                     divide="raise"):
         warnings.simplefilter("always")
-        dmd = BOPDMD(svd_rank=rank, varpro_opts_dict=dict(VARPRO_OPTIONS)).fit(stacked, t - t[0])
+        dmd = BOPDMD(svd_rank=rank, varpro_opts_dict=dict(VARPRO_OPTIONS),
+                     eig_constraints=set(EIG_CONSTRAINTS)).fit(stacked, t - t[0])
     blocks = np.asarray(dmd.modes, dtype=np.complex128).reshape(J, n, -1)
     modes = np.empty((n, blocks.shape[-1]), dtype=np.complex128)
     for k in range(blocks.shape[-1]):
@@ -166,7 +177,7 @@ def chosen_rank(kind: str, times: Sequence[np.ndarray], states: Sequence[np.ndar
         try:
             fitted = FITS[kind](early_t, early_y, r)
             scores[r] = forecast_error(fitted, times, states, keep)
-        except (np.linalg.LinAlgError, ValueError):  # a rank the solver cannot fit: not chosen
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):  # a rank the solver cannot fit: not chosen
             scores[r] = math.inf
     if not scores:
         raise ValueError(f"ranks: none of {list(ranks)} is between 1 and {limit} (what the held-out fits allow)")

@@ -402,7 +402,7 @@ class DMDModel(AbstractFluidModel):
         rank, scores = _dmd.chosen_rank(self.kind, times, states, self.ranks)
         try:
             fitted = _dmd.FITS[self.kind](times, states, rank)
-        except (np.linalg.LinAlgError, ValueError) as err:  # pydmd's solver failed on every snapshot: no forecast
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError) as err:  # pydmd failed on every snapshot
             return Forecaster(lambda starts, step, n_steps: np.full((len(starts), n_steps + 1, starts.shape[1]), np.inf),
                               None, None, f"rank {rank} of {sorted(scores)}: pydmd failed ({type(err).__name__})")
 

@@ -68,3 +68,19 @@ def test_rank_rule_refuses_what_it_cannot_fit():
         _dmd.chosen_rank("optimised", times, states, (40,))  # more modes than the held-out fit's snapshots
     with pytest.raises(ValueError, match="one clock"):
         _dmd.fit_optimised_dmd([times[0], times[0] * 1.1, times[0]], states, 6)
+
+
+def test_an_overflow_in_the_optimised_fit_is_a_rank_it_cannot_fit_not_a_hang(monkeypatch):
+    """pydmd's variable projection let a trial eigenvalue grow until $e^{\\omega t}$ overflowed
+    (W8, QG F = 100), and LAPACK's least squares on the NaN never returned: the fit now runs
+    with overflows raising, and the rank rule scores such a rank inf."""
+    import pydmd
+
+    def overflowing(self, X, t):
+        return np.exp(np.outer(t, [1e3]))  # what a runaway trial eigenvalue does
+
+    monkeypatch.setattr(pydmd.BOPDMD, "fit", overflowing)
+    times, states = _trajectories(_uneven())
+    assert _dmd.chosen_rank("optimised", times, states, (2, 4)) == (2, {2: np.inf, 4: np.inf})
+    with pytest.raises(FloatingPointError):
+        _dmd.fit_optimised_dmd(times, states, 4)
