@@ -648,7 +648,7 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
 
 @eqx.filter_jit
 def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps):
-    """`(b, x, Gx, steps)` of one column `Jp` `(J, L n)` of $J_\theta$: $b = J_s^\top$ `Jp`,
+    r"""`(b, x, Gx, steps)` of one column `Jp` `(J, L n)` of $J_\theta$: $b = J_s^\top$ `Jp`,
     $x \approx G^{-1}b$ by conjugate gradients on $G$ scaled by counts$^{-1/2}$ (NaN if they
     do not converge), $Gx$ and their steps (`_profiled`)."""
     r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
