@@ -1,4 +1,4 @@
-"""The error of `learn.StreamOperator`'s orders at a given cost (BENCHMARKS.md, "Fluids from
+r"""The error of `learn.StreamOperator`'s orders at a given cost (BENCHMARKS.md, "Fluids from
 data"): Euler's equations on the sphere (Zeitlin's model at the Laplacian's spectrum, N = 16),
 a random field with every degree (W8's training field, unit harmonic norm: one eddy turnover
 is t = 1) run to t = 1 in `n` equal steps per interval of 0.1, against heyoka's Taylor method
@@ -13,6 +13,10 @@ turnover. Beside the three orders, Yoshida's triple jump of the midpoint
         --se-rtol 1e-2
     python -m benchmarks.stream_operator_orders --step-bias --N 32 --composition Yoshida6 --fit-step 0.075 \
         --se-from benchmarks/results/stream_operator_orders_step_bias_N32_Suzuki_0.15.json
+    python -m benchmarks.stream_operator_orders --step-bias --N 32 --truth rotating --composition Yoshida6 \
+        --fit-step 0.15
+    python -m benchmarks.stream_operator_orders --step-bias --N 32 --truth rotating --composition Yoshida6 \
+        --fit-step 0.075 --se-from benchmarks/results/stream_operator_orders_step_bias_N32_rotating_Yoshida6_0.15.json
 
 `--w8-limit`: what the step's error does to a fit, W8's limit (the quasi-geostrophic family,
 F from 0) on W8's Euler data at N = 16, noise 1e-3 (the quick profile's condition), at order 2
@@ -22,7 +26,10 @@ turnover (`benchmarks/results/stream_operator_orders_w8_limit.json`).
 
 `--step-bias`: the same for W8's learned spectrum per degree at the full profile's sizes: fitted
 to the clean training snapshots from the truth, its deviation is the step's bias, reported over
-the standard errors the fit has at noise 1e-3 (`step_bias`).
+the standard errors the fit has at noise 1e-3 (`step_bias`). `--truth rotating`: on the rotating
+sphere, with the rotation, steps of at most `fit_step` times $1/(2\Omega)$ (W8's
+`Condition.max_step`): `--fit-step 0.15` is the 0.075 eddy turnovers the full profile had there
+before.
 
 `--se-solves`: what the standard errors' solves cost and how exact they are (`se_solves`): W8's
 Euler training data at noise 1e-3, fitted without standard errors, then the profiled
@@ -104,43 +111,55 @@ def w8_limit() -> list[dict]:
 
 
 def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | None, cg_rtol: float,
-              se_rtol: float) -> dict:
-    """The step's bias of W8's learned spectrum per degree (Euler truth, W8's full-profile
-    training fields and clock at size `N`): the fit on the CLEAN snapshots from the truth, whose
-    deviation is the bias, over the standard errors at noise 1e-3 (the clean fit's, scaled from
-    its residual noise to 1e-3's noise; or read from `se_from`, an earlier run's results: they
-    hardly depend on the step)."""
+              se_rtol: float, truth: str = "Euler") -> dict:
+    r"""The step's bias of W8's learned spectrum per degree (W8's `truth`, its full-profile
+    training fields and clock at size `N`; on the rotating truth the rotation too, and steps of
+    W8's `Condition.max_step`, `fit_step` times $1/(2\Omega)$): the fit on the CLEAN snapshots
+    from the truth, whose deviation is the bias, over the standard errors at noise 1e-3 (the
+    clean fit's, scaled from its residual noise to 1e-3's noise; or read from `se_from`, an
+    earlier run's results: they hardly depend on the step)."""
     import time
 
     import integrators as it
     from paper import w8_fluids as w8
 
     P = w8.PROFILES["full"].replace(composition=composition, fit_step=fit_step)
-    condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+    condition = w8.Condition(N, w8.TRUTHS[truth], 1e-3, P)
+    rotation = condition.truth.rotation
     clean = np.asarray(w8._rollouts(condition.truth.model(condition.system),
                                     jnp.asarray(condition._fields(w8.TRAIN_SEED, P.n_train)),
                                     jnp.asarray(np.diff(condition.clock)), P.fine))
     data = it.Observations(condition.system, [condition.clock] * P.n_train, list(clean))
     sigma = it.add_field_noise(data, 1e-3, seed=w8.NOISE_SEED).metadata["noise_std"]
-    true = -np.arange(1, N) * np.arange(2, N + 1.0)
+    true = condition.truth.degree_values(N)
     model = learn.StreamOperator(condition.system, learn.DegreeSpectrum(true, reference_degree=N - 1),
-                                 composition=composition, tol=w8.MODEL_TOL, iterations=6)
+                                 rotation=rotation, composition=composition, tol=w8.MODEL_TOL, iterations=6)
     start = time.perf_counter()
-    fit = learn.fit_stream_operator(model, data, max_step=fit_step * condition.tau, iterations=3, rtol=1e-14,
+    fit = learn.fit_stream_operator(model, data, max_step=condition.max_step, iterations=3, rtol=1e-14,
                                     chi2_tol=0.0, cg_rtol=cg_rtol, standard_errors=se_from is None, se_rtol=se_rtol,
                                     progress=True)
     seconds = time.perf_counter() - start
     if se_from is None:
         se = np.asarray(fit.standard_errors) / fit.noise * sigma
+        rotation_se = None if rotation is None else float(fit.rotation_standard_error) / fit.noise * sigma
     else:
-        se = np.asarray(saved_results(se_from)[-1]["standard_errors"])
+        saved = saved_results(se_from)[-1]
+        se, rotation_se = np.asarray(saved["standard_errors"]), saved.get("rotation_standard_error")
     bias = np.asarray(fit.values) - true
     z = np.abs(bias[:-1]) / se[:-1]  # the last degree is the gauge's reference (not fitted)
-    print(f"N = {N}, {composition or 'midpoint'}, steps <= {fit_step} tau ({fit.substeps} an interval): bias/SE at "
-          f"noise 1e-3 by degree {np.array2string(z, precision=2, max_line_width=150)}; max {z.max():.3g} at degree "
-          f"{int(np.argmax(z)) + 1}; fit {seconds:.0f} s", flush=True)
-    return {"N": N, "composition": composition, "fit_step": fit_step, "substeps": fit.substeps,
-            "bias": bias.tolist(), "standard_errors": se.tolist(), "z": z.tolist(), "fit_seconds": seconds}
+    words = ""
+    if rotation is not None:
+        rotation_bias = float(fit.rotation) - rotation
+        words = f"; rotation's bias/SE {abs(rotation_bias) / rotation_se:.2g}"
+    print(f"N = {N}, {truth}, {composition or 'midpoint'}, steps <= {condition.max_step:.4g} ({fit.substeps} an "
+          f"interval): bias/SE at noise 1e-3 by degree {np.array2string(z, precision=2, max_line_width=150)}; max "
+          f"{z.max():.3g} at degree {int(np.argmax(z)) + 1}{words}; fit {seconds:.0f} s", flush=True)
+    result = {"N": N, "truth": truth, "composition": composition, "fit_step": fit_step,
+              "max_step": condition.max_step, "substeps": fit.substeps, "bias": bias.tolist(),
+              "standard_errors": se.tolist(), "z": z.tolist(), "fit_seconds": seconds}
+    if rotation is not None:
+        result.update(rotation_bias=rotation_bias, rotation_standard_error=rotation_se)
+    return result
 
 
 def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[float]) -> list[dict]:
@@ -207,6 +226,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--step-bias", action="store_true",
                         help="the step's bias of W8's learned spectrum per degree (module docstring)")
     parser.add_argument("--composition", default="Suzuki", help="--step-bias: the model's (None: the midpoint)")
+    parser.add_argument("--truth", default="Euler", help="--step-bias: W8's truth (paper.w8_fluids.TRUTHS)")
     parser.add_argument("--fit-step", type=float, default=0.15, help="--step-bias: the longest step, eddy turnovers")
     parser.add_argument("--se-from", default=None, help="--step-bias: the standard errors of an earlier run's file")
     parser.add_argument("--cg-rtol", type=float, default=1e-8, help="--step-bias: fit_stream_operator's cg_rtol")
@@ -219,14 +239,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.step_bias or args.se_solves:
         composition = None if args.composition == "None" else args.composition
         kind = "step_bias" if args.step_bias else "se_solves"
-        tag = f"{NAME}_{kind}_N{args.N}_{composition or 'midpoint'}_{args.fit_step:g}"
+        truth = "" if args.truth == "Euler" else f"_{args.truth.replace(' ', '').replace('=', '')}"
+        tag = f"{NAME}_{kind}_N{args.N}{truth}_{composition or 'midpoint'}_{args.fit_step:g}"
         out = args.out if args.out != default_out(NAME) else default_out(tag)
         if args.report:
             for r in saved_results(out):
                 print(r)
         elif args.step_bias:
             write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
-                                             args.se_rtol)])
+                                             args.se_rtol, args.truth)])
         else:
             write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
         return

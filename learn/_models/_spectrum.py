@@ -13,7 +13,10 @@ inverse eigenvalue $1/\lambda_{lm}$ adds $\kappa W$ to the stream, and $[\psi + 
 enstrophy), and the flow (the isospectral midpoint's to $O(h^2)$) cannot tell the two apart.
 A spectrum per degree or per harmonic therefore holds one eigenvalue fixed (`reference`: the
 gauge) and learns the others; compare a fitted spectrum with a true one in the same gauge
-(`in_gauge`)."""
+(`in_gauge`). On a rotating sphere (`learn.StreamOperator`'s rotation $\Omega$, $\dot W =
+[\psi, W + \Omega f]$) the shift is no symmetry: it adds $\kappa\Omega[W, f]$, a turning of
+the field about the axis, so the data fix every eigenvalue; hold the reference at its true
+value there, or compare the fitted flows rather than the spectra."""
 
 from __future__ import annotations
 
