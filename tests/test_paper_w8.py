@@ -32,6 +32,18 @@ def test_w8_is_registered_with_a_profile_of_each_name():
         assert {name for _, name, _ in P.spot_checks} <= set(w8.TRUTHS)
 
 
+def test_steps_are_shorter_on_a_sphere_turning_faster_than_the_eddies():
+    # fit_step times the shortest time scale: tau, or 1/(2 Omega) (the planetary vorticity's
+    # largest value 2 Omega); Euler's and QG's steps are fit_step eddy turnovers
+    P = w8.PROFILES["full"]
+    euler = w8.Condition(8, w8.TRUTHS["Euler"], 1e-3, P)
+    assert euler.max_step == P.fit_step * euler.tau
+    assert w8.Condition(8, w8.TRUTHS["QG F = 100"], 1e-3, P).max_step == euler.max_step
+    for rotation, scale in ((1.0, 0.5), (4.0, 0.125), (-4.0, 0.125), (0.1, euler.tau), (0.0, euler.tau)):
+        turning = w8.Condition(8, w8.Truth("turning", rotation=rotation), 1e-3, P)
+        assert turning.max_step == pytest.approx(P.fit_step * min(scale, euler.tau), rel=1e-15)
+
+
 def test_the_limits_laplacian_is_the_quasi_geostrophic_family_at_zero_and_learns_nothing():
     N = 6
     fixed = w8.LaplacianSpectrum()

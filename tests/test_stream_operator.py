@@ -139,6 +139,30 @@ def test_gauge():
     assert spectrum.inverse_values.shape == (N - 2,)  # the reference degree is not learned
 
 
+def test_the_gauge_is_no_symmetry_on_a_rotating_sphere():
+    # dW/dt = [psi, W + Omega f]/hbar: adding kappa to every inverse eigenvalue adds
+    # kappa [W, W + Omega f]/hbar = kappa Omega [W, f]/hbar, zero only without rotation
+    N, kappa, h = 6, 0.03, 1e-5
+    system = Zeitlin(N)
+    y = jnp.asarray(system.random_state(3))
+    l = np.arange(1, N)
+    lam = -(l * (l + 1.0))
+    shifted = 1.0 / (1.0 / lam + kappa)
+    W, f = system.algebra.matrix(y), jnp.asarray(learn.planetary_vorticity(N))
+    for rotation in (None, 0.7):
+        a, b = (learn.StreamOperator(system, learn.DegreeSpectrum(s), rotation=rotation, h=h, iterations=12)
+                for s in (lam, shifted))
+        rate = (np.asarray(b.step(y)) - np.asarray(a.step(y))) / h
+        if rotation is None:
+            # the same flow: the midpoint tells them apart at O(h^2) only (the module docstring)
+            assert np.max(np.abs(rate)) <= 1e-6 * np.max(np.abs(y))
+        else:
+            expected = np.asarray(system.algebra.coordinates(kappa * rotation * (W @ f - f @ W) / system.hbar))
+            # the steps differ by h times the rate plus O(h^2): a relative 1e-3 is ~100 h
+            np.testing.assert_allclose(rate, expected, rtol=0, atol=1e-3 * np.max(np.abs(expected)))
+            assert np.max(np.abs(expected)) > 1e-2 * np.max(np.abs(y))  # a turning the data see
+
+
 def test_bad_input():
     system = Zeitlin(4)
     with pytest.raises(TypeError, match="system must be liepoisson.systems.Zeitlin"):
