@@ -38,8 +38,8 @@ import numpy as np
 #: it finds them to 2e-9.
 VARPRO_OPTIONS = {"tol": 1e-12, "maxiter": 200}
 #: The optimised DMD's eigenvalues: stable (real parts <= 0; pydmd's constraint for data that do
-#: not grow: W8's flows keep their enstrophy). Unconstrained, on W8's slow QG F = 100 fields (6-7%
-#: of their norm moved over the data) a trial step's eigenvalue grew until $e^{\omega t}$
+#: not grow: W8's flows keep their enstrophy). Unconstrained, on W8's slow QG F = 100 fields (which
+#: move little over the data) a trial step's eigenvalue grew until $e^{\omega t}$
 #: overflowed, and LAPACK's least squares on the NaN that followed never returned. (Conjugate
 #: pairs as well would lose a real system's single real eigenvalues: tests/test_dmd_peers.py.)
 EIG_CONSTRAINTS = frozenset({"stable"})

@@ -20,8 +20,8 @@ from paper._registry import EXPERIMENTS
 def test_w8_is_registered_with_a_profile_of_each_name():
     assert EXPERIMENTS["W8"] is w8.EXPERIMENT
     assert set(w8.PROFILES) == {"smoke", "quick", "full"}
-    # the grid at N = 32 and one condition of each noise at N = 64 (a learned fit there is
-    # ~7-8 core-hours); N = 128's fit time is a benchmark's
+    # the grid at N = 32 and one condition of each noise at N = 64 (a learned fit there
+    # outlasts a session); N = 128's fit time is a benchmark's
     full = w8.PROFILES["full"]
     keys = [c.key for c in w8.EXPERIMENT.conditions(full)]
     assert len(keys) == len(set(keys)) == 8 + 2
