@@ -121,8 +121,8 @@ PROFILES = profiles(
                   n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
                   dmd_ranks=(4, 8, 16, 32), spot_checks=()),
     # the whole grid at N = 32 and two conditions at N = 64, one of each noise (a learned fit at
-    # N = 64 outlasts a session, its time the row's fit_seconds: the grid there would take weeks
-    # of a core); N = 128's fit time is benchmarks/stream_operator_probe.py's (BENCHMARKS, "Fluids
+    # N = 64 outlasts a session, its time the row's fit_seconds: the grid there is many times
+    # that); N = 128's fit time is benchmarks/stream_operator_probe.py's (BENCHMARKS, "Fluids
     # from data"). Yoshida's order 6 in two steps an interval (four on the rotating sphere:
     # `Condition.max_step`; Suzuki's in one biases the per-degree spectrum at N = 32 by many
     # standard errors: BENCHMARKS, "The step's order"); resumable row by row (--out)
