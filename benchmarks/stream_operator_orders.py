@@ -192,7 +192,7 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
                                             jnp.asarray(0.5), CG_MAX_STEPS))  # compiled once for the timings
     for rtol in sorted(rtols, reverse=True):
         wall, cpu = time.perf_counter(), time.process_time()
-        profiled, steps = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
+        profiled, steps, _ = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
                                             jnp.asarray(rtol), CG_MAX_STEPS)
         variances = np.diag(fit.noise**2 * np.linalg.inv(np.asarray(profiled)))
         # of the fitted inverse eigenvalues, degrees 1..N - 2 (the gauge's reference N - 1 is held)

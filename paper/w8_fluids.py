@@ -65,7 +65,9 @@ outside them is lost at $t = 0$ (its size is in the DMD rows' note).
 the test fields); the energy error $|E(\hat W) - E(W)|/E(W)$ (the truth's energy) and the
 enstrophy error (the same with $\tfrac12\|W\|_F^2$) at $5\tau$; the identified parameters
 against the truth's in units of their standard errors (the spectrum per degree in the same
-gauge, `learn.in_gauge`; the largest over degrees 1..N-2 and the rotation); the Casimir drift
+gauge, `learn.in_gauge`; the largest over degrees 1..N-2 and the rotation; the row's
+parameters say the step's estimated bias in the same units, `learn.StreamOperatorFit.step_bias`,
+in rows fitted since it was added); the Casimir drift
 $\max_k|\sum_i e_i^k(t) - \sum_i e_i^k(0)|/\sum_i|e_i(0)|^k$, $e_i$ the eigenvalues of
 $iq$, $q = W + \Omega f$ the absolute vorticity (on the rotating truth, $\Omega$ the model's own
 fitted rotation, the truth's for DMD; $q = W$ otherwise), $k = 2..4$, over every forecast
@@ -347,6 +349,18 @@ def _pm(value: float, se: float) -> str:
     return f"{value:.5g} ± {se:.2g}"
 
 
+def _step_words(fit: learn.StreamOperatorFit) -> str:
+    """The step's estimated bias (`StreamOperatorFit.step_bias`), at most, in standard errors
+    of the parameters fitted (a held reference has none)."""
+    bias, se = np.asarray(fit.step_bias, dtype=float), np.asarray(fit.standard_errors, dtype=float)
+    if fit.rotation is not None:
+        bias, se = np.append(bias, fit.rotation_step_bias), np.append(se, fit.rotation_standard_error)
+    fitted = se > 0
+    if not np.any(fitted):
+        return ""
+    return f"; the step's estimated bias at most {np.max(np.abs(bias[fitted]) / se[fitted]):.2g} SE"
+
+
 @dataclasses.dataclass(frozen=True)
 class LearnedStreamModel(AbstractFluidModel):
     """`learn.StreamOperator` with a spectrum per degree (gauge at degree N - 1) and, on a
@@ -369,6 +383,7 @@ class LearnedStreamModel(AbstractFluidModel):
             # no gauge on a rotating sphere (module docstring): the truth's own rotation
             z.append(abs(fit.rotation - truth.rotation) / fit.rotation_standard_error)
             words += f"; rotation {_pm(fit.rotation, fit.rotation_standard_error)}"
+        words += _step_words(fit)
         return Forecaster(predict, float(np.max(z)), words, f"{fit.iterations} LM iterations ({fit.stopped})",
                           fit.rotation, seconds)
 
@@ -396,6 +411,7 @@ class LimitModel(AbstractFluidModel):
         else:
             z = abs(fit.rotation - truth.rotation) / fit.rotation_standard_error
             words = f"rotation {_pm(fit.rotation, fit.rotation_standard_error)}"
+        words += _step_words(fit)
         return Forecaster(predict, float(z), words, f"{fit.iterations} LM iterations ({fit.stopped})",
                           fit.rotation, seconds)
 

@@ -218,7 +218,7 @@ def test_profiled_matrix_is_the_dense_schur_complement_to_second_order_in_the_so
     S = jnp.asarray(np.stack([y[0] for y in data.states]))
     lin = _linearisation(model, S, padded, 1, None)
     counts = jnp.sum(padded.mask, axis=1)
-    profiled, steps = _profiled(model, S, padded, lin.J_theta, lin.A, counts, 1, 1e-2, 200)
+    profiled, steps, _ = _profiled(model, S, padded, lin.J_theta, lin.A, counts, 1, 1e-2, 200)
 
     x, rebuild = _flat(model)
     jac = jax.jacfwd(lambda z, s: _all_residuals(rebuild(z), s, padded, 1).reshape(-1), argnums=(0, 1))
@@ -335,3 +335,33 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
     path.write_text("not HDF5")
     with pytest.raises(ValueError, match="not a readable HDF5 file"):
         learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)
+
+
+@pytest.mark.slow  # compiles a fit with standard errors at N = 4: over the default run's budget
+def test_the_steps_estimated_bias_is_the_bias_a_coarse_step_puts_in_the_parameters():
+    # the data: a rotating fluid rolled out in 32 midpoints an interval (its step error 1/1024 of
+    # one midpoint's, order 2); the model: one midpoint an interval, fitted to them from the
+    # truth, its deviation the step's bias (the reference degree held at the truth's: no gauge on
+    # a rotating sphere). The estimate is first order in the bias and Richardson's in the step
+    # (the midpoint's next term is O(h^4)): a tenth of it is room for both.
+    n = 4
+    system = Zeitlin(n)
+    l = np.arange(1, n)
+    true = -(l * (l + 1.0)) - 3.0
+    truth = learn.StreamOperator(system, learn.DegreeSpectrum(true), rotation=0.8, tol=TOL, iterations=16)
+    roll = eqx.filter_jit(lambda m, y, d: m.rollout_intervals(y, d, 32))
+    rng = np.random.default_rng(1)
+    times = [np.concatenate([[0.0], np.cumsum(rng.uniform(0.2, 0.4, 8))]) for _ in range(2)]
+    states = [np.asarray(roll(truth, jnp.asarray(2 * system.random_state(j, decay=0.5)), jnp.asarray(np.diff(t))))
+              for j, t in enumerate(times)]
+    model = learn.StreamOperator(system, learn.DegreeSpectrum(true), rotation=0.8, tol=TOL, iterations=16)
+    fit = learn.fit_stream_operator(model, Observations(system, times, states), iterations=30, rtol=1e-14,
+                                    chi2_tol=0.0)
+    bias = np.append(fit.values - true, fit.rotation - 0.8)
+    estimate = np.append(fit.step_bias, fit.rotation_step_bias)
+    assert bias[0] == estimate[0] == 0.0  # the held reference
+    assert np.min(np.abs(bias[1:]) / np.abs(np.append(true[1:], 0.8))) > 1e-4  # a bias to see
+    np.testing.assert_allclose(estimate[1:], bias[1:], rtol=0.1)
+    # without standard errors there is no estimate
+    bare = learn.fit_stream_operator(model, Observations(system, times, states), iterations=2, standard_errors=False)
+    assert np.all(np.isnan(bare.step_bias)) and np.isnan(bare.rotation_step_bias)

@@ -37,6 +37,14 @@ $\hat\sigma^2\big(A - \sum_j B_j^\top G_j^{-1}B_j\big)^{-1}$ ($B$ by $p$ transpo
 $G_j^{-1}B_j$ by conjugate gradients, a column at a time, the product formed so that its error
 is second order in the solves': they run to `se_rtol`), $\hat\sigma^2$ the residual sum of
 squares over its degrees of freedom.
+
+A model rolled out in steps $h$ carries the step's error $e = \Phi^h_\theta - \Phi_\theta$
+into its fitted parameters: to first order by the Gauss-Newton step of the residual $e$ with
+the starts profiled out, $\delta\theta = -S_p^{-1}\big(J_\theta^\top e - \sum_j B_j^\top
+G_j^{-1}J_{s_j}^\top e_j\big)$, $S_p$ the profiled matrix above (its solves $X = G^{-1}B$
+reused). $e$ is estimated by Richardson's rule from the same rollouts at half the step,
+$e \approx (\Phi^h - \Phi^{h/2})\,2^q/(2^q - 1)$ at order $q$: one more rollout and one
+reverse pass per trajectory (`StreamOperatorFit.step_bias`).
 """
 
 from __future__ import annotations
@@ -93,6 +101,9 @@ class StreamOperatorFit:
     - `covariance`: `(p, p)` of the parameters (flattened as the model's array leaves), the
       Gauss-Newton covariance with the starts profiled out; `noise`: $\hat\sigma$, the
       residuals' root mean square over their degrees of freedom (per component).
+    - `step_bias`, `rotation_step_bias`: the bias of `values` and `rotation` the step's error
+      puts in them, estimated (module docstring; NaN without standard errors): compare it with
+      the standard errors, and give a smaller `max_step` where it is not well below them.
     - `losses`: the mean squared residual after each accepted iteration (the first at the
       start); `iterations`; `stopped`: why the fit stopped; `substeps`: steps per interval;
       `seconds`: the fit's wall time (resumed from a checkpoint: the time saved in it, that
@@ -113,6 +124,8 @@ class StreamOperatorFit:
     stopped: str
     substeps: int
     seconds: float
+    step_bias: np.ndarray
+    rotation_step_bias: float | None
 
 
 class _Data(eqx.Module):
@@ -400,19 +413,31 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
 
         partial = None if saved is None or saved.B is None else (saved.B, saved.X, saved.GX, saved.steps,
                                                                    saved.columns)
-        profiled, cg_steps = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
-                                       jnp.asarray(se_rtol), cg_max_steps, partial=partial, after=after)
+        profiled, cg_steps, X = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
+                                          jnp.asarray(se_rtol), cg_max_steps, partial=partial, after=after)
         covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
+        bias = _step_bias(fitted, starts, padded, substeps, np.asarray(profiled), X)
         if progress:
             print(f"fit_stream_operator: standard errors: {p} solves of {int(np.min(cg_steps))}-"
                   f"{int(np.max(cg_steps))} conjugate gradient steps (rtol {se_rtol:.0e}), "
                   f"{_since(clock)}", flush=True)
     else:
         covariance = np.full((p, p), np.nan)
+        bias = np.full(p, np.nan)
     variances = np.diag(covariance)
     se = unravel(jnp.asarray(np.where(variances >= 0, np.sqrt(np.abs(variances)), np.nan)))
     h = float(np.median(all_intervals)) / substeps
     fitted = eqx.tree_at(lambda m: m.h, fitted, h, is_leaf=lambda v: v is None)
+    # the bias of what the fit reports: the values the biased parameters give, less the fitted
+    # ones (its sign kept; to first order, as the bias itself)
+    known = bool(np.all(np.isfinite(bias)))
+    biased = rebuild(x + jnp.asarray(np.where(np.isfinite(bias), bias, 0.0)))
+    values_bias = biased.spectrum.values() - fitted.spectrum.values() if known else \
+        np.full(np.shape(fitted.spectrum.values()), np.nan)
+    if progress and known:
+        z = float(np.max(np.abs(bias) / np.sqrt(np.abs(variances))))
+        print(f"fit_stream_operator: the step's estimated bias: at most {z:.2g} standard errors"
+              + (": give a smaller max_step" if z > 1 else ""), flush=True)
     return StreamOperatorFit(
         model=fitted, spectrum=fitted.spectrum, values=fitted.spectrum.values(),
         standard_errors=fitted.spectrum.standard_errors(se.spectrum),
@@ -420,7 +445,10 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         rotation_standard_error=None if fitted.rotation is None else float(se.rotation),
         starts=np.asarray(starts), covariance=np.asarray(covariance), noise=math.sqrt(sigma2),
         losses=losses, iterations=done, stopped=stopped, substeps=substeps,
-        seconds=before_seconds + time.perf_counter() - begin)
+        seconds=before_seconds + time.perf_counter() - begin,
+        step_bias=np.asarray(values_bias, dtype=np.float64),
+        rotation_step_bias=None if fitted.rotation is None else
+        (float(biased.rotation) - float(fitted.rotation) if known else math.nan))
 
 
 def _clock() -> tuple[float, float]:
@@ -643,7 +671,39 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
             after(k, B, X, GX, steps)
     B, X, GX = B.reshape(p, -1), X.reshape(p, -1), GX.reshape(p, -1)
     BX = B @ X.T
-    return np.asarray(A) - (BX + BX.T - X @ GX.T), steps
+    return np.asarray(A) - (BX + BX.T - X @ GX.T), steps, X
+
+
+@eqx.filter_jit
+def _step_error(model, S, data, substeps):
+    r"""The step's error of the rollouts, $e \approx (\Phi^h - \Phi^{h/2})\,2^q/(2^q - 1)$ at
+    order $q$ (Richardson), `(J, L, n)`, the padding 0."""
+    coarse = jax.vmap(lambda s, dt: model.rollout_intervals(s, dt, substeps))(S, data.intervals)
+    fine = jax.vmap(lambda s, dt: model.rollout_intervals(s, dt, 2 * substeps))(S, data.intervals)
+    return (coarse - fine) * data.mask[..., None] * (2.0**model.order / (2.0**model.order - 1.0))
+
+
+@eqx.filter_jit
+def _pullback(model, S, data, substeps, E):
+    r"""$(J_\theta^\top E, J_s^\top E)$ for residual-shaped `E` `(J, L, n)`: one reverse pass
+    per trajectory."""
+    x, rebuild = _flat(model)
+
+    def one(a):
+        s, y, dt, m, e = a
+        _, pullback = jax.vjp(lambda z, s: _residuals(rebuild(z), s, y, dt, m, substeps), x, s)
+        return pullback(e)
+
+    g, c = jax.lax.map(one, (S, data.states, data.intervals, data.mask, E))
+    return jnp.sum(g, 0), c
+
+
+def _step_bias(model, S, data, substeps, profiled: np.ndarray, X: np.ndarray) -> np.ndarray:
+    r"""The flat parameters' bias from the step's error (module docstring),
+    $-S_p^{-1}(J_\theta^\top e - X J_s^\top e)$, `X` $= G^{-1}B$ `(p, J n)` of `_profiled`."""
+    E = _step_error(model, S, data, substeps)
+    g, c = _pullback(model, S, data, substeps, E)
+    return -np.linalg.solve(profiled, np.asarray(g) - X @ np.asarray(c).reshape(-1))
 
 
 @eqx.filter_jit
