@@ -29,7 +29,8 @@ to the clean training snapshots from the truth, its deviation is the step's bias
 the standard errors the fit has at noise 1e-3 (`step_bias`). `--truth rotating`: on the rotating
 sphere, with the rotation, steps of at most `fit_step` times $1/(2\Omega)$ (W8's
 `Condition.max_step`): `--fit-step 0.15` is the 0.075 eddy turnovers the full profile had there
-before.
+before. Computed with standard errors (no `--se-from`), the fit's own estimate of the bias,
+`learn.StreamOperatorFit.step_bias`, is printed and saved beside it (`estimated_bias`).
 
 `--se-solves`: what the standard errors' solves cost and how exact they are (`se_solves`): W8's
 Euler training data at noise 1e-3, fitted without standard errors, then the profiled
@@ -159,6 +160,16 @@ def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | N
               "standard_errors": se.tolist(), "z": z.tolist(), "fit_seconds": seconds}
     if rotation is not None:
         result.update(rotation_bias=rotation_bias, rotation_standard_error=rotation_se)
+    if se_from is None:  # the fit's own estimate of the same bias (learn.StreamOperatorFit.step_bias)
+        estimate = np.asarray(fit.step_bias)
+        worst = int(np.argmax(np.abs(bias[:-1])))
+        print(f"  the fit's estimate of it (step_bias): by degree "
+              f"{np.array2string(np.abs(estimate[:-1]) / se[:-1], precision=2, max_line_width=150)}; at degree "
+              f"{worst + 1} {estimate[worst]:.3g} against the bias {bias[worst]:.3g}"
+              + ("" if rotation is None else f"; rotation {fit.rotation_step_bias:.3g} against {rotation_bias:.3g}"),
+              flush=True)
+        result.update(estimated_bias=estimate.tolist(),
+                      **({} if rotation is None else {"estimated_rotation_bias": fit.rotation_step_bias}))
     return result
 
 
