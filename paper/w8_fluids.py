@@ -216,9 +216,8 @@ class Condition:
         shortest time scale, the eddy turnover $\tau$ or, on a rotating sphere, $1/(2\Omega)$
         (the inverse of the planetary vorticity's largest value $2\Omega$; the sphere's rotation
         rate is known to a physicist to its order of magnitude, its value is what a model learns).
-        On the rotating truth at N = 32 Yoshida's order 6 at $0.075\tau$ biased the learned
-        degree-1 eigenvalue by 4.1 standard errors at noise 1e-3, at $0.0375$ by 0.08
-        (BENCHMARKS.md, "The step's order")."""
+        Without the rotation's scale the step biased the rotating truth's learned spectrum by
+        many standard errors (BENCHMARKS.md, "The step's order")."""
         scale = self.tau
         if self.truth.rotation is not None and self.truth.rotation != 0:
             scale = min(scale, 1.0 / (2.0 * abs(self.truth.rotation)))
