@@ -542,18 +542,20 @@ class _Linearisation(eqx.Module):
 
 
 @eqx.filter_jit
-def _gradient(model, S, data, substeps):
-    r"""`(cost, g_theta, c)`: one rollout and one reverse pass per trajectory (one trajectory at
-    a time, `lax.map`: one's reverse-mode residuals held)."""
+def _pullback(model, S, data, substeps, E=None):
+    r"""`(cost, g_theta, c)`: $g_\theta = J_\theta^\top E$, $c = J_s^\top E$ for residual-shaped
+    `E` `(J, L, n)`, or the residuals $r$ themselves (`None`: the cost's half-gradient), and
+    the cost $|r|^2$: one rollout and one reverse pass per trajectory (one trajectory at a
+    time, `lax.map`: one's reverse-mode residuals held)."""
     x, rebuild = _flat(model)
 
     def one(a):
-        s, y, dt, m = a
+        s, y, dt, m, *e = a
         r, pullback = jax.vjp(lambda z, s: _residuals(rebuild(z), s, y, dt, m, substeps), x, s)
-        g, c = pullback(r)
+        g, c = pullback(r if E is None else e[0])
         return jnp.sum(r * r), g, c
 
-    cost, g, c = jax.lax.map(one, (S, data.states, data.intervals, data.mask))
+    cost, g, c = jax.lax.map(one, (S, data.states, data.intervals, data.mask, *(() if E is None else (E,))))
     return jnp.sum(cost), jnp.sum(g, 0), c
 
 
@@ -576,7 +578,7 @@ def _linearisation(model, S, data, substeps, previous: _Linearisation | None) ->
     (`previous` `None`: $p$ forward passes per trajectory, the fit's largest cost) or kept
     from `previous` (its point near: the gradient, exact, fixes the minimum; $J_\theta$ only
     shapes the steps towards it)."""
-    cost, g_theta, c = _gradient(model, S, data, substeps)
+    cost, g_theta, c = _pullback(model, S, data, substeps)
     J_theta, A = _theta_jacobian(model, S, data, substeps) if previous is None else (previous.J_theta, previous.A)
     return _Linearisation(cost, g_theta, c, J_theta, A)
 
@@ -683,26 +685,11 @@ def _step_error(model, S, data, substeps):
     return (coarse - fine) * data.mask[..., None] * (2.0**model.order / (2.0**model.order - 1.0))
 
 
-@eqx.filter_jit
-def _pullback(model, S, data, substeps, E):
-    r"""$(J_\theta^\top E, J_s^\top E)$ for residual-shaped `E` `(J, L, n)`: one reverse pass
-    per trajectory."""
-    x, rebuild = _flat(model)
-
-    def one(a):
-        s, y, dt, m, e = a
-        _, pullback = jax.vjp(lambda z, s: _residuals(rebuild(z), s, y, dt, m, substeps), x, s)
-        return pullback(e)
-
-    g, c = jax.lax.map(one, (S, data.states, data.intervals, data.mask, E))
-    return jnp.sum(g, 0), c
-
-
 def _step_bias(model, S, data, substeps, profiled: np.ndarray, X: np.ndarray) -> np.ndarray:
     r"""The flat parameters' bias from the step's error (module docstring),
     $-S_p^{-1}(J_\theta^\top e - X J_s^\top e)$, `X` $= G^{-1}B$ `(p, J n)` of `_profiled`."""
     E = _step_error(model, S, data, substeps)
-    g, c = _pullback(model, S, data, substeps, E)
+    _, g, c = _pullback(model, S, data, substeps, E)
     return -np.linalg.solve(profiled, np.asarray(g) - X @ np.asarray(c).reshape(-1))
 
 
