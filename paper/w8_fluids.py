@@ -52,7 +52,7 @@ At $\tau$ the fields have moved about a tenth of their norm, at $5\tau$ about a 
 forecast by every model from that noisy field, in steps of $\Delta$ (the stream operators:
 each in equal steps of the `composition` of midpoints (`learn.StreamOperator`'s) of at most
 `Condition.max_step` (`fit_step` eddy turnovers; on the rotating sphere `fit_step` times
-$1/(2\Omega)$ if shorter), as in their fits, where every interval is run in the same number of
+$1/(2\Omega)$ if shorter; above N = 32 shorter by $(N - 1)/31$), as in their fits, where every interval is run in the same number of
 steps, the fewest that keep the longest one's at most that), against the truth from the clean field.
 A fitted model carries its step's error into its parameters, the more visibly the smaller the
 error bars (more data, larger N): hence a higher order and shorter steps in the full profile
@@ -103,6 +103,7 @@ FORECAST_ITERATIONS = 16  # stage iterations of a forecast step (a noisy start, 
 TRAIN_SEED, TEST_SEED, CLOCK_SEED, NOISE_SEED = 100, 200, 0, 1
 ROTATION = 1.0  # the rotating truth's angular velocity (the rms vorticity is 1)
 HORIZONS = (1, 5)  # in eddy turnovers
+RESOLUTION = 32  # the N at which fit_step was measured; steps shorten above it (Condition.max_step)
 
 PROFILES = profiles(
     # sizes: N; truths: names of TRUTHS; noises: relative to the field's rms component (the grid
@@ -112,7 +113,7 @@ PROFILES = profiles(
     # stream operators' first fit (continuation in time, `_fit`; smoke: all, no continuation,
     # as measured; quick, full: NOT yet measured, the N = 16 check was cut by the deadline); fit_step: the stream operators'
     # longest step in eddy turnovers (`Condition.max_step`: fit_stream_operator's max_step, forecasts too;
-    # shorter on a rotating sphere); composition: their
+    # shorter on a rotating sphere and above N = 32); composition: their
     # step's (None: one midpoint; the module docstring); fine: the
     # truth's steps per interval; lm_iterations: fit_stream_operator's at most; dmd_ranks: the DMD candidates.
     # "smoke" exercises the whole pipeline (tests); numbers are meaningless at N = 8.
@@ -215,13 +216,17 @@ class Condition:
         r"""The stream operators' longest step (fits and forecasts): `fit_step` times the flow's
         shortest time scale, the eddy turnover $\tau$ or, on a rotating sphere, $1/(2\Omega)$
         (the inverse of the planetary vorticity's largest value $2\Omega$; the sphere's rotation
-        rate is known to a physicist to its order of magnitude, its value is what a model learns).
-        Without the rotation's scale the step biased the rotating truth's learned spectrum by
-        many standard errors (BENCHMARKS.md, "The step's order")."""
+        rate is known to a physicist to its order of magnitude, its value is what a model learns),
+        and above `RESOLUTION` shorter by $(N - 1)/($`RESOLUTION`$ - 1)$: the field's finest
+        resolved degree $l = N - 1$ is advected, so a step's error, and the midpoint's stage
+        iteration's contraction factor, grow with $l\,h$ (Courant's number). Without the
+        rotation's scale the step biased the rotating truth's learned spectrum by many standard
+        errors, without the resolution's the limit's $F$ at N = 64 (BENCHMARKS.md, "The step's
+        order")."""
         scale = self.tau
         if self.truth.rotation is not None and self.truth.rotation != 0:
             scale = min(scale, 1.0 / (2.0 * abs(self.truth.rotation)))
-        return self.P.fit_step * scale
+        return self.P.fit_step * scale * min(1.0, (RESOLUTION - 1) / (self.N - 1))
 
     @functools.cached_property
     def clock(self) -> np.ndarray:

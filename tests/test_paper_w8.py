@@ -3,6 +3,7 @@ truths' spectra, the Casimir drift, the profiles), and the whole study at the sm
 (slow)."""
 
 import json
+import math
 
 import equinox as eqx
 import jax
@@ -42,6 +43,31 @@ def test_steps_are_shorter_on_a_sphere_turning_faster_than_the_eddies():
     for rotation, scale in ((1.0, 0.5), (4.0, 0.125), (-4.0, 0.125), (0.1, euler.tau), (0.0, euler.tau)):
         turning = w8.Condition(8, w8.Truth("turning", rotation=rotation), 1e-3, P)
         assert turning.max_step == pytest.approx(P.fit_step * min(scale, euler.tau), rel=1e-15)
+    # above N = 32 the step shortens with the finest degree N - 1 (Courant's number l h)
+    for N, shorter in ((32, 1.0), (64, 31 / 63), (128, 31 / 127)):
+        condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+        assert condition.max_step == pytest.approx(P.fit_step * condition.tau * shorter, rel=1e-15)
+
+
+@pytest.mark.slow  # rollouts at N = 64, compiled
+def test_the_step_at_n_64_errs_no_more_than_the_step_at_n_32():
+    # The step error of W8's Euler truth over one interval of 0.15 tau (W8's longest), at each
+    # size's Condition.max_step, against 16 substeps (order 6: their own error ~1e-8 of it).
+    # Measured: N = 32 4.4e-6; N = 64 9.4e-7 at its max_step, 4.5e-5 at N = 32's, and NaN at
+    # twice that (the midpoint's stage iteration diverges): the step must shorten with N.
+    P = w8.PROFILES["full"]
+    errors = {}
+    for N in (32, 64):
+        condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+        tau = condition.tau
+        y0 = jnp.asarray(condition._fields(w8.TRAIN_SEED, 1)[0])
+        model = learn.StreamOperator(condition.system, composition=P.composition, tol=1e-13, iterations=16)
+        interval = jnp.full(1, 0.15 * tau)
+        n = math.ceil(0.15 * tau / condition.max_step - 1e-12)
+        y = np.asarray(model.rollout_intervals(y0, interval, n))[-1]
+        reference = np.asarray(model.rollout_intervals(y0, interval, 16))[-1]
+        errors[N] = np.linalg.norm(y - reference) / np.linalg.norm(reference)
+    assert np.isfinite(errors[64]) and errors[64] <= errors[32]
 
 
 def test_the_limits_laplacian_is_the_quasi_geostrophic_family_at_zero_and_learns_nothing():
