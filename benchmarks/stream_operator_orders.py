@@ -32,6 +32,13 @@ sphere, with the rotation, steps of at most `fit_step` times $1/(2\Omega)$ (W8's
 before. Computed with standard errors (no `--se-from`), the fit's own estimate of the bias,
 `learn.StreamOperatorFit.step_bias`, is printed and saved beside it (`estimated_bias`).
 
+`--courant`: why W8's steps shorten above N = 32 (`paper.w8_fluids.Condition.max_step`): the
+full profile's composition over one interval of 0.15 eddy turnovers (W8's longest) from W8's
+first Euler training field, at N = 32 and 64, in 1, 2 and 4 steps against 16 (order 6: their
+own error is about 1e-8 of the 4 steps'), and at each size's `max_step`:
+
+    python -m benchmarks.stream_operator_orders --courant
+
 `--se-solves`: what the standard errors' solves cost and how exact they are (`se_solves`): W8's
 Euler training data at noise 1e-3, fitted without standard errors, then the profiled
 Gauss-Newton matrix (`learn._training._stream_fit._profiled`, what `fit_stream_operator` does
@@ -223,6 +230,32 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
     return results
 
 
+def courant(sizes: tuple[int, ...] = (32, 64)) -> list[dict]:
+    """The step's error over one interval by size and step (module docstring, `--courant`)."""
+    import math
+
+    from paper import w8_fluids as w8
+
+    jax.config.update("jax_enable_x64", True)
+    P = w8.PROFILES["full"]
+    results = []
+    for N in sizes:
+        condition = w8.Condition(N, w8.TRUTHS["Euler"], 1e-3, P)
+        tau, y0 = condition.tau, jnp.asarray(condition._fields(w8.TRAIN_SEED, 1)[0])
+        model = learn.StreamOperator(condition.system, composition=P.composition, tol=1e-13, iterations=16)
+        interval = jnp.full(1, 0.15 * tau)
+        roll = eqx.filter_jit(lambda m, y, dt, n: m.rollout_intervals(y, dt, n))
+        reference = np.asarray(roll(model, y0, interval, 16))[-1]
+        own = math.ceil(0.15 * tau / condition.max_step - 1e-12)
+        for n in sorted({1, 2, 4, own}):
+            y = np.asarray(roll(model, y0, interval, n))[-1]
+            error = float(np.linalg.norm(y - reference) / np.linalg.norm(reference))
+            results.append({"N": N, "steps": n, "step_over_tau": 0.15 / n, "max_step": n == own, "error": error})
+            print(f"N = {N}, {n} step(s) of {0.15 / n:.4g} tau{' (its max_step)' if n == own else ''}: "
+                  f"relative error {error:.2e}", flush=True)
+    return results
+
+
 def report(results: list[dict]) -> None:
     print("method        midpoints per tau: relative error at tau")
     for method in dict.fromkeys(r["method"] for r in results):
@@ -242,6 +275,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--se-from", default=None, help="--step-bias: the standard errors of an earlier run's file")
     parser.add_argument("--cg-rtol", type=float, default=1e-8, help="--step-bias: fit_stream_operator's cg_rtol")
     parser.add_argument("--se-rtol", type=float, default=1e-3, help="--step-bias: fit_stream_operator's se_rtol")
+    parser.add_argument("--courant", action="store_true", help="the step's error by size (module docstring)")
     parser.add_argument("--se-solves", action="store_true", help="the standard errors' solves (module docstring)")
     parser.add_argument("--se-rtols", type=float, nargs="+", default=[1e-3, 1e-2, 1e-6],
                         help="--se-solves: the tolerances (the tightest the reference)")
@@ -261,6 +295,14 @@ def main(argv: list[str] | None = None) -> None:
                                              args.se_rtol, args.truth)])
         else:
             write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
+        return
+    if args.courant:
+        out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_courant")
+        if args.report:
+            for r in saved_results(out):
+                print(r)
+            return
+        write_json(out, args, courant())
         return
     if args.w8_limit:
         out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")
