@@ -5,6 +5,7 @@ argument, and progress bars. Not a user API: these names may change with the lib
 - `as_state(y, name, dim)`, `states(y, name, dim)`, `pairs(y0, y1, dim)`: float64 arrays of
   states `(..., dim)`, finite, checked.
 - `positive_float(x, name)`, `positive_int(n, name, minimum=1)`, `fraction(x, name)`: scalars.
+- `is_traced(x)`: a JAX tracer (inside `jit`, `vmap`, `grad`), whose values no check can see.
 - `check_system(system)`: a `liepoisson.systems.AbstractPoissonSystem`; `refuse_nonholonomic(system,
   what)`: `ValueError` for a constrained system where `what` moves along coadjoint orbits.
 - `check_casimirs_agree(...)`: pairs whose Casimirs differ are named; `casimir_scale(gradients,
@@ -32,6 +33,9 @@ from ._validation import (
 )
 from ._validation import (
     fraction as fraction,
+)
+from ._validation import (
+    is_traced as is_traced,
 )
 from ._validation import (
     pairs as pairs,

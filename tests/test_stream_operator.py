@@ -192,6 +192,33 @@ def test_bad_input():
         learn.DegreeSpectrum([-2.0, -6.0, -12.0], reference_degree=4)
 
 
+def test_rollout_refuses_bad_arguments_and_a_step_its_stage_iteration_cannot_take():
+    system = Zeitlin(4)
+    model = learn.StreamOperator(system)
+    y0 = np.asarray(system.random_state(0))  # |y0| = 2
+    with pytest.raises(ValueError, match=r"y0 must have shape \(\.\.\., 16\).*got shape \(15,\)"):
+        model.rollout_intervals(np.ones(15), [0.1])
+    with pytest.raises(ValueError, match=r"y0 must be one state of shape \(16,\); got shape \(2, 16\)"):
+        model.rollout_intervals(np.ones((2, 16)), [0.1])
+    with pytest.raises(ValueError, match="y0 must be finite"):
+        model.rollout_intervals(np.full(16, np.nan), [0.1])
+    with pytest.raises(ValueError, match=r"intervals must have shape \(n,\).*got shape \(1, 1\)"):
+        model.rollout_intervals(y0, [[0.1]])
+    for bad in (-0.1, np.inf, np.nan):
+        with pytest.raises(ValueError, match="intervals must be finite and >= 0.* at index 1"):
+            model.rollout_intervals(y0, [0.01, bad])
+    with pytest.raises(TypeError, match="intervals must be an array"):
+        model.rollout_intervals(y0, "0.1")
+    # four stage iterations do not reach tol at a step of 0.1 from this field (the same call
+    # returned NaN before it was checked); six do, and so do four at ten substeps
+    with pytest.raises(ValueError, match=r"did not meet tol=1e-10 in iterations=4 in interval 1 \(of length 0\.1, "
+                                         r"1 substep\(s\)\).*give more substeps"):
+        model.rollout_intervals(y0, [0.01, 0.1])
+    for ok in (learn.StreamOperator(system, iterations=6).rollout_intervals(y0, [0.01, 0.1]),
+               model.rollout_intervals(y0, [0.01, 0.1], 10)):
+        assert np.all(np.isfinite(np.asarray(ok)))
+
+
 def test_hamiltonian_is_zeitlins_at_the_laplacian():
     N = 6
     system = Zeitlin(N)

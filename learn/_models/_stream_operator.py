@@ -24,7 +24,13 @@ from integrators.internals import (
     check_stage_tolerance,
 )
 from integrators.splitting import AbstractCompositionMethod, splitting_method_by_name
-from liepoisson.internals import harmonic_multiplier, positive_float, positive_int
+from liepoisson.internals import (
+    as_state,
+    harmonic_multiplier,
+    is_traced,
+    positive_float,
+    positive_int,
+)
 from liepoisson.systems import AbstractPoissonSystem, Zeitlin
 
 from .._solvers._stage import AbstractStage
@@ -120,6 +126,27 @@ class _Ring(eqx.Module):
                      self.times.at[slot].set(jnp.where(keep, t, self.times[slot])),
                      self.valid.at[slot].set(self.valid[slot] | keep),
                      jnp.where(keep, self.count + 1, self.count) % (2 * PREDICTOR_POINTS))
+
+
+def _checked_rollout(y0: Any, intervals: Any, dim: int) -> tuple[jax.Array, np.ndarray]:
+    """`rollout_intervals`' arguments checked (called on concrete values only): `y0` one
+    finite state `(dim,)`, `intervals` `(n,)` finite and >= 0."""
+    y0 = as_state(y0, "y0", dim)
+    if y0.ndim != 1:
+        raise ValueError(f"y0 must be one state of shape ({dim},); got shape {tuple(y0.shape)}")
+    if isinstance(intervals, (str, bytes)) or intervals is None:
+        raise TypeError(f"intervals must be an array of shape (n,) of times; got {intervals!r}")
+    arr = np.asarray(intervals)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise TypeError(f"intervals must be a real array of shape (n,); got dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"intervals must have shape (n,), the times between states; got shape {arr.shape}")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        bad = int(np.argmax(~np.isfinite(arr) | (arr < 0)))
+        raise ValueError(f"intervals must be finite and >= 0 (0: a padded interval, the state repeated); got "
+                         f"{arr[bad]!r} at index {bad}")
+    return y0, arr
 
 
 class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
@@ -263,8 +290,14 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
         state: padding). Traceable and differentiable in both modes in the parameters and `y0`
         (the fixed `iterations`; the history that starts each step's iteration is found without
         derivatives). The predictor's history is kept per unit step (increments divided by
-        $h$), so that it extrapolates across intervals of other lengths."""
+        $h$), so that it extrapolates across intervals of other lengths. A midpoint whose stage
+        iteration has not met `tol` makes the states after it NaN under `jit`, `vmap` or `grad`
+        (a fit rejects such a step); called on values, the arguments are checked and such a
+        step is a `ValueError` that says which interval."""
         substeps = positive_int(substeps, "substeps")
+        eager = not (is_traced(y0) or is_traced(intervals))
+        if eager:
+            y0, intervals = _checked_rollout(y0, intervals, self.system.dim)
         intervals = jnp.asarray(intervals)
         shift = self._shift()
         W = self.system.algebra.matrix(jnp.asarray(y0) + shift)
@@ -303,7 +336,14 @@ class StreamOperator(IsospectralMidpoint, AbstractCasimirConservingMap):
             return (W, ring, t), self.system.algebra.coordinates(W) - shift
 
         _, ys = jax.lax.scan(interval, (W, ring, jnp.zeros_like(h0)), intervals)
-        return jnp.concatenate([jnp.asarray(y0)[None], ys])
+        out = jnp.concatenate([jnp.asarray(y0)[None], ys])
+        if eager and not is_traced(out) and not bool(jnp.all(jnp.isfinite(out))):
+            first = int(np.argmin(np.all(np.isfinite(np.asarray(out)), axis=-1)))
+            raise ValueError(f"the stage iteration of a midpoint did not meet tol={self.tol:g} in iterations="
+                             f"{self.iterations} in interval {first - 1} (of length {float(intervals[first - 1]):g}, "
+                             f"{substeps} substep(s)): the step is too long for this field; give more substeps (a "
+                             f"shorter step) or more iterations")
+        return out
 
     def _stage_step(self, W: jax.Array, h: jax.Array, D: jax.Array) -> tuple[jax.Array, jax.Array]:
         """`IsospectralMidpoint._midpoint` with `iterations` fixed, as a loop (`lax.scan`: one
