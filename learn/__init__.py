@@ -105,7 +105,8 @@ from ._training._criterion import (
     SkippedFamily as SkippedFamily,
 )
 from ._training._fit_splitting import fit_splitting as fit_splitting
-from ._training._stream_fit import StreamOperatorFit as StreamOperatorFit, fit_stream_operator as fit_stream_operator
+from ._training._stream_fit import StreamOperatorFit as StreamOperatorFit, WaldTest as WaldTest
+from ._training._stream_fit import fit_stream_operator as fit_stream_operator
 from ._training._phase import fit_phase as fit_phase
 from ._training._identify import (
     PrincipalAxes as PrincipalAxes,

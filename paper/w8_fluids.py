@@ -67,7 +67,9 @@ enstrophy error (the same with $\tfrac12\|W\|_F^2$) at $5\tau$; the identified p
 against the truth's in units of their standard errors (the spectrum per degree in the same
 gauge, `learn.in_gauge`; the largest over degrees 1..N-2 and the rotation; the row's
 parameters say the step's estimated bias in the same units, `learn.StreamOperatorFit.step_bias`,
-in rows fitted since it was added); the Casimir drift
+and the learned rows' the truth's Wald test, every parameter at once with their correlations,
+`learn.StreamOperatorFit.wald_test`: with N - 2 degrees one beyond 3 SE is no rare event; both
+in rows fitted since they were added); the Casimir drift
 $\max_k|\sum_i e_i^k(t) - \sum_i e_i^k(0)|/\sum_i|e_i(0)|^k$, $e_i$ the eigenvalues of
 $iq$, $q = W + \Omega f$ the absolute vorticity (on the rotating truth, $\Omega$ the model's own
 fitted rotation, the truth's for DMD; $q = W$ otherwise), $k = 2..4$, over every forecast
@@ -154,6 +156,11 @@ class LaplacianSpectrum(learn.AbstractSpectrum):
 
     def standard_errors(self, leaf_errors: Any) -> np.ndarray:
         return np.zeros(0)
+
+    def with_values(self, values: Any) -> LaplacianSpectrum:
+        if np.size(values) != 0:
+            raise ValueError(f"values must be empty (the Laplacian learns nothing); got {values!r}")
+        return self
 
 
 @dataclasses.dataclass(frozen=True)
@@ -387,6 +394,8 @@ class LearnedStreamModel(AbstractFluidModel):
             # no gauge on a rotating sphere (module docstring): the truth's own rotation
             z.append(abs(fit.rotation - truth.rotation) / fit.rotation_standard_error)
             words += f"; rotation {_pm(fit.rotation, fit.rotation_standard_error)}"
+        wald = fit.wald_test(truth.degree_values(N), truth.rotation)
+        words += f"; the truth's Wald d^2 {wald.statistic:.1f} on {wald.dof} parameters, p = {wald.p_value:.2g}"
         words += _step_words(fit)
         return Forecaster(predict, float(np.max(z)), words, f"{fit.iterations} LM iterations ({fit.stopped})",
                           fit.rotation, seconds)

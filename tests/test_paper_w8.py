@@ -4,6 +4,7 @@ truths' spectra, the Casimir drift, the profiles), and the whole study at the sm
 
 import json
 import math
+import re
 
 import equinox as eqx
 import jax
@@ -108,6 +109,9 @@ def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
     for r in learned + [r for r in rows if r["model"] == w8.LIMIT]:
         assert r["casimir_drift"] <= 1e-13  # unitary conjugations of q, whatever was fitted
         assert r["error_1"] <= 0.05 and r["z"] is not None  # from a start with 1% noise
+    for r in learned:  # the truth's Wald test, every parameter at once: N - 2 degrees (and the rotation)
+        dof = int(re.search(r"Wald d\^2 [0-9.]+ on (\d+) parameters, p = ", r["parameters"]).group(1))
+        assert dof == 6 + (r["truth"] == "rotating")
     assert len(list((tmp_path / "W8" / "snapshots").rglob("*.h5"))) == len(truths) * w8.PROFILES["smoke"].n_train
     # the stream operators' fits (learned and limit; smoke's prefix is every snapshot: one stage),
     # each resumable from its checkpoint

@@ -365,3 +365,75 @@ def test_the_steps_estimated_bias_is_the_bias_a_coarse_step_puts_in_the_paramete
     # without standard errors there is no estimate
     bare = learn.fit_stream_operator(model, Observations(system, times, states), iterations=2, standard_errors=False)
     assert np.all(np.isnan(bare.step_bias)) and np.isnan(bare.rotation_step_bias)
+
+
+def _fit_with(model, covariance):
+    """A StreamOperatorFit holding `model` and `covariance` (what wald_test reads), the rest
+    placeholders."""
+    nan = np.full(np.shape(model.spectrum.values()), np.nan)
+    rotation = None if model.rotation is None else float(model.rotation)
+    return learn.StreamOperatorFit(
+        model=model, spectrum=model.spectrum, values=model.spectrum.values(), standard_errors=nan,
+        rotation=rotation, rotation_standard_error=None if rotation is None else np.nan, starts=np.zeros((1, 16)),
+        covariance=covariance, noise=1.0, losses=[], iterations=0, stopped="", substeps=1, seconds=0.0,
+        step_bias=nan, rotation_step_bias=None if rotation is None else np.nan)
+
+
+def test_wald_test_is_the_covariance_distance_of_the_inverse_eigenvalues_in_any_gauge():
+    from scipy.linalg import cho_factor, cho_solve
+    from scipy.stats import chi2
+
+    system = Zeitlin(4)
+    fitted = np.array([-2.1, -5.8, -12.0])  # held at degree 3 (the gauge's reference)
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(2, 2))
+    C = 1e-4 * (M @ M.T + np.eye(2))
+    fit = _fit_with(learn.StreamOperator(system, learn.DegreeSpectrum(fitted, reference_degree=3)), C)
+    truth = np.array([-2.0, -6.0, -12.0])
+    # by hand: the fitted inverse eigenvalues of degrees 1, 2 less the truth's (same gauge)
+    delta = 1.0 / fitted[:2] - 1.0 / truth[:2]
+    expected = float(delta @ cho_solve(cho_factor(C), delta))
+    test = fit.wald_test(truth)
+    assert test.dof == 2
+    # a 2x2 solve: a few ulps of the statistic (cond(C) ~ 10)
+    assert test.statistic == pytest.approx(expected, rel=64 * np.finfo(float).eps)
+    assert test.p_value == pytest.approx(chi2.sf(expected, 2), rel=1e-12)
+    # the same hypothesis in another gauge (a constant added to every 1/lambda): the same flow
+    moved = learn.in_gauge(truth, 0, -1.5)
+    assert fit.wald_test(moved).statistic == pytest.approx(expected, rel=1e-10)
+    assert fit.wald_test(fitted).statistic == 0.0
+    with pytest.raises(ValueError, match=r"values must have shape \(3,\); got shape \(2,\)"):
+        fit.wald_test(truth[:2])
+    with pytest.raises(ValueError, match="rotation must be given exactly when the fit has one"):
+        fit.wald_test(truth, rotation=1.0)
+    with pytest.raises(ValueError, match="fit with standard_errors=True"):
+        _fit_with(fit.model, np.full((2, 2), np.nan)).wald_test(truth)
+
+
+def test_wald_test_on_a_rotating_sphere_holds_the_gauge_and_tests_the_rotation():
+    system = Zeitlin(4)
+    fitted = np.array([-2.1, -5.8, -12.0])
+    C = np.diag([1e-4, 4e-4, 1e-6])  # the inverse eigenvalues of degrees 1, 2, then the rotation
+    fit = _fit_with(learn.StreamOperator(system, learn.DegreeSpectrum(fitted, reference_degree=3), rotation=1.002), C)
+    truth = np.array([-2.0, -6.0, -12.0])
+    delta = np.array([1 / -2.1 - 1 / -2.0, 1 / -5.8 - 1 / -6.0, 0.002])
+    test = fit.wald_test(truth, rotation=1.0)
+    assert test.dof == 3
+    assert test.statistic == pytest.approx(float(np.sum(delta**2 / np.diag(C))), rel=1e-12)
+    # no gauge freedom: a hypothesis in another gauge is another flow, refused
+    with pytest.raises(ValueError, match=r"values\[2\] must be the held eigenvalue -12.0 \(the gauge\)"):
+        fit.wald_test(learn.in_gauge(truth, 0, -1.5), rotation=1.0)
+    with pytest.raises(ValueError, match="rotation must be given exactly when the fit has one"):
+        fit.wald_test(truth)
+    with pytest.raises(ValueError, match="rotation must be a finite real number"):
+        fit.wald_test(truth, rotation=np.inf)
+
+
+def test_wald_test_of_the_quasi_geostrophic_family_is_z_squared():
+    system = Zeitlin(4)
+    fit = _fit_with(learn.StreamOperator(system, learn.QuasiGeostrophicSpectrum(0.3)), np.array([[0.01]]))
+    test = fit.wald_test([0.0])  # Euler's equations: F = 0, 3 standard errors away
+    assert test.dof == 1 and test.statistic == pytest.approx(9.0, rel=1e-12)
+    assert test.p_value == pytest.approx(0.0026997960632601866, rel=1e-9)  # P(|Z| >= 3), a normal table's value
+    with pytest.raises(ValueError, match=r"values must be \(F,\), one real number; got shape \(2,\)"):
+        fit.wald_test([0.0, 1.0])

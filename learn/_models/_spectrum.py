@@ -94,6 +94,11 @@ class AbstractSpectrum(eqx.Module):
         """The standard errors of `values()` from those of this spectrum's array leaves (a
         spectrum of the same kind holding them), by the delta method."""
 
+    @abc.abstractmethod
+    def with_values(self, values: ArrayLike) -> AbstractSpectrum:
+        """The spectrum of this kind and size whose `values()` are `values` (what is held
+        fixed, held as here): a hypothesis to compare a fitted one with."""
+
 
 def in_gauge(eigenvalues: ArrayLike, reference: int, value: float) -> np.ndarray:
     r"""`eigenvalues` `(k,)` moved to the gauge whose entry `reference` is `value`: the inverse
@@ -139,6 +144,17 @@ class AbstractGaugedSpectrum(AbstractSpectrum):
         the fixed one."""
         errors = np.insert(np.asarray(leaf_errors.inverse_values), self.reference, 0.0)
         return errors * self.values() ** 2
+
+    def with_values(self, values: ArrayLike) -> AbstractGaugedSpectrum:
+        """The same gauge: `values[reference]` must be the held eigenvalue (a hypothesis in
+        another gauge: `learn.in_gauge` first)."""
+        held = self.values()
+        values = _finite_values(values, "values", held.size)
+        r, v = self.reference, float(held[self.reference])
+        if not np.isclose(values[r], v, rtol=1e-12, atol=0.0):
+            raise ValueError(f"values[{r}] must be the held eigenvalue {v!r} (the gauge); got {float(values[r])!r}: "
+                             f"move the values into this gauge with learn.in_gauge(values, {r}, {v!r})")
+        return eqx.tree_at(lambda s: s.inverse_values, self, jnp.asarray(np.delete(1.0 / values, self.reference)))
 
     def _check_count(self, expected: int, what: str, name: str, N: int) -> None:
         got = self.inverse_values.shape[0] + 1
@@ -229,6 +245,16 @@ class QuasiGeostrophicSpectrum(AbstractSpectrum):
 
     def standard_errors(self, leaf_errors: QuasiGeostrophicSpectrum) -> np.ndarray:
         return np.asarray(leaf_errors.F).reshape(1)
+
+    def with_values(self, values: ArrayLike) -> QuasiGeostrophicSpectrum:
+        """`values` $(F,)$."""
+        try:
+            arr = np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"values must be (F,), one real number; got {values!r}") from err
+        if arr.shape not in ((), (1,)):
+            raise ValueError(f"values must be (F,), one real number; got shape {arr.shape}")
+        return QuasiGeostrophicSpectrum(float(arr.reshape(-1)[0]))
 
 
 #: The spectra by `kind`.

@@ -62,13 +62,14 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
+import scipy.stats
 from jax.flatten_util import ravel_pytree
 
 from integrators import Observations
 from liepoisson.internals import check_fits_in_memory, positive_float, positive_int
 from liepoisson.systems import Zeitlin
 
-from .._models._spectrum import AbstractGaugedSpectrum, AbstractSpectrum
+from .._models._spectrum import AbstractGaugedSpectrum, AbstractSpectrum, _finite_values, in_gauge
 from .._models._stream_operator import StreamOperator
 from .._solvers._checkpoint import Checkpoint
 from . import _stream_checkpoint as _checkpoint
@@ -104,6 +105,8 @@ class StreamOperatorFit:
     - `step_bias`, `rotation_step_bias`: the bias of `values` and `rotation` the step's error
       puts in them, estimated (module docstring; NaN without standard errors): compare it with
       the standard errors, and give a smaller `max_step` where it is not well below them.
+    - `wald_test(values, rotation)`: a hypothesised operator (the truth, Euler's $F = 0$)
+      against the fit, every parameter at once (`WaldTest`).
     - `losses`: the mean squared residual after each accepted iteration (the first at the
       start); `iterations`; `stopped`: why the fit stopped; `substeps`: steps per interval;
       `seconds`: the fit's wall time (resumed from a checkpoint: the time saved in it, that
@@ -126,6 +129,47 @@ class StreamOperatorFit:
     seconds: float
     step_bias: np.ndarray
     rotation_step_bias: float | None
+
+    def wald_test(self, values: Any, rotation: float | None = None) -> WaldTest:
+        r"""How far a hypothesised operator lies from the fitted one in the fit's error bars:
+        $d^2 = \delta^\top C^{-1}\delta$, $\delta$ the fitted parameters (as fitted: inverse
+        eigenvalues, $F$, the rotation) less the hypothesis's, $C$ = `covariance`. If the
+        hypothesis is the truth, $d^2 \sim \chi^2_p$ (Gaussian noise, the model linear in its
+        parameters over the error bars): one test of every parameter at once, with their
+        correlations, where "each within 3 standard errors" fails by chance with many of them
+        (p = 0.0027 each). `values` as `values` reports them: a spectrum per degree or harmonic
+        in any gauge (moved into the fit's; on a rotating sphere the gauge is no symmetry, so
+        the held eigenvalue must be the fit's), or $(F,)$; `rotation` the hypothesis's if the
+        fit has one."""
+        if not np.all(np.isfinite(self.covariance)):
+            raise ValueError("wald_test needs the fit's covariance: fit with standard_errors=True")
+        spectrum = self.spectrum
+        if isinstance(spectrum, AbstractGaugedSpectrum) and self.rotation is None:
+            held = spectrum.values()
+            values = _finite_values(values, "values", held.size)
+            values = in_gauge(values, spectrum.reference, float(held[spectrum.reference]))
+        if (rotation is None) != (self.rotation is None):
+            raise ValueError("rotation must be given exactly when the fit has one (the hypothesis's angular "
+                             f"velocity); the fit's is {self.rotation!r}, got {rotation!r}")
+        hypothesis = eqx.tree_at(lambda m: m.spectrum, self.model, spectrum.with_values(values))
+        if rotation is not None:
+            if isinstance(rotation, (bool, np.bool_, str, bytes)) or np.ndim(rotation) != 0 \
+                    or not np.isfinite(float(rotation)):
+                raise ValueError(f"rotation must be a finite real number; got {rotation!r}")
+            hypothesis = eqx.tree_at(lambda m: m.rotation, hypothesis, jnp.asarray(float(rotation)))
+        delta = np.asarray(_flat(self.model)[0]) - np.asarray(_flat(hypothesis)[0])
+        statistic = float(delta @ np.linalg.solve(self.covariance, delta))
+        return WaldTest(statistic, delta.size, float(scipy.stats.chi2.sf(statistic, delta.size)))
+
+
+@dataclasses.dataclass(frozen=True)
+class WaldTest:
+    r"""`StreamOperatorFit.wald_test`'s answer: Wald's `statistic` $d^2$, its degrees of
+    freedom `dof` (the parameters fitted) and `p_value`, $P(\chi^2_{dof} \ge d^2)$."""
+
+    statistic: float
+    dof: int
+    p_value: float
 
 
 class _Data(eqx.Module):
