@@ -296,22 +296,15 @@ def main(argv: list[str] | None = None) -> None:
         else:
             write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
         return
-    if args.courant:
-        out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_courant")
-        if args.report:
-            for r in saved_results(out):
-                print(r)
+    for flag, measured in (("courant", courant), ("w8_limit", w8_limit)):  # modes without options
+        if getattr(args, flag):
+            out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_{flag}")
+            if args.report:
+                for r in saved_results(out):
+                    print(r)
+            else:
+                write_json(out, args, measured())
             return
-        write_json(out, args, courant())
-        return
-    if args.w8_limit:
-        out = args.out if args.out != default_out(NAME) else default_out(f"{NAME}_w8_limit")
-        if args.report:
-            for r in saved_results(out):
-                print(r)
-            return
-        write_json(out, args, w8_limit())
-        return
     if args.report:
         report(saved_results(args.out))
         return
