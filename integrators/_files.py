@@ -40,7 +40,9 @@ def remove_stale_temporaries(path: str | os.PathLike) -> list[str]:
 @contextlib.contextmanager
 def _sigterm_as_exit() -> Iterator[None]:
     """Within the block, SIGTERM raises `SystemExit` (so `finally` clauses clean up) instead of
-    killing the process outright; the previous handler is restored after."""
+    killing the process outright; the previous handler is restored after. An exit that Python
+    swallows (raised while a finalizer or weakref callback ran: "Exception ignored in") is
+    raised again when the block ends, and a second SIGTERM kills outright."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -49,7 +51,11 @@ def _sigterm_as_exit() -> Iterator[None]:
         yield
         return
 
+    received: list[int] = []
+
     def handler(signum, frame):
+        received.append(signum)
+        signal.signal(signal.SIGTERM, previous)
         raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGTERM, handler)
@@ -57,6 +63,8 @@ def _sigterm_as_exit() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+    if received:  # the block ended normally: its exit was swallowed
+        raise SystemExit(128 + received[0])
 
 
 @contextlib.contextmanager

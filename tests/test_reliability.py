@@ -202,6 +202,32 @@ def test_a_killed_save_leaves_no_half_file_and_no_stale_temporary(tmp_path, sig)
     assert it.Trajectories.load(target).states.shape == (1, 2, 3)
 
 
+def test_a_sigterm_whose_exit_python_swallowed_still_ends_the_process_after_a_whole_write(tmp_path):
+    """SIGTERM's SystemExit raised while a finalizer runs is printed as "Exception ignored" and
+    lost (a timed-out docs build ran on so): the write completes, then the exit is raised again;
+    meanwhile a second SIGTERM would kill outright (the default handler back)."""
+    script = textwrap.dedent("""
+        import os, signal, sys
+        from integrators._files import atomic_path
+        with atomic_path(sys.argv[1]) as tmp:
+            with open(tmp, "w") as f:
+                f.write("whole")
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)  # the handler raises at the next bytecode
+                signal.pthread_sigmask(signal.SIG_BLOCK, [])
+            except SystemExit:
+                pass  # swallowed, as in a finalizer
+            print("default" if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL else "caught", flush=True)
+        print("not reached", flush=True)
+    """)
+    target = tmp_path / "x.txt"
+    done = subprocess.run([sys.executable, "-c", script, str(target)], check=False, capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr
+    assert done.stdout.split() == ["default"]
+    assert target.read_text() == "whole" and sorted(os.listdir(tmp_path)) == ["x.txt"]
+
+
 def test_a_live_writers_temporary_is_kept(tmp_path):
     """Stale-temporary removal only touches files of dead processes (a concurrent writer's
     temporary carries its live pid)."""
