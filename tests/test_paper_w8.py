@@ -53,9 +53,8 @@ def test_steps_are_shorter_on_a_sphere_turning_faster_than_the_eddies():
 @pytest.mark.slow  # rollouts at N = 64, compiled
 def test_the_step_at_n_64_errs_no_more_than_the_step_at_n_32():
     # The step error of W8's Euler truth over one interval of 0.15 tau (W8's longest), at each
-    # size's Condition.max_step, against 16 substeps (order 6: their own error ~1e-8 of it).
-    # Measured: N = 32 4.4e-6; N = 64 9.4e-7 at its max_step, 4.5e-5 at N = 32's, and NaN at
-    # twice that (the midpoint's stage iteration diverges): the step must shorten with N.
+    # size's Condition.max_step, against 16 substeps (order 6: their own error far below it);
+    # at N = 32's step N = 64 errs ten times more (BENCHMARKS.md, "The step's order", --courant).
     P = w8.PROFILES["full"]
     errors = {}
     for N in (32, 64):

@@ -94,6 +94,12 @@ class AbstractSpectrum(eqx.Module):
         """The standard errors of `values()` from those of this spectrum's array leaves (a
         spectrum of the same kind holding them), by the delta method."""
 
+    def in_gauge_of(self, values: ArrayLike) -> ArrayLike:
+        """`values` (as `values()` reports them) moved into this spectrum's gauge, the same flow
+        on a sphere at rest; a spectrum without a gauge returns them as given (`with_values`
+        checks them)."""
+        return values
+
     @abc.abstractmethod
     def with_values(self, values: ArrayLike) -> AbstractSpectrum:
         """The spectrum of this kind and size whose `values()` are `values` (what is held
@@ -144,6 +150,10 @@ class AbstractGaugedSpectrum(AbstractSpectrum):
         the fixed one."""
         errors = np.insert(np.asarray(leaf_errors.inverse_values), self.reference, 0.0)
         return errors * self.values() ** 2
+
+    def in_gauge_of(self, values: ArrayLike) -> np.ndarray:
+        held = self.values()
+        return in_gauge(_finite_values(values, "values", held.size), self.reference, float(held[self.reference]))
 
     def with_values(self, values: ArrayLike) -> AbstractGaugedSpectrum:
         """The same gauge: `values[reference]` must be the held eigenvalue (a hypothesis in

@@ -69,7 +69,7 @@ from integrators import Observations
 from liepoisson.internals import check_fits_in_memory, positive_float, positive_int
 from liepoisson.systems import Zeitlin
 
-from .._models._spectrum import AbstractGaugedSpectrum, AbstractSpectrum, _finite_values, in_gauge
+from .._models._spectrum import AbstractGaugedSpectrum, AbstractSpectrum
 from .._models._stream_operator import StreamOperator
 from .._solvers._checkpoint import Checkpoint
 from . import _stream_checkpoint as _checkpoint
@@ -144,10 +144,8 @@ class StreamOperatorFit:
         if not np.all(np.isfinite(self.covariance)):
             raise ValueError("wald_test needs the fit's covariance: fit with standard_errors=True")
         spectrum = self.spectrum
-        if isinstance(spectrum, AbstractGaugedSpectrum) and self.rotation is None:
-            held = spectrum.values()
-            values = _finite_values(values, "values", held.size)
-            values = in_gauge(values, spectrum.reference, float(held[spectrum.reference]))
+        if self.rotation is None:  # on a sphere at rest the gauge is a symmetry
+            values = spectrum.in_gauge_of(values)
         if (rotation is None) != (self.rotation is None):
             raise ValueError("rotation must be given exactly when the fit has one (the hypothesis's angular "
                              f"velocity); the fit's is {self.rotation!r}, got {rotation!r}")
