@@ -19,6 +19,7 @@ Conventions follow the `quflow` code of Modin and Viviani (0-based indices, $s =
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 
 import jax
@@ -182,26 +183,41 @@ def vorticity_on_grid(W: np.ndarray, n_theta: int | None = None, n_phi: int | No
 
 
 # -- operators diagonal in the spherical harmonics ------------------------------------------------
+#: The diagonals $m$ of `harmonic_multiplier` fall in this many groups of consecutive $m$, each
+#: padded to its largest block ($N - m$ at its first $m$) rather than all to $N$: the bases read
+#: each call are $\approx 0.47 N^3$ numbers, not $N^3$ (the products are bound by that reading;
+#: BENCHMARKS.md, "Fluids from data").
+MULTIPLIER_GROUPS = 4
+
+
 @functools.cache
 def _multiplier_arrays(N: int) -> tuple[np.ndarray, ...]:
     r"""The arrays of `harmonic_multiplier` at size N, padded to `(N, N)` per diagonal $m$:
     `rows`, `cols` (entry $k$ of the m-th upper diagonal, $(k, k + m)$; padding at (0, 0)),
-    `valid` (k < N - m), `basis` `(N, N, N)` (`harmonic_basis(N)[m]` in the top-left corner,
-    zeros elsewhere), `sign` $(-1)^m$, and the harmonic indices `plus` $l^2 + l + m$ and
-    `minus` $l^2 + l - m$ of column $j$ ($l = m + j$; 0 where $l \ge N$)."""
+    `valid` (k < N - m), `sign` $(-1)^m$, the harmonic indices `plus` $l^2 + l + m$ and
+    `minus` $l^2 + l - m$ of column $j$ ($l = m + j$; 0 where $l \ge N$), and `groups`: for
+    each group of diagonals $m = a..b-1$ (`MULTIPLIER_GROUPS`), `(a, b, basis, transposed)`
+    with `basis` `(b - a, N - a, N - a)` holding `harmonic_basis(N)[m]` in its top-left corner,
+    zeros elsewhere, and `transposed` each of its blocks transposed (both ways a plain batched
+    product; on one field at N = 128 1.3x faster than contracting the basis's rows)."""
     m = np.arange(N)[:, None]
     k = np.arange(N)[None, :]
     valid = k < N - m
     rows = np.where(valid, k, 0)
     cols = np.where(valid, k + m, 0)
-    basis = np.zeros((N, N, N))
-    for mm, V in enumerate(harmonic_basis(N)):
-        basis[mm, : N - mm, : N - mm] = V
+    blocks = harmonic_basis(N)
+    edges = sorted({round(N * i / MULTIPLIER_GROUPS) for i in range(MULTIPLIER_GROUPS + 1)})
+    groups = []
+    for a, b in itertools.pairwise(edges):
+        basis = np.zeros((b - a, N - a, N - a))
+        for mm in range(a, b):
+            basis[mm - a, : N - mm, : N - mm] = blocks[mm]
+        groups.append((a, b, basis, np.ascontiguousarray(basis.transpose(0, 2, 1))))
     l = m + k  # column j = k of diagonal m is degree l = m + j
     plus = np.where(valid, l * l + l + m, 0)
     minus = np.where(valid, l * l + l - m, 0)
     sign = (-1.0) ** np.arange(N)
-    return rows, cols, valid, basis, sign, plus, minus
+    return rows, cols, valid, sign, plus, minus, tuple(groups)
 
 
 def harmonic_multiplier(W: jax.Array, multiplier: jax.Array) -> jax.Array:
@@ -215,24 +231,29 @@ def harmonic_multiplier(W: jax.Array, multiplier: jax.Array) -> jax.Array:
     (`harmonic_basis`, $V_m^\top V_m = N\,1$) and $c_l = (\omega_{l,m} - i\,\omega_{l,-m})/\sqrt2$
     (`harmonics_to_matrix`): $c = -i(-1)^m V_m^\top d_m/N$, its real part scaled by
     $\mu_{l,m}$ and its imaginary part by $\mu_{l,-m}$, and back; the lower diagonals by
-    skew-Hermitian symmetry. One batched product by the padded $V_m$ each way, real and
-    imaginary parts apart: $4N^3$ real multiply-adds, no matrix larger than $N\times N$ per
-    diagonal."""
+    skew-Hermitian symmetry. One batched product each way per group of diagonals
+    (`MULTIPLIER_GROUPS`), the real and imaginary parts two right-hand sides of it: each basis
+    read once a way, no matrix larger than $N\times N$ per diagonal."""
     W = jnp.asarray(W)
     N = W.shape[-1]
-    rows, cols, valid, basis, sign, plus, minus = _multiplier_arrays(N)
+    rows, cols, valid, sign, plus, minus, groups = _multiplier_arrays(N)
     multiplier = jnp.asarray(multiplier)
     d = jnp.where(valid, W[rows, cols], 0.0)  # (N m, N k): the upper diagonals
-    zr = jnp.einsum("mkj,mk->mj", basis, jnp.real(d))
-    zi = jnp.einsum("mkj,mk->mj", basis, jnp.imag(d))
-    # c = -i (-1)^m z / N: Re c = (-1)^m Im z / N, Im c = -(-1)^m Re z / N
-    s = sign[:, None] / N
-    c_re = s * zi * jnp.where(valid, multiplier[plus], 0.0)
-    c_im = -s * zr * jnp.where(valid, multiplier[minus], 0.0)
-    # d' = i (-1)^m V c': Re d' = -(-1)^m V Im c', Im d' = (-1)^m V Re c'
-    out_re = -sign[:, None] * jnp.einsum("mkj,mj->mk", basis, c_im)
-    out_im = sign[:, None] * jnp.einsum("mkj,mj->mk", basis, c_re)
-    out = jax.lax.complex(out_re, out_im)
+    d = jnp.stack([jnp.real(d), jnp.imag(d)], axis=-1)
+    mu_plus = jnp.where(valid, multiplier[plus], 0.0)
+    mu_minus = jnp.where(valid, multiplier[minus], 0.0)
+    parts = []
+    for a, b, basis, transposed in groups:
+        n = N - a
+        z = jnp.einsum("mjk,mkc->mjc", transposed, d[a:b, :n])  # V^T d: real, imaginary
+        # c = -i (-1)^m z / N: Re c = (-1)^m Im z / N, Im c = -(-1)^m Re z / N; scaled
+        s = sign[a:b, None] / N
+        c = jnp.stack([-s * z[..., 0] * mu_minus[a:b, :n], s * z[..., 1] * mu_plus[a:b, :n]], axis=-1)
+        # d' = i (-1)^m V c': Re d' = -(-1)^m V Im c', Im d' = (-1)^m V Re c'
+        out = jnp.einsum("mkj,mjc->mkc", basis, c)
+        parts.append(jnp.pad(out, ((0, 0), (0, N - n), (0, 0))))
+    out = jnp.concatenate(parts, axis=0)
+    out = jax.lax.complex(-sign[:, None] * out[..., 0], sign[:, None] * out[..., 1])
     U = jnp.zeros((N, N), dtype=jnp.complex128).at[rows[valid], cols[valid]].set(out[valid])
     strict = jnp.triu(U, 1)
     return U - jnp.conj(strict.T)
