@@ -246,7 +246,8 @@ def harmonic_multiplier(W: jax.Array, multiplier: jax.Array) -> jax.Array:
     for a, b, basis, transposed in groups:
         n = N - a
         z = jnp.einsum("mjk,mkc->mjc", transposed, d[a:b, :n])  # V^T d: real, imaginary
-        # c = -i (-1)^m z / N: Re c = (-1)^m Im z / N, Im c = -(-1)^m Re z / N; scaled
+        # c = -i (-1)^m z / N: Re c = (-1)^m Im z / N, Im c = -(-1)^m Re z / N; scaled to c',
+        # stacked (Im c', Re c'): the order the product back needs
         s = sign[a:b, None] / N
         c = jnp.stack([-s * z[..., 0] * mu_minus[a:b, :n], s * z[..., 1] * mu_plus[a:b, :n]], axis=-1)
         # d' = i (-1)^m V c': Re d' = -(-1)^m V Im c', Im d' = (-1)^m V Re c'
