@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -184,14 +185,15 @@ def vorticity_on_grid(W: np.ndarray, n_theta: int | None = None, n_phi: int | No
 
 # -- operators diagonal in the spherical harmonics ------------------------------------------------
 #: The diagonals $m$ of `harmonic_multiplier` fall in this many groups of consecutive $m$, each
-#: padded to its largest block ($N - m$ at its first $m$) rather than all to $N$: the bases read
-#: each call are $\approx 0.47 N^3$ numbers, not $N^3$ (the products are bound by that reading;
-#: BENCHMARKS.md, "Fluids from data").
+#: padded to its largest block ($N - m$ at its first $m$) rather than all to $N$: each way a call
+#: reads $\approx 0.47 N^3$ numbers of basis (two stored copies, $0.94 N^3$ in all), where the
+#: former four products read $N^3$ each (they are bound by that reading; BENCHMARKS.md, "Fluids
+#: from data").
 MULTIPLIER_GROUPS = 4
 
 
 @functools.cache
-def _multiplier_arrays(N: int) -> tuple[np.ndarray, ...]:
+def _multiplier_arrays(N: int) -> tuple[Any, ...]:
     r"""The arrays of `harmonic_multiplier` at size N, padded to `(N, N)` per diagonal $m$:
     `rows`, `cols` (entry $k$ of the m-th upper diagonal, $(k, k + m)$; padding at (0, 0)),
     `valid` (k < N - m), `sign` $(-1)^m$, the harmonic indices `plus` $l^2 + l + m$ and
