@@ -279,6 +279,12 @@ def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_unint
     assert phases == ([("iterations", k, 0) for k in range(1, whole.iterations)]
                       + [("standard errors", whole.iterations, 0)]
                       + [("standard errors", whole.iterations, k) for k in range(1, p + 1)])
+    # the standard errors' files keep no J_theta (recomputed on resume), the iterations' do
+    import h5py
+    for phase, _, _, _, blob in copies:
+        (tmp_path / "copy.h5").write_bytes(blob)
+        with h5py.File(tmp_path / "copy.h5") as f:
+            assert ("state_J_theta" in f) == (phase == "iterations"), phase
     # after iteration 1 and the last but one, when they end, after the first column, at the end
     for k in (0, whole.iterations - 2, whole.iterations - 1, whole.iterations, len(copies) - 1):
         path.write_bytes(copies[k][4])
@@ -325,9 +331,18 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match=r"other settings \(substeps=\d+ then, \d+ now \(from max_step\)\)"):
         learn.fit_stream_operator(model, data, max_step=0.05, standard_errors=False, checkpoint=resume)
     with h5py.File(path, "a") as f:  # cut short
-        del f["state_J_theta"]
-    with pytest.raises(ValueError, match="lacks state_J_theta"):
+        del f["x"]
+    with pytest.raises(ValueError, match="lacks x"):
         learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)
+    # an iteration's file keeps the linearisation its next step is made with: without it, refused
+    learn.fit_stream_operator(model, data, max_step=0.1, iterations=1, standard_errors=False,
+                              checkpoint=learn.Checkpoint(path, every=1))
+    with h5py.File(path, "a") as f:
+        f.attrs["phase"] = "iterations"
+        if "state_J_theta" in f:
+            del f["state_J_theta"]
+    with pytest.raises(ValueError, match="lacks .*state_J_theta"):
+        learn.fit_stream_operator(model, data, max_step=0.1, iterations=1, standard_errors=False, checkpoint=resume)
     with h5py.File(path, "w") as f:  # a foreign HDF5 file
         f["x"] = np.zeros(3)
     with pytest.raises(ValueError, match="is not a checkpoint of learn.fit_stream_operator"):

@@ -1,7 +1,13 @@
 """The checkpoint file of `learn.fit_stream_operator`: the fit's state after an accepted
 Levenberg-Marquardt iteration or a standard error's column, from which a later call (another
 process, another day) continues bit for bit as the uninterrupted fit would have (a learned
-fit at N = 64 takes hours, most of them in the standard errors' solves)."""
+fit at N = 64 takes hours, most of them in the standard errors' solves).
+
+A file of the standard errors' phase whose linearisation is of its point (`fresh`, as the
+fit makes it before the standard errors) keeps none of it: `J_theta`, `(J, L n, p)`, is 89 of
+a file's 115 MB at N = 64, and the resumed fit recomputes it at the saved point, the same
+function of the same arrays, so the same bits (a file small enough to carry from one working
+session to the next)."""
 
 from __future__ import annotations
 
@@ -52,7 +58,8 @@ class FitState:
     """What `fit_stream_operator` carries from one iteration to the next (`phase`
     "iterations"), or into the standard errors (`phase` "standard errors": `columns` of the
     profiled matrix's `p` done, their `B`, `X`, `GX` `(p, J, n)` and `steps` `(p,)`, zero
-    past `columns`); `seconds` the fit's wall time so far, over every process that ran it."""
+    past `columns`); `seconds` the fit's wall time so far, over every process that ran it.
+    `state` is `None` where it is to be recomputed at `x` (`kept_state`)."""
 
     phase: str
     x: np.ndarray
@@ -64,7 +71,7 @@ class FitState:
     done: int
     losses: list[float]
     D_theta: np.ndarray
-    state: dict[str, np.ndarray]
+    state: dict[str, np.ndarray] | None
     stopped: str
     seconds: float
     columns: int = 0
@@ -72,6 +79,12 @@ class FitState:
     X: np.ndarray | None = None
     GX: np.ndarray | None = None
     steps: np.ndarray | None = None
+
+
+def kept_state(phase: str, fresh: bool) -> bool:
+    """Whether a file keeps the fit's linearisation: not in the standard errors' phase with one
+    of the file's point, which the resumed fit recomputes (module docstring)."""
+    return not (phase == "standard errors" and fresh)
 
 
 def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], settings: dict[str, Any]) -> None:
@@ -85,8 +98,9 @@ def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], se
                        phase=s.phase, lam=s.lam, nu=s.nu, forcing=s.forcing, fresh=s.fresh, done=s.done,
                        stopped=s.stopped, seconds=s.seconds, columns=s.columns)
         f["x"], f["starts"], f["losses"], f["D_theta"] = s.x, s.starts, np.asarray(s.losses, float), s.D_theta
-        for name in STATE:
-            f[f"state_{name}"] = s.state[name]
+        if kept_state(s.phase, s.fresh):
+            for name in STATE:
+                f[f"state_{name}"] = s.state[name]
         if s.B is not None:
             f["B"], f["X"], f["GX"], f["steps"] = s.B, s.X, s.GX, s.steps
 
@@ -106,7 +120,9 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
                              "or delete the file to start the fit afresh")
         missing = [name for name in ("keys", "settings", "phase", "lam", "nu", "forcing", "fresh", "done", "stopped",
                                      "seconds", "columns") if name not in attrs]
-        missing += [name for name in ("x", "starts", "losses", "D_theta", *(f"state_{n}" for n in STATE)) if name not in f]
+        kept = "phase" in attrs and "fresh" in attrs and kept_state(str(attrs["phase"]), bool(attrs["fresh"]))
+        missing += [name for name in ("x", "starts", "losses", "D_theta", *(f"state_{n}" for n in STATE if kept))
+                    if name not in f]
         if missing:
             raise ValueError(f"{where} lacks {', '.join(missing)} (a file cut short or edited): delete it to start the "
                              "fit afresh")
@@ -130,7 +146,8 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
         phase=str(attrs["phase"]), x=arrays["x"], starts=arrays["starts"], lam=float(attrs["lam"]),
         nu=float(attrs["nu"]), forcing=float(attrs["forcing"]), fresh=bool(attrs["fresh"]), done=int(attrs["done"]),
         losses=[float(v) for v in arrays["losses"]], D_theta=arrays["D_theta"],
-        state={name: arrays[f"state_{name}"] for name in STATE}, stopped=str(attrs["stopped"]),
+        state={name: arrays[f"state_{name}"] for name in STATE} if all(f"state_{n}" in arrays for n in STATE) else None,
+        stopped=str(attrs["stopped"]),
         seconds=float(attrs["seconds"]), columns=int(attrs["columns"]),
         B=arrays.get("B") if has_columns else None, X=arrays.get("X") if has_columns else None,
         GX=arrays.get("GX") if has_columns else None, steps=arrays.get("steps") if has_columns else None)
