@@ -3,11 +3,11 @@ Levenberg-Marquardt iteration or a standard error's column, from which a later c
 process, another day) continues bit for bit as the uninterrupted fit would have (a learned
 fit at N = 64 takes hours, most of them in the standard errors' solves).
 
-A file of the standard errors' phase whose linearisation is of its point (`fresh`, as the
-fit makes it before the standard errors) keeps none of it: `J_theta`, `(J, L n, p)`, is 89 of
-a file's 115 MB at N = 64, and the resumed fit recomputes it at the saved point, the same
-function of the same arrays, so the same bits (a file small enough to carry from one working
-session to the next)."""
+A file of the standard errors' phase keeps none of the fit's linearisation: `J_theta`, `(J,
+L n, p)`, is 89 of a file's 115 MB at N = 64, and the resumed fit recomputes it at the saved
+point, where the fit had computed it before the standard errors, the same function of the same
+arrays, so the same bits (a file small enough to carry from one working session to the next;
+a fit without standard errors uses only its cost, exact at any point)."""
 
 from __future__ import annotations
 
@@ -81,10 +81,10 @@ class FitState:
     steps: np.ndarray | None = None
 
 
-def kept_state(phase: str, fresh: bool) -> bool:
-    """Whether a file keeps the fit's linearisation: not in the standard errors' phase with one
-    of the file's point, which the resumed fit recomputes (module docstring)."""
-    return not (phase == "standard errors" and fresh)
+def kept_state(phase: str) -> bool:
+    """Whether a file of `phase` keeps the fit's linearisation: not in the standard errors'
+    phase, where the resumed fit recomputes it (module docstring)."""
+    return phase != "standard errors"
 
 
 def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], settings: dict[str, Any]) -> None:
@@ -98,7 +98,7 @@ def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], se
                        phase=s.phase, lam=s.lam, nu=s.nu, forcing=s.forcing, fresh=s.fresh, done=s.done,
                        stopped=s.stopped, seconds=s.seconds, columns=s.columns)
         f["x"], f["starts"], f["losses"], f["D_theta"] = s.x, s.starts, np.asarray(s.losses, float), s.D_theta
-        if kept_state(s.phase, s.fresh):
+        if kept_state(s.phase):
             for name in STATE:
                 f[f"state_{name}"] = s.state[name]
         if s.B is not None:
@@ -120,7 +120,7 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
                              "or delete the file to start the fit afresh")
         missing = [name for name in ("keys", "settings", "phase", "lam", "nu", "forcing", "fresh", "done", "stopped",
                                      "seconds", "columns") if name not in attrs]
-        kept = "phase" in attrs and "fresh" in attrs and kept_state(str(attrs["phase"]), bool(attrs["fresh"]))
+        kept = "phase" in attrs and kept_state(str(attrs["phase"]))
         missing += [name for name in ("x", "starts", "losses", "D_theta", *(f"state_{n}" for n in STATE if kept))
                     if name not in f]
         if missing:

@@ -344,7 +344,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         stopped, done, fresh, forcing, phase, before_seconds = "iterations", 0, True, FORCING_MAX, "iterations", 0.0
     else:
         x, starts, D_theta = jnp.asarray(saved.x), jnp.asarray(saved.starts), jnp.asarray(saved.D_theta)
-        if saved.state is None:  # a file without the linearisation of its point: the same bits afresh
+        if saved.state is None:  # the standard errors' phase: the linearisation of its point, the same bits afresh
             state = _linearisation(rebuild(x), starts, padded, substeps, None)
         else:
             state = _Linearisation(**{name: jnp.asarray(value) for name, value in saved.state.items()})
@@ -361,7 +361,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         _checkpoint.write(checkpoint.path, _checkpoint.FitState(
             phase, np.asarray(x), np.asarray(starts), lam, nu, forcing, fresh, done, losses, np.asarray(D_theta),
             {name: np.asarray(getattr(state, name)) for name in _checkpoint.STATE}
-            if _checkpoint.kept_state(phase, fresh) else None, stopped,
+            if _checkpoint.kept_state(phase) else None, stopped,
             before_seconds + time.perf_counter() - begin, columns, *(profiled or (None,) * 4)), keys, settings)
 
     def relinearised(why: str) -> _Linearisation:
