@@ -42,11 +42,13 @@ own error is about 1e-8 of the 4 steps'), and at each size's `max_step`:
 `--se-solves`: what the standard errors' solves cost and how exact they are (`se_solves`): W8's
 Euler training data at noise 1e-3, fitted without standard errors, then the profiled
 Gauss-Newton matrix (`learn._training._stream_fit._profiled`, what `fit_stream_operator` does
-after its last iteration) at each `--se-rtols` tolerance, its CPU time and conjugate gradient
-steps, and the standard errors' largest relative deviation from those at the tightest:
+after its last iteration) at each `--se-rtols` tolerance and each `--se-coarse-degrees`
+preconditioner (`fit_stream_operator`'s `se_coarse_degree`; 0: none), its CPU time (the
+preconditioner's coarse block included) and conjugate gradient steps, and the standard errors'
+largest relative deviation from those at the tightest tolerance without a preconditioner:
 
     python -m benchmarks.stream_operator_orders --se-solves --N 32 --composition Suzuki --fit-step 0.15 \
-        --se-rtols 1e-3 1e-2 1e-6
+        --se-rtols 1e-3 1e-2 1e-6 --se-coarse-degrees 0 5
 """
 
 from __future__ import annotations
@@ -180,9 +182,11 @@ def step_bias(N: int, composition: str | None, fit_step: float, se_from: str | N
     return result
 
 
-def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[float]) -> list[dict]:
-    """The standard errors' solves at each of `rtols` (module docstring, `--se-solves`), of the
-    fitted inverse eigenvalues (their relative deviations are those of the eigenvalues')."""
+def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[float],
+              coarse_degrees: tuple[int, ...] = (0,)) -> list[dict]:
+    """The standard errors' solves at each of `rtols` and `coarse_degrees` (module docstring,
+    `--se-solves`), of the fitted inverse eigenvalues (their relative deviations are those of
+    the eigenvalues')."""
     import time
 
     import integrators as it
@@ -208,14 +212,17 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
     results = []
     jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
                                             jnp.asarray(0.5), CG_MAX_STEPS))  # compiled once for the timings
-    for rtol in sorted(rtols, reverse=True):
+    for rtol, degree in sorted(((r, d) for r in rtols for d in coarse_degrees), key=lambda rd: (-rd[0], -rd[1])):
+        if degree:  # compiled once for the timings
+            jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta[..., :1], state.A[:1, :1],
+                                                    counts, fit.substeps, jnp.asarray(0.5), CG_MAX_STEPS, degree))
         wall, cpu = time.perf_counter(), time.process_time()
         profiled, steps, _ = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,
-                                            jnp.asarray(rtol), CG_MAX_STEPS)
+                                            jnp.asarray(rtol), CG_MAX_STEPS, degree)
         variances = np.diag(fit.noise**2 * np.linalg.inv(np.asarray(profiled)))
         # of the fitted inverse eigenvalues, degrees 1..N - 2 (the gauge's reference N - 1 is held)
         se = np.where(variances >= 0, np.sqrt(np.abs(variances)), np.nan)
-        results.append({"N": N, "composition": composition, "fit_step": fit_step, "rtol": rtol,
+        results.append({"N": N, "composition": composition, "fit_step": fit_step, "rtol": rtol, "coarse_degree": degree,
                         "wall_seconds": time.perf_counter() - wall, "cpu_seconds": time.process_time() - cpu,
                         "steps": np.asarray(steps).tolist(), "inverse_standard_errors": se.tolist()})
     tightest = np.asarray(results[-1]["inverse_standard_errors"])
@@ -223,7 +230,7 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
         deviation = np.abs(np.asarray(r["inverse_standard_errors"]) / tightest - 1.0)
         r["deviation_max"], r["deviation_median"] = float(deviation.max()), float(np.median(deviation))
         r["deviation_degree"] = int(np.argmax(deviation)) + 1
-        print(f"se_rtol {r['rtol']:g}: {r['cpu_seconds']:.0f} s CPU ({r['wall_seconds']:.0f} s wall), "
+        print(f"se_rtol {r['rtol']:g}, se_coarse_degree {r['coarse_degree']}: {r['cpu_seconds']:.0f} s CPU ({r['wall_seconds']:.0f} s wall), "
               f"{sum(r['steps'])} CG steps ({min(r['steps'])}-{max(r['steps'])} a column); standard errors "
               f"within {r['deviation_max']:.1e} of rtol {min(rtols):g}'s (degree {r['deviation_degree']}; "
               f"median {r['deviation_median']:.1e})", flush=True)
@@ -279,6 +286,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--se-solves", action="store_true", help="the standard errors' solves (module docstring)")
     parser.add_argument("--se-rtols", type=float, nargs="+", default=[1e-3, 1e-2, 1e-6],
                         help="--se-solves: the tolerances (the tightest the reference)")
+    parser.add_argument("--se-coarse-degrees", type=int, nargs="+", default=[0],
+                        help="--se-solves: the preconditioners' degrees (0: none, the reference's)")
     add_output_arguments(parser, NAME)
     args = parser.parse_args(argv)
     if args.step_bias or args.se_solves:
@@ -294,7 +303,8 @@ def main(argv: list[str] | None = None) -> None:
             write_json(out, args, [step_bias(args.N, composition, args.fit_step, args.se_from, args.cg_rtol,
                                              args.se_rtol, args.truth)])
         else:
-            write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols))
+            write_json(out, args, se_solves(args.N, composition, args.fit_step, args.se_rtols,
+                                                  tuple(args.se_coarse_degrees)))
         return
     for flag, measured in (("courant", courant), ("w8_limit", w8_limit)):  # modes without options
         if getattr(args, flag):

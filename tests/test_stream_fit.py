@@ -234,6 +234,16 @@ def test_profiled_matrix_is_the_dense_schur_complement_to_second_order_in_the_so
     assert np.max(np.abs(np.asarray(profiled) - dense)) <= 1e-6 * scale
     # and the profiling matters here: the starts take a visible part of the information
     assert np.max(np.abs(A - dense)) >= 1e-3 * scale
+    # preconditioned on every degree (1 to N - 1; degree 0, the trace, is kept by the flow and
+    # so is G's identity there): the preconditioner is G's inverse and the first step solves
+    # (lineax's second sees it: steps 2), to the same product
+    exact, exact_steps, _ = _profiled(model, S, padded, lin.J_theta, lin.A, counts, 1, 1e-2, 200, 3)
+    assert np.all(np.asarray(exact_steps) <= 2) and np.all(np.asarray(steps) > 2)
+    assert np.max(np.abs(np.asarray(exact) - dense)) <= 1e-6 * scale
+    # on degree 1 alone (a block of G, not its inverse): no more steps than none, the same product
+    low, low_steps, _ = _profiled(model, S, padded, lin.J_theta, lin.A, counts, 1, 1e-2, 200, 1)
+    assert np.all(np.asarray(low_steps) <= np.asarray(steps))
+    assert np.max(np.abs(np.asarray(low) - dense)) <= 1e-6 * scale
 
 
 def _small_fit_problem(noise: float = 1e-3, shift: float = 0.0):
@@ -330,6 +340,16 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
                                   starts=np.stack([y[1] for y in data.states]))
     with pytest.raises(ValueError, match=r"other settings \(substeps=\d+ then, \d+ now \(from max_step\)\)"):
         learn.fit_stream_operator(model, data, max_step=0.05, standard_errors=False, checkpoint=resume)
+    # other settings of the standard errors alone: the iterations kept, the standard errors afresh
+    full = learn.fit_stream_operator(model, data, max_step=0.1, checkpoint=learn.Checkpoint(path, every=1))
+    again = learn.fit_stream_operator(model, data, max_step=0.1, se_coarse_degree=0,
+                                      checkpoint=learn.Checkpoint(path, resume=True))
+    fresh = learn.fit_stream_operator(model, data, max_step=0.1, se_coarse_degree=0)
+    assert again.losses == full.losses and again.iterations == full.iterations
+    np.testing.assert_array_equal(again.values, full.values)
+    np.testing.assert_array_equal(again.standard_errors, fresh.standard_errors)
+    with pytest.raises(ValueError, match="se_coarse_degree must be an integer >= 0"):
+        learn.fit_stream_operator(model, data, se_coarse_degree=-1)
     with h5py.File(path, "a") as f:  # cut short
         del f["x"]
     with pytest.raises(ValueError, match="lacks x"):

@@ -30,6 +30,9 @@ VERSION = 1
 #: The fit's algorithm: raised with any change to what an iteration or a column computes, so
 #: that a file written by an older library is refused rather than resumed into other bits.
 ALGORITHM = 1
+#: The settings of the standard errors alone: a file written with others keeps its iterations,
+#: and the resumed fit computes the standard errors afresh.
+SE_SETTINGS = ("se_rtol", "se_coarse_degree")
 #: What a checkpoint's keys (`fingerprint`) are of, in the order `read` names them.
 KEYS = ("data", "model", "start")
 #: The fit's arrays kept in the file, by name (`_Linearisation`'s fields prefixed `state_`).
@@ -58,7 +61,7 @@ class FitState:
     """What `fit_stream_operator` carries from one iteration to the next (`phase`
     "iterations"), or into the standard errors (`phase` "standard errors": `columns` of the
     profiled matrix's `p` done, their `B`, `X`, `GX` `(p, J, n)` and `steps` `(p,)`, zero
-    past `columns`); `seconds` the fit's wall time so far, over every process that ran it.
+    past `columns`, and the preconditioner's coarse block `coarse` `(J, k, k)`); `seconds` the fit's wall time so far, over every process that ran it.
     `state` is `None` where it is to be recomputed at `x` (`kept_state`)."""
 
     phase: str
@@ -79,6 +82,7 @@ class FitState:
     X: np.ndarray | None = None
     GX: np.ndarray | None = None
     steps: np.ndarray | None = None
+    coarse: np.ndarray | None = None
 
 
 def kept_state(phase: str) -> bool:
@@ -102,7 +106,7 @@ def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], se
             for name in STATE:
                 f[f"state_{name}"] = s.state[name]
         if s.B is not None:
-            f["B"], f["X"], f["GX"], f["steps"] = s.B, s.X, s.GX, s.steps
+            f["B"], f["X"], f["GX"], f["steps"], f["coarse"] = s.B, s.X, s.GX, s.steps, s.coarse
 
 
 def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]) -> FitState:
@@ -129,6 +133,8 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
         saved = json.loads(attrs["settings"])
         now = json.loads(json.dumps({**settings, "algorithm": ALGORITHM}, sort_keys=True))
         changed = sorted(k for k in {*saved, *now} if saved.get(k) != now.get(k))
+        columns_kept = not changed
+        changed = [k for k in changed if k not in SE_SETTINGS]
         if changed:
             what = "; ".join(f"{k}={saved.get(k)!r} then, {now.get(k)!r} now"
                              + (" (from max_step)" if k == "substeps" else "")
@@ -141,13 +147,14 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
             raise ValueError(f"{where} was written by a fit of other {', '.join(differ)} ({', '.join(KEYS)} compared): "
                              "give another path, or delete the file to start afresh")
         arrays = {name: np.asarray(f[name]) for name in f}
-    has_columns = "B" in arrays
+    has_columns = "B" in arrays and columns_kept
     return FitState(
         phase=str(attrs["phase"]), x=arrays["x"], starts=arrays["starts"], lam=float(attrs["lam"]),
         nu=float(attrs["nu"]), forcing=float(attrs["forcing"]), fresh=bool(attrs["fresh"]), done=int(attrs["done"]),
         losses=[float(v) for v in arrays["losses"]], D_theta=arrays["D_theta"],
         state={name: arrays[f"state_{name}"] for name in STATE} if all(f"state_{n}" in arrays for n in STATE) else None,
         stopped=str(attrs["stopped"]),
-        seconds=float(attrs["seconds"]), columns=int(attrs["columns"]),
+        seconds=float(attrs["seconds"]), columns=int(attrs["columns"]) if has_columns else 0,
         B=arrays.get("B") if has_columns else None, X=arrays.get("X") if has_columns else None,
-        GX=arrays.get("GX") if has_columns else None, steps=arrays.get("steps") if has_columns else None)
+        GX=arrays.get("GX") if has_columns else None, steps=arrays.get("steps") if has_columns else None,
+        coarse=arrays.get("coarse") if has_columns else None)
