@@ -250,8 +250,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       (BENCHMARKS.md, "The step's order": the standard errors' solves); `se_coarse_degree`
       their preconditioner's degrees: block Jacobi with the spherical harmonics of degrees 1 to
       it solved exactly ($(d + 1)^2 - 1$ passes per fit, once; on a sphere the low degrees hold
-      most of the solves' spread: at N = 64 the default 5 cuts a solve from 28 steps to 9; 0:
-      none). A checkpoint written with other `se_rtol` or `se_coarse_degree` keeps its
+      most of the solves' spread, BENCHMARKS.md, the same place; 0: none). A checkpoint written with other `se_rtol` or `se_coarse_degree` keeps its
       iterations and recomputes the standard errors.
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
@@ -799,9 +798,8 @@ def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps
     do not converge), $Gx$ and their steps (`_profiled`). Preconditioned by block Jacobi on the
     orthonormal fields `V` `(k, n)` and their complement: $P^{-1} = V C_j^{-1} V^\top + 1 -
     VV^\top$, `C_inv` the $C_j^{-1}$ of `_coarse_block` (`k` = 0: none). On a sphere the low
-    degrees take most of $G$'s spread: at N = 64 (W8's Euler fit) their Rayleigh quotients fall
-    from 119 times the counts at degree 1 to 2.5 at degree 4 and 1.09 at 8, and degrees 1-5
-    cut a column's steps from 28 to 9."""
+    degrees hold most of $G$'s spread: a field's rotation by its degree-1 part moves every
+    later snapshot (BENCHMARKS.md, "The step's order": the standard errors' solves)."""
     r, forward = jax.linearize(lambda Z: _all_residuals(model, Z, data, substeps), S)
     transpose = jax.linear_transpose(forward, S)
     scale = 1.0 / jnp.sqrt(counts)[:, None]
