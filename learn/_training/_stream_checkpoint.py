@@ -4,7 +4,7 @@ process, another day) continues bit for bit as the uninterrupted fit would have 
 fit at N = 64 takes hours, most of them in the standard errors' solves).
 
 A file of the standard errors' phase keeps none of the fit's linearisation: `J_theta`, `(J,
-L n, p)`, is 89 of a file's 115 MB at N = 64, and the resumed fit recomputes it at the saved
+L n, p)`, is most of a file's size (`runs/README.md`), and the resumed fit recomputes it at the saved
 point, where the fit had computed it before the standard errors, the same function of the same
 arrays, so the same bits (a file small enough to carry from one working session to the next;
 a fit without standard errors uses only its cost, exact at any point)."""

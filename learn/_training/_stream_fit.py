@@ -262,7 +262,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       continues from the file bit for bit as the uninterrupted fit (a file of another fit, or
       of an older library's algorithm, is refused, saying what differs). A finished fit's file
       returns its result at once. Files of the standard errors' phase keep no $J_\theta$ (the
-      resumed fit recomputes it at their point, the same bits): 25 MB rather than 115 at N = 64.
+      resumed fit recomputes it at their point, the same bits; most of a file's size).
     - `progress`: print each iteration's loss, and each trial step's conjugate gradient steps,
       loss and time (wall and CPU).
 
