@@ -73,7 +73,12 @@ in rows fitted since they were added); the Casimir drift
 $\max_k|\sum_i e_i^k(t) - \sum_i e_i^k(0)|/\sum_i|e_i(0)|^k$, $e_i$ the eigenvalues of
 $iq$, $q = W + \Omega f$ the absolute vorticity (on the rotating truth, $\Omega$ the model's own
 fitted rotation, the truth's for DMD; $q = W$ otherwise), $k = 2..4$, over every forecast
-step; and the fit time.
+step; the fit time and the process's peak memory by its end.
+
+**Fast checks** (a profile's `fast_checks`, with the settings `FAST`): a condition fitted on the
+issue's time budget (N = 128, dimension 16,384: under 10 minutes on 2 cores, under 8 GB), with
+a smaller protocol: fewer snapshots, one midpoint a step, no standard errors. Their verdict
+says the budget, not the spectrum's standard errors; learned and limit share the step's error.
 """
 
 from __future__ import annotations
@@ -81,6 +86,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any, ClassVar
@@ -107,6 +113,17 @@ ROTATION = 1.0  # the rotating truth's angular velocity (the rms vorticity is 1)
 HORIZONS = (1, 5)  # in eddy turnovers
 RESOLUTION = 32  # the N at which fit_step was measured; steps shorten above it (Condition.max_step)
 
+#: The settings of a profile's `fast_checks`: conditions fitted on a time budget (N = 128 in under
+#: 10 minutes on 2 cores), the protocol of `benchmarks/stream_operator_probe.py` on W8's data: two
+#: trajectories of six snapshots, one midpoint a step (`fit_step` in eddy turnovers at N = 32,
+#: shortened by `Condition.max_step` above it: 0.62 keeps W8's longest interval, 0.15 tau, one
+#: step at N = 128), at most 10 iterations, no standard errors (their p conjugate gradient solves
+#: would take hours), two test fields (the truth's forecasts to 5 tau: 400 steps of Suzuki's each).
+#: The step's error is the models' own, learned and limit alike: these rows measure size and
+#: time, not the spectrum.
+FAST = {"n_train": 2, "snapshots": 6, "prefix": 6, "n_test": 2, "composition": None, "fit_step": 0.62,
+        "lm_iterations": 10, "standard_errors": False}
+
 PROFILES = profiles(
     # sizes: N; truths: names of TRUTHS; noises: relative to the field's rms component (the grid
     # sizes x truths x noises); spot_checks: (N, truth, noise) conditions run beside the grid;
@@ -117,23 +134,25 @@ PROFILES = profiles(
     # longest step in eddy turnovers (`Condition.max_step`: fit_stream_operator's max_step, forecasts too;
     # shorter on a rotating sphere and above N = 32); composition: their
     # step's (None: one midpoint; the module docstring); fine: the
-    # truth's steps per interval; lm_iterations: fit_stream_operator's at most; dmd_ranks: the DMD candidates.
+    # truth's steps per interval; lm_iterations: fit_stream_operator's at most; dmd_ranks: the DMD candidates;
+    # standard_errors: the stream operators' (fit_stream_operator's); fast_checks: (N, truth, noise)
+    # conditions run with the settings fast_settings changes (`FAST`).
     # "smoke" exercises the whole pipeline (tests); numbers are meaningless at N = 8.
     smoke=Profile(sizes=(8,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-2,), n_train=3,
                   snapshots=9, n_test=2, interval=0.1, prefix=9, fit_step=0.05, composition=None, fine=4, lm_iterations=20, dmd_ranks=(4, 8, 16),
-                  spot_checks=()),
+                  spot_checks=(), standard_errors=True, fast_checks=(), fast_settings={}),
     quick=Profile(sizes=(16,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                   n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
-                  dmd_ranks=(4, 8, 16, 32), spot_checks=()),
+                  dmd_ranks=(4, 8, 16, 32), spot_checks=(), standard_errors=True, fast_checks=(), fast_settings={}),
     # the whole grid at N = 32 and two conditions at N = 64, one of each noise (a learned fit at
     # N = 64 outlasts a session, its time the row's fit_seconds: the grid there is many times
-    # that); N = 128's fit time is benchmarks/stream_operator_probe.py's (BENCHMARKS, "Fluids
-    # from data"). Yoshida's order 6 in two steps an interval (four on the rotating sphere:
+    # that); N = 128 on the time budget (`FAST`). Yoshida's order 6 in two steps an interval (four on the rotating sphere:
     # `Condition.max_step`; Suzuki's in one biases the per-degree spectrum at N = 32 by many
     # standard errors: BENCHMARKS, "The step's order"); resumable row by row (--out)
     full=Profile(sizes=(32,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                  n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.075, composition="Yoshida6", fine=8, lm_iterations=30,
-                 dmd_ranks=(4, 8, 16, 32, 64), spot_checks=((64, "Euler", 1e-3), (64, "QG F = 10", 1e-2))),
+                 dmd_ranks=(4, 8, 16, 32, 64), spot_checks=((64, "Euler", 1e-3), (64, "QG F = 10", 1e-2)),
+                 standard_errors=True, fast_checks=((128, "Euler", 1e-3),), fast_settings=FAST),
 )
 
 
@@ -198,15 +217,18 @@ class Condition:
     """One N x truth x noise of W8: the snapshot files (written when a row first needs them,
     under `folder`), the data read back, the test fields and the truth's forecasts."""
 
-    def __init__(self, N: int, truth: Truth, noise: float, P: Profile):
-        self.N, self.truth, self.noise, self.P = N, truth, noise, P
+    def __init__(self, N: int, truth: Truth, noise: float, P: Profile, fast: bool = False):
+        self.N, self.truth, self.noise, self.fast = N, truth, noise, fast
+        #: the profile, with its `fast_settings` on a fast check (`FAST`)
+        self.P = P.replace(**P.fast_settings) if fast else P
         self.system = lp.systems.Zeitlin(N)
         self.folder: Path | None = None  # set by the study before the rows
         self.checkpoints: Path | None = None  # the fits' checkpoints: likewise
 
     @property
     def key(self) -> str:
-        return f"N{self.N}-{self.truth.name.replace(' ', '').replace('=', '')}-{self.noise:g}"
+        return (f"N{self.N}-{self.truth.name.replace(' ', '').replace('=', '')}-{self.noise:g}"
+                + ("-fast" if self.fast else ""))
 
     def _fields(self, seed: int, count: int) -> np.ndarray:
         return np.stack([self.system.random_state(seed + j, lmax=self.N - 1, decay=0.5)
@@ -337,7 +359,8 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
     else:
         seconds = 0.0
     fit = learn.fit_stream_operator(model, data, max_step=max_step, iterations=iterations, starts=starts,
-                                    progress=progress, checkpoint=_checkpoint(condition, tag))
+                                    standard_errors=condition.P.standard_errors, progress=progress,
+                                    checkpoint=_checkpoint(condition, tag))
     fitted = learn.StreamOperator(fit.model.system, fit.spectrum, rotation=fit.rotation, composition=fit.model.composition,
                                   tol=MODEL_TOL, iterations=FORECAST_ITERATIONS)
 
@@ -388,6 +411,14 @@ class LearnedStreamModel(AbstractFluidModel):
                                      composition=condition.P.composition, tol=MODEL_TOL, iterations=6)
         fit, predict, seconds = _fit(model, condition, data, self.iterations, progress, "learned")
         true = learn.in_gauge(truth.degree_values(N), N - 2, float(fit.values[N - 2]))
+        if not condition.P.standard_errors:  # a fast check (`FAST`): the spectrum's relative error
+            relative = np.abs(fit.values - true)[:-1] / np.abs(true[:-1])
+            words = (f"no standard errors; spectrum: largest relative error {np.max(relative):.2g} at degree "
+                     f"{int(np.argmax(relative)) + 1}, median {np.median(relative):.2g}")
+            if truth.rotation is not None:
+                words += f"; rotation {fit.rotation:.5g}"
+            return Forecaster(predict, None, words, f"{fit.iterations} LM iterations ({fit.stopped})",
+                              fit.rotation, seconds)
         z = list(np.abs(fit.values - true)[:-1] / fit.standard_errors[:-1])
         words = f"spectrum: largest |error|/SE at degree {int(np.argmax(z)) + 1}"
         if truth.rotation is not None:
@@ -418,6 +449,11 @@ class LimitModel(AbstractFluidModel):
             model = learn.StreamOperator(condition.system, LaplacianSpectrum(), rotation=0.0,
                                          composition=condition.P.composition, tol=MODEL_TOL, iterations=6)
         fit, predict, seconds = _fit(model, condition, data, self.iterations, progress, "limit")
+        if not condition.P.standard_errors:  # a fast check (`FAST`)
+            words = "no standard errors; " + (f"F = {float(fit.values[0]):.5g}" if truth.rotation is None
+                                              else f"rotation {fit.rotation:.5g}")
+            return Forecaster(predict, None, words, f"{fit.iterations} LM iterations ({fit.stopped})",
+                              fit.rotation, seconds)
         if truth.rotation is None:
             z = abs(float(fit.values[0]) - truth.F) / float(fit.standard_errors[0])
             words = f"F = {_pm(float(fit.values[0]), float(fit.standard_errors[0]))}"
@@ -485,6 +521,9 @@ class W8Row:
     fit_seconds: float | None
     parameters: str | None
     note: str | None
+    #: The process's peak resident memory by the fit's end, in GB (an upper bound on the fit's;
+    #: `None` in rows saved before it was recorded).
+    peak_memory_gb: float | None
 
     @property
     def condition(self) -> tuple[int, str, float]:
@@ -508,6 +547,16 @@ def casimir_drift(system: lp.systems.Zeitlin, ys: np.ndarray, rotation: float | 
     return worst
 
 
+def _peak_memory_gb() -> float | None:
+    """The process's peak resident memory so far, in GB (`None` where the OS does not say)."""
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**30 if sys.platform == "darwin" else peak / 2**20  # bytes on macOS, KiB on Linux
+
+
 def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> W8Row:
     """Fit `model` on `condition`'s data and measure its forecasts."""
     base = {"N": condition.N, "truth": condition.truth.name, "noise": condition.noise, "model": model.label}
@@ -515,6 +564,7 @@ def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> 
     begin = time.perf_counter()
     forecaster = model.fit(condition, data, progress=progress)
     fit_seconds = time.perf_counter() - begin if forecaster.fit_seconds is None else forecaster.fit_seconds
+    peak_memory_gb = _peak_memory_gb()
     starts, reference = condition.test
     ys = forecaster.predict(starts, condition.step, reference.shape[1] - 1)
     scale = np.linalg.norm(reference[:, 0], axis=-1)
@@ -537,7 +587,7 @@ def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> 
                  enstrophy_error=finite(np.mean(np.abs(enstrophy - enstrophy_true) / enstrophy_true)),
                  z=forecaster.z, casimir_drift=casimir_drift(
                      condition.system, ys, condition.truth.rotation if forecaster.rotation is None else forecaster.rotation), fit_seconds=fit_seconds,
-                 parameters=forecaster.parameters, note=forecaster.note)
+                 parameters=forecaster.parameters, note=forecaster.note, peak_memory_gb=peak_memory_gb)
 
 
 COLUMNS = (
@@ -552,6 +602,7 @@ COLUMNS = (
     Column("max |error|/SE", lambda r: r.z),
     Column("Casimir drift", lambda r: r.casimir_drift),
     Column("fit s", lambda r: r.fit_seconds),
+    Column("peak memory GB", lambda r: r.peak_memory_gb),
     Column("identified", lambda r: r.parameters or "—"),
     Column("note", lambda r: r.note or "—"),
 )
@@ -560,7 +611,13 @@ LEARNED, LIMIT = LearnedStreamModel.label, LimitModel.label
 DMD_LABELS = ("DMD (exact)", "optimised DMD (BOPDMD)")
 
 
-def verdict(rows: list[W8Row]) -> list[str]:
+#: A fast check's budget (`FAST`): the learned fit's wall time and the process's peak memory.
+FAST_SECONDS, FAST_MEMORY_GB = 600.0, 8.0
+
+
+def verdict(rows: list[W8Row], fast: frozenset[tuple[int, str, float]] = frozenset()) -> list[str]:
+    """The must-show statements per condition; `fast`: the conditions of fast checks (`FAST`),
+    judged on their budget, not on standard errors they do not have."""
     out = []
     for condition in dict.fromkeys(r.condition for r in rows):
         here = {r.model: r for r in rows if r.condition == condition}
@@ -577,9 +634,19 @@ def verdict(rows: list[W8Row]) -> list[str]:
             below = all(learned.error_1 < p.error_1 and learned.error_5 < p.error_5 for p in peers)
             line += (f"; {'below' if below else 'NOT below'} DMD's ("
                      + ", ".join(f"{p.model} {fmt(p.error_1)}, {fmt(p.error_5)}" for p in peers) + ")")
-        line += (f"; spectrum {fmt(learned.z)} standard errors at most "
-                 f"({'within' if learned.z is not None and learned.z <= 3 else 'NOT within'} 3), the limit's "
-                 f"{fmt(limit.z)}; Casimirs kept to {fmt(learned.casimir_drift)} "
+        if condition in fast:
+            memory = learned.peak_memory_gb
+            line += (f"; a fast check: the learned fit {learned.fit_seconds:.0f} s "
+                     f"({'under' if learned.fit_seconds <= FAST_SECONDS else 'NOT under'} {FAST_SECONDS:.0f} s), "
+                     f"the process's peak memory {fmt(memory)} GB ("
+                     + ("not known here" if memory is None else
+                        f"{'under' if memory <= FAST_MEMORY_GB else 'NOT under'} {FAST_MEMORY_GB:g} GB")
+                     + "), no standard errors")
+        else:
+            line += (f"; spectrum {fmt(learned.z)} standard errors at most "
+                     f"({'within' if learned.z is not None and learned.z <= 3 else 'NOT within'} 3), the limit's "
+                     f"{fmt(limit.z)}")
+        line += (f"; Casimirs kept to {fmt(learned.casimir_drift)} "
                  f"({'within' if learned.casimir_drift <= 1e-13 else 'NOT within'} 1e-13).")
         out.append(line)
     return out
@@ -593,18 +660,25 @@ class W8(AbstractStudy):
     columns = COLUMNS
 
     def conditions(self, P):
+        overlap = set(P.fast_checks) & ({(N, t, e) for N in P.sizes for t in P.truths for e in P.noises}
+                                        | set(P.spot_checks))
+        if overlap:
+            raise ValueError(f"W8: the fast checks {sorted(overlap)} are also conditions of the grid or spot "
+                             "checks (their rows would be judged together): run them apart")
         for N in P.sizes:
             for name in P.truths:
                 for noise in P.noises:
                     yield Condition(N, TRUTHS[name], noise, P)
         for N, name, noise in P.spot_checks:
             yield Condition(N, TRUTHS[name], noise, P)
+        for N, name, noise in P.fast_checks:
+            yield Condition(N, TRUTHS[name], noise, P, fast=True)
 
     def announce(self, condition):
         return f"W8: N = {condition.N}, {condition.truth.name}, noise {condition.noise:g}"
 
     def models(self, P, condition):
-        return models(P)
+        return models(condition.P)
 
     def admits(self, condition, model):
         reason = model.skip()
@@ -629,7 +703,7 @@ class W8(AbstractStudy):
                 + (f"; {row.note}" if row.note else ""))
 
     def verdict(self, rows, conditions):
-        lines = verdict(rows)
+        lines = verdict(rows, frozenset((c.N, c.truth.name, c.noise) for c in conditions if c.fast))
         missing = _dmd.pydmd_missing()
         if missing is not None:
             lines.append(f"No DMD rows: {missing}.")
@@ -650,7 +724,9 @@ class W8(AbstractStudy):
                 f"files; {P.get('n_test')} test fields forecast from a noisy start. tau = 1/omega_rms (the eddy "
                 "turnover time from the enstrophy). The learned spectrum's gauge: degree N - 1 at the Laplacian's. "
                 "The limit: the QG family (Euler, QG), the Laplacian with the rotation learned (rotating). No LPNet "
-                "row: it needs pairs at one step (these snapshots are uneven) and N^4 weights.")
+                "row: it needs pairs at one step (these snapshots are uneven) and N^4 weights."
+                + (f" Fast checks {P.get('fast_checks')}: the settings {P.get('fast_settings')} (no standard "
+                   "errors, a midpoint a step)." if P.get("fast_checks") else ""))
 
 
 EXPERIMENT = W8()

@@ -22,16 +22,53 @@ from paper._registry import EXPERIMENTS
 def test_w8_is_registered_with_a_profile_of_each_name():
     assert EXPERIMENTS["W8"] is w8.EXPERIMENT
     assert set(w8.PROFILES) == {"smoke", "quick", "full"}
-    # the grid at N = 32 and one condition of each noise at N = 64 (a learned fit there
-    # outlasts a session); N = 128's fit time is a benchmark's
+    # the grid at N = 32, one condition of each noise at N = 64 (a learned fit there outlasts a
+    # session) and N = 128 on the time budget (a fast check)
     full = w8.PROFILES["full"]
-    keys = [c.key for c in w8.EXPERIMENT.conditions(full)]
-    assert len(keys) == len(set(keys)) == 8 + 2
-    assert {c.N for c in w8.EXPERIMENT.conditions(full)} == {32, 64}
-    assert {c.noise for c in w8.EXPERIMENT.conditions(full) if c.N == 64} == {1e-3, 1e-2}
+    conditions = list(w8.EXPERIMENT.conditions(full))
+    keys = [c.key for c in conditions]
+    assert len(keys) == len(set(keys)) == 8 + 2 + 1
+    assert {c.N for c in conditions} == {32, 64, 128}
+    assert {c.noise for c in conditions if c.N == 64} == {1e-3, 1e-2}
+    assert [c.N for c in conditions if c.fast] == [128]
     for P in w8.PROFILES.values():
         assert set(P.truths) <= set(w8.TRUTHS)
-        assert {name for _, name, _ in P.spot_checks} <= set(w8.TRUTHS)
+        assert {name for _, name, _ in P.spot_checks + P.fast_checks} <= set(w8.TRUTHS)
+        assert set(P.fast_settings) <= set(P.as_dict())  # names the profile has (Profile.replace)
+
+
+def test_a_fast_check_takes_its_settings_and_one_midpoint_an_interval_at_n_128():
+    P = w8.PROFILES["full"]
+    fast = w8.Condition(128, w8.TRUTHS["Euler"], 1e-3, P, fast=True)
+    assert fast.key == "N128-Euler-0.001-fast" and w8.Condition(128, w8.TRUTHS["Euler"], 1e-3, P).key != fast.key
+    assert fast.P.standard_errors is False and fast.P.n_train == 2 and fast.P.composition is None
+    assert P.standard_errors is True and P.n_train == 4  # the profile itself unchanged
+    # W8's longest interval (1.5 mean intervals) is one step at N = 128
+    assert fast.max_step >= 1.5 * P.interval * fast.tau
+    assert all(m.iterations == w8.FAST["lm_iterations"] for m in w8.EXPERIMENT.models(P, fast)
+               if isinstance(m, (w8.LearnedStreamModel, w8.LimitModel)))
+    # a fast check that is also a grid condition would be judged with it: refused, named
+    clash = P.replace(fast_checks=((32, "Euler", 1e-3),))
+    with pytest.raises(ValueError, match=r"fast checks \[\(32, 'Euler', 0.001\)\]"):
+        list(w8.EXPERIMENT.conditions(clash))
+
+
+def _row(N, model, error, *, z=None, seconds=1.0, memory=None):
+    return w8.W8Row(N=N, truth="Euler", noise=1e-3, model=model, error_1=error, error_5=2 * error,
+                    energy_error=0.0, enstrophy_error=0.0, z=z, casimir_drift=1e-15, fit_seconds=seconds,
+                    parameters=None, note=None, peak_memory_gb=memory)
+
+
+def test_the_verdict_judges_a_fast_check_on_its_budget_and_the_others_on_standard_errors():
+    rows = [_row(32, w8.LEARNED, 0.0012, z=3.5), _row(32, w8.LIMIT, 0.001, z=1.0),
+            _row(128, w8.LEARNED, 0.02, seconds=700.0, memory=3.9), _row(128, w8.LIMIT, 0.01, seconds=90.0)]
+    grid, fast = w8.verdict(rows, frozenset({(128, "Euler", 1e-3)}))
+    assert "1.2x at most: within 1.5x" in grid and "3.5 standard errors at most (NOT within 3)" in grid
+    assert "2x at most: NOT within 1.5x" in fast and "700 s (NOT under 600 s)" in fast
+    assert "3.9 GB (under 8 GB)" in fast and "standard errors at most" not in fast
+    rows[2] = _row(128, w8.LEARNED, 0.01, seconds=500.0, memory=9.0)
+    fast = w8.verdict(rows, frozenset({(128, "Euler", 1e-3)}))[1]
+    assert "500 s (under 600 s)" in fast and "9 GB (NOT under 8 GB)" in fast
 
 
 def test_steps_are_shorter_on_a_sphere_turning_faster_than_the_eddies():
@@ -130,3 +167,24 @@ def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
     assert after["fit_seconds"] > before["fit_seconds"]  # the fit's time over both processes
     assert {k: v for k, v in after.items() if k != "fit_seconds"} == {k: v for k, v in before.items()
                                                                        if k != "fit_seconds"}
+
+
+@pytest.mark.slow  # two fits at N = 8, compiled
+def test_a_fast_check_fits_without_standard_errors_and_keeps_the_casimirs(tmp_path):
+    P = w8.PROFILES["smoke"].replace(fast_settings={**w8.FAST, "fine": 4, "n_test": 1})
+    condition = w8.Condition(8, w8.TRUTHS["QG F = 10"], 1e-3, P, fast=True)
+    condition.folder = tmp_path / "snapshots"
+    learned = w8.measure(condition, w8.LearnedStreamModel(w8.FAST["lm_iterations"]), progress=False)
+    limit = w8.measure(condition, w8.LimitModel(w8.FAST["lm_iterations"]), progress=False)
+    assert len(list(condition.folder.glob("*.h5"))) == w8.FAST["n_train"]
+    for row in (learned, limit):
+        assert row.z is None and row.parameters.startswith("no standard errors")
+        assert row.casimir_drift <= 1e-13  # unitary conjugations, whatever was fitted
+        assert row.peak_memory_gb is not None and 0 < row.peak_memory_gb < 64
+    # a midpoint an interval of up to 0.15 tau at N = 8 errs little: both forecast to a few times
+    # the noise (1e-3 of the field; measured 1.1e-3 and 9.8e-4 at tau)
+    assert learned.error_1 < 5e-3 and limit.error_1 < 5e-3
+    F = float(re.search(r"F = ([0-9.e+-]+)", limit.parameters).group(1))
+    assert abs(F - 10.0) < 0.5  # the limit's F from 0 (measured 9.96 after its 10 iterations)
+    largest = float(re.search(r"largest relative error ([0-9.e+-]+) at degree \d", learned.parameters).group(1))
+    assert largest < 0.05  # measured 0.007
