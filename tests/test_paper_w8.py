@@ -43,8 +43,8 @@ def test_a_fast_check_takes_its_settings_and_one_midpoint_an_interval_at_n_128()
     assert fast.key == "N128-Euler-0.001-fast" and w8.Condition(128, w8.TRUTHS["Euler"], 1e-3, P).key != fast.key
     assert fast.P.standard_errors is False and fast.P.n_train == 2 and fast.P.composition is None
     assert P.standard_errors is True and P.n_train == 4  # the profile itself unchanged
-    # W8's longest interval (1.5 mean intervals) is one step at N = 128
-    assert fast.max_step >= 1.5 * P.interval * fast.tau
+    # the longest interval (1.5 mean intervals) is one step at N = 128
+    assert fast.P.interval < P.interval and 1.5 * fast.P.interval * fast.tau <= fast.max_step
     assert all(m.iterations == w8.FAST["lm_iterations"] for m in w8.EXPERIMENT.models(P, fast)
                if isinstance(m, (w8.LearnedStreamModel, w8.LimitModel)))
     # a fast check that is also a grid condition would be judged with it: refused, named
@@ -171,7 +171,7 @@ def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
 
 @pytest.mark.slow  # two fits at N = 8, compiled
 def test_a_fast_check_fits_without_standard_errors_and_keeps_the_casimirs(tmp_path):
-    P = w8.PROFILES["smoke"].replace(fast_settings={**w8.FAST, "fine": 4, "n_test": 1})
+    P = w8.PROFILES["smoke"].replace(fast_settings={**w8.FAST, "n_test": 1})
     condition = w8.Condition(8, w8.TRUTHS["QG F = 10"], 1e-3, P, fast=True)
     condition.folder = tmp_path / "snapshots"
     learned = w8.measure(condition, w8.LearnedStreamModel(w8.FAST["lm_iterations"]), progress=False)
@@ -181,10 +181,10 @@ def test_a_fast_check_fits_without_standard_errors_and_keeps_the_casimirs(tmp_pa
         assert row.z is None and row.parameters.startswith("no standard errors")
         assert row.casimir_drift <= 1e-13  # unitary conjugations, whatever was fitted
         assert row.peak_memory_gb is not None and 0 < row.peak_memory_gb < 64
-    # a midpoint an interval of up to 0.15 tau at N = 8 errs little: both forecast to a few times
-    # the noise (1e-3 of the field; measured 1.1e-3 and 9.8e-4 at tau)
-    assert learned.error_1 < 5e-3 and limit.error_1 < 5e-3
+    # six snapshots over 0.1 tau, a midpoint an interval: both forecast to a few times the noise
+    # (1e-3 of the field; measured 3.4e-3 and 1.7e-3 at tau)
+    assert learned.error_1 < 1e-2 and limit.error_1 < 1e-2
     F = float(re.search(r"F = ([0-9.e+-]+)", limit.parameters).group(1))
-    assert abs(F - 10.0) < 0.5  # the limit's F from 0 (measured 9.96 after its 10 iterations)
+    assert abs(F - 10.0) < 0.5  # the limit's F from 0 (measured 9.81 after its 10 iterations)
     largest = float(re.search(r"largest relative error ([0-9.e+-]+) at degree \d", learned.parameters).group(1))
-    assert largest < 0.05  # measured 0.007
+    assert largest < 0.1  # measured 0.033
