@@ -116,16 +116,17 @@ RESOLUTION = 32  # the N at which fit_step was measured; steps shorten above it 
 #: The settings of a profile's `fast_checks`: conditions fitted on a time budget (N = 128 in under
 #: 10 minutes on 2 cores), near the protocol of `benchmarks/stream_operator_probe.py`: two
 #: trajectories of six snapshots at a mean interval of 0.02 eddy turnovers (at N = 128 a field's
-#: finest degrees move 0.16 of its norm in 0.05 tau: there one midpoint of 0.05 tau errs 4e-3 and
-#: its stage iteration needs 12 iterations, one of 0.03 errs 9e-4 in 6, one of 0.02 3e-4, against
-#: W8's truth), one midpoint a step (`fit_step` 0.125 eddy turnovers at N = 32, shortened by
-#: `Condition.max_step` above it: the longest interval, 0.03 tau, is one step at N = 128), at most
-#: 10 iterations, no standard errors (their p conjugate gradient solves would take hours), two
-#: test fields, the truth's forecasts in two of Suzuki's steps an interval (at N = 128 one errs
-#: 2e-7 in 0.02 tau, two 1.3e-8). The step's error is the models' own, learned and limit alike:
-#: these rows measure size and time more than the spectrum.
+#: finest degrees move fast: a midpoint of W8's interval errs far above the noise and its stage
+#: iteration stalls), in midpoints (`fit_step` 0.0625 eddy turnovers at N = 32, shortened by
+#: `Condition.max_step` above it: the longest interval, 0.03 tau, is two steps at N = 128; one
+#: step an interval is faster, but its step's error is many times the noise's), at most 10
+#: iterations, no standard errors (their p conjugate gradient solves would take hours), two test
+#: fields, the truth's forecasts in two of Suzuki's steps an interval. The step's error is still
+#: the models' own, learned and limit alike: these rows measure size and time more than the
+#: spectrum. The measured figures behind these choices: BENCHMARKS.md, "Fluids from data: the
+#: stream operator at N = 64 and 128".
 FAST = {"n_train": 2, "snapshots": 6, "prefix": 6, "n_test": 2, "interval": 0.02, "composition": None,
-        "fit_step": 0.125, "fine": 2, "lm_iterations": 10, "standard_errors": False}
+        "fit_step": 0.0625, "fine": 2, "lm_iterations": 10, "standard_errors": False}
 
 PROFILES = profiles(
     # sizes: N; truths: names of TRUTHS; noises: relative to the field's rms component (the grid
