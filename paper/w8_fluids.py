@@ -99,9 +99,10 @@ import numpy as np
 import integrators as it
 import learn
 import liepoisson as lp
+from integrators.internals import figure, save_figure
 
 from . import _dmd
-from ._experiment import Column, Profile, fmt, profiles
+from ._experiment import Column, Profile, fmt, optional, profiles
 from ._runner import AbstractStudy
 from ._study import AbstractStudyModel
 
@@ -328,6 +329,8 @@ class Forecaster:
     #: The fit's wall time, if the model knows it better than the clock around `fit` (a fit
     #: resumed from a checkpoint: its time over every process that ran it).
     fit_seconds: float | None = None
+    #: The identified spectrum per degree (`W8Row.spectrum`; `None`: a model without one).
+    spectrum: dict[str, list[float]] | None = None
 
 
 class AbstractFluidModel(AbstractStudyModel):
@@ -399,6 +402,26 @@ def _step_words(fit: learn.StreamOperatorFit) -> str:
     return f"; the step's estimated bias at most {np.max(np.abs(bias[fitted]) / se[fitted]):.2g} SE"
 
 
+def _unbiased_words(fit: learn.StreamOperatorFit, true: np.ndarray, rotation: float | None) -> str:
+    r"""The largest |error|/SE of the learned spectrum (degrees 1..N-2, and the rotation) once
+    the step's estimated bias is taken off, $|\hat\lambda_l - b_l - \lambda_l|/\sigma_l$: what
+    a fit in shorter steps would give, to first order ("" where the bias is not known)."""
+    bias = np.asarray(fit.step_bias, dtype=float)
+    if not np.all(np.isfinite(bias)):
+        return ""
+    z = list(np.abs(fit.values - bias - true)[:-1] / fit.standard_errors[:-1])
+    if rotation is not None and fit.rotation_step_bias is not None:
+        z.append(abs(fit.rotation - fit.rotation_step_bias - rotation) / fit.rotation_standard_error)
+    worst = int(np.argmax(z))
+    where = "the rotation" if worst == len(fit.values) - 1 else f"degree {worst + 1}"
+    return f"; less the step's bias, |error|/SE {max(z):.4g} at most ({where})"
+
+
+def _listed(arrays: dict[str, Any]) -> dict[str, list[float]]:
+    """A row's `spectrum`: the arrays as lists (JSON; NaN is saved as null)."""
+    return {k: np.asarray(v, dtype=float).tolist() for k, v in arrays.items()}
+
+
 @dataclasses.dataclass(frozen=True)
 class LearnedStreamModel(AbstractFluidModel):
     """`learn.StreamOperator` with a spectrum per degree (gauge at degree N - 1) and, on a
@@ -415,6 +438,7 @@ class LearnedStreamModel(AbstractFluidModel):
                                      composition=condition.P.composition, tol=MODEL_TOL, iterations=6)
         fit, predict, seconds = _fit(model, condition, data, self.iterations, progress, "learned")
         true = learn.in_gauge(truth.degree_values(N), N - 2, float(fit.values[N - 2]))
+        spectrum = {"values": fit.values, "true": true}
         if not condition.P.standard_errors:  # a fast check (`FAST`): the spectrum's relative error
             relative = np.abs(fit.values - true)[:-1] / np.abs(true[:-1])
             words = (f"no standard errors; spectrum: largest relative error {np.max(relative):.2g} at degree "
@@ -422,7 +446,8 @@ class LearnedStreamModel(AbstractFluidModel):
             if truth.rotation is not None:
                 words += f"; rotation {fit.rotation:.5g}"
             return Forecaster(predict, None, words, f"{fit.iterations} LM iterations ({fit.stopped})",
-                              fit.rotation, seconds)
+                              fit.rotation, seconds, _listed(spectrum))
+        spectrum |= {"standard_errors": fit.standard_errors, "step_bias": fit.step_bias}
         z = list(np.abs(fit.values - true)[:-1] / fit.standard_errors[:-1])
         words = f"spectrum: largest |error|/SE at degree {int(np.argmax(z)) + 1}"
         if truth.rotation is not None:
@@ -431,9 +456,9 @@ class LearnedStreamModel(AbstractFluidModel):
             words += f"; rotation {_pm(fit.rotation, fit.rotation_standard_error)}"
         wald = fit.wald_test(truth.degree_values(N), truth.rotation)
         words += f"; the truth's Wald d^2 {wald.statistic:.1f} on {wald.dof} parameters, p = {wald.p_value:.2g}"
-        words += _step_words(fit)
+        words += _step_words(fit) + _unbiased_words(fit, true, truth.rotation)
         return Forecaster(predict, float(np.max(z)), words, f"{fit.iterations} LM iterations ({fit.stopped})",
-                          fit.rotation, seconds)
+                          fit.rotation, seconds, _listed(spectrum))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -528,6 +553,11 @@ class W8Row:
     #: The process's peak resident memory by the fit's end, in GB (an upper bound on the fit's;
     #: `None` in rows saved before it was recorded).
     peak_memory_gb: float | None
+    #: The learned model's spectrum per degree $l = 1..N-1$ in the truth's gauge (`values`, the
+    #: truth's `true`, and with standard errors `standard_errors` and the step's estimated bias
+    #: `step_bias`; degree N - 1 is the gauge's, held); `None` for other models and in rows saved
+    #: before it was kept.
+    spectrum: dict[str, list[float]] | None = optional()
 
     @property
     def condition(self) -> tuple[int, str, float]:
@@ -591,7 +621,44 @@ def measure(condition: Condition, model: AbstractFluidModel, progress: bool) -> 
                  enstrophy_error=finite(np.mean(np.abs(enstrophy - enstrophy_true) / enstrophy_true)),
                  z=forecaster.z, casimir_drift=casimir_drift(
                      condition.system, ys, condition.truth.rotation if forecaster.rotation is None else forecaster.rotation), fit_seconds=fit_seconds,
-                 parameters=forecaster.parameters, note=forecaster.note, peak_memory_gb=peak_memory_gb)
+                 parameters=forecaster.parameters, note=forecaster.note, peak_memory_gb=peak_memory_gb,
+                 spectrum=forecaster.spectrum)
+
+
+def spectrum_figure(rows: list[W8Row], out_dir: Path) -> list[str]:
+    r"""`spectrum.png`: per condition whose learned row kept its spectrum (`W8Row.spectrum`), the
+    error of each degree's eigenvalue against the truth's in standard errors, $(\hat\lambda_l -
+    \lambda_l)/\sigma_l$, the same less the step's estimated bias, and the band of 3; a fast
+    check (no standard errors) its relative error instead. Nothing if no row kept one."""
+    kept = [r for r in rows if r.spectrum is not None]
+    if not kept:
+        return []
+    columns = min(len(kept), 3)
+    fig = figure(figsize=(4.6 * columns, 3.4 * math.ceil(len(kept) / columns)))
+    axes = np.atleast_1d(fig.subplots(math.ceil(len(kept) / columns), columns, squeeze=False)).ravel()
+    for ax, row in zip(axes, kept):
+        sp = {k: np.asarray(v, dtype=float) for k, v in row.spectrum.items()}  # null (NaN) stays NaN
+        degrees = np.arange(1, len(sp["values"]))  # the gauge's degree N - 1 is held: left out
+        error = (sp["values"] - sp["true"])[:-1]
+        if "standard_errors" in sp:
+            se = sp["standard_errors"][:-1]
+            ax.axhspan(-3, 3, color="0.9", label="within 3 SE")
+            ax.plot(degrees, error / se, "o", ms=4, color="black", label="fit")
+            if np.all(np.isfinite(sp["step_bias"])):
+                ax.plot(degrees, (error - sp["step_bias"][:-1]) / se, "x", ms=4, color="crimson",
+                        label="less the step's bias")
+            ax.set_ylabel("(fit - truth) / SE")
+        else:
+            ax.semilogy(degrees, np.abs(error) / np.abs(sp["true"][:-1]), "o", ms=3, color="black")
+            ax.set_ylabel("|fit - truth| / |truth|")
+        ax.set_xlabel("degree l")
+        ax.set_title(f"N = {row.N}, {row.truth}, noise {row.noise:g}", fontsize=9)
+    next((ax for ax, row in zip(axes, kept) if "standard_errors" in row.spectrum), axes[0]).legend(fontsize=7)
+    for ax in axes[len(kept):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    save_figure(fig, Path(out_dir) / "spectrum.png", dpi=110)
+    return ["spectrum.png"]
 
 
 COLUMNS = (
@@ -715,6 +782,9 @@ class W8(AbstractStudy):
 
     def summary(self, P, rows, conditions):
         return {"profile_settings": P.as_dict(), "horizons": list(HORIZONS), "rotation": ROTATION}
+
+    def figures(self, rows, conditions, out_dir):
+        return spectrum_figure(rows, out_dir)
 
     def summary_rows(self, rows):
         return [(f"N = {r.N} {r.truth} noise {r.noise:g} {r.model}: field error at 5 tau", "—", fmt(r.error_5), "—")

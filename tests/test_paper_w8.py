@@ -2,9 +2,11 @@
 truths' spectra, the Casimir drift, the profiles), and the whole study at the smoke profile
 (slow)."""
 
+import dataclasses
 import json
 import math
 import re
+import types
 
 import equinox as eqx
 import jax
@@ -70,6 +72,49 @@ def test_the_verdict_judges_a_fast_check_on_its_budget_and_the_others_on_standar
     rows[2] = _row(128, w8.LEARNED, 0.01, seconds=500.0, memory=9.0)
     fast = w8.verdict(rows, frozenset({(128, "Euler", 1e-3)}))[1]
     assert "500 s (under 600 s)" in fast and "9 GB (NOT under 8 GB)" in fast
+
+
+def _fit_like(values, se, bias, rotation=None, rotation_se=None, rotation_bias=None):
+    """What `_unbiased_words` reads of a `learn.StreamOperatorFit`."""
+    return types.SimpleNamespace(values=np.asarray(values, float), standard_errors=np.asarray(se, float),
+                                 step_bias=np.asarray(bias, float), rotation=rotation,
+                                 rotation_standard_error=rotation_se, rotation_step_bias=rotation_bias)
+
+
+def test_the_error_less_the_steps_bias_is_in_standard_errors_and_names_its_worst_parameter():
+    true = np.array([-2.0, -6.0, -12.0, -20.0])  # degrees 1..3 and the gauge's 4 (held: left out)
+    se = np.array([0.1, 0.2, 0.1, 0.0])
+    # errors 0.25, -0.5, 0.2 (2.5, 2.5, 2 SE); biases 0.05, -0.1, -0.1: less them 2.0, 2.0, 3.0 SE
+    fit = _fit_like(true + [0.25, -0.5, 0.2, 0.0], se, [0.05, -0.1, -0.1, 0.0])
+    assert w8._unbiased_words(fit, true, None) == "; less the step's bias, |error|/SE 3 at most (degree 3)"
+    # the rotation after the degrees: 1.004 with bias 0.001, SE 0.001, the truth 1: 3 SE
+    fit = _fit_like(true, se, np.zeros(4), rotation=1.004, rotation_se=0.001, rotation_bias=0.001)
+    assert w8._unbiased_words(fit, true, 1.0) == "; less the step's bias, |error|/SE 3 at most (the rotation)"
+    assert w8._unbiased_words(_fit_like(true, se, np.full(4, np.nan)), true, None) == ""  # no bias known
+
+
+def _spectrum_row(N, spectrum, z=None):
+    return dataclasses.replace(_row(N, w8.LEARNED, 0.001, z=z), spectrum=spectrum)
+
+
+def test_a_row_keeps_its_spectrum_through_json_and_the_figure_draws_it(tmp_path):
+    from paper._experiment import row_from_json, row_to_json
+
+    kept = {"values": [-2.1, -6.0, -12.0], "true": [-2.0, -6.2, -12.0], "standard_errors": [0.1, 0.1, 0.0],
+            "step_bias": [0.01, float("nan"), 0.0]}
+    row = _spectrum_row(4, kept, z=2.0)
+    saved = row_to_json(row)
+    assert saved["spectrum"]["step_bias"][1] is None  # NaN is saved as null
+    back = row_from_json(w8.W8Row, json.loads(json.dumps(saved)))
+    assert back.spectrum["values"] == kept["values"] and back.spectrum["step_bias"][1] is None
+    old = {k: v for k, v in saved.items() if k != "spectrum"}  # a row saved before spectra were kept
+    assert "spectrum" not in row_to_json(_row(4, w8.LIMIT, 0.001))  # only the rows that have one
+    assert row_from_json(w8.W8Row, old).spectrum is None
+    fast = _spectrum_row(8, {"values": [-2.1, -6.0, -12.0], "true": [-2.0, -6.2, -12.0]})
+    assert w8.spectrum_figure([back, fast, _row(4, w8.LIMIT, 0.001)], tmp_path) == ["spectrum.png"]
+    assert (tmp_path / "spectrum.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert w8.spectrum_figure([_row(4, w8.LIMIT, 0.001)], tmp_path / "none") == []  # no spectrum: no figure
+    assert not (tmp_path / "none").exists()
 
 
 def test_steps_are_shorter_on_a_sphere_turning_faster_than_the_eddies():
@@ -149,6 +194,17 @@ def test_w8_smoke_runs_resumes_and_says_its_verdict(tmp_path):
     for r in learned:  # the truth's Wald test, every parameter at once: N - 2 degrees (and the rotation)
         dof = int(re.search(r"Wald d\^2 [0-9.]+ on (\d+) parameters, p = ", r["parameters"]).group(1))
         assert dof == 6 + (r["truth"] == "rotating")
+        # the spectrum kept per degree gives the row's largest |error|/SE (the rotation's aside)
+        sp = {k: np.asarray(v, dtype=float) for k, v in r["spectrum"].items()}
+        assert all(len(v) == 7 for v in sp.values())  # degrees 1..N-1
+        z = np.max(np.abs(sp["values"] - sp["true"])[:-1] / sp["standard_errors"][:-1])
+        if r["truth"] == "rotating":
+            assert z <= r["z"] * (1 + 1e-12)
+        else:
+            assert z == pytest.approx(r["z"], rel=1e-12)  # the same floats, the same operations
+        assert "less the step's bias, |error|/SE" in r["parameters"]
+    assert metrics["figures"] == ["spectrum.png"] and (tmp_path / "W8" / "spectrum.png").exists()
+    assert all("spectrum" not in r for r in rows if r["model"] != w8.LEARNED)
     assert len(list((tmp_path / "W8" / "snapshots").rglob("*.h5"))) == len(truths) * w8.PROFILES["smoke"].n_train
     # the stream operators' fits (learned and limit; smoke's prefix is every snapshot: one stage),
     # each resumable from its checkpoint
@@ -191,3 +247,6 @@ def test_a_fast_check_fits_without_standard_errors_and_keeps_the_casimirs(tmp_pa
     assert abs(F - 10.0) < 0.5  # the limit's F from 0 (measured 9.81 after its 10 iterations)
     largest = float(re.search(r"largest relative error ([0-9.e+-]+) at degree \d", learned.parameters).group(1))
     assert largest < 0.1  # measured 0.033
+    sp = {k: np.asarray(v) for k, v in learned.spectrum.items()}  # no standard errors: values and truth
+    assert set(sp) == {"values", "true"} and limit.spectrum is None
+    assert float(f"{np.max(np.abs(sp['values'] - sp['true'])[:-1] / np.abs(sp['true'][:-1])):.2g}") == largest
