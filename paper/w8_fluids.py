@@ -68,12 +68,15 @@ against the truth's in units of their standard errors (the spectrum per degree i
 gauge, `learn.in_gauge`; the largest over degrees 1..N-2 and the rotation; the row's
 parameters say the step's estimated bias in the same units, `learn.StreamOperatorFit.step_bias`,
 and the learned rows' the truth's Wald test, every parameter at once with their correlations,
-`learn.StreamOperatorFit.wald_test`: with N - 2 degrees one beyond 3 SE is no rare event; both
-in rows fitted since they were added); the Casimir drift
+`learn.StreamOperatorFit.wald_test`: with N - 2 degrees one beyond 3 SE is no rare event, and
+the largest |error|/SE less the step's bias, what shorter steps would give to first order; each
+in rows fitted since it was added); the Casimir drift
 $\max_k|\sum_i e_i^k(t) - \sum_i e_i^k(0)|/\sum_i|e_i(0)|^k$, $e_i$ the eigenvalues of
 $iq$, $q = W + \Omega f$ the absolute vorticity (on the rotating truth, $\Omega$ the model's own
 fitted rotation, the truth's for DMD; $q = W$ otherwise), $k = 2..4$, over every forecast
-step; the fit time and the process's peak memory by its end.
+step; the fit time and the process's peak memory by its end. A learned row keeps its spectrum
+per degree (`W8Row.spectrum`), and `spectrum.png` draws it: each degree's error in standard
+errors, with and without the step's bias.
 
 **Fast checks** (a profile's `fast_checks`, with the settings `FAST`): a condition fitted on the
 issue's time budget (N = 128, dimension 16,384: under 10 minutes on 2 cores, under 8 GB), with
