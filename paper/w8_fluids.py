@@ -143,15 +143,18 @@ PROFILES = profiles(
     # shorter on a rotating sphere and above N = 32); composition: their
     # step's (None: one midpoint; the module docstring); fine: the
     # truth's steps per interval; lm_iterations: fit_stream_operator's at most; dmd_ranks: the DMD candidates;
-    # standard_errors: the stream operators' (fit_stream_operator's); fast_checks: (N, truth, noise)
+    # standard_errors: the stream operators' (fit_stream_operator's); max_step_bias: a stream
+    # operator whose step's estimated bias is over this many standard errors on any parameter is
+    # fitted again in half the step (`_fit`; None: never); fast_checks: (N, truth, noise)
     # conditions run with the settings fast_settings changes (`FAST`).
     # "smoke" exercises the whole pipeline (tests); numbers are meaningless at N = 8.
     smoke=Profile(sizes=(8,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-2,), n_train=3,
                   snapshots=9, n_test=2, interval=0.1, prefix=9, fit_step=0.05, composition=None, fine=4, lm_iterations=20, dmd_ranks=(4, 8, 16),
-                  spot_checks=(), standard_errors=True, fast_checks=(), fast_settings={}),
+                  spot_checks=(), standard_errors=True, max_step_bias=None, fast_checks=(), fast_settings={}),
     quick=Profile(sizes=(16,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                   n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.15, composition="Suzuki", fine=8, lm_iterations=30,
-                  dmd_ranks=(4, 8, 16, 32), spot_checks=(), standard_errors=True, fast_checks=(), fast_settings={}),
+                  dmd_ranks=(4, 8, 16, 32), spot_checks=(), standard_errors=True, max_step_bias=None, fast_checks=(),
+                  fast_settings={}),
     # the whole grid at N = 32 and two conditions at N = 64, one of each noise (a learned fit at
     # N = 64 outlasts a session, its time the row's fit_seconds: the grid there is many times
     # that); N = 128 on the time budget (`FAST`). Yoshida's order 6 in two steps an interval (four on the rotating sphere:
@@ -160,7 +163,7 @@ PROFILES = profiles(
     full=Profile(sizes=(32,), truths=("Euler", "QG F = 10", "QG F = 100", "rotating"), noises=(1e-3, 1e-2),
                  n_train=4, snapshots=11, n_test=4, interval=0.1, prefix=4, fit_step=0.075, composition="Yoshida6", fine=8, lm_iterations=30,
                  dmd_ranks=(4, 8, 16, 32, 64), spot_checks=((64, "Euler", 1e-3), (64, "QG F = 10", 1e-2)),
-                 standard_errors=True, fast_checks=((128, "Euler", 1e-3),), fast_settings=FAST),
+                 standard_errors=True, max_step_bias=0.05, fast_checks=((128, "Euler", 1e-3),), fast_settings=FAST),
 )
 
 
@@ -371,6 +374,21 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
     fit = learn.fit_stream_operator(model, data, max_step=max_step, iterations=iterations, starts=starts,
                                     standard_errors=condition.P.standard_errors, progress=progress,
                                     checkpoint=_checkpoint(condition, tag))
+    limit, halvings = condition.P.max_step_bias, 0
+    while limit is not None and (worst := worst_step_bias(fit)) is not None and worst > limit:
+        if halvings == MAX_HALVINGS:
+            raise RuntimeError(f"W8 {condition.key} {tag}: the step's estimated bias is still {worst:.2g} standard "
+                               f"errors after {MAX_HALVINGS} halvings of the step (max_step {max_step:g}): the "
+                               "estimate does not fall as the step's order says; fit with max_step_bias=None to see it")
+        # the same fit in half the step, from where it stopped (its parameters and starts)
+        halvings, max_step = halvings + 1, max_step / 2
+        if progress:
+            print(f"W8 {condition.key} {tag}: the step's estimated bias {worst:.2g} standard errors (over "
+                  f"{limit:g}): fitting again in steps of at most {max_step:.4g}", flush=True)
+        seconds += fit.seconds
+        fit = learn.fit_stream_operator(fit.model, data, max_step=max_step, iterations=iterations, starts=fit.starts,
+                                        standard_errors=True, progress=progress,
+                                        checkpoint=_checkpoint(condition, f"{tag}-half{halvings}"))
     fitted = learn.StreamOperator(fit.model.system, fit.spectrum, rotation=fit.rotation, composition=fit.model.composition,
                                   tol=MODEL_TOL, iterations=FORECAST_ITERATIONS)
 
@@ -379,6 +397,23 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
         return np.asarray(_rollouts(fitted, jnp.asarray(starts), jnp.full(n_steps, step), substeps))
 
     return fit, predict, seconds + fit.seconds
+
+
+#: The most times `_fit` halves a step whose estimated bias is over the profile's `max_step_bias`.
+MAX_HALVINGS = 3
+
+
+def worst_step_bias(fit: learn.StreamOperatorFit) -> float | None:
+    """The step's estimated bias (`StreamOperatorFit.step_bias`) at most, in standard errors of
+    the parameters fitted (a held reference has none); `None` if not estimated (no standard
+    errors)."""
+    bias, se = np.asarray(fit.step_bias, dtype=float), np.asarray(fit.standard_errors, dtype=float)
+    if fit.rotation is not None:
+        bias, se = np.append(bias, fit.rotation_step_bias), np.append(se, fit.rotation_standard_error)
+    fitted = se > 0
+    if not np.any(fitted) or not np.all(np.isfinite(bias[fitted])):
+        return None
+    return float(np.max(np.abs(bias[fitted]) / se[fitted]))
 
 
 def _checkpoint(condition: Condition, name: str) -> learn.Checkpoint | None:
@@ -394,15 +429,9 @@ def _pm(value: float, se: float) -> str:
 
 
 def _step_words(fit: learn.StreamOperatorFit) -> str:
-    """The step's estimated bias (`StreamOperatorFit.step_bias`), at most, in standard errors
-    of the parameters fitted (a held reference has none)."""
-    bias, se = np.asarray(fit.step_bias, dtype=float), np.asarray(fit.standard_errors, dtype=float)
-    if fit.rotation is not None:
-        bias, se = np.append(bias, fit.rotation_step_bias), np.append(se, fit.rotation_standard_error)
-    fitted = se > 0
-    if not np.any(fitted):
-        return ""
-    return f"; the step's estimated bias at most {np.max(np.abs(bias[fitted]) / se[fitted]):.2g} SE"
+    """The step's estimated bias at most (`worst_step_bias`), and the step if `_fit` shortened it."""
+    worst = worst_step_bias(fit)
+    return "" if worst is None else f"; the step's estimated bias at most {worst:.2g} SE ({fit.substeps} steps an interval)"
 
 
 def _unbiased_words(fit: learn.StreamOperatorFit, true: np.ndarray, rotation: float | None) -> str:

@@ -250,3 +250,28 @@ def test_a_fast_check_fits_without_standard_errors_and_keeps_the_casimirs(tmp_pa
     sp = {k: np.asarray(v) for k, v in learned.spectrum.items()}  # no standard errors: values and truth
     assert set(sp) == {"values", "true"} and limit.spectrum is None
     assert float(f"{np.max(np.abs(sp['values'] - sp['true'])[:-1] / np.abs(sp['true'][:-1])):.2g}") == largest
+
+
+@pytest.mark.slow  # two fits with standard errors at N = 8, compiled
+def test_a_step_whose_bias_is_over_the_profiles_limit_is_halved_until_it_is_not(tmp_path):
+    P = w8.PROFILES["smoke"].replace(max_step_bias=0.05)
+    condition = w8.Condition(8, w8.TRUTHS["rotating"], 1e-2, P)
+    condition.folder, condition.checkpoints = tmp_path / "snapshots", tmp_path / "checkpoints"
+    model = learn.StreamOperator(condition.system, learn.DegreeSpectrum(w8.TRUTHS["rotating"].degree_values(8),
+                                                                        reference_degree=7),
+                                 rotation=1.0, composition=P.composition, tol=w8.MODEL_TOL, iterations=6)
+    fit, predict, _ = w8._fit(model, condition, condition.data, P.lm_iterations, False, "learned")
+    longest = float(np.max(np.diff(condition.clock)))
+    first = math.ceil(longest / condition.max_step - 1e-12)
+    # at the profile's step the bias was 0.17 SE (measured); one midpoint a step, order 2: half
+    # the step takes it to a quarter, 0.04, under the limit: one halving, its own checkpoint
+    assert fit.substeps == 2 * first
+    assert w8.worst_step_bias(fit) <= 0.05
+    assert sorted(p.name for p in condition.checkpoints.iterdir()) == ["learned-half1.h5", "learned.h5"]
+    ys = predict(np.asarray(condition.data.states[0][:1]), 0.1, 2)  # forecasts in the halved steps
+    assert np.all(np.isfinite(ys))
+    # the profile without the limit: the first fit only, read back from its checkpoint
+    plain = w8.Condition(8, w8.TRUTHS["rotating"], 1e-2, P.replace(max_step_bias=None))
+    plain.folder, plain.checkpoints = condition.folder, condition.checkpoints
+    unhalved = w8._fit(model, plain, plain.data, P.lm_iterations, False, "learned")[0]
+    assert unhalved.substeps == first and w8.worst_step_bias(unhalved) > 0.05
