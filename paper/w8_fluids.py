@@ -429,7 +429,7 @@ def _pm(value: float, se: float) -> str:
 
 
 def _step_words(fit: learn.StreamOperatorFit) -> str:
-    """The step's estimated bias at most (`worst_step_bias`), and the step if `_fit` shortened it."""
+    """The step's estimated bias at most (`worst_step_bias`) and the fit's steps an interval."""
     worst = worst_step_bias(fit)
     return "" if worst is None else f"; the step's estimated bias at most {worst:.2g} SE ({fit.substeps} steps an interval)"
 
