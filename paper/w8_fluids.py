@@ -57,7 +57,9 @@ steps, the fewest that keep the longest one's at most that), against the truth f
 A fitted model carries its step's error into its parameters, the more visibly the smaller the
 error bars (more data, larger N): hence a higher order and shorter steps in the full profile
 than in quick (quick: Suzuki's, 0.15; full: Yoshida6, 0.075; the biases measured in
-BENCHMARKS.md, "The step's order"). DMD's modes span
+BENCHMARKS.md, "The step's order"), and in the full profile a fit whose step's estimated bias
+is over `max_step_bias` (0.05) standard errors on any parameter is fitted again in half the
+step from where it stopped (`_fit`), so that no step moves a 3-SE comparison. DMD's modes span
 what the training snapshots span (rank at most their number): the part of a test field
 outside them is lost at $t = 0$ (its size is in the DMD rows' note).
 
