@@ -214,7 +214,7 @@ def se_solves(N: int, composition: str | None, fit_step: float, rtols: list[floa
                                             jnp.asarray(0.5), CG_MAX_STEPS))  # compiled once for the timings
     for rtol, degree in sorted(((r, d) for r in rtols for d in coarse_degrees), key=lambda rd: (-rd[0], -rd[1])):
         if degree:  # compiled once for the timings
-            jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta[..., :1], state.A[:1, :1],
+            jax.block_until_ready(fitting._profiled(fitted, starts, padded, state.J_theta[..., :4], state.A[:4, :4],
                                                     counts, fit.substeps, jnp.asarray(0.5), CG_MAX_STEPS, degree))
         wall, cpu = time.perf_counter(), time.process_time()
         profiled, steps, _ = fitting._profiled(fitted, starts, padded, state.J_theta, state.A, counts, fit.substeps,

@@ -59,7 +59,8 @@ error bars (more data, larger N): hence a higher order and shorter steps in the 
 than in quick (quick: Suzuki's, 0.15; full: Yoshida6, 0.075; the biases measured in
 BENCHMARKS.md, "The step's order"), and in the full profile a fit whose step's estimated bias
 is over `max_step_bias` (0.05) standard errors on any parameter is fitted again in half the
-step from where it stopped (`_fit`), so that no step moves a 3-SE comparison. DMD's modes span
+step from where it stopped (`_fit`; its standard errors' solves started from the last fit's:
+`fit_stream_operator`'s `se_start`), so that no step moves a 3-SE comparison. DMD's modes span
 what the training snapshots span (rank at most their number): the part of a test field
 outside them is lost at $t = 0$ (its size is in the DMD rows' note).
 
@@ -388,8 +389,11 @@ def _fit(model: learn.StreamOperator, condition: Condition, data: it.Observation
             print(f"W8 {condition.key} {tag}: the step's estimated bias {worst:.2g} standard errors (over "
                   f"{limit:g}): fitting again in steps of at most {max_step:.4g}", flush=True)
         seconds += fit.seconds
+        # its standard errors' solves started from the last fit's (in its checkpoint, if kept)
+        last = _checkpoint(condition, tag if halvings == 1 else f"{tag}-half{halvings - 1}")
         fit = learn.fit_stream_operator(fit.model, data, max_step=max_step, iterations=iterations, starts=fit.starts,
                                         standard_errors=True, progress=progress,
+                                        se_start=None if last is None else last.path,
                                         checkpoint=_checkpoint(condition, f"{tag}-half{halvings}"))
     fitted = learn.StreamOperator(fit.model.system, fit.spectrum, rotation=fit.rotation, composition=fit.model.composition,
                                   tol=MODEL_TOL, iterations=FORECAST_ITERATIONS)

@@ -9,6 +9,7 @@ import re
 import types
 
 import equinox as eqx
+import h5py
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -268,6 +269,13 @@ def test_a_step_whose_bias_is_over_the_profiles_limit_is_halved_until_it_is_not(
     assert fit.substeps == 2 * first
     assert w8.worst_step_bias(fit) <= 0.05
     assert sorted(p.name for p in condition.checkpoints.iterdir()) == ["learned-half1.h5", "learned.h5"]
+    # the refit's standard errors started from the first fit's solves (se_start, in its settings)
+    from learn._training import _stream_checkpoint
+
+    with h5py.File(condition.checkpoints / "learned-half1.h5") as f:
+        settings = json.loads(f.attrs["settings"])
+    solves = _stream_checkpoint.read_solves(condition.checkpoints / "learned.h5")
+    assert settings["se_start"] == _stream_checkpoint.fingerprint(*solves)
     ys = predict(np.asarray(condition.data.states[0][:1]), 0.1, 2)  # forecasts in the halved steps
     assert np.all(np.isfinite(ys))
     # the profile without the limit: the first fit only, read back from its checkpoint

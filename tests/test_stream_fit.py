@@ -372,6 +372,41 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
         learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume)
 
 
+@pytest.mark.slow  # three fits at N = 4 with standard errors, ~70 s
+def test_standard_errors_started_from_an_earlier_fits_solves_are_the_cold_ones_in_fewer_steps(tmp_path):
+    """A fit refined in half the step, its standard errors' solves started from those of the
+    fit at the full step (`se_start`): the same covariance as solves from 0, to the solves'
+    tolerance, in fewer conjugate gradient steps; a file without finished solves, or of
+    another shape, or not a path, is refused by name."""
+    import h5py
+
+    model, data = _small_fit_problem(noise=1e-2, shift=-3.0)
+    coarse, cold_path, warm_path = tmp_path / "coarse.h5", tmp_path / "cold.h5", tmp_path / "warm.h5"
+    first = learn.fit_stream_operator(model, data, max_step=0.2, checkpoint=learn.Checkpoint(coarse))
+    cold = learn.fit_stream_operator(first.model, data, max_step=0.1, starts=first.starts,
+                                     checkpoint=learn.Checkpoint(cold_path))
+    warm = learn.fit_stream_operator(first.model, data, max_step=0.1, starts=first.starts, se_start=coarse,
+                                     checkpoint=learn.Checkpoint(warm_path))
+    # the iterations do not see se_start: the same bits
+    np.testing.assert_array_equal(warm.values, cold.values)
+    # the covariance is second order in the solves' error: relative residuals of se_rtol = 1e-3
+    # leave ~1e-6 of it, 1e-4 bounds both fits' with room (and a warm start from the longer
+    # step's solves, ~1e-2 off here, without a solve would miss by ~1e-4 of it: see below)
+    np.testing.assert_allclose(warm.covariance, cold.covariance, rtol=1e-4)
+    with h5py.File(cold_path) as f, h5py.File(warm_path) as g:
+        cold_steps, warm_steps = np.asarray(f["steps"]), np.asarray(g["steps"])
+    assert np.all(warm_steps >= 1) and np.sum(warm_steps) < np.sum(cold_steps)
+    # refused: a fit without finished standard errors, another problem's solves, not a path
+    unfinished = tmp_path / "unfinished.h5"
+    learn.fit_stream_operator(model, data, max_step=0.2, standard_errors=False, checkpoint=learn.Checkpoint(unfinished))
+    with pytest.raises(ValueError, match="holds no finished standard errors"):
+        learn.fit_stream_operator(model, data, max_step=0.1, se_start=unfinished)
+    with pytest.raises(ValueError, match=r"se_start's solves have shape"):
+        learn.fit_stream_operator(model, Observations(data.system, data.times[:1], data.states[:1]), se_start=coarse)
+    with pytest.raises(TypeError, match="se_start must be a learn.Checkpoint or the path of one"):
+        learn.fit_stream_operator(model, data, se_start=3)
+
+
 @pytest.mark.slow  # compiles a fit with standard errors at N = 4: over the default run's budget
 def test_the_steps_estimated_bias_is_the_bias_a_coarse_step_puts_in_the_parameters():
     # the data: a rotating fluid rolled out in 32 midpoints an interval (its step error 1/1024 of

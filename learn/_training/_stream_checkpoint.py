@@ -32,7 +32,7 @@ VERSION = 1
 ALGORITHM = 1
 #: The settings of the standard errors alone: a file written with others keeps its iterations,
 #: and the resumed fit computes the standard errors afresh.
-SE_SETTINGS = ("se_rtol", "se_coarse_degree")
+SE_SETTINGS = ("se_rtol", "se_coarse_degree", "se_start")
 #: What a checkpoint's keys (`fingerprint`) are of, in the order `read` names them.
 KEYS = ("data", "model", "start")
 #: The fit's arrays kept in the file, by name (`_Linearisation`'s fields prefixed `state_`).
@@ -158,3 +158,23 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
         B=arrays.get("B") if has_columns else None, X=arrays.get("X") if has_columns else None,
         GX=arrays.get("GX") if has_columns else None, steps=arrays.get("steps") if has_columns else None,
         coarse=arrays.get("coarse") if has_columns else None)
+
+
+def read_solves(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    r"""`(X, coarse)` of the finished standard errors in the checkpoint at `path`: the solves
+    $X \approx G^{-1}B$ `(p, J, n)` and the preconditioner's block `(J, k, k)` (`FitState`),
+    to start another fit's (`fit_stream_operator`'s `se_start`); `ValueError` naming `path` if
+    it is not such a file or its standard errors are not all done."""
+    expected = "a checkpoint of learn.fit_stream_operator"
+    where = f"se_start {os.fspath(path)!r}"
+    with open_hdf5(path, expected) as f:
+        attrs = dict(f.attrs)
+        if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
+            raise ValueError(f"{where} is not {expected} (format {attrs.get('format')!r}, version "
+                             f"{attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION})")
+        if "X" not in f or "coarse" not in f or int(attrs.get("columns", -1)) != f["X"].shape[0]:
+            done = int(attrs.get("columns", 0))
+            raise ValueError(f"{where} holds no finished standard errors ({done} columns done"
+                             + ("" if "X" not in f else f" of {f['X'].shape[0]}")
+                             + "): give the checkpoint of a fit whose standard errors are done, or None")
+        return np.asarray(f["X"]), np.asarray(f["coarse"])

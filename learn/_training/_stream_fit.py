@@ -216,7 +216,8 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                         iterations: int = 50, rtol: float = 1e-10, chi2_tol: float = 0.01,
                         cg_rtol: float = 1e-8,
                         cg_max_steps: int = 200, standard_errors: bool = True, se_rtol: float = 1e-3,
-                        se_coarse_degree: int = 5, starts: Any = None, checkpoint: Checkpoint | None = None,
+                        se_coarse_degree: int = 5, se_start: Checkpoint | str | os.PathLike | None = None,
+                        starts: Any = None, checkpoint: Checkpoint | None = None,
                         progress: bool = False) -> StreamOperatorFit:
     r"""Fit `model`'s stream operator and one initial field per trajectory to `data` by
     trajectory least squares (module docstring: Levenberg-Marquardt with the starts eliminated
@@ -250,8 +251,15 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       (BENCHMARKS.md, "The step's order": the standard errors' solves); `se_coarse_degree`
       their preconditioner's degrees: block Jacobi with the spherical harmonics of degrees 1 to
       it solved exactly ($(d + 1)^2 - 1$ passes per fit, once; on a sphere the low degrees hold
-      most of the solves' spread, BENCHMARKS.md, the same place; 0: none). A checkpoint written with other `se_rtol` or `se_coarse_degree` keeps its
-      iterations and recomputes the standard errors.
+      most of the solves' spread, BENCHMARKS.md, the same place; 0: none; not built where its
+      passes outnumber ten per parameter, what it saves each solve: a fit of one parameter
+      solves faster without it); `se_start`: the checkpoint (a `learn.Checkpoint` or its path)
+      of an earlier fit of the same data and parameters whose standard errors are done, e.g.
+      this fit at a longer step: its solves start this fit's conjugate gradients and its
+      preconditioner block is reused (a fit refined in a shorter step moves $G^{-1}B$ little,
+      so each solve takes a few passes instead of ~10). A checkpoint written with other
+      `se_rtol`, `se_coarse_degree` or `se_start` keeps its iterations and recomputes the
+      standard errors.
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
       trajectory's first observation), e.g. a previous fit's `starts`.
     - `checkpoint`: a `learn.Checkpoint`: the fit's state is written to its file (HDF5, a
@@ -289,6 +297,13 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
         raise ValueError(f"se_coarse_degree must be an integer >= 0 (the highest spherical-harmonic degree of the "
                          f"standard errors' preconditioner; 0: none); got {se_coarse_degree!r}")
     se_coarse_degree = int(se_coarse_degree)
+    if se_start is not None:
+        if not isinstance(se_start, (Checkpoint, str, os.PathLike)):
+            raise TypeError(f"se_start must be a learn.Checkpoint or the path of one (an earlier fit's, its standard "
+                            f"errors done) or None; got {type(se_start).__name__}")
+        guess = _checkpoint.read_solves(se_start.path if isinstance(se_start, Checkpoint) else se_start)
+    else:
+        guess = None
     all_intervals = data.intervals()
     if max_step is None:
         substeps = 1
@@ -336,6 +351,13 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
     settings = {"iterations": iterations, "rtol": rtol, "chi2_tol": chi2_tol, "cg_rtol": cg_rtol,
                 "cg_max_steps": cg_max_steps, "standard_errors": standard_errors, "se_rtol": se_rtol,
                 "se_coarse_degree": se_coarse_degree, "substeps": substeps}
+    if guess is not None:
+        X0, C0 = guess
+        if X0.shape != (p, *starts.shape):
+            raise ValueError(f"se_start's solves have shape {X0.shape}, this fit's {(p, *starts.shape)} (parameters, "
+                             "trajectories, field components): give the checkpoint of a fit of the same data and "
+                             "parameters")
+        settings["se_start"] = _checkpoint.fingerprint(X0, C0)
     keys = {} if checkpoint is None else {"data": _checkpoint.fingerprint(padded),
                                           "model": _checkpoint.fingerprint(x, eqx.partition(model, _trained(model))[1]),
                                           "start": _checkpoint.fingerprint(starts)}
@@ -470,7 +492,7 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
                                                                    saved.coarse, saved.columns)
         profiled, cg_steps, X = _profiled(fitted, starts, padded, state.J_theta, state.A, counts, substeps,
                                           jnp.asarray(se_rtol), cg_max_steps, se_coarse_degree, partial=partial,
-                                          after=after)
+                                          after=after, guess=guess)
         covariance = sigma2 * np.linalg.inv(np.asarray(profiled))
         bias = _step_bias(fitted, starts, padded, substeps, np.asarray(profiled), X)
         if progress:
@@ -649,17 +671,19 @@ class _Step(eqx.Module):
     cg_steps: jax.Array
 
 
-def _scaled_cg(operator, rhs, rtol, max_steps, preconditioner=None):
+def _scaled_cg(operator, rhs, rtol, max_steps, preconditioner=None, y0=None):
     r"""$x$ with $\|Mx - b\|_2 \le$ `rtol` $\|b\|_2$ (and the last step's change as small) by
     conjugate gradients (lineax) on the positive semidefinite `operator` $M$, whose diagonal
     is about 1 (scaled by the caller: Jacobi's preconditioner), with `preconditioner` (a
-    function approximating $M^{-1}$, positive definite) if given: `(x, steps)`, `x` the last
-    iterate at `max_steps` too."""
+    function approximating $M^{-1}$, positive definite) if given, from `y0` (default 0):
+    `(x, steps)`, `x` the last iterate at `max_steps` too."""
     structure = jax.eval_shape(lambda: rhs)
     M = lx.FunctionLinearOperator(operator, structure, tags=lx.positive_semidefinite_tag)
     solver = lx.CG(rtol=0.0, atol=rtol * jnp.sqrt(jnp.sum(rhs * rhs)), norm=optx.two_norm, max_steps=max_steps)
     options = {} if preconditioner is None else \
         {"preconditioner": lx.FunctionLinearOperator(preconditioner, structure, tags=lx.positive_semidefinite_tag)}
+    if y0 is not None:
+        options["y0"] = y0
     sol = lx.linear_solve(M, rhs, solver, throw=False, options=options)
     return sol.value, sol.stats["num_steps"], sol.result == lx.RESULTS.successful
 
@@ -705,37 +729,41 @@ def _solve(model, S, data, lin, D_theta, counts, lam, substeps, cg_rtol, cg_max_
 
 
 def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_steps, coarse_degree: int = 0, *,
-              partial: tuple | None = None, after: Callable[..., None] | None = None):
+              partial: tuple | None = None, after: Callable[..., None] | None = None, guess: tuple | None = None):
     r"""`(S_p, steps)`: $S_p = A - \sum_j B_j^\top G_j^{-1}B_j$, $B_j = J_{s_j}^\top J_{\theta,j}$,
     the parameters' Gauss-Newton matrix with the starts profiled out, and the conjugate gradient
     steps of each column's solve `(p,)`. $B$ by $p$ transposed passes, $X \approx G^{-1}B$ by
     conjugate gradients, one column after another (`_profiled_column`; NaN where a solve does
     not converge; a batch of columns runs to its slowest column's steps and costs as much as its
     columns one by one: BENCHMARKS.md, the standard errors' solves), preconditioned on the
-    spherical harmonics of degrees 1 to `coarse_degree` (`_coarse`; 0: none); the
+    spherical harmonics of degrees 1 to `coarse_degree` (`_coarse`; 0: none; none where its
+    $k$ passes outnumber $10p$: each solve saves about 20 with it, BENCHMARKS.md); the
     product taken as $B^\top X + X^\top B - X^\top GX$, whose error is $-E^\top GE$ for the
     solves' error $E = X - G^{-1}B$: second order in it (the first-order $B^\top X$ is off by
     $B^\top E$), so that solves to a relative residual $\epsilon$ give $S_p$ to about
     $\epsilon^2$ (one more pass per column for $GX$, and one rollout to linearise at). `partial`:
     `(B, X, GX, steps, C, k)` of an earlier call whose first `k` columns are done (a
     checkpoint's; `C` its coarse block, `None`: computed afresh); `after(k, B, X, GX, steps, C)`
-    is called once column `k` is."""
+    is called once column `k` is; `guess`: `(X0, C0)` of an earlier fit (`se_start`), X0 the
+    solves' start (its non-finite columns 0), C0 the block if of this basis's size."""
     p = J_theta.shape[-1]
-    if partial is None or partial[4] is None:
-        C = _coarse_block(model, S, data, counts, substeps, coarse_degree)
-    else:
-        C = np.asarray(partial[4])
+    if len(_coarse_basis(model.system, coarse_degree)) > 10 * p:
+        coarse_degree = 0
+    V = jnp.asarray(_coarse_basis(model.system, coarse_degree))
+    kept = [np.asarray(c) for c in (None if partial is None else partial[4], None if guess is None else guess[1])
+            if c is not None and np.shape(c) == (S.shape[0], V.shape[0], V.shape[0])]
+    C = kept[0] if kept else _coarse_block(model, S, data, counts, substeps, coarse_degree)
     if partial is None:
         shape = (p, *S.shape)
         B, X, GX, steps, first = np.zeros(shape), np.zeros(shape), np.zeros(shape), np.zeros(p, np.int64), 0
     else:
         B, X, GX, steps = (np.array(a) for a in partial[:4])
         first = int(partial[5])
-    V = jnp.asarray(_coarse_basis(model.system, coarse_degree))
     C_inv = jnp.asarray(np.linalg.inv(C)) if C.shape[-1] else jnp.asarray(C)
+    X0 = np.zeros((p, *S.shape)) if guess is None else np.where(np.isfinite(guess[0]), guess[0], 0.0)
     for k in range(first, p):
         b, x, gx, n = _profiled_column(model, S, data, J_theta[:, :, k], counts, substeps, cg_rtol, cg_max_steps,
-                                       V, C_inv)
+                                       V, C_inv, jnp.asarray(X0[k]))
         B[k], X[k], GX[k], steps[k] = b, x, gx, n
         if after is not None:
             after(k, B, X, GX, steps, C)
@@ -792,9 +820,9 @@ def _step_bias(model, S, data, substeps, profiled: np.ndarray, X: np.ndarray) ->
 
 
 @eqx.filter_jit
-def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps, V, C_inv):
+def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps, V, C_inv, x0):
     r"""`(b, x, Gx, steps)` of one column `Jp` `(J, L n)` of $J_\theta$: $b = J_s^\top$ `Jp`,
-    $x \approx G^{-1}b$ by conjugate gradients on $G$ scaled by counts$^{-1/2}$ (NaN if they
+    $x \approx G^{-1}b$ by conjugate gradients from `x0` on $G$ scaled by counts$^{-1/2}$ (NaN if they
     do not converge), $Gx$ and their steps (`_profiled`). Preconditioned by block Jacobi on the
     orthonormal fields `V` `(k, n)` and their complement: $P^{-1} = V C_j^{-1} V^\top + 1 -
     VV^\top$, `C_inv` the $C_j^{-1}$ of `_coarse_block` (`k` = 0: none). On a sphere the low
@@ -810,6 +838,6 @@ def _profiled_column(model, S, data, Jp, counts, substeps, cg_rtol, cg_max_steps
         return R + jnp.einsum("in,ji->jn", V, jnp.einsum("jik,jk->ji", C_inv, VR) - VR)
 
     Z, steps, ok = _scaled_cg(lambda Z: scale * transpose(forward(scale * Z))[0], scale * b, cg_rtol, cg_max_steps,
-                              precondition if V.shape[0] else None)
+                              precondition if V.shape[0] else None, x0 / scale)
     x = jnp.where(ok, scale * Z, jnp.nan)
     return b, x, transpose(forward(x))[0], steps
