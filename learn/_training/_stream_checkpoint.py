@@ -117,11 +117,7 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
     expected = "a checkpoint of learn.fit_stream_operator"
     where = f"checkpoint {os.fspath(path)!r}"
     with open_hdf5(path, expected) as f:
-        attrs = dict(f.attrs)
-        if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
-            raise ValueError(f"{where} is not {expected} (format {attrs.get('format')!r}, version "
-                             f"{attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION}): give another path, "
-                             "or delete the file to start the fit afresh")
+        attrs = _attrs(f, where, "give another path, or delete the file to start the fit afresh")
         missing = [name for name in ("keys", "settings", "phase", "lam", "nu", "forcing", "fresh", "done", "stopped",
                                      "seconds", "columns") if name not in attrs]
         kept = "phase" in attrs and kept_state(str(attrs["phase"]))
@@ -168,13 +164,20 @@ def read_solves(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     expected = "a checkpoint of learn.fit_stream_operator"
     where = f"se_start {os.fspath(path)!r}"
     with open_hdf5(path, expected) as f:
-        attrs = dict(f.attrs)
-        if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
-            raise ValueError(f"{where} is not {expected} (format {attrs.get('format')!r}, version "
-                             f"{attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION})")
+        attrs = _attrs(f, where, "give the checkpoint of a fit whose standard errors are done, or None")
         if "X" not in f or "coarse" not in f or int(attrs.get("columns", -1)) != f["X"].shape[0]:
             done = int(attrs.get("columns", 0))
             raise ValueError(f"{where} holds no finished standard errors ({done} columns done"
                              + ("" if "X" not in f else f" of {f['X'].shape[0]}")
                              + "): give the checkpoint of a fit whose standard errors are done, or None")
         return np.asarray(f["X"]), np.asarray(f["coarse"])
+
+
+def _attrs(f: h5py.File, where: str, fix: str) -> dict[str, Any]:
+    """The attributes of `f`, a checkpoint of this format and version (`ValueError` naming
+    `where` and saying `fix` if not)."""
+    attrs = dict(f.attrs)
+    if attrs.get("format") != FORMAT or attrs.get("version") != VERSION:
+        raise ValueError(f"{where} is not a checkpoint of learn.fit_stream_operator (format {attrs.get('format')!r}, "
+                         f"version {attrs.get('version')!r}; expected {FORMAT!r}, version {VERSION}): {fix}")
+    return attrs
