@@ -252,12 +252,12 @@ def fit_stream_operator(model: StreamOperator, data: Observations, *, max_step: 
       their preconditioner's degrees: block Jacobi with the spherical harmonics of degrees 1 to
       it solved exactly ($(d + 1)^2 - 1$ passes per fit, once; on a sphere the low degrees hold
       most of the solves' spread, BENCHMARKS.md, the same place; 0: none; not built where its
-      passes outnumber ten per parameter, what it saves each solve: a fit of one parameter
+      passes outnumber ten per parameter, more than it saves the solves (BENCHMARKS.md): a fit of one parameter
       solves faster without it); `se_start`: the checkpoint (a `learn.Checkpoint` or its path)
       of an earlier fit of the same data and parameters whose standard errors are done, e.g.
       this fit at a longer step: its solves start this fit's conjugate gradients and its
       preconditioner block is reused (a fit refined in a shorter step moves $G^{-1}B$ little,
-      so each solve takes a few passes instead of ~10). A checkpoint written with other
+      so each solve takes far fewer steps, BENCHMARKS.md). A checkpoint written with other
       `se_rtol`, `se_coarse_degree` or `se_start` keeps its iterations and recomputes the
       standard errors.
     - `starts`: the initial fields to start from `(n_trajectories, N^2)` (default: each
@@ -737,7 +737,7 @@ def _profiled(model, S, data, J_theta, A, counts, substeps, cg_rtol, cg_max_step
     not converge; a batch of columns runs to its slowest column's steps and costs as much as its
     columns one by one: BENCHMARKS.md, the standard errors' solves), preconditioned on the
     spherical harmonics of degrees 1 to `coarse_degree` (`_coarse`; 0: none; none where its
-    $k$ passes outnumber $10p$: each solve saves about 20 with it, BENCHMARKS.md); the
+    $k$ passes outnumber $10p$: what it saves the solves, BENCHMARKS.md); the
     product taken as $B^\top X + X^\top B - X^\top GX$, whose error is $-E^\top GE$ for the
     solves' error $E = X - G^{-1}B$: second order in it (the first-order $B^\top X$ is off by
     $B^\top E$), so that solves to a relative residual $\epsilon$ give $S_p$ to about
