@@ -140,8 +140,12 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
         then = json.loads(attrs["keys"])
         differ = [name for name in KEYS if then.get(name) != keys.get(name)]
         if differ:
+            # data made again from the same seeds on another machine can differ at round-off: numpy's
+            # matrix products round differently in each of OpenBLAS's kernels
+            hint = ("; data made again on another machine differ if numpy's BLAS kernel does (numpy.show_runtime() "
+                    "names it, the environment's OPENBLAS_CORETYPE sets it)") if "data" in differ else ""
             raise ValueError(f"{where} was written by a fit of other {', '.join(differ)} ({', '.join(KEYS)} compared): "
-                             "give another path, or delete the file to start afresh")
+                             f"give another path, or delete the file to start afresh{hint}")
         arrays = {name: np.asarray(f[name]) for name in f}
     has_columns = "B" in arrays and columns_kept
     return FitState(
