@@ -61,3 +61,16 @@ def serial_lapack_block() -> Iterator[None]:
         return
     with controller.select(filepath=paths).limit(limits=1):
         yield
+
+
+def openblas_kernels() -> list[str]:
+    """The kernels (`architecture`: `Haswell`, `SkylakeX`, ...) of the OpenBLAS libraries this
+    process has loaded (NumPy's, SciPy's), sorted, each once; empty if none is loaded or
+    threadpoolctl cannot tell. Matrix products round differently in each kernel, so the same
+    seeds make other bits of data on a machine where OpenBLAS chose another (`OPENBLAS_CORETYPE`
+    chooses it)."""
+    import numpy  # noqa: F401 (its OpenBLAS loaded)
+    from threadpoolctl import threadpool_info
+
+    return sorted({str(info["architecture"]) for info in threadpool_info()
+                   if info.get("internal_api") == "openblas" and info.get("architecture")})

@@ -51,6 +51,7 @@ from ._isospectral import DEFAULT_TOL as ISOSPECTRAL_TOL  # noqa: F401 (re-expor
 from ._isospectral import check_isospectral as check_isospectral
 from ._isospectral import check_stage_tolerance as check_stage_tolerance
 from ._json_values import json_values as json_values
+from ._lapack import openblas_kernels as openblas_kernels
 from ._lapack import serial_lapack as serial_lapack
 from ._lapack import serial_lapack_block as serial_lapack_block
 from ._observations import rms_size as rms_size

@@ -2,8 +2,10 @@
 observed vorticity fields (Euler and quasi-geostrophic flow on the sphere, N = 8)."""
 
 import functools
+import json
 
 import equinox as eqx
+import h5py
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -290,7 +292,6 @@ def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_unint
                       + [("standard errors", whole.iterations, 0)]
                       + [("standard errors", whole.iterations, k) for k in range(1, p + 1)])
     # the standard errors' files keep no J_theta (recomputed on resume), the iterations' do
-    import h5py
     for phase, _, _, _, blob in copies:
         (tmp_path / "copy.h5").write_bytes(blob)
         with h5py.File(tmp_path / "copy.h5") as f:
@@ -321,8 +322,6 @@ def test_a_fit_resumed_from_any_of_its_checkpoints_ends_bit_for_bit_as_the_unint
 
 @pytest.mark.slow  # a fit at N = 4 compiled
 def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
-    import h5py
-
     model, data = _small_fit_problem()
     path = tmp_path / "fit.h5"
     learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=learn.Checkpoint(path))
@@ -340,6 +339,12 @@ def test_a_checkpoint_of_another_fit_or_file_is_refused_by_name(tmp_path):
         learn.fit_stream_operator(model, data, max_step=0.1, standard_errors=False, checkpoint=resume,
                                   starts=np.stack([y[1] for y in data.states]))
     assert "OPENBLAS" not in str(start_only.value)  # the hint is about data alone
+    with h5py.File(path, "r+") as f:  # as if written on a machine whose OpenBLAS ran another kernel
+        f.attrs["openblas"] = json.dumps(["Elsewhere"])
+    with pytest.raises(ValueError, match=r"OpenBLAS ran its Elsewhere kernel, this process runs .*"
+                                         r"OPENBLAS_CORETYPE=Elsewhere"):
+        learn.fit_stream_operator(model, other, max_step=0.1, standard_errors=False, checkpoint=resume,
+                                  starts=np.stack([y[0] for y in data.states]))
     with pytest.raises(ValueError, match=r"other settings \(substeps=\d+ then, \d+ now \(from max_step\)\)"):
         learn.fit_stream_operator(model, data, max_step=0.05, standard_errors=False, checkpoint=resume)
     # other settings of the standard errors alone: the iterations kept, the standard errors afresh
@@ -380,7 +385,6 @@ def test_standard_errors_started_from_an_earlier_fits_solves_are_the_cold_ones_i
     fit at the full step (`se_start`): the same covariance as solves from 0, to the solves'
     tolerance, in fewer conjugate gradient steps; a file without finished solves, or of
     another shape, or not a path, is refused by name."""
-    import h5py
 
     model, data = _small_fit_problem(noise=1e-2, shift=-3.0)
     coarse, cold_path, warm_path = tmp_path / "coarse.h5", tmp_path / "cold.h5", tmp_path / "warm.h5"

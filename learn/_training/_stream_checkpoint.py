@@ -23,7 +23,7 @@ import h5py
 import jax
 import numpy as np
 
-from integrators.internals import atomic_path, open_hdf5
+from integrators.internals import atomic_path, open_hdf5, openblas_kernels
 
 FORMAT = "liepoisson stream operator fit checkpoint"
 VERSION = 1
@@ -100,7 +100,8 @@ def write(path: str | os.PathLike, fit_state: FitState, keys: dict[str, str], se
         f.attrs.update(format=FORMAT, version=VERSION, keys=json.dumps(keys, sort_keys=True),
                        settings=json.dumps({**settings, "algorithm": ALGORITHM}, sort_keys=True),
                        phase=s.phase, lam=s.lam, nu=s.nu, forcing=s.forcing, fresh=s.fresh, done=s.done,
-                       stopped=s.stopped, seconds=s.seconds, columns=s.columns)
+                       stopped=s.stopped, seconds=s.seconds, columns=s.columns,
+                       openblas=json.dumps(openblas_kernels()))  # what the data's bits may depend on (`read`)
         f["x"], f["starts"], f["losses"], f["D_theta"] = s.x, s.starts, np.asarray(s.losses, float), s.D_theta
         if kept_state(s.phase):
             for name in STATE:
@@ -140,10 +141,19 @@ def read(path: str | os.PathLike, keys: dict[str, str], settings: dict[str, Any]
         then = json.loads(attrs["keys"])
         differ = [name for name in KEYS if then.get(name) != keys.get(name)]
         if differ:
-            # data made again from the same seeds on another machine can differ at round-off: numpy's
-            # matrix products round differently in each of OpenBLAS's kernels
-            hint = ("; data made again on another machine differ if numpy's BLAS kernel does (numpy.show_runtime() "
-                    "names it, the environment's OPENBLAS_CORETYPE sets it)") if "data" in differ else ""
+            # data made again from the same seeds on another machine can differ at round-off: matrix
+            # products round differently in each of OpenBLAS's kernels
+            written = json.loads(attrs["openblas"]) if "openblas" in attrs else None  # not kept before
+            kernels = openblas_kernels()
+            if "data" not in differ:
+                hint = ""
+            elif written and kernels and written != kernels:
+                hint = (f"; it was written where OpenBLAS ran its {', '.join(written)} kernel, this process runs "
+                        f"{', '.join(kernels)}, and data made from the same seeds differ at round-off between "
+                        f"kernels: resume with the environment's OPENBLAS_CORETYPE={written[0]}")
+            else:
+                hint = ("; data made again on another machine differ if OpenBLAS's kernel does (numpy.show_runtime() "
+                        "names it, the environment's OPENBLAS_CORETYPE sets it)")
             raise ValueError(f"{where} was written by a fit of other {', '.join(differ)} ({', '.join(KEYS)} compared): "
                              f"give another path, or delete the file to start afresh{hint}")
         arrays = {name: np.asarray(f[name]) for name in f}
