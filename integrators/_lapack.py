@@ -1,4 +1,5 @@
-"""The OpenBLAS under JAX's CPU LAPACK kernels (SciPy's), limited to one thread.
+"""The OpenBLAS under JAX's CPU LAPACK kernels (SciPy's), limited to one thread; and the
+kernels of the OpenBLAS libraries loaded (`openblas_kernels`: what data's bits depend on).
 
 JAX on CPU calls LAPACK (LU, Cholesky, tridiagonal solves) through SciPy's OpenBLAS. With its
 default threads that library's workers, left spinning after each call, slow the XLA operations
